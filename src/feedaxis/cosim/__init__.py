@@ -1,0 +1,1 @@
+"""Running the feedaxis FMUs through fmpy."""

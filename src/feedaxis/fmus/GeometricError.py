@@ -1,0 +1,56 @@
+"""GeometricError FMU: transmission error of the screw-nut pair (seed 000/001 Eq. 1-5, 10).
+
+Thin adapter over feedaxis.physics.geometry; defaults are the seed 001 case-study fit.
+"""
+from feedaxis_fmu_physics import geometry, mounting
+from feedaxis_slave import AxisSlave
+
+
+class GeometricError(AxisSlave):
+    """Lead error + assembly eccentricity + backlash + gravity sag at the nut position."""
+
+    description = ("Ball-screw transmission error: cumulative lead error, assembly eccentricity "
+                   "(wavelength = lead), backlash by direction of motion, gravity sag")
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.input("position_mm", 0.0, "Axis position", "mm")
+        self.input("velocity_mm_s", 0.0, "Axis velocity; its sign sets the approach direction", "mm/s")
+        self.output("error_um", "Positioning deviation, actual - nominal (ISO 230-2 sign)", "um")
+        self.parameter("lead_mm", 1.0, "Screw lead, axial travel per revolution", "mm", (0, None))
+        self.parameter("offset_um", 0.2515, "Lead error b1 at position 0 (seed 001)", "um")
+        self.parameter("slope_um_per_mm", -0.5084, "Cumulative lead error a1 (seed 001)", "um/mm")
+        self.parameter("eccentricity_cos_um", 0.2005, "Eccentricity a2, cosine term (seed 001)", "um")
+        self.parameter("eccentricity_sin_um", 0.1504, "Eccentricity b2, sine term (seed 001)", "um")
+        self.parameter("backlash_um", 0.0, "Reversal value B = mean(+) - mean(-)", "um")
+        self.parameter("sag_enabled", True, "Add the gravity sag computed from the screw (Eq. 3-5)")
+        self.parameter("length_m", 0.8, "Screw length between supports", "m", (0, None))
+        self.parameter("diameter_m", 0.034, "Screw root diameter", "m", (0, None))
+        self.parameter("density_kg_m3", 7800.0, "Screw material density", "kg/m3", (0, None))
+        self.parameter("youngs_modulus_Pa", 2.1e11, "Screw Young's modulus", "Pa", (0, None))
+        self.parameter("support", "fixed-free", "fixed-free | fixed-fixed | supported-supported")
+        self.parameter("fixed_end_mm", -141.0, "Axis coordinate P_f of the fixed end (seed 003 Eq. 15-16)", "mm")
+        self.direction = 1.0
+
+    def build(self):
+        if self.support not in geometry.SUPPORTS:
+            raise ValueError(f"support must be one of {geometry.SUPPORTS}, got {self.support!r}")
+        return geometry.gravity_sag_table(self.length_m, self.diameter_m, self.density_kg_m3,
+                                          self.youngs_modulus_Pa, self.support)
+
+    def step(self, step_size_s):
+        if self.velocity_mm_s != 0.0:
+            self.direction = 1.0 if self.velocity_mm_s > 0 else -1.0
+        sag_um = 0.0
+        if self.sag_enabled:
+            screw_m = mounting.screw_coordinate_m(self.position_mm, self.fixed_end_mm)
+            sag_um = geometry.gravity_sag_error_um(screw_m, self.model)
+        self.error_um = float(geometry.transmission_error_um(
+            self.position_mm, self.direction, self.lead_mm, self.offset_um, self.slope_um_per_mm,
+            self.eccentricity_cos_um, self.eccentricity_sin_um, self.backlash_um, sag_um))
+
+    def model_state(self):
+        return {"direction": self.direction}
+
+    def restore_model_state(self, state):
+        self.direction = float(state["direction"])

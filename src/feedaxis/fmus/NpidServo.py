@@ -1,0 +1,58 @@
+"""NpidServo FMU: ball-screw position loop with PID or NPID control (seed 002 Eq. 1-8).
+
+Thin adapter over feedaxis.physics.servo; defaults are the Googol XY table x axis.
+"""
+from dataclasses import fields
+
+from feedaxis_fmu_physics import servo
+from feedaxis_slave import AxisSlave
+
+UNITS = {"plant_gain_mm_per_Vs2": "mm/(V.s2)", "plant_damping_per_s": "1/s",
+         "plant_stiffness_per_s2": "1/s2", "delay_s": "s", "kp_V_per_mm": "V/mm",
+         "ki_V_per_mm_s": "V/(mm.s)", "kd_V_s_per_mm": "V.s/mm", "ko_per_mm": "1/mm",
+         "e_max_mm": "mm", "nonlinear": None, "force_constant_N_per_V": "N/V", "time_step_s": "s"}
+DESCRIPTIONS = {
+    "plant_gain_mm_per_Vs2": "Plant numerator b of G(s) = b / (s2 + a1 s + a0) (Eq. 1)",
+    "plant_damping_per_s": "Plant a1 (Eq. 1)", "plant_stiffness_per_s2": "Plant a0 (Eq. 1)",
+    "delay_s": "Transport delay of the command (seed 002: 1.2 ms)",
+    "kp_V_per_mm": "PID proportional gain (Eq. 6)", "ki_V_per_mm_s": "PID integral gain (Eq. 6)",
+    "kd_V_s_per_mm": "PID derivative gain (Eq. 6)", "ko_per_mm": "NPID rate KO (Eq. 8)",
+    "e_max_mm": "NPID error beyond which K(e) is held (Eq. 8)",
+    "nonlinear": "true: NPID (nonlinear gain in front of the PID), false: PID",
+    "force_constant_N_per_V": "Axial force per volt of command (assumed; not in seed 002)",
+    "time_step_s": "Internal loop step"}
+
+
+class NpidServo(AxisSlave):
+    """Closed position loop: reference in, axial position, velocity and tracking error out."""
+
+    description = "Ball-screw position servo, PID or NPID (Anang et al. 2017)"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.input("position_ref_mm", 0.0, "Commanded axis position", "mm")
+        self.input("disturbance_N", 0.0, "External axial force, e.g. cutting force", "N")
+        self.output("position_mm", "Axial position the motor angle commands (lead x turns)", "mm")
+        self.output("velocity_mm_s", "Axial velocity", "mm/s")
+        self.output("tracking_error_mm", "Reference minus position", "mm")
+        for field in fields(servo.ServoParams):
+            limits = None if field.name == "nonlinear" else (0, None)
+            self.parameter(field.name, field.default, DESCRIPTIONS[field.name], UNITS[field.name],
+                           limits)
+
+    def build(self):
+        params = servo.ServoParams(
+            **{field.name: getattr(self, field.name) for field in fields(servo.ServoParams)})
+        return servo.Servo(params, initial_reference_mm=self.position_ref_mm)
+
+    def step(self, step_size_s):
+        self.model.advance(step_size_s, self.position_ref_mm, self.disturbance_N)
+        self.position_mm = self.model.position_mm
+        self.velocity_mm_s = self.model.velocity_mm_s
+        self.tracking_error_mm = self.model.tracking_error_mm
+
+    def model_state(self):
+        return self.model.state()
+
+    def restore_model_state(self, state):
+        self.model.restore(state)

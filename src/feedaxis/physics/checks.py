@@ -1,0 +1,24 @@
+"""Parameter checks shared by the physics: one clear error naming the parameter."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def require_finite(name, value):
+    """Raise ValueError naming ``name`` unless every element of ``value`` is finite."""
+    if not np.all(np.isfinite(np.asarray(value, dtype=float))):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+
+
+def require_positive(name, value):
+    """Raise ValueError naming ``name`` unless ``value`` is finite and > 0."""
+    require_finite(name, value)
+    if not np.all(np.asarray(value, dtype=float) > 0):
+        raise ValueError(f"{name} must be > 0, got {value!r}")
+
+
+def require_non_negative(name, value):
+    """Raise ValueError naming ``name`` unless ``value`` is finite and >= 0."""
+    require_finite(name, value)
+    if not np.all(np.asarray(value, dtype=float) >= 0):
+        raise ValueError(f"{name} must be >= 0, got {value!r}")

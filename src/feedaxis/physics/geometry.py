@@ -1,0 +1,178 @@
+"""Geometric transmission error of the screw-nut pair.
+
+Sources: seed 000 (Liu Minghua 2022) Eq. 1-5 and seed 001 (the same study, 2023) for the
+fitted case-study coefficients. All positions are axis coordinates in mm, all errors in µm
+(deviation = actual - nominal, ISO 230-2 sign).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .checks import require_positive
+
+GRAVITY_M_S2 = 9.80665
+SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
+
+
+def lead_error_um(position_mm, offset_um, slope_um_per_mm):
+    """Cumulative lead deviation f1(y) = a1*y + b1 (seed 001, fitted low-frequency part).
+
+    Parameters
+    ----------
+    position_mm : array_like
+        Axis position y (mm).
+    offset_um : float
+        b1, deviation at y = 0 (µm).
+    slope_um_per_mm : float
+        a1, cumulative lead deviation per mm of travel (µm/mm).
+    """
+    return offset_um + slope_um_per_mm * np.asarray(position_mm, dtype=float)
+
+
+def eccentricity_amplitude_um(offset_um, tilt_rad):
+    """Axial amplitude δ·tanθ of the assembly-eccentricity oscillation (seed 000 Eq. 1-2).
+
+    Parameters
+    ----------
+    offset_um : float
+        δ, radial offset of the bearing contact point from the screw axis (µm).
+    tilt_rad : float
+        θ, tilt of the contact interface (rad).
+    """
+    return offset_um * np.tan(tilt_rad)
+
+
+def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
+    """Assembly eccentricity f2(y) = a2·cos(ωy) + b2·sin(ωy), ω = 2π/lead (seed 000 Eq. 1-2).
+
+    The contact point runs on an ellipse once per screw revolution, so the axial error is a
+    sinusoid whose wavelength is the lead and whose amplitude hypot(a2, b2) = δ·tanθ.
+
+    Parameters
+    ----------
+    position_mm : array_like
+        Axis position y (mm).
+    lead_mm : float
+        Screw lead: axial travel per revolution (mm).
+    cos_um, sin_um : float
+        a2 and b2 (µm).
+    """
+    require_positive("lead_mm", lead_mm)
+    phase_rad = 2.0 * np.pi * np.asarray(position_mm, dtype=float) / lead_mm
+    return cos_um * np.cos(phase_rad) + sin_um * np.sin(phase_rad)
+
+
+def screw_line_load_N_per_m(diameter_m, density_kg_m3):
+    """Weight per unit length q = ρ·g·πD²/4 of a solid screw (seed 000 Eq. 3)."""
+    require_positive("diameter_m", diameter_m)
+    require_positive("density_kg_m3", density_kg_m3)
+    return density_kg_m3 * GRAVITY_M_S2 * np.pi * diameter_m**2 / 4.0
+
+
+def second_moment_m4(diameter_m):
+    """Area moment of inertia I = πD⁴/64 of a solid round screw (m⁴)."""
+    require_positive("diameter_m", diameter_m)
+    return np.pi * diameter_m**4 / 64.0
+
+
+def sag_slope(screw_coord_m, length_m, line_load_N_per_m, flexural_rigidity_Nm2, support):
+    """Slope w'(y) of the screw bent by its own weight (Euler-Bernoulli beam, seed 000 Eq. 3-4).
+
+    Parameters
+    ----------
+    screw_coord_m : array_like
+        Distance y from the fixed (or left) end along the screw (m).
+    length_m : float
+        Screw length L between supports (m).
+    line_load_N_per_m : float
+        Distributed weight q (N/m).
+    flexural_rigidity_Nm2 : float
+        E·I (N·m²).
+    support : str
+        One of ``"fixed-free"`` (cantilever fixed at y = 0), ``"fixed-fixed"``,
+        ``"supported-supported"``.
+    """
+    y = np.asarray(screw_coord_m, dtype=float)
+    L = length_m
+    scale = line_load_N_per_m / flexural_rigidity_Nm2
+    if support == "fixed-free":
+        return scale * y * (3 * L**2 - 3 * L * y + y**2) / 6.0
+    if support == "fixed-fixed":
+        return scale * y * (L - y) * (L - 2 * y) / 12.0
+    if support == "supported-supported":
+        return scale * (L**3 - 6 * L * y**2 + 4 * y**3) / 24.0
+    raise ValueError(f"support must be one of {SUPPORTS}, got {support!r}")
+
+
+def gravity_sag_table(length_m, diameter_m, density_kg_m3, youngs_modulus_Pa, support,
+                      n_grid=2001):
+    """Axial error y_a - y_i of the nut on the sagging screw, tabulated (seed 000 Eq. 3-5).
+
+    The nominal travel is the arc length y_i = ∫₀^{y_a} √(1 + w'(y)²) dy of the bent screw,
+    so the error y_a - y_i ≤ 0 grows along the screw. Computed from geometry and material
+    by the trapezoidal rule, not fitted; for real screw sizes it is of the order of 0.01 µm.
+
+    Parameters
+    ----------
+    length_m, diameter_m : float
+        Screw length between supports and (root) diameter (m).
+    density_kg_m3, youngs_modulus_Pa : float
+        Material density and Young's modulus.
+    support : str
+        Bearing arrangement, see :func:`sag_slope`.
+    n_grid : int
+        Points of the arc-length integration.
+
+    Returns
+    -------
+    (grid_m, error_um) : tuple of ndarray
+        Distance from the fixed end and the error there; evaluate with
+        :func:`gravity_sag_error_um`.
+    """
+    require_positive("length_m", length_m)
+    require_positive("youngs_modulus_Pa", youngs_modulus_Pa)
+    grid_m = np.linspace(0.0, length_m, n_grid)
+    slope = sag_slope(grid_m, length_m, screw_line_load_N_per_m(diameter_m, density_kg_m3),
+                      youngs_modulus_Pa * second_moment_m4(diameter_m), support)
+    excess = np.sqrt(1.0 + slope**2) - 1.0
+    cumulative_excess_m = np.concatenate(
+        ([0.0], np.cumsum(0.5 * (excess[1:] + excess[:-1]) * np.diff(grid_m))))
+    return grid_m, -1e6 * cumulative_excess_m
+
+
+def gravity_sag_error_um(screw_coord_m, sag_table):
+    """Gravity-sag error (µm) at distances from the fixed end, from :func:`gravity_sag_table`."""
+    grid_m, error_um = sag_table
+    return np.interp(np.clip(screw_coord_m, 0.0, grid_m[-1]), grid_m, error_um)
+
+
+def backlash_error_um(direction, backlash_um):
+    """Reversal error ±B/2 by approach direction, so that x̄↑ - x̄↓ = B (ISO 230-2 reversal).
+
+    Parameters
+    ----------
+    direction : array_like
+        +1 when the position was approached moving in +, -1 moving in -.
+    backlash_um : float
+        Reversal value B (µm).
+    """
+    return 0.5 * backlash_um * np.sign(np.asarray(direction, dtype=float))
+
+
+def transmission_error_um(position_mm, direction, lead_mm, offset_um, slope_um_per_mm,
+                          cos_um, sin_um, backlash_um, sag_um=0.0):
+    """Superposed transmission error f_T = f1 + f2 + backlash + sag (seed 000 Eq. 10).
+
+    Parameters
+    ----------
+    position_mm, direction : array_like
+        Axis position (mm) and approach direction (±1).
+    lead_mm, offset_um, slope_um_per_mm, cos_um, sin_um, backlash_um : float
+        See :func:`lead_error_um`, :func:`eccentricity_error_um`, :func:`backlash_error_um`.
+    sag_um : array_like
+        Gravity-sag error at the same positions, from :func:`gravity_sag_error_um` (µm).
+    """
+    return (lead_error_um(position_mm, offset_um, slope_um_per_mm)
+            + eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um)
+            + backlash_error_um(direction, backlash_um)
+            + sag_um)

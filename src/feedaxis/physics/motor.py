@@ -1,0 +1,49 @@
+"""Stepper-motor angular error mapped to axial displacement, seed 000 Eq. 6, 9, 10.
+
+The rotor's angular deviation Δφ is periodic over ``error_period_steps`` full steps
+(a 5-phase hybrid motor: 10 steps, a 2-phase one: 4). Through the screw it becomes the
+axial displacement error Δφ/2π × lead (Eq. 9-10); seed 001 fits it with one Fourier term
+f3 = a3·cos(ωy) + b3·sin(ωy) + c3, ω = 2π / period.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .checks import require_positive
+
+
+def motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps):
+    """Axial wavelength of the motor error: steps × step angle / 360° × lead (mm).
+
+    Seed 001 case: 10 × 0.72° / 360° × 1 mm = 0.02 mm.
+    """
+    require_positive("lead_mm", lead_mm)
+    require_positive("step_angle_deg", step_angle_deg)
+    require_positive("error_period_steps", error_period_steps)
+    return error_period_steps * step_angle_deg / 360.0 * lead_mm
+
+
+def angular_to_axial_um(angle_error_deg, lead_mm):
+    """Axial displacement error Δφ/2π × p (seed 000 Eq. 9) of a rotor angle error (µm)."""
+    return np.asarray(angle_error_deg, dtype=float) / 360.0 * lead_mm * 1e3
+
+
+def motor_step_error_um(position_mm, lead_mm, step_angle_deg, error_period_steps,
+                        cos_um, sin_um):
+    """Axial motor error as a Fourier series over the motor error period (seed 000 Eq. 6, 10).
+
+    Parameters
+    ----------
+    position_mm : array_like
+        Axis position (mm); the rotor angle is position / lead × 360°.
+    lead_mm, step_angle_deg, error_period_steps : float
+        Screw lead (mm), full-step angle (deg) and steps per error period.
+    cos_um, sin_um : sequence of float
+        Harmonic k = 1, 2, ... cosine and sine amplitudes of the axial error (µm).
+    """
+    period_mm = motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps)
+    phase_rad = 2.0 * np.pi * np.asarray(position_mm, dtype=float) / period_mm
+    error_um = np.zeros_like(phase_rad)
+    for k, (a_um, b_um) in enumerate(zip(cos_um, sin_um), start=1):
+        error_um = error_um + a_um * np.cos(k * phase_rad) + b_um * np.sin(k * phase_rad)
+    return error_um

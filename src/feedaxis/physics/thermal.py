@@ -1,0 +1,295 @@
+"""Finite-difference thermal model of a ball screw fixed at one end, seed 003 Eq. 1-19.
+
+The screw is a 1-D rod of N = L/dx cells (Eq. 4). Heat enters from the fixed-end bearing
+(Q_B spread over L_B) and from the nut (Q_N spread over L_N, at the nut's position);
+the remaining lateral surface and the free-end face lose heat by convection h to ambient;
+the fixed-end face is adiabatic (Eq. 5-9). The state is the temperature rise above ambient,
+θ_n = T_n - T_a, so Eq. 10 reads C·dθ_n/dt = conduction + sources - convection.
+
+Two deliberate refinements of Eq. 10, both exact in the paper's limit:
+- the nut covers cells by fractional overlap (Eq. 10 uses whole cells), so the nut delivers
+  exactly Q_N and the error is a smooth function of the nut position and of P_f;
+- a requested step larger than the explicit stability limit is split into sub-steps
+  dt ≤ C/|diagonal| (at Table 1 values the limit is 0.31 s, so dt = 0.1 s runs unchanged).
+
+Thermal error: E_n = α θ_n dx (Eq. 11), TE_m cumulative from the fixed end (Eq. 12-14),
+axis coordinate mapped through P_f (Eq. 15-16), plus ambient expansion TE_a (Eq. 1).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from .checks import require_finite, require_non_negative, require_positive
+from .mounting import axis_sign, screw_coordinate_m
+
+
+@dataclass(frozen=True)
+class ThermalScrewParams:
+    """Screw data (seed 003 Table 1) and identified coefficients (Table 3, X axis).
+
+    k1..k4 relate convection and heat flows to the feed speed v in mm/min (Eq. 17-19):
+    h = k1·v + k2, Q_B = k3·v, Q_N = k4·v.
+    """
+
+    length_m: float = 0.8
+    diameter_m: float = 0.034
+    density_kg_m3: float = 7800.0
+    specific_heat_J_kgK: float = 448.0
+    expansion_per_K: float = 11.7e-6
+    nut_length_m: float = 0.212
+    bearing_length_m: float = 0.03
+    cell_length_m: float = 0.01
+    time_step_s: float = 0.1
+    conductivity_W_mK: float = 566.3
+    k1_W_m2K_per_mm_min: float = 0.911e-3
+    k2_W_m2K: float = 26.034
+    k3_W_per_mm_min: float = 0.904e-3
+    k4_W_per_mm_min: float = 0.911e-3
+    fixed_end_mm: float = -141.0
+
+    def __post_init__(self):
+        for field in fields(self):
+            value = getattr(self, field.name)
+            if field.name.startswith("k") or field.name == "fixed_end_mm":
+                require_finite(field.name, value)
+            else:
+                require_positive(field.name, value)
+        for name in ("k1_W_m2K_per_mm_min", "k2_W_m2K", "k3_W_per_mm_min", "k4_W_per_mm_min"):
+            require_non_negative(name, getattr(self, name))
+        if self.n_cells < 2:
+            raise ValueError(f"length_m / cell_length_m must give at least 2 cells, "
+                             f"got {self.length_m} / {self.cell_length_m}")
+
+    @property
+    def n_cells(self):
+        """N = L / dx (Eq. 4)."""
+        return int(round(self.length_m / self.cell_length_m))
+
+    @property
+    def area_m2(self):
+        """Cross-section A_s = πD²/4 (Eq. 5)."""
+        return np.pi * self.diameter_m**2 / 4.0
+
+    @property
+    def cell_heat_capacity_J_K(self):
+        """C = ρ·c·A_s·dx of one cell (Eq. 8)."""
+        return self.density_kg_m3 * self.specific_heat_J_kgK * self.area_m2 * self.cell_length_m
+
+    def convection_W_m2K(self, feed_mm_min):
+        """h = k1·v + k2 (Eq. 17)."""
+        return self.k1_W_m2K_per_mm_min * abs(feed_mm_min) + self.k2_W_m2K
+
+    def bearing_heat_W(self, feed_mm_min):
+        """Q_B = k3·v (Eq. 18)."""
+        return self.k3_W_per_mm_min * abs(feed_mm_min)
+
+    def nut_heat_W(self, feed_mm_min):
+        """Q_N = k4·v (Eq. 19)."""
+        return self.k4_W_per_mm_min * abs(feed_mm_min)
+
+
+def bearing_cells(params):
+    """Fraction of each cell under the fixed-end bearing, 0 ≤ x ≤ L_B (Eq. 10, second case)."""
+    return _interval_overlap(params, 0.0, params.bearing_length_m)
+
+
+def nut_cells(params, nut_screw_m):
+    """Fraction of each cell under the nut centred at ``nut_screw_m`` from the fixed end."""
+    half_m = params.nut_length_m / 2.0
+    return _interval_overlap(params, nut_screw_m - half_m, nut_screw_m + half_m)
+
+
+def averaged_nut_cells(params, from_screw_m, to_screw_m, n_points=401):
+    """Time average of :func:`nut_cells` for a nut running back and forth between two points.
+
+    A back-and-forth run at constant speed spends equal time at every point of its path, so
+    the average is the mean over evenly spaced positions (midpoint rule).
+    """
+    if np.isclose(from_screw_m, to_screw_m):
+        return nut_cells(params, from_screw_m)
+    offsets = (np.arange(n_points) + 0.5) / n_points
+    positions_m = from_screw_m + (to_screw_m - from_screw_m) * offsets
+    return np.mean([nut_cells(params, x) for x in positions_m], axis=0)
+
+
+def _interval_overlap(params, start_m, stop_m):
+    lower_m = np.arange(params.n_cells) * params.cell_length_m
+    upper_m = lower_m + params.cell_length_m
+    overlap_m = np.minimum(upper_m, stop_m) - np.maximum(lower_m, start_m)
+    return np.clip(overlap_m / params.cell_length_m, 0.0, 1.0)
+
+
+def rate_matrix(params, feed_mm_min, nut_fraction):
+    """System matrix A (1/s) of dθ/dt = A θ + s, from Eq. 5-10.
+
+    Conduction between neighbours, lateral convection on cells not under the bearing or
+    the nut (Eq. 7), convection on the free-end face (Eq. 6, n = N). A is symmetric.
+    """
+    n = params.n_cells
+    capacity = params.cell_heat_capacity_J_K
+    conductance = params.conductivity_W_mK * params.area_m2 / params.cell_length_m
+    h = params.convection_W_m2K(feed_mm_min)
+    lateral_area_m2 = np.pi * params.diameter_m * params.cell_length_m
+    exposed = (1.0 - bearing_cells(params)) * (1.0 - nut_fraction)
+    loss_W_K = h * lateral_area_m2 * exposed
+    loss_W_K[-1] += h * params.area_m2
+    coupling = np.full(n - 1, conductance)
+    diagonal = -loss_W_K - np.concatenate((coupling, [0.0])) - np.concatenate(([0.0], coupling))
+    return (np.diag(diagonal) + np.diag(coupling, 1) + np.diag(coupling, -1)) / capacity
+
+
+def source_rate(params, feed_mm_min, nut_fraction):
+    """Source vector s (K/s): Q_B/L_B and Q_N/L_N per cell length (Eq. 7, 10)."""
+    dx = params.cell_length_m
+    bearing_W = params.bearing_heat_W(feed_mm_min) / params.bearing_length_m * dx
+    nut_W = params.nut_heat_W(feed_mm_min) / params.nut_length_m * dx
+    heat_W = bearing_W * bearing_cells(params) + nut_W * nut_fraction
+    return heat_W / params.cell_heat_capacity_J_K
+
+
+def stable_time_step_s(params, rates):
+    """Largest explicit step keeping every update a convex combination (no overshoot).
+
+    dt ≤ 1 / max|A_nn| for the system matrix ``rates``, capped by ``params.time_step_s``.
+    """
+    return min(params.time_step_s, 1.0 / np.max(np.abs(np.diag(rates))))
+
+
+def advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
+    """Advance the temperature rise over ``duration_s`` with the nut held at one position.
+
+    Explicit Euler updates of Eq. 10, θ ← θ + dt (A θ + s), in equal sub-steps of at most
+    :func:`stable_time_step_s`, so any communication step is stable and dt = 0.1 s at
+    Table 1 values is the paper's scheme.
+
+    Parameters
+    ----------
+    params : ThermalScrewParams
+    rise_K : ndarray
+        θ_n = T_n - T_a per cell (K).
+    duration_s : float
+        Time to advance (s), ≥ 0.
+    nut_position_mm : float
+        Axis coordinate of the nut (mm), mapped through P_f (Eq. 15-16).
+    feed_mm_min : float
+        Feed speed v (mm/min); its magnitude drives Eq. 17-19.
+    """
+    require_non_negative("duration_s", duration_s)
+    require_finite("nut_position_mm", nut_position_mm)
+    require_finite("feed_mm_min", feed_mm_min)
+    if duration_s == 0.0:
+        return rise_K
+    nut_fraction = nut_cells(params, screw_coordinate_m(nut_position_mm, params.fixed_end_mm))
+    rates = rate_matrix(params, feed_mm_min, nut_fraction)
+    sources = source_rate(params, feed_mm_min, nut_fraction)
+    n_sub = int(np.ceil(duration_s / stable_time_step_s(params, rates) - 1e-9))
+    dt_s = duration_s / n_sub
+    for _ in range(n_sub):
+        rise_K = rise_K + dt_s * (rates @ rise_K + sources)
+    return rise_K
+
+
+def screw_elongation_um(params, rise_K, screw_coord_m):
+    """TE_m(x) = Σ α θ_i dx up to x, linear within a cell (Eq. 11-14), in µm.
+
+    ``rise_K`` may be 2-D (time × cells); the result then has one row per time.
+    """
+    rise_K = np.atleast_2d(rise_K)
+    per_cell_um = params.expansion_per_K * rise_K * params.cell_length_m * 1e6
+    cumulative_um = np.concatenate((np.zeros((rise_K.shape[0], 1)),
+                                    np.cumsum(per_cell_um, axis=1)), axis=1)
+    nodes_m = np.arange(params.n_cells + 1) * params.cell_length_m
+    x = np.clip(np.asarray(screw_coord_m, dtype=float), 0.0, params.length_m)
+    result = np.array([np.interp(x, nodes_m, row) for row in cumulative_um])
+    return result[0] if result.shape[0] == 1 else result
+
+
+def ambient_error_um(params, position_mm, ambient_delta_K):
+    """TE_a = α·ΔT_a·X_N (seed 003 Eq. 1), X_N the axis position, in µm."""
+    return params.expansion_per_K * np.asarray(ambient_delta_K) * np.asarray(position_mm) * 1e3
+
+
+def thermal_error_um(params, rise_K, position_mm, ambient_delta_K=0.0):
+    """Positioning thermal error TE(P_x) = ±(TE_m + TE_a) (seed 003 Eq. 2, 15, 16), in µm."""
+    sign = axis_sign(params.fixed_end_mm)
+    screw_m = screw_coordinate_m(position_mm, params.fixed_end_mm)
+    return sign * (screw_elongation_um(params, rise_K, screw_m)
+                   + ambient_error_um(params, position_mm, ambient_delta_K))
+
+
+@dataclass(frozen=True)
+class DutySegment:
+    """One row of duty.csv: back-and-forth travel between two points at a feed speed."""
+
+    start_s: float
+    duration_s: float
+    feed_mm_min: float
+    from_mm: float
+    to_mm: float
+
+    @property
+    def end_s(self):
+        return self.start_s + self.duration_s
+
+    def nut_position_mm(self, time_s):
+        """Axis position at ``time_s`` for a triangle-wave run starting at ``from_mm``."""
+        stroke_mm = self.to_mm - self.from_mm
+        speed_mm_s = abs(self.feed_mm_min) / 60.0
+        if stroke_mm == 0.0 or speed_mm_s == 0.0:
+            return np.full_like(np.asarray(time_s, dtype=float), self.from_mm)
+        travelled = speed_mm_s * (np.asarray(time_s, dtype=float) - self.start_s) / abs(stroke_mm)
+        fold = np.abs((travelled + 1.0) % 2.0 - 1.0)
+        return self.from_mm + stroke_mm * fold
+
+
+def simulate_duty(params, segments, times_s):
+    """Temperature rise at ``times_s`` for a duty cycle, in closed form per segment.
+
+    Within a segment the nut's heat and shading are averaged over its path
+    (:func:`averaged_nut_cells`), which makes the system time-invariant; the explicit
+    scheme of Eq. 10 is then evaluated exactly for any number of steps through the
+    eigen-decomposition of the symmetric A: θ_k = V (1 + dt·μ)^k Vᵀ (θ_0 - θ*) + θ*.
+
+    Parameters
+    ----------
+    params : ThermalScrewParams
+    segments : sequence of DutySegment
+        Consecutive segments starting at t = 0.
+    times_s : array_like
+        Sample times (s), within the duty span.
+
+    Returns
+    -------
+    ndarray, shape (len(times_s), n_cells)
+        θ per cell (K) at each sample time.
+    """
+    times_s = np.asarray(times_s, dtype=float)
+    rise_K = np.zeros((times_s.size, params.n_cells))
+    state_K = np.zeros(params.n_cells)
+    for segment in segments:
+        propagate = _segment_propagator(params, segment)
+        inside = (times_s >= segment.start_s) & (times_s <= segment.end_s)
+        if np.any(inside):
+            rise_K[inside] = propagate(state_K, times_s[inside] - segment.start_s)
+        state_K = propagate(state_K, np.array([segment.duration_s]))[0]
+    return rise_K
+
+
+def _segment_propagator(params, segment):
+    feed = segment.feed_mm_min
+    path_m = screw_coordinate_m(np.array([segment.from_mm, segment.to_mm]), params.fixed_end_mm)
+    nut_fraction = averaged_nut_cells(params, path_m[0], path_m[1])
+    rates_matrix = rate_matrix(params, feed, nut_fraction)
+    rates, vectors = np.linalg.eigh(rates_matrix)
+    steady_K = -vectors @ ((vectors.T @ source_rate(params, feed, nut_fraction)) / rates)
+    dt_s = stable_time_step_s(params, rates_matrix)
+    growth = 1.0 + dt_s * rates
+
+    def propagate(state_K, elapsed_s):
+        modes = vectors.T @ (state_K - steady_K)
+        decay = growth[None, :] ** (elapsed_s[:, None] / dt_s)
+        return (decay * modes[None, :]) @ vectors.T + steady_K
+
+    return propagate

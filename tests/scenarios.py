@@ -1,0 +1,102 @@
+"""Scripted input sequences for each FMU and the same runs computed by the physics directly.
+
+``direct(name, ...)`` follows the FMU step convention (input k over step k, output after
+it) without any FMI code, so the FMUs can be checked against the physics they wrap.
+"""
+import numpy as np
+
+from feedaxis.physics import geometry, motor, mounting, servo, thermal
+
+STEP_SIZE_S = {"NpidServo": 1e-3, "StepperError": 0.01, "GeometricError": 0.01,
+               "ThermalScrew": 1.0}
+N_STEPS = {"NpidServo": 1500, "StepperError": 600, "GeometricError": 600, "ThermalScrew": 900}
+OUTPUTS = {"NpidServo": ("position_mm", "velocity_mm_s", "tracking_error_mm"),
+           "StepperError": ("error_um",), "GeometricError": ("error_um",),
+           "ThermalScrew": ("error_um", "elongation_um", "peak_rise_K")}
+PARAMETERS = {"NpidServo": {"nonlinear": True},
+              "StepperError": {"harmonic2_cos_um": 0.03, "error_period_steps": 4},
+              "GeometricError": {"backlash_um": 1.5, "support": "fixed-fixed"},
+              "ThermalScrew": {"fixed_end_mm": 120.0, "time_step_s": 0.25}}
+
+
+def scripted_inputs(name):
+    """Input sequences exercising each FMU: motion back and forth, a force, ambient drift."""
+    t = np.arange(N_STEPS[name]) * STEP_SIZE_S[name]
+    if name == "NpidServo":
+        return {"position_ref_mm": 5.0 * np.sin(2 * np.pi * 0.7 * t) + 0.2 * (t > 0.8),
+                "disturbance_N": 40.0 * np.sin(2 * np.pi * 50 * t) * (t > 0.5)}
+    if name == "StepperError":
+        return {"position_mm": 0.37 * t}
+    if name == "GeometricError":
+        position = 2.5 - 2.5 * np.cos(2 * np.pi * t / 3.0)
+        return {"position_mm": position, "velocity_mm_s": np.gradient(position, t)}
+    position = 250.0 - 240.0 * np.cos(2 * np.pi * t / 10.0)
+    return {"position_mm": position, "velocity_mm_s": np.gradient(position, t) * (t < 600),
+            "ambient_C": 20.0 + 0.002 * t}
+
+
+def direct(name, inputs, parameters):
+    """Outputs of FMU ``name`` computed by feedaxis.physics alone: (t=0 row, step rows)."""
+    n = len(next(iter(inputs.values())))
+    rows = []
+    if name == "NpidServo":
+        loop = servo.Servo(servo.ServoParams(**_only(servo.ServoParams, parameters)),
+                           initial_reference_mm=inputs["position_ref_mm"][0])
+        rows.append((loop.position_mm, loop.velocity_mm_s, loop.tracking_error_mm))
+        for k in range(n):
+            loop.advance(STEP_SIZE_S[name], inputs["position_ref_mm"][k], inputs["disturbance_N"][k])
+            rows.append((loop.position_mm, loop.velocity_mm_s, loop.tracking_error_mm))
+    elif name == "StepperError":
+        p = {"lead_mm": 1.0, "step_angle_deg": 0.72, "error_period_steps": 10,
+             "harmonic1_cos_um": 0.08, "harmonic1_sin_um": 0.06,
+             "harmonic2_cos_um": 0.0, "harmonic2_sin_um": 0.0, **parameters}
+        position = np.concatenate(([inputs["position_mm"][0]], inputs["position_mm"]))
+        error = motor.motor_step_error_um(position, p["lead_mm"], p["step_angle_deg"],
+                                          p["error_period_steps"],
+                                          (p["harmonic1_cos_um"], p["harmonic2_cos_um"]),
+                                          (p["harmonic1_sin_um"], p["harmonic2_sin_um"]))
+        rows = error[:, None]
+    elif name == "GeometricError":
+        rows = _geometric(inputs, parameters)
+    else:
+        rows = _thermal(inputs, parameters)
+    return np.asarray(rows, dtype=float)
+
+
+def _only(cls, parameters):
+    names = set(cls.__dataclass_fields__)
+    return {k: v for k, v in parameters.items() if k in names}
+
+
+def _geometric(inputs, parameters):
+    p = {"lead_mm": 1.0, "offset_um": 0.2515, "slope_um_per_mm": -0.5084,
+         "eccentricity_cos_um": 0.2005, "eccentricity_sin_um": 0.1504, "backlash_um": 0.0,
+         "length_m": 0.8, "diameter_m": 0.034, "density_kg_m3": 7800.0,
+         "youngs_modulus_Pa": 2.1e11, "support": "fixed-free", "fixed_end_mm": -141.0,
+         **parameters}
+    table = geometry.gravity_sag_table(p["length_m"], p["diameter_m"], p["density_kg_m3"],
+                                       p["youngs_modulus_Pa"], p["support"])
+    position = np.concatenate(([inputs["position_mm"][0]], inputs["position_mm"]))
+    velocity = np.concatenate(([inputs["velocity_mm_s"][0]], inputs["velocity_mm_s"]))
+    direction, rows = 1.0, []
+    for x, v in zip(position, velocity):
+        direction = np.sign(v) if v != 0 else direction
+        sag = geometry.gravity_sag_error_um(mounting.screw_coordinate_m(x, p["fixed_end_mm"]), table)
+        rows.append([geometry.transmission_error_um(
+            x, direction, p["lead_mm"], p["offset_um"], p["slope_um_per_mm"],
+            p["eccentricity_cos_um"], p["eccentricity_sin_um"], p["backlash_um"], sag)])
+    return rows
+
+
+def _thermal(inputs, parameters):
+    params = thermal.ThermalScrewParams(**_only(thermal.ThermalScrewParams, parameters))
+    rise = np.zeros(params.n_cells)
+    steps = [0.0] + [STEP_SIZE_S["ThermalScrew"]] * len(inputs["position_mm"])
+    index = [0] + list(range(len(inputs["position_mm"])))
+    rows = []
+    for dt, k in zip(steps, index):
+        x = inputs["position_mm"][k]
+        rise = thermal.advance(params, rise, dt, x, inputs["velocity_mm_s"][k] * 60.0)
+        rows.append((thermal.thermal_error_um(params, rise, x, inputs["ambient_C"][k] - 20.0),
+                     thermal.screw_elongation_um(params, rise, params.length_m), rise.max()))
+    return rows

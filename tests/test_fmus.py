@@ -1,0 +1,143 @@
+"""The four FMUs as products: valid, faithful to the physics, robust, restorable."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import simulate_fmu
+from fmpy.fmi1 import FMICallException
+from fmpy.util import read_csv
+from fmpy.validation import validate_fmu
+
+from feedaxis.cosim.fmu_runner import run_fmu
+from feedaxis.fmu_build import FMU_NAMES
+from scenarios import N_STEPS, OUTPUTS, PARAMETERS, STEP_SIZE_S, direct, scripted_inputs
+
+REFERENCE_DIR = Path(__file__).parent / "reference"
+
+
+def run_scripted(loaded, name, parameters=None, instance_name="feedaxis"):
+    return run_fmu(loaded, STEP_SIZE_S[name], N_STEPS[name], scripted_inputs(name),
+                   PARAMETERS[name] if parameters is None else parameters, OUTPUTS[name],
+                   instance_name)
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_passes_fmpy_validation(fmu_paths, name):
+    assert validate_fmu(str(fmu_paths[name])) == []
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_model_description_declares_units_and_state(loaded_fmus, name):
+    description = loaded_fmus[name].description
+    assert description.coSimulation.canGetAndSetFMUstate
+    for variable in description.modelVariables:
+        assert variable.description, variable.name
+        if variable.type == "Real" and variable.causality in ("input", "output"):
+            assert variable.unit, variable.name
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_matches_cross_check_reference(fmu_paths, name):
+    folder = REFERENCE_DIR / name
+    options = dict(line.split(", ") for line in (folder / f"{name}_ref.opt").read_text().splitlines())
+    reference = read_csv(folder / f"{name}_ref.csv")
+    result = simulate_fmu(str(fmu_paths[name]), stop_time=float(options["StopTime"]),
+                          step_size=float(options["StepSize"]),
+                          output_interval=float(options["StepSize"]),
+                          input=read_csv(folder / f"{name}_in.csv"),
+                          output=list(OUTPUTS[name]))
+    assert len(result) == len(reference)
+    for output in OUTPUTS[name]:
+        np.testing.assert_allclose(result[output], reference[output], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_reproduces_physics_called_directly(loaded_fmus, name):
+    result = run_scripted(loaded_fmus[name], name)
+    expected = direct(name, scripted_inputs(name), PARAMETERS[name])[1:]
+    for i, output in enumerate(OUTPUTS[name]):
+        scale = np.max(np.abs(expected[:, i]))
+        assert scale > 0, f"{name}.{output} never moves: the scenario tests nothing"
+        np.testing.assert_allclose(result[output], expected[:, i], rtol=1e-9, atol=1e-9 * scale)
+
+
+def test_all_four_fmus_run_together_and_repeat_identically(loaded_fmus):
+    first = {name: run_scripted(loaded_fmus[name], name) for name in FMU_NAMES}
+    for cycle in range(100):
+        for name in FMU_NAMES:
+            slave = loaded_fmus[name].instantiate(f"{name}_{cycle}")
+            slave.freeInstance()
+    again = {name: run_scripted(loaded_fmus[name], name) for name in FMU_NAMES}
+    for name in FMU_NAMES:
+        for output in OUTPUTS[name]:
+            np.testing.assert_array_equal(again[name][output], first[name][output])
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_get_and_set_state_restores_internal_state(loaded_fmus, name):
+    loaded = loaded_fmus[name]
+    inputs = scripted_inputs(name)
+    h = STEP_SIZE_S[name]
+    slave = loaded.instantiate("state")
+    loaded.set_values(slave, PARAMETERS[name])
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+
+    def advance(first_step, n_steps):
+        for k in range(first_step, first_step + n_steps):
+            loaded.set_values(slave, {n: v[k].item() for n, v in inputs.items()})
+            slave.doStep(k * h, h)
+        return loaded.get_reals(slave, OUTPUTS[name])
+
+    advance(0, 200)
+    saved = slave.getFMUstate()
+    after_save = advance(200, 100)
+    advance(300, 150)
+    slave.setFMUstate(saved)
+    restored = advance(200, 100)
+    serialized = slave.serializeFMUstate(saved)
+    slave.setFMUstate(slave.deSerializeFMUstate(serialized))
+    deserialized = advance(200, 100)
+    slave.freeFMUstate(saved)
+    slave.freeInstance()
+    assert restored == after_save
+    assert deserialized == after_save
+
+
+BAD_PARAMETERS = [
+    ("GeometricError", {"lead_mm": 0.0}, "lead_mm"),
+    ("StepperError", {"lead_mm": -1.0}, "lead_mm"),
+    ("ThermalScrew", {"diameter_m": 0.0}, "diameter_m"),
+    ("ThermalScrew", {"time_step_s": 0.0}, "time_step_s"),
+    ("NpidServo", {"time_step_s": -1e-4}, "time_step_s"),
+    ("NpidServo", {"e_max_mm": 0.0}, "e_max_mm"),
+    ("GeometricError", {"support": "floating"}, "support"),
+]
+
+
+@pytest.mark.parametrize("name, parameters, named", BAD_PARAMETERS)
+def test_bad_parameter_gives_fmi_error_with_message(loaded_fmus, capsys, name, parameters, named):
+    with pytest.raises(FMICallException) as failure:
+        run_fmu(loaded_fmus[name], STEP_SIZE_S[name], 3, scripted_inputs(name), parameters,
+                OUTPUTS[name])
+    assert failure.value.status >= 3  # fmi2Error or worse
+    assert named in capsys.readouterr().out
+    assert np.isfinite(run_scripted(loaded_fmus[name], name)[OUTPUTS[name][0]]).all()
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_nan_input_gives_fmi_error_with_message(loaded_fmus, capsys, name):
+    inputs = scripted_inputs(name)
+    first_input = next(iter(inputs))
+    inputs[first_input] = inputs[first_input].astype(float)
+    inputs[first_input][2] = np.nan
+    with pytest.raises(FMICallException):
+        run_fmu(loaded_fmus[name], STEP_SIZE_S[name], 5, inputs, {}, OUTPUTS[name])
+    assert f"input {first_input} must be finite" in capsys.readouterr().out
+
+
+def test_zero_communication_step_is_refused(loaded_fmus, capsys):
+    with pytest.raises(FMICallException):
+        run_fmu(loaded_fmus["StepperError"], 0.0, 2, {"position_mm": [0.0, 0.1]}, {}, ("error_um",))
+    assert "communication step size must be > 0" in capsys.readouterr().out
