@@ -84,7 +84,7 @@ class AxisSlave(Fmi2Slave):
             self.step(step_size)
         except ValueError as error:
             self.log(f"{self.instance_name} at t = {current_time} s: {error}", Fmi2Status.error)
-            raise
+            return False
         return True
 
     def _get_fmu_state(self):
