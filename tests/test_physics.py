@@ -1,0 +1,92 @@
+"""Physics functions against independent answers: the paper's literal scheme, closed forms."""
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from feedaxis.physics import geometry, motor, servo, thermal
+
+
+def literal_eq10_step(T, Ta, p, v, nut_center_m, dt):
+    """Seed 003 Eq. 10 exactly as printed: whole cells, case by case (1-based n)."""
+    N = p.n_cells
+    r = p.conductivity_W_mK * dt / (p.density_kg_m3 * p.specific_heat_J_kgK * p.cell_length_m**2)
+    src = 4 * dt / (np.pi * p.diameter_m**2 * p.density_kg_m3 * p.specific_heat_J_kgK)
+    h = p.k1_W_m2K_per_mm_min * v + p.k2_W_m2K
+    conv = 4 * h * dt / (p.density_kg_m3 * p.specific_heat_J_kgK * p.diameter_m)
+    lo = (nut_center_m - p.nut_length_m / 2) / p.cell_length_m
+    hi = (nut_center_m + p.nut_length_m / 2) / p.cell_length_m
+    new = T.copy()
+    for n in range(1, N + 1):
+        i = n - 1
+        if n == 1:
+            new[i] = T[i] + r * (T[i + 1] - T[i]) + src * p.k3_W_per_mm_min * v / p.bearing_length_m
+        elif n <= round(p.bearing_length_m / p.cell_length_m):
+            new[i] = T[i] + r * (T[i + 1] + T[i - 1] - 2 * T[i]) + src * p.k3_W_per_mm_min * v / p.bearing_length_m
+        elif lo < n - 1e-9 and n <= hi + 1e-9:
+            new[i] = T[i] + r * (T[i + 1] + T[i - 1] - 2 * T[i]) + src * p.k4_W_per_mm_min * v / p.nut_length_m
+        elif n == N:
+            new[i] = T[i] + r * (T[i - 1] - T[i]) - conv * (1 + p.diameter_m / (4 * p.cell_length_m)) * (T[i] - Ta)
+        else:
+            new[i] = T[i] + r * (T[i + 1] + T[i - 1] - 2 * T[i]) - conv * (T[i] - Ta)
+    return new
+
+
+def test_thermal_step_is_the_papers_eq10_at_dt_0_1_s():
+    params = thermal.ThermalScrewParams(nut_length_m=0.2)  # nut edges on cell boundaries
+    nut_center_mm = 300.0 - 141.0  # 0.3 m from the fixed end
+    ours = np.zeros(params.n_cells)
+    literal = np.full(params.n_cells, 21.5)
+    for _ in range(3000):
+        ours = thermal.advance(params, ours, 0.1, nut_center_mm, 6000.0)
+        literal = literal_eq10_step(literal, 21.5, params, 6000.0, 0.3, 0.1)
+    assert ours.max() > 1.0
+    np.testing.assert_allclose(ours, literal - 21.5, rtol=1e-10, atol=1e-12)
+
+
+def test_thermal_large_steps_stay_stable_and_close():
+    params = thermal.ThermalScrewParams()
+    fine = coarse = np.zeros(params.n_cells)
+    for _ in range(600):
+        fine = thermal.advance(params, fine, 1.0, 100.0, 6000.0)
+    coarse = thermal.advance(params, coarse, 600.0, 100.0, 6000.0)
+    assert np.all(np.isfinite(coarse))
+    np.testing.assert_allclose(coarse, fine, rtol=1e-9)
+
+
+def test_thermal_error_sign_follows_fixed_end_side():
+    negative = thermal.ThermalScrewParams(fixed_end_mm=-141.0)
+    positive = thermal.ThermalScrewParams(fixed_end_mm=641.0)
+    rise = np.linspace(2.0, 0.5, negative.n_cells)
+    # P_f < 0: TE = TE_m(P_x - P_f) (Eq. 16); P_f > 0: TE = -TE_m(P_f - P_x) (Eq. 15)
+    assert thermal.thermal_error_um(negative, rise, 200.0) == pytest.approx(
+        thermal.screw_elongation_um(negative, rise, 0.341))
+    assert thermal.thermal_error_um(positive, rise, 200.0) == pytest.approx(
+        -thermal.screw_elongation_um(positive, rise, 0.441))
+
+
+def test_npid_gain_at_e_max_is_the_papers_value():
+    assert servo.npid_gain(0.3, 6.0, 0.3) == pytest.approx(3.1075, abs=1e-4)
+    assert servo.npid_gain(-5.0, 6.0, 0.3) == servo.npid_gain(0.3, 6.0, 0.3)
+
+
+def test_gravity_sag_matches_small_slope_integral():
+    L, D, rho, E = 0.8, 0.034, 7800.0, 2.1e11
+    q = rho * 9.80665 * np.pi * D**2 / 4
+    EI = E * np.pi * D**4 / 64
+    slope = lambda y: q * y * (3 * L**2 - 3 * L * y + y**2) / (6 * EI)  # cantilever w'(y)
+    expected_um = -1e6 * quad(lambda y: slope(y) ** 2 / 2, 0.0, L)[0]
+    table = geometry.gravity_sag_table(L, D, rho, E, "fixed-free")
+    assert geometry.gravity_sag_error_um(L, table) == pytest.approx(expected_um, rel=1e-4)
+
+
+def test_motor_error_period_of_seed001_motor():
+    assert motor.motor_error_period_mm(1.0, 0.72, 10) == pytest.approx(0.002 * 10)
+    y = np.array([0.0, 0.005, 0.02])
+    np.testing.assert_allclose(motor.motor_step_error_um(y, 1.0, 0.72, 10, [0.1], [0.0]),
+                               [0.1, 0.0, 0.1], atol=1e-12)
+
+
+def test_backlash_reversal_is_iso_reversal_value():
+    up = geometry.backlash_error_um(1, 3.0)
+    down = geometry.backlash_error_um(-1, 3.0)
+    assert up - down == pytest.approx(3.0)
