@@ -96,12 +96,6 @@ def straightforward_explicit(params, segments, times_s, dt_s=0.1):
     return out
 
 
-def table2_cycle(feed_mm_min):
-    return [thermal.DutySegment(0.0, 84 * 60.0, feed_mm_min, 0.0, 500.0),
-            thermal.DutySegment(84 * 60.0, 42 * 60.0, 0.0, 0.0, 0.0),
-            thermal.DutySegment(126 * 60.0, 42 * 60.0, feed_mm_min, 0.0, 500.0)]
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats (default 5)")
@@ -128,7 +122,7 @@ def main():
     params = thermal.ThermalScrewParams()
     times = np.arange(0.0, 168 * 60.0 + 1.0, 60.0)
     for feed in (3000.0, 6000.0, 9000.0):
-        segments = table2_cycle(feed)
+        segments = thermal.table2_cycle(feed)
         fast_s, slow_s = [], []
         for _ in range(max(1, repeats // 2)):
             start = time.perf_counter()

@@ -48,19 +48,12 @@ def test_pid_loop_agrees_with_its_continuous_frequency_response():
     assert (settled.max() - settled.min()) / 2 == pytest.approx(expected, rel=2e-3)
 
 
-def table2_cycle(feed_mm_min, stroke_mm=(0.0, 500.0)):
-    """Seed 003 Table 2: warm 84 min, cool 42 min, warm 42 min at one feed speed."""
-    return [thermal.DutySegment(0.0, 84 * 60.0, feed_mm_min, *stroke_mm),
-            thermal.DutySegment(84 * 60.0, 42 * 60.0, 0.0, stroke_mm[0], stroke_mm[0]),
-            thermal.DutySegment(126 * 60.0, 42 * 60.0, feed_mm_min, *stroke_mm)]
-
-
 def test_thermal_table2_cycle_gives_elongation_of_measured_order():
     params = thermal.ThermalScrewParams()
     times = np.arange(0.0, 168 * 60.0 + 1.0, 30.0)
     peaks = []
     for feed in (3000.0, 6000.0, 9000.0):
-        rise = thermal.simulate_duty(params, table2_cycle(feed), times)
+        rise = thermal.simulate_duty(params, thermal.table2_cycle(feed), times)
         peaks.append(np.max(thermal.screw_elongation_um(params, rise, params.length_m)))
     assert peaks[0] < peaks[1] < peaks[2]
     assert 57.2 / 3 < peaks[1] < 57.2 * 3
@@ -69,7 +62,7 @@ def test_thermal_table2_cycle_gives_elongation_of_measured_order():
 def test_thermal_fmu_over_table2_cycle_matches_closed_form(loaded_fmus):
     """The FMU driven with the moving nut against the path-averaged closed form."""
     params = thermal.ThermalScrewParams()
-    segments = table2_cycle(6000.0)
+    segments = thermal.table2_cycle(6000.0)
     h = 1.0
     t = np.arange(int(168 * 60 / h)) * h
     position = np.empty_like(t)

@@ -244,6 +244,16 @@ class DutySegment:
         return self.from_mm + stroke_mm * fold
 
 
+def table2_cycle(feed_mm_min, from_mm=0.0, to_mm=500.0):
+    """Seed 003 Table 2 loading: warm 84 min, cool 42 min, warm 42 min at one feed speed.
+
+    The stroke is not published; 0 to 500 mm is an assumption.
+    """
+    return [DutySegment(0.0, 84 * 60.0, feed_mm_min, from_mm, to_mm),
+            DutySegment(84 * 60.0, 42 * 60.0, 0.0, from_mm, from_mm),
+            DutySegment(126 * 60.0, 42 * 60.0, feed_mm_min, from_mm, to_mm)]
+
+
 def simulate_duty(params, segments, times_s):
     """Temperature rise at ``times_s`` for a duty cycle, in closed form per segment.
 
