@@ -1,0 +1,421 @@
+"""Reading, checking and writing a measurement case, format version 1 (../shared/data-format.md).
+
+A case is one folder: ``axis.toml`` (required), ``positioning.csv`` and/or ``tracking.csv``,
+optionally ``duty.csv``. Every rule of the format is checked; a broken file raises one
+:class:`CaseError` naming the file, the row (1-based, header = row 1) and the column.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .physics.geometry import SUPPORTS
+from .physics.thermal import DutySegment
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
+
+AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE = (
+    "axis.toml", "positioning.csv", "duty.csv", "tracking.csv")
+
+SCREW_KEYS = {
+    "lead_mm": "positive", "length_m": "positive", "diameter_m": "positive",
+    "density_kg_m3": "positive", "specific_heat_J_kgK": "positive",
+    "expansion_per_K": "positive", "youngs_modulus_Pa": "positive",
+    "nut_length_m": "positive", "bearing_length_m": "positive", "support": "support",
+    "fixed_end_mm": "finite",
+}
+MOTOR_KEYS = {"step_angle_deg": "positive", "error_period_steps": "positive_integer"}
+TABLES = {"screw": SCREW_KEYS, "motor": MOTOR_KEYS}
+
+POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
+                       "time_s": False, "ambient_C": False}
+DUTY_COLUMNS = {"start_s": True, "duration_s": True, "feed_mm_min": True, "from_mm": True,
+                "to_mm": True, "ambient_C": False}
+TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
+                    "disturbance_N": False}
+
+
+class CaseError(ValueError):
+    """A case file breaks the format: the message names file, row and column."""
+
+    def __init__(self, path, message, row=None, column=None):
+        where = [str(path)]
+        if row is not None:
+            where.append(f"row {row}")
+        if column is not None:
+            where.append(f"column '{column}'")
+        super().__init__(f"{', '.join(where)}: {message}")
+        self.path, self.row, self.column = Path(path), row, column
+
+
+@dataclass(frozen=True)
+class Axis:
+    """The axis of ``axis.toml``: free-text name, ``[screw]`` and ``[motor]`` values."""
+
+    name: str
+    screw: dict
+    motor: dict = field(default_factory=dict)
+    path: Path = Path(AXIS_FILE)
+
+    @property
+    def lead_mm(self):
+        return self.screw["lead_mm"]
+
+    def missing(self, table, keys):
+        """The ``[table] key`` names among ``keys`` that this axis lacks."""
+        values = self.screw if table == "screw" else self.motor
+        return [f"[{table}] {key}" for key in keys if key not in values]
+
+
+@dataclass(frozen=True)
+class Positioning:
+    """positioning.csv as arrays; ``direction`` is ±1 (+1 when the column is absent)."""
+
+    target_mm: np.ndarray
+    error_um: np.ndarray
+    direction: np.ndarray
+    run: np.ndarray | None = None
+    time_s: np.ndarray | None = None
+    ambient_C: np.ndarray | None = None
+    has_direction: bool = False
+
+    @property
+    def size(self):
+        return self.target_mm.size
+
+    @property
+    def bidirectional(self):
+        """True when both approach directions were measured."""
+        return self.has_direction and {-1.0, 1.0} <= set(np.unique(self.direction))
+
+
+@dataclass(frozen=True)
+class Duty:
+    """duty.csv: consecutive segments from t = 0, with the optional ambient per segment."""
+
+    segments: tuple
+    ambient_C: np.ndarray | None = None
+
+    @property
+    def end_s(self):
+        return self.segments[-1].end_s
+
+
+@dataclass(frozen=True)
+class Tracking:
+    """tracking.csv as arrays."""
+
+    time_s: np.ndarray
+    reference_mm: np.ndarray
+    actual_mm: np.ndarray
+    disturbance_N: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Case:
+    """One measurement case folder."""
+
+    folder: Path
+    axis: Axis
+    positioning: Positioning | None = None
+    duty: Duty | None = None
+    tracking: Tracking | None = None
+
+    @property
+    def name(self):
+        return self.axis.name or self.folder.name
+
+    @property
+    def is_thermal(self):
+        """A thermal case: duty.csv and time-stamped positions."""
+        return self.duty is not None and self.positioning is not None
+
+
+def read_case(folder):
+    """Read and check a case folder; raise :class:`CaseError` on the first broken rule."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise CaseError(folder, "not a case folder (expected a folder holding axis.toml)")
+    axis = read_axis(folder / AXIS_FILE)
+    duty = read_duty(folder / DUTY_FILE) if (folder / DUTY_FILE).exists() else None
+    positioning = tracking = None
+    if (folder / POSITIONING_FILE).exists():
+        positioning = read_positioning(folder / POSITIONING_FILE,
+                                       duty.end_s if duty is not None else None)
+    elif duty is not None:
+        raise CaseError(folder / DUTY_FILE, f"a thermal test needs {POSITIONING_FILE} "
+                                            "with time_s beside duty.csv")
+    if (folder / TRACKING_FILE).exists():
+        tracking = read_tracking(folder / TRACKING_FILE)
+    if positioning is None and tracking is None:
+        raise CaseError(folder, f"a case holds {POSITIONING_FILE}, {TRACKING_FILE} or both; "
+                                "neither was found")
+    return Case(folder, axis, positioning, duty, tracking)
+
+
+def read_axis(path):
+    """Read ``axis.toml``: known snake_case keys with units only, each value checked."""
+    path = Path(path)
+    if not path.exists():
+        raise CaseError(path, "missing: every case needs axis.toml")
+    text = path.read_text(encoding="utf-8")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        line = re.search(r"line (\d+)", str(error))
+        raise CaseError(path, f"not valid TOML: {error}",
+                        row=int(line.group(1)) if line else None) from None
+    tables = {}
+    for key, value in data.items():
+        if key == "name":
+            if not isinstance(value, str):
+                raise CaseError(path, "name must be a string", _key_line(text, key), key)
+        elif key in TABLES and isinstance(value, dict):
+            tables[key] = _check_table(path, text, key, value)
+        else:
+            raise CaseError(path, _unknown_key_message(key, ["name", "[screw]", "[motor]"]),
+                            _key_line(text, key), key)
+    if "screw" not in tables or "lead_mm" not in tables["screw"]:
+        raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
+                        column="screw.lead_mm")
+    return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}), path)
+
+
+def _check_table(path, text, table, values):
+    known = TABLES[table]
+    for key, value in values.items():
+        row, column = _key_line(text, key, table), f"{table}.{key}"
+        if key not in known:
+            raise CaseError(path, _unknown_key_message(key, list(known)), row, column)
+        problem = _value_problem(known[key], value)
+        if problem:
+            raise CaseError(path, f"{key} {problem}, got {value!r}", row, column)
+    return dict(values)
+
+
+def _unknown_key_message(key, known):
+    hint = "" if "_" in key else " (keys carry their unit as a suffix, e.g. lead_mm)"
+    return f"unknown or unit-less key '{key}'{hint}; known: {', '.join(known)}"
+
+
+def _value_problem(rule, value):
+    if rule == "support":
+        return None if value in SUPPORTS else f"must be one of {', '.join(SUPPORTS)}"
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return "must be a number"
+    if not math.isfinite(value):
+        return "must be finite"
+    if rule == "positive" and value <= 0:
+        return "must be > 0"
+    if rule == "positive_integer" and (not isinstance(value, int) or value < 1):
+        return "must be a whole number >= 1"
+    return None
+
+
+def _key_line(text, key, table=None):
+    """1-based line of ``key = ...`` (inside ``[table]`` when given), or of ``[key]``."""
+    current = None
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        header = re.match(r"\[\s*([A-Za-z0-9_.-]+)\s*\]", stripped)
+        if header:
+            current = header.group(1)
+            if table is None and current == key:
+                return number
+        elif current == table and re.match(rf"{re.escape(key)}\s*=", stripped):
+            return number
+        elif table and re.match(rf"{re.escape(table)}\.{re.escape(key)}\s*=", stripped):
+            return number
+    return None
+
+
+def _read_csv(path, spec):
+    """Read a CSV of the format: header row, '#' comment lines, numeric fields only.
+
+    Returns {column: float array} for the columns present and each data row's label.
+    """
+    path = Path(path)
+    records = []
+    for line_number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        stripped = line.strip()
+        if stripped and not stripped.startswith("#"):
+            records.append((line_number, [cell.strip() for cell in line.split(",")]))
+    if not records:
+        raise CaseError(path, "empty: a header row and at least one data row are needed")
+    header_line, header = records[0]
+    names = _check_header(path, header, spec, _row_label(1, header_line))
+    if len(records) == 1:
+        raise CaseError(path, "no data rows below the header", _row_label(2, header_line + 1))
+    values = {name: np.empty(len(records) - 1) for name in names}
+    for index, (line_number, cells) in enumerate(records[1:]):
+        row = _row_label(index + 2, line_number)
+        if len(cells) != len(names):
+            column = names[min(len(cells), len(names) - 1)]
+            raise CaseError(path, f"{len(cells)} fields where the header has {len(names)}",
+                            row, column)
+        for name, cell in zip(names, cells):
+            values[name][index] = _number(path, cell, row, name)
+    row_labels = [_row_label(i + 2, line) for i, (line, _) in enumerate(records[1:])]
+    return values, row_labels
+
+
+def _row_label(row, line):
+    """Row number counting the header as row 1; the file line too when comments shift it."""
+    return f"{row}" if row == line else f"{row} (line {line})"
+
+
+def _check_header(path, header, spec, row):
+    for name in header:
+        if name not in spec:
+            raise CaseError(path, f"unknown column '{name}'; known: {', '.join(spec)}", row, name)
+        if header.count(name) > 1:
+            raise CaseError(path, "column appears twice", row, name)
+    for name, required in spec.items():
+        if required and name not in header:
+            raise CaseError(path, "required column is missing", row, name)
+    return header
+
+
+def _number(path, cell, row, column):
+    try:
+        value = float(cell)
+    except ValueError:
+        raise CaseError(path, f"not a number: {cell!r}", row, column) from None
+    if not math.isfinite(value):
+        raise CaseError(path, f"must be finite, got {cell!r}", row, column)
+    return value
+
+
+def _first_bad(path, mask, rows, column, message):
+    """Raise naming the first row where ``mask`` is True."""
+    bad = np.flatnonzero(mask)
+    if bad.size:
+        raise CaseError(path, message, rows[bad[0]], column)
+
+
+def read_positioning(path, duty_end_s=None):
+    """Read positioning.csv: target and deviation, optional direction, run, time, ambient.
+
+    With ``duty_end_s`` (a thermal case) every sample needs a time within the duty.
+    """
+    path = Path(path)
+    values, rows = _read_csv(path, POSITIONING_COLUMNS)
+    direction = values.get("direction")
+    if direction is not None:
+        _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
+                   "direction must be +1 or -1")
+    run = values.get("run")
+    if run is not None:
+        _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
+                   "run must be a whole number >= 1")
+    time_s = values.get("time_s")
+    if time_s is not None:
+        _first_bad(path, time_s < 0, rows, "time_s", "time_s must be >= 0 (seconds since the "
+                                                     "start of duty.csv)")
+    if duty_end_s is not None:
+        _check_within_duty(path, time_s, rows, duty_end_s)
+    return Positioning(values["target_mm"], values["error_um"],
+                       direction if direction is not None else np.ones_like(values["target_mm"]),
+                       run.astype(int) if run is not None else None, time_s,
+                       values.get("ambient_C"), has_direction=direction is not None)
+
+
+def read_duty(path):
+    """Read duty.csv: contiguous segments from t = 0, durations > 0, feeds >= 0."""
+    path = Path(path)
+    values, rows = _read_csv(path, DUTY_COLUMNS)
+    start, duration = values["start_s"], values["duration_s"]
+    _first_bad(path, duration <= 0, rows, "duration_s", "duration_s must be > 0")
+    _first_bad(path, values["feed_mm_min"] < 0, rows, "feed_mm_min",
+               "feed_mm_min must be >= 0 (0 means standing still)")
+    if start[0] != 0.0:
+        raise CaseError(path, f"the first segment must start at 0 s, got {start[0]:g}",
+                        rows[0], "start_s")
+    expected = start[:-1] + duration[:-1]
+    tolerance = 1e-9 * np.maximum(1.0, np.abs(expected))
+    mismatch = np.flatnonzero(np.abs(start[1:] - expected) > tolerance)
+    if mismatch.size:
+        i = mismatch[0] + 1
+        kind = "overlaps the previous one" if start[i] < expected[i - 1] else "leaves a gap after the previous one"
+        raise CaseError(path, f"segment {kind}: starts at {start[i]:g} s, the previous ends at "
+                              f"{expected[i - 1]:g} s", rows[i], "start_s")
+    segments = tuple(DutySegment(*row) for row in zip(
+        start, duration, values["feed_mm_min"], values["from_mm"], values["to_mm"]))
+    return Duty(segments, values.get("ambient_C"))
+
+
+def read_tracking(path):
+    """Read tracking.csv: strictly increasing time, reference and actual position."""
+    path = Path(path)
+    values, rows = _read_csv(path, TRACKING_COLUMNS)
+    time_s = values["time_s"]
+    _first_bad(path, np.concatenate(([False], np.diff(time_s) <= 0)), rows, "time_s",
+               "time_s must be strictly increasing")
+    return Tracking(time_s, values["reference_mm"], values["actual_mm"],
+                    values.get("disturbance_N"))
+
+
+def _check_within_duty(path, time_s, rows, duty_end_s):
+    if time_s is None:
+        raise CaseError(path, "a thermal case (duty.csv present) needs time_s on every sample",
+                        "1", "time_s")
+    _first_bad(path, time_s > duty_end_s * (1 + 1e-9), rows, "time_s",
+               f"sample lies after the end of duty.csv ({duty_end_s:g} s): the duty does not "
+               "match the samples' time span")
+
+
+def write_case(folder, axis_values, positioning=None, duty=None, tracking=None):
+    """Write a case folder atomically: all files appear together or none does.
+
+    Parameters
+    ----------
+    folder : path
+        The case folder to create; it must not exist yet.
+    axis_values : dict
+        The content of axis.toml (``name``, ``screw``, ``motor``).
+    positioning, duty, tracking : dict of {column: array}, optional
+        Columns of each CSV, written in the given order.
+    """
+    import tomli_w
+
+    folder = Path(folder)
+    if folder.exists():
+        raise CaseError(folder, "already exists; choose a new case folder")
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+    try:
+        (staging / AXIS_FILE).write_text(tomli_w.dumps(axis_values), encoding="utf-8")
+        for name, columns in ((POSITIONING_FILE, positioning), (DUTY_FILE, duty),
+                              (TRACKING_FILE, tracking)):
+            if columns is not None:
+                _write_csv(staging / name, columns)
+        os.replace(staging, folder)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return folder
+
+
+def _write_csv(path, columns):
+    names = list(columns)
+    table = np.column_stack([np.asarray(columns[name], dtype=float) for name in names])
+    lines = [",".join(names)] + [",".join(_format_cell(name, v) for name, v in zip(names, row))
+                                 for row in table]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _format_cell(name, value):
+    if name in ("direction", "run"):
+        return f"{int(value):+d}" if name == "direction" else f"{int(value)}"
+    return repr(float(value))
