@@ -90,3 +90,12 @@ def test_backlash_reversal_is_iso_reversal_value():
     up = geometry.backlash_error_um(1, 3.0)
     down = geometry.backlash_error_um(-1, 3.0)
     assert up - down == pytest.approx(3.0)
+
+
+def test_per_sample_thermal_error_equals_the_field_evaluated_row_by_row():
+    params = thermal.ThermalScrewParams(fixed_end_mm=-141.0)
+    fields = thermal.simulate_duty(params, thermal.table2_cycle(6000.0), [600.0, 3000.0, 9000.0])
+    positions = np.array([0.0, 250.0, 640.0])
+    per_sample = thermal.thermal_error_um(params, fields, positions)
+    row_by_row = [thermal.thermal_error_um(params, field, x) for field, x in zip(fields, positions)]
+    np.testing.assert_allclose(per_sample, row_by_row, rtol=1e-12)

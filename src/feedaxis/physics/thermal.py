@@ -191,19 +191,36 @@ def advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
     return rise_K
 
 
+def _cumulative_elongation_um(params, rise_K):
+    """TE_m at the cell boundaries, Σ α θ_i dx from the fixed end (Eq. 11-14), per row (µm)."""
+    rise_K = np.atleast_2d(rise_K)
+    per_cell_um = params.expansion_per_K * rise_K * params.cell_length_m * 1e6
+    return np.concatenate((np.zeros((rise_K.shape[0], 1)), np.cumsum(per_cell_um, axis=1)),
+                          axis=1)
+
+
 def screw_elongation_um(params, rise_K, screw_coord_m):
     """TE_m(x) = Σ α θ_i dx up to x, linear within a cell (Eq. 11-14), in µm.
 
     ``rise_K`` may be 2-D (time × cells); the result then has one row per time.
     """
-    rise_K = np.atleast_2d(rise_K)
-    per_cell_um = params.expansion_per_K * rise_K * params.cell_length_m * 1e6
-    cumulative_um = np.concatenate((np.zeros((rise_K.shape[0], 1)),
-                                    np.cumsum(per_cell_um, axis=1)), axis=1)
+    cumulative_um = _cumulative_elongation_um(params, rise_K)
     nodes_m = np.arange(params.n_cells + 1) * params.cell_length_m
     x = np.clip(np.asarray(screw_coord_m, dtype=float), 0.0, params.length_m)
     result = np.array([np.interp(x, nodes_m, row) for row in cumulative_um])
     return result[0] if result.shape[0] == 1 else result
+
+
+def sample_elongation_um(params, rise_K, screw_coord_m):
+    """TE_m of sample k at ``screw_coord_m[k]`` in field ``rise_K[k]`` (µm), as
+    :func:`screw_elongation_um` row by row, vectorised for many samples."""
+    cumulative_um = _cumulative_elongation_um(params, rise_K)
+    cells = np.clip(np.asarray(screw_coord_m, dtype=float), 0.0, params.length_m) \
+        / params.cell_length_m
+    lower = np.minimum(np.floor(cells).astype(int), params.n_cells - 1)
+    rows = np.arange(cumulative_um.shape[0])
+    return (cumulative_um[rows, lower] + (cells - lower)
+            * (cumulative_um[rows, lower + 1] - cumulative_um[rows, lower]))
 
 
 def ambient_error_um(params, position_mm, ambient_delta_K):
@@ -212,10 +229,16 @@ def ambient_error_um(params, position_mm, ambient_delta_K):
 
 
 def thermal_error_um(params, rise_K, position_mm, ambient_delta_K=0.0):
-    """Positioning thermal error TE(P_x) = ±(TE_m + TE_a) (seed 003 Eq. 2, 15, 16), in µm."""
+    """Positioning thermal error TE(P_x) = ±(TE_m + TE_a) (seed 003 Eq. 2, 15, 16), in µm.
+
+    With a 1-D ``rise_K`` (one field) the error at every position; with a 2-D ``rise_K``
+    holding one field per sample, the error of sample k at ``position_mm[k]``.
+    """
     sign = axis_sign(params.fixed_end_mm)
     screw_m = screw_coordinate_m(position_mm, params.fixed_end_mm)
-    return sign * (screw_elongation_um(params, rise_K, screw_m)
+    rise_K = np.asarray(rise_K, dtype=float)
+    elongation = (screw_elongation_um if rise_K.ndim == 1 else sample_elongation_um)
+    return sign * (elongation(params, rise_K, screw_m)
                    + ambient_error_um(params, position_mm, ambient_delta_K))
 
 
