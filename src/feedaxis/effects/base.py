@@ -1,0 +1,203 @@
+"""Effects and models: the shape every physical effect, built in or the user's own, takes.
+
+An :class:`Effect` names a physical cause of positioning error, its parameters (unit,
+bounds), a starting guess from the data, its evaluation at the samples of a case, and the
+FMU parameters it maps to. Effects compose into a :class:`Model` with ``+``, as lmfit
+models do: ``model = LeadError() + Backlash()``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One fitted parameter: name with its unit as suffix, bounds, and what it means."""
+
+    name: str
+    unit: str
+    lower: float
+    upper: float
+    meaning: str = ""
+
+
+@dataclass(frozen=True)
+class Needs:
+    """What an effect needs from a case: CSV columns, axis.toml keys, a duty.csv."""
+
+    columns: tuple = ()
+    screw_keys: tuple = ()
+    motor_keys: tuple = ()
+    duty: bool = False
+    both_directions: bool = False
+
+
+class Effect:
+    """A physical effect that adds to the positioning error (µm) at each sample.
+
+    Subclasses set ``name``, ``meaning``, ``parameters`` and ``needs`` and implement
+    :meth:`prepare`; :meth:`guess`, :meth:`fmu_parameters`, :meth:`evidence` and
+    :meth:`wavelength_mm` have sensible defaults.
+    """
+
+    name = "effect"
+    meaning = ""
+    parameters: tuple = ()
+    needs = Needs()
+    fmu = None
+
+    def __add__(self, other):
+        return Model((self,)) + other
+
+    def __repr__(self):
+        return f"<{type(self).__name__} {self.name}>"
+
+    @property
+    def parameter_names(self):
+        return tuple(p.name for p in self.parameters)
+
+    def unavailable(self, case):
+        """Why this effect cannot be used on ``case`` (None when it can)."""
+        positioning = case.positioning
+        if positioning is None:
+            return "the case has no positioning.csv"
+        for column in self.needs.columns:
+            if getattr(positioning, column, None) is None or (
+                    column == "direction" and not positioning.has_direction):
+                return f"needs the '{column}' column of positioning.csv"
+        if self.needs.both_directions and not positioning.bidirectional:
+            return "needs samples approached in both directions"
+        if self.needs.duty and case.duty is None:
+            return "needs duty.csv (the motion history of a thermal test)"
+        missing = (case.axis.missing("screw", self.needs.screw_keys)
+                   + case.axis.missing("motor", self.needs.motor_keys))
+        if missing:
+            return f"needs {', '.join(missing)} in axis.toml"
+        return None
+
+    def prepare(self, case):
+        """Return ``f(values) -> error_um`` at the case's positioning samples."""
+        raise NotImplementedError
+
+    def bounds(self, axis):
+        """{parameter: (lower, upper)} on this axis; by default the parameters' own bounds."""
+        return {p.name: (p.lower, p.upper) for p in self.parameters}
+
+    def guess(self, case, residual_um):
+        """Starting values from the data; by default 0 clipped into the bounds."""
+        return {p.name: float(np.clip(0.0, p.lower, p.upper)) for p in self.parameters}
+
+    def wavelength_mm(self, axis):
+        """Spatial wavelength of a periodic effect (mm), or None."""
+        return None
+
+    def fmu_parameters(self, axis, values):
+        """{FMU name: {parameter: value}} that make the FMU reproduce this effect."""
+        return {}
+
+    def evidence(self, case, values, contribution_um):
+        """One line on what in the data points to this effect."""
+        return f"explains {np.std(contribution_um):.3g} µm RMS of the residual"
+
+
+class FunctionEffect(Effect):
+    """An effect from a plain function ``f(case, **values) -> error_um`` (the user API)."""
+
+    def __init__(self, function, name, meaning, parameters, needs=Needs(), wavelength_mm=None,
+                 guess=None):
+        self.function, self.name, self.meaning = function, name, meaning
+        self.parameters, self.needs = tuple(parameters), needs
+        self._wavelength_mm, self._guess = wavelength_mm, guess
+
+    def prepare(self, case):
+        return lambda values: np.asarray(self.function(case, **values), dtype=float)
+
+    def guess(self, case, residual_um):
+        return self._guess(case, residual_um) if self._guess else super().guess(case, residual_um)
+
+    def wavelength_mm(self, axis):
+        return self._wavelength_mm
+
+
+def effect(name, meaning, parameters, needs=Needs(), wavelength_mm=None, guess=None):
+    """Decorator turning ``f(case, **params) -> error_um`` into an :class:`Effect`.
+
+    Example (a file loaded with ``--effects my_effects.py``)::
+
+        from feedaxis.effects import Parameter, effect
+
+        @effect("coupling_ripple", "ripple of a worn coupling, period 0.37 mm",
+                [Parameter("cos_um", "um", -10, 10), Parameter("sin_um", "um", -10, 10)],
+                wavelength_mm=0.37)
+        def coupling_ripple(case, cos_um, sin_um):
+            phase = 2 * np.pi * case.positioning.target_mm / 0.37
+            return cos_um * np.cos(phase) + sin_um * np.sin(phase)
+    """
+    def wrap(function):
+        return FunctionEffect(function, name, meaning, parameters, needs, wavelength_mm, guess)
+    return wrap
+
+
+class Model:
+    """An ordered set of effects with their parameter values; add effects with ``+``."""
+
+    def __init__(self, effects=(), values=None):
+        self.effects = tuple(effects)
+        names = [e.name for e in self.effects]
+        duplicated = {n for n in names if names.count(n) > 1}
+        if duplicated:
+            raise ValueError(f"effect {sorted(duplicated)[0]!r} appears twice in the model")
+        self.values = {e.name: dict((values or {}).get(e.name, {})) for e in self.effects}
+
+    def __add__(self, other):
+        if isinstance(other, Effect):
+            other = Model((other,))
+        return Model(self.effects + other.effects, {**self.values, **other.values})
+
+    def __contains__(self, name):
+        return name in self.names
+
+    def __repr__(self):
+        return f"<Model {' + '.join(self.names) or '(empty)'}>"
+
+    @property
+    def names(self):
+        return tuple(e.name for e in self.effects)
+
+    def with_values(self, values):
+        """A copy with ``values`` ({effect: {parameter: value}}) replacing the current ones."""
+        return Model(self.effects, {**self.values, **values})
+
+    def prepare(self, case):
+        """Per effect, its evaluation function on ``case``."""
+        return [(e, e.prepare(case)) for e in self.effects]
+
+    def components(self, case):
+        """{effect name: error_um contribution} at the case's positioning samples."""
+        return {e.name: f(self.values[e.name]) for e, f in self.prepare(case)}
+
+    def predict_um(self, case):
+        """Total modelled error (µm) at the case's positioning samples."""
+        total = np.zeros(case.positioning.size)
+        for contribution in self.components(case).values():
+            total = total + contribution
+        return total
+
+    def fmu_parameters(self, axis):
+        """{FMU name: {parameter: value}} for the co-simulated axis to reproduce the model."""
+        from .catalog import neutral_fmu_parameters
+
+        parameters = neutral_fmu_parameters(axis)
+        for e in self.effects:
+            for fmu, values in e.fmu_parameters(axis, self.values[e.name]).items():
+                parameters.setdefault(fmu, {}).update(values)
+        return parameters
+
+    def to_toml(self):
+        """The model as TOML text: one table per effect holding its parameter values."""
+        import tomli_w
+
+        header = "# feedaxis model: one table per effect, parameter values with units in names\n"
+        return header + tomli_w.dumps({name: self.values[name] for name in self.names})

@@ -1,0 +1,207 @@
+"""Bounded least squares over a model's effects, on one or several cases jointly.
+
+One :class:`FitResult` carries the fitted model, the residual and its statistics
+(RMS, max, P-V, R², AIC, BIC) and each parameter's standard uncertainty.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .effects import Model
+
+SINGULAR_RATIO = 1e-10
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """Residual figures of a model on measured data (µm); AIC/BIC for Gaussian errors."""
+
+    n_points: int
+    n_free: int
+    rms_before_um: float
+    rms_um: float
+    max_um: float
+    pv_um: float
+    r2: float
+    aic: float
+    bic: float
+
+    @classmethod
+    def of(cls, measured_um, residual_um, n_free):
+        n = measured_um.size
+        rss = max(float(residual_um @ residual_um), 1e-300)
+        tss = float(np.sum((measured_um - measured_um.mean()) ** 2))
+        log_likelihood_term = n * np.log(rss / n)
+        return cls(n, n_free, _rms(measured_um), _rms(residual_um),
+                   float(np.max(np.abs(residual_um))), float(np.ptp(residual_um)),
+                   1.0 - rss / tss if tss > 0 else float("nan"),
+                   log_likelihood_term + 2 * n_free, log_likelihood_term + n_free * np.log(n))
+
+
+def _rms(values):
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+@dataclass
+class FitResult:
+    """A fitted model with its residual, statistics and parameter uncertainties."""
+
+    model: Model
+    statistics: Statistics
+    measured_um: np.ndarray
+    residual_um: np.ndarray
+    uncertainties: dict = field(default_factory=dict)
+    undetermined: dict = field(default_factory=dict)
+
+    @property
+    def rms_um(self):
+        return self.statistics.rms_um
+
+    def params(self):
+        """{effect: {parameter: value}} of the fitted model."""
+        return {name: dict(self.model.values[name]) for name in self.model.names}
+
+
+def _as_list(cases):
+    return list(cases) if isinstance(cases, (list, tuple)) else [cases]
+
+
+def measured_um(cases):
+    """The measured deviations of one or several cases, concatenated (µm)."""
+    return np.concatenate([c.positioning.error_um for c in _as_list(cases)])
+
+
+def check_available(model, cases):
+    """Raise ValueError when an effect of ``model`` cannot be used on a case."""
+    for case in _as_list(cases):
+        if case.positioning is None:
+            raise ValueError(f"{case.folder}: the fit needs positioning.csv")
+        for effect in model.effects:
+            reason = effect.unavailable(case)
+            if reason:
+                raise ValueError(f"{case.folder}: effect {effect.name} {reason}")
+
+
+def evaluate(model, cases):
+    """Statistics and residual of ``model`` as it stands (no fitting)."""
+    cases = _as_list(cases)
+    check_available(model, cases)
+    measured = measured_um(cases)
+    residual = measured - np.concatenate([model.predict_um(c) for c in cases])
+    return FitResult(model, Statistics.of(measured, residual, 0), measured, residual)
+
+
+def fit(model, cases, progress=None):
+    """Fit every parameter of ``model`` to the cases by bounded least squares.
+
+    Effects without values start from their :meth:`~feedaxis.effects.Effect.guess` on the
+    residual of the effects before them; the fit then moves all parameters together
+    (trust-region reflective, bounds from each effect).
+
+    Parameters
+    ----------
+    model : Model
+    cases : Case or list of Case
+        Fitted jointly; their residuals are concatenated.
+    progress : callable, optional
+        Called once per model evaluation (for a progress bar).
+
+    Returns
+    -------
+    FitResult
+    """
+    cases = _as_list(cases)
+    check_available(model, cases)
+    model = _with_starting_values(model, cases)
+    measured = measured_um(cases)
+    layout = _Layout(model, cases[0].axis)
+    evaluators = [model.prepare(case) for case in cases]
+
+    def residual(x):
+        if progress:
+            progress()
+        values = layout.values(x)
+        predicted = [sum((f(values[e.name]) for e, f in prepared), np.zeros(case.positioning.size))
+                     for case, prepared in zip(cases, evaluators)]
+        return measured - np.concatenate(predicted)
+
+    if layout.size == 0:
+        return evaluate(model, cases)
+    solution = least_squares(residual, layout.start(), bounds=layout.bounds(), x_scale="jac",
+                             method="trf")
+    fitted = model.with_values(layout.values(solution.x))
+    sigma, undetermined = _uncertainties(solution, layout, measured.size)
+    return FitResult(fitted, Statistics.of(measured, solution.fun, layout.size), measured,
+                     solution.fun, sigma, undetermined)
+
+
+def _with_starting_values(model, cases):
+    """Give each effect lacking values its guess on the residual of the effects before it."""
+    case = cases[0]
+    running = np.array(case.positioning.error_um, dtype=float)
+    values = {}
+    for effect in model.effects:
+        current = model.values[effect.name]
+        if not current and effect.parameters:
+            limits = effect.bounds(case.axis)
+            current = {name: float(np.clip(value, *limits[name]))
+                       for name, value in effect.guess(case, running).items()}
+            values[effect.name] = current
+        running = running - effect.prepare(case)(current)
+    return model.with_values(values)
+
+
+class _Layout:
+    """Where each effect's parameters sit in the flat vector the optimiser moves."""
+
+    def __init__(self, model, axis):
+        self.model = model
+        self.slots = [(e.name, p.name) for e in model.effects for p in e.parameters]
+        limits = {e.name: e.bounds(axis) for e in model.effects}
+        self.lower = np.array([limits[e][p][0] for e, p in self.slots], dtype=float)
+        self.upper = np.array([limits[e][p][1] for e, p in self.slots], dtype=float)
+
+    @property
+    def size(self):
+        return len(self.slots)
+
+    def start(self):
+        x0 = np.array([self.model.values[e][p] for e, p in self.slots], dtype=float)
+        margin = 1e-9 * (self.upper - self.lower)
+        return np.clip(x0, self.lower + margin, self.upper - margin)
+
+    def bounds(self):
+        return self.lower, self.upper
+
+    def values(self, x):
+        values = {name: {} for name in self.model.names}
+        for (effect_name, parameter_name), value in zip(self.slots, x):
+            values[effect_name][parameter_name] = float(value)
+        return values
+
+
+def _uncertainties(solution, layout, n_points):
+    """Standard uncertainties from the Jacobian at the optimum; flag what the data cannot fix.
+
+    A parameter is undetermined when it has a share in a (nearly) singular direction of the
+    Jacobian, or when it ends on a bound.
+    """
+    variance = float(solution.fun @ solution.fun) / max(n_points - layout.size, 1)
+    _, singular, vt = np.linalg.svd(solution.jac, full_matrices=False)
+    strong = singular > SINGULAR_RATIO * max(singular[0], 1e-300)
+    covariance = (vt[strong].T / singular[strong] ** 2) @ vt[strong] * variance
+    weak = np.abs(vt[~strong]).max(axis=0, initial=0.0) > 0.1
+    sigma = {name: {} for name in layout.model.names}
+    undetermined = {}
+    for index, (effect_name, parameter_name) in enumerate(layout.slots):
+        key = f"{effect_name}.{parameter_name}"
+        sigma[effect_name][parameter_name] = float(np.sqrt(covariance[index, index]))
+        if weak[index]:
+            undetermined[key] = "the data cannot separate it from other parameters"
+            sigma[effect_name][parameter_name] = float("nan")
+        elif solution.active_mask[index] != 0:
+            undetermined[key] = "ended on its bound"
+    return sigma, undetermined

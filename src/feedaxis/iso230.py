@@ -1,0 +1,103 @@
+"""ISO 230-2 positioning figures of bidirectional (or unidirectional) runs.
+
+x_ij = deviation at target i, run j; ↑ / ↓ = approach in + / -. With means x̄_i↑, x̄_i↓,
+sample standard deviations s_i↑, s_i↓ (n - 1) and x̄_i = (x̄_i↑ + x̄_i↓)/2:
+B_i = x̄_i↑ - x̄_i↓, B = max|B_i|, B̄ = mean B_i; R_i↑ = 4 s_i↑;
+R_i = max(2 s_i↑ + 2 s_i↓ + |B_i|, R_i↑, R_i↓); E↑ = max x̄_i↑ - min x̄_i↑;
+E = max(x̄↑, x̄↓) - min(x̄↑, x̄↓); M = max x̄_i - min x̄_i;
+A = max(x̄↑ + 2s↑, x̄↓ + 2s↓) - min(x̄↑ - 2s↑, x̄↓ - 2s↓). All in µm.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+TARGET_DECIMALS = 6
+
+
+def per_target(target_mm, error_um, direction, sign):
+    """Targets, mean and sample standard deviation (NaN for one run) of one direction."""
+    chosen = direction == sign
+    targets = np.round(target_mm[chosen], TARGET_DECIMALS)
+    unique_mm, index = np.unique(targets, return_inverse=True)
+    counts = np.bincount(index)
+    mean = np.bincount(index, error_um[chosen]) / counts
+    squares = np.bincount(index, (error_um[chosen] - mean[index]) ** 2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        std = np.where(counts > 1, np.sqrt(squares / (counts - 1)), np.nan)
+    return unique_mm, mean, std, counts
+
+
+def _unidirectional(mean, std):
+    figures = {"E": float(np.ptp(mean))}
+    if not np.any(np.isnan(std)):
+        figures["R"] = float(np.max(4 * std))
+        figures["A"] = float(np.max(mean + 2 * std) - np.min(mean - 2 * std))
+    return figures
+
+
+def iso230_figures(target_mm, error_um, direction):
+    """ISO 230-2 figures (µm) keyed ``E_up_um``, ``B_um``, ``A_um``, ...; absent when the
+    data cannot give them (one direction only, or one run per target)."""
+    target_mm, error_um = np.asarray(target_mm, float), np.asarray(error_um, float)
+    direction = np.asarray(direction, float)
+    figures = {}
+    sides = {}
+    for label, sign in (("up", 1.0), ("down", -1.0)):
+        if np.any(direction == sign):
+            sides[label] = per_target(target_mm, error_um, direction, sign)
+            for name, value in _unidirectional(*sides[label][1:3]).items():
+                figures[f"{name}_{label}_um"] = value
+            figures[f"runs_{label}"] = int(np.min(sides[label][3]))
+    if len(sides) == 2 and np.array_equal(sides["up"][0], sides["down"][0]):
+        figures.update(_bidirectional(sides["up"][1:3], sides["down"][1:3]))
+    figures["targets"] = int(np.unique(np.round(target_mm, TARGET_DECIMALS)).size)
+    return figures
+
+
+def _bidirectional(up, down):
+    (mean_up, std_up), (mean_down, std_down) = up, down
+    reversal = mean_up - mean_down
+    both = np.concatenate((mean_up, mean_down))
+    figures = {"B_um": float(np.max(np.abs(reversal))), "B_mean_um": float(np.mean(reversal)),
+               "E_um": float(np.ptp(both)), "M_um": float(np.ptp((mean_up + mean_down) / 2))}
+    if not (np.any(np.isnan(std_up)) or np.any(np.isnan(std_down))):
+        r_i = np.maximum.reduce([2 * std_up + 2 * std_down + np.abs(reversal),
+                                 4 * std_up, 4 * std_down])
+        figures["R_um"] = float(np.max(r_i))
+        figures["A_um"] = float(max(np.max(mean_up + 2 * std_up), np.max(mean_down + 2 * std_down))
+                                - min(np.min(mean_up - 2 * std_up), np.min(mean_down - 2 * std_down)))
+    return figures
+
+
+FIGURE_NAMES = {
+    "A_um": "accuracy A", "E_um": "systematic deviation E", "M_um": "mean positioning error M",
+    "R_um": "repeatability R", "B_um": "reversal B", "B_mean_um": "mean reversal B̄",
+    "E_up_um": "systematic deviation E↑", "E_down_um": "systematic deviation E↓",
+    "R_up_um": "repeatability R↑", "R_down_um": "repeatability R↓",
+    "A_up_um": "accuracy A↑", "A_down_um": "accuracy A↓",
+}
+
+
+def compare(case, model):
+    """ISO 230-2 figures of the measurement and of the residual after ``model``, side by side.
+
+    Returns {"figures": {key: {"measured_um", "residual_um", "explained"}}, "targets", ...};
+    ``explained`` = 1 - residual / measured, the share of the figure the model explains.
+    """
+    from .fit import evaluate
+
+    positioning = case.positioning
+    result = evaluate(model, case)
+    measured = iso230_figures(positioning.target_mm, result.measured_um, positioning.direction)
+    residual = iso230_figures(positioning.target_mm, result.residual_um, positioning.direction)
+    figures = {}
+    for key, name in FIGURE_NAMES.items():
+        if key in measured:
+            explained = 1 - residual[key] / measured[key] if measured[key] else None
+            figures[key] = {"name": name, "measured_um": measured[key],
+                            "residual_um": residual[key], "explained": explained}
+    return {"case": str(case.folder), "effects": list(model.names),
+            "targets": measured["targets"], "runs_up": measured.get("runs_up", 0),
+            "runs_down": measured.get("runs_down", 0), "bidirectional": positioning.bidirectional,
+            "rms_measured_um": result.statistics.rms_before_um,
+            "rms_residual_um": result.statistics.rms_um, "figures": figures}
