@@ -1,44 +1,70 @@
-"""`feedaxis demo` until the comparison loop lands: build the FMUs and run each through fmpy."""
+"""`feedaxis demo`: the whole loop on the bundled seed 001 case, then the FMUs.
+
+Each round diagnoses the model, adds the best missing effect and refits, until the verdict
+is no longer ``missing_effect``. The fitted model, the report and the FMUs are written to
+the output folder, and the FMUs driven with the fitted parameters are checked against the
+model.
+"""
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
-from .cosim.fmu_runner import run_fmu
+from .case import read_case
+from .cosim.replay import POSITION_FMUS, replay_positioning
+from .diagnose import diagnose
+from .effects import CATALOG, Model
+from .examples import BUNDLED_CASE
 from .fmu_build import build_fmus
+from .output import write_atomically
+from .report import write_report
 
-DEMO_RUNS = {
-    "NpidServo": dict(step_size_s=1e-3, duration_s=5.0, outputs=("tracking_error_mm",),
-                      inputs=lambda t: {"position_ref_mm": 10.0 * np.sin(2 * np.pi * 0.4 * t)},
-                      measure=lambda e: (np.max(np.abs(e[e.size // 2:])),),
-                      summary="PID, 0.4 Hz x 10 mm sine: settled max |tracking error| {:.4f} mm "
-                              "(seed 002 Table 1: 0.0639 mm)"),
-    "StepperError": dict(step_size_s=0.01, duration_s=1.0, outputs=("error_um",),
-                         inputs=lambda t: {"position_mm": 0.04 * t},
-                         measure=lambda e: (np.ptp(e),),
-                         summary="motor ripple over 0.04 mm: peak-to-valley {:.3f} um"),
-    "GeometricError": dict(step_size_s=0.01, duration_s=5.0, outputs=("error_um",),
-                           inputs=lambda t: {"position_mm": t, "velocity_mm_s": np.ones_like(t)},
-                           measure=lambda e: (e[0], e[-1]),
-                           summary="0 to 5 mm at 1 mm/s: error from {:.2f} to {:.2f} um "
-                                   "(seed 001: 0 to about -3 um, 1 mm ripple)"),
-    "ThermalScrew": dict(step_size_s=1.0, duration_s=3600.0, outputs=("elongation_um",),
-                         inputs=lambda t: {"position_mm": 250.0 - 250.0 * np.cos(2 * np.pi * t / 10.0),
-                                           "velocity_mm_s": np.full_like(t, 100.0),
-                                           "ambient_C": np.full_like(t, 20.0)},
-                         measure=lambda e: (np.max(np.abs(e)),),
-                         summary="1 h back and forth at 6000 mm/min: screw elongation {:.1f} um"),
-}
+MAX_ROUNDS = 8
+
+
+def improve(case, model, effects=None, echo=print, max_rounds=MAX_ROUNDS):
+    """Diagnose, add the best missing effect, refit; repeat. Returns (model, rounds)."""
+    effects = CATALOG if effects is None else effects
+    rounds = []
+    for number in range(1, max_rounds + 1):
+        diagnosis = diagnose(case, model, effects)
+        round_ = {"round": number, "rms_um": diagnosis.rms_um, "noise_um": diagnosis.noise_um,
+                  "verdict": diagnosis.verdict, **diagnosis.to_json()}
+        echo(f"round {number}: RMS {diagnosis.rms_um:.4f} um (noise {diagnosis.noise_um:.4f} um)"
+             f" -> {diagnosis.verdict}")
+        for structure in diagnosis.unexplained:
+            echo(f"    unexplained {structure.kind}: {structure.evidence}")
+        if diagnosis.verdict != "missing_effect":
+            rounds.append(round_)
+            break
+        best = diagnosis.candidates[0]
+        model = best.result.model
+        round_.update(added=best.effect, rms_after_um=best.rms_after_um)
+        rounds.append(round_)
+        echo(f"    missing: {best.effect} ({best.meaning})")
+        echo(f"    evidence: {best.evidence}")
+        echo(f"    add {best.effect}, refit: RMS {best.rms_after_um:.4f} um")
+    return model, rounds
 
 
 def run_demo(out_dir, echo=print):
-    """Build the four FMUs into ``out_dir``, run each and return {name: summary line}."""
-    summaries = {}
-    for path in build_fmus(out_dir):
-        run = DEMO_RUNS[path.stem]
-        n = int(round(run["duration_s"] / run["step_size_s"]))
-        t = np.arange(n) * run["step_size_s"]
-        result = run_fmu(path, run["step_size_s"], n, run["inputs"](t), {}, run["outputs"])
-        numbers = run["measure"](result[run["outputs"][0]])
-        summaries[path.stem] = run["summary"].format(*numbers)
-        echo(f"{path.stem:15s} {summaries[path.stem]}")
-    return summaries
+    """Run the loop on the bundled case and write model, report and FMUs to ``out_dir``."""
+    out_dir = Path(out_dir)
+    case = read_case(BUNDLED_CASE)
+    echo(f"case: {case.name}")
+    echo(f"      {case.positioning.size} laser points, {case.positioning.target_mm.min():g} to "
+         f"{case.positioning.target_mm.max():g} mm; model: empty")
+    model, rounds = improve(case, Model(), echo=echo)
+    model_path = write_atomically(out_dir / "model.toml", model.to_toml())
+    report_path = write_report(case, model, CATALOG, out_dir / "report.html")
+    echo(f"fitted model: {model_path}")
+    echo(f"report:       {report_path}")
+    fmu_paths = {path.stem: path for path in build_fmus(out_dir / "fmus", POSITION_FMUS)}
+    difference_um = float(np.max(np.abs(replay_positioning(case, model, fmu_paths)
+                                        - model.predict_um(case))))
+    echo(f"FMUs {' + '.join(POSITION_FMUS)} with the fitted parameters reproduce the model "
+         f"within {difference_um:.1e} um ({out_dir / 'fmus'})")
+    return {"case": str(case.folder), "rounds": rounds, "effects": list(model.names),
+            "params": model.values, "model": str(model_path), "report": str(report_path),
+            "fmu_max_difference_um": difference_um}

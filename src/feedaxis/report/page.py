@@ -1,0 +1,126 @@
+"""The self-contained HTML report: tables and PNG plots embedded as data URIs."""
+from __future__ import annotations
+
+import base64
+import html
+from pathlib import Path
+
+from ..diagnose import diagnose
+from ..effects import Model
+from ..fit import evaluate, fit
+from ..iso230 import compare
+from ..output import write_atomically
+from . import plots
+
+STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;
+text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
+img{max-width:100%}.verdict{font-size:1.2em;font-weight:bold}"""
+
+
+def error_ladder(case, model):
+    """[(label, residual RMS µm)]: nothing, then each effect of ``model`` added in turn, refitted."""
+    steps = [("measured", evaluate(Model(), case).rms_um)]
+    for count in range(1, len(model.effects) + 1):
+        partial = Model(model.effects[:count])
+        steps.append((f"+ {model.effects[count - 1].name}", fit(partial, case).rms_um))
+    return steps
+
+
+def _image(png, alt):
+    data = base64.b64encode(png).decode("ascii")
+    return f'<p><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>'
+
+
+def _table(header, rows):
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>"
+                   for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _parameter_rows(model):
+    return [(f"{e.name}.{p.name}", f"{model.values[e.name][p.name]:.6g}", p.unit, p.meaning)
+            for e in model.effects for p in e.parameters]
+
+
+def _diagnosis_html(diagnosis):
+    parts = [f'<p class="verdict">verdict: {diagnosis.verdict}</p>',
+             f"<p>residual RMS {diagnosis.rms_um:.4g} µm; noise {diagnosis.noise_um:.3g} µm "
+             f"({html.escape(diagnosis.noise_source)})</p>"]
+    if diagnosis.candidates:
+        parts.append(_table(("missing effect", "RMS after (µm)", "ΔBIC", "meaning", "evidence"),
+                            [(c.effect, f"{c.rms_after_um:.4g}", f"{c.delta_bic:.1f}", c.meaning,
+                              c.evidence) for c in diagnosis.candidates]))
+    if diagnosis.unexplained:
+        parts.append(_table(("unexplained", "wavelength (mm)", "amplitude (µm)", "evidence"),
+                            [(s.kind, "" if s.wavelength_mm is None else f"{s.wavelength_mm:.4g}",
+                              f"{s.amplitude_um:.3g}", s.evidence) for s in diagnosis.unexplained]))
+    if diagnosis.skipped:
+        parts.append(_table(("passed over", "why"), diagnosis.skipped.items()))
+    return "".join(parts)
+
+
+def _comparison_html(comparison):
+    rows = [(f["name"], f"{f['measured_um']:.4g}", f"{f['residual_um']:.4g}",
+             "" if f["explained"] is None else f"{100 * f['explained']:.1f} %")
+            for f in comparison["figures"].values()]
+    rows.append(("RMS", f"{comparison['rms_measured_um']:.4g}",
+                 f"{comparison['rms_residual_um']:.4g}", ""))
+    return _table(("ISO 230-2 figure", "measured (µm)", "residual (µm)", "explained"), rows)
+
+
+def _residual_panels(case, residual_um):
+    positioning = case.positioning
+    panels = []
+    if positioning.time_s is not None:
+        panels.append(("time (min)", positioning.time_s / 60.0, residual_um))
+    if positioning.bidirectional:
+        panels.append(("approach direction", positioning.direction, residual_um))
+    if positioning.ambient_C is not None:
+        panels.append(("ambient (°C)", positioning.ambient_C, residual_um))
+    return panels
+
+
+def write_report(case, model, effects, out_path):
+    """Write the report of ``model`` (as fitted) on ``case`` to ``out_path``; returns the path."""
+    result = evaluate(model, case)
+    diagnosis = diagnose(case, model, effects)
+    positioning = case.positioning
+    steps = error_ladder(case, model)
+    sections = [
+        f"<h1>feedaxis report: {html.escape(case.name)}</h1>",
+        f"<p>case <code>{html.escape(str(case.folder))}</code>, {positioning.size} samples; "
+        f"model: {html.escape(' + '.join(model.names) or '(empty)')}; residual RMS "
+        f"{result.rms_um:.4g} µm of {result.statistics.rms_before_um:.4g} µm measured "
+        f"(R² {result.statistics.r2:.4f})</p>",
+        "<h2>Diagnosis</h2>", _diagnosis_html(diagnosis),
+        "<h2>Measurement against model</h2>",
+        _image(plots.measurement_vs_model(positioning.target_mm, result.measured_um,
+                                          result.measured_um - result.residual_um,
+                                          positioning.direction), "measurement against model"),
+        "<h2>Residual</h2>",
+        _image(plots.residual_vs_position(positioning.target_mm, result.residual_um,
+                                          diagnosis.spectrum.marks), "residual against position"),
+        _image(plots.spectrum(diagnosis.spectrum.wavelength_mm, diagnosis.spectrum.amplitude_um,
+                              diagnosis.spectrum.marks, diagnosis.unexplained), "spectrum"),
+    ]
+    panels = _residual_panels(case, result.residual_um)
+    if panels:
+        sections.append(_image(plots.residual_against(panels), "residual against time, "
+                                                               "direction, ambient"))
+    sections += [
+        "<h2>Each effect's contribution</h2>",
+        _image(plots.contributions(positioning.target_mm, model.components(case)),
+               "contributions") if model.effects else "<p>(empty model)</p>",
+        "<h2>Error ladder</h2>", _image(plots.ladder(steps, diagnosis.noise_um), "error ladder"),
+        _table(("step", "residual RMS (µm)"), [(label, f"{v:.4g}") for label, v in steps]),
+        "<h2>ISO 230-2 figures</h2>", _comparison_html(compare(case, model)),
+        "<h2>Model parameters</h2>",
+        _table(("parameter", "value", "unit", "meaning"), _parameter_rows(model)),
+    ]
+    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>feedaxis report: "
+            f"{html.escape(case.name)}</title><style>{STYLE}</style></head><body>"
+            + "\n".join(sections) + "</body></html>")
+    write_atomically(out_path, page)
+    return Path(out_path)

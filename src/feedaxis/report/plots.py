@@ -1,0 +1,117 @@
+"""Report figures as PNG bytes (matplotlib, Agg backend); each takes computed arrays only."""
+from __future__ import annotations
+
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+MARK_COLOURS = ("tab:red", "tab:purple", "tab:brown", "tab:olive")
+MAX_PERIOD_LINES = 60
+
+
+def _png(figure):
+    buffer = io.BytesIO()
+    figure.tight_layout()
+    figure.savefig(buffer, format="png", dpi=110)
+    plt.close(figure)
+    return buffer.getvalue()
+
+
+def measurement_vs_model(position_mm, measured_um, predicted_um, direction):
+    """Measured deviations (dots) and the model (line) against position."""
+    figure, axes = plt.subplots(figsize=(9, 3.6))
+    axes.plot(position_mm, measured_um, ".", ms=2, color="0.55", label="measured")
+    order = np.argsort(position_mm, kind="stable")
+    for sign, colour in ((1.0, "tab:blue"), (-1.0, "tab:orange")):
+        chosen = order[direction[order] == sign]
+        if chosen.size:
+            axes.plot(position_mm[chosen], predicted_um[chosen], "-", lw=1.2, color=colour,
+                      label=f"model ({'+' if sign > 0 else '-'} approach)")
+    axes.set(xlabel="target position (mm)", ylabel="error (µm)",
+             title="Measurement against model")
+    axes.legend(loc="best", fontsize=8)
+    axes.grid(alpha=0.3)
+    return _png(figure)
+
+
+def residual_vs_position(position_mm, residual_um, marks):
+    """Residual against position; the catalog wavelengths as period grids and scale bars."""
+    figure, axes = plt.subplots(figsize=(9, 3.6))
+    axes.plot(position_mm, residual_um, ".", ms=2, color="tab:blue", label="residual")
+    start, stop = float(np.min(position_mm)), float(np.max(position_mm))
+    top = float(np.max(residual_um)) if residual_um.size else 1.0
+    for (label, wavelength), colour in zip(marks.items(), MARK_COLOURS):
+        if (stop - start) / wavelength <= MAX_PERIOD_LINES:
+            for x in np.arange(start, stop + 1e-12, wavelength):
+                axes.axvline(x, color=colour, lw=0.6, alpha=0.4)
+        axes.plot([start, start + wavelength], [top, top], "-", lw=3, color=colour,
+                  label=f"{label}: {wavelength:.4g} mm")
+    axes.set(xlabel="target position (mm)", ylabel="residual (µm)",
+             title="Residual against position, with the marked wavelengths")
+    axes.legend(loc="best", fontsize=8)
+    axes.grid(alpha=0.3)
+    return _png(figure)
+
+
+def spectrum(wavelength_mm, amplitude_um, marks, structures=()):
+    """Amplitude spectrum of the residual against wavelength, catalog wavelengths marked."""
+    figure, axes = plt.subplots(figsize=(9, 3.4))
+    if wavelength_mm.size:
+        axes.semilogx(wavelength_mm, amplitude_um, lw=0.8, color="tab:blue")
+    for (label, wavelength), colour in zip(marks.items(), MARK_COLOURS):
+        axes.axvline(wavelength, color=colour, ls="--", lw=1, label=f"{label} {wavelength:.4g} mm")
+    for structure in structures:
+        if structure.wavelength_mm:
+            axes.axvline(structure.wavelength_mm, color="k", ls=":", lw=1.2,
+                         label=f"unexplained {structure.wavelength_mm:.4g} mm")
+    axes.set(xlabel="wavelength (mm)", ylabel="amplitude (µm)",
+             title="Spatial spectrum of the residual")
+    axes.legend(loc="best", fontsize=8)
+    axes.grid(alpha=0.3, which="both")
+    return _png(figure)
+
+
+def contributions(position_mm, components):
+    """Each effect's contribution against position, one panel per effect."""
+    count = max(len(components), 1)
+    figure, axes_list = plt.subplots(count, 1, figsize=(9, 1.8 * count + 0.6), sharex=True,
+                                     squeeze=False)
+    order = np.argsort(position_mm, kind="stable")
+    for axes, (name, values_um) in zip(axes_list[:, 0], components.items()):
+        axes.plot(position_mm[order], values_um[order], ".", ms=1.5)
+        axes.set_ylabel("µm")
+        axes.set_title(name, fontsize=9, loc="left")
+        axes.grid(alpha=0.3)
+    axes_list[-1, 0].set_xlabel("target position (mm)")
+    figure.suptitle("Each effect's contribution")
+    return _png(figure)
+
+
+def ladder(steps, noise_um):
+    """Residual RMS after each added effect (bars) and the noise level (line)."""
+    figure, axes = plt.subplots(figsize=(9, 3.4))
+    labels = [label for label, _ in steps]
+    values = [value for _, value in steps]
+    axes.bar(range(len(steps)), values, color="tab:blue")
+    for index, value in enumerate(values):
+        axes.text(index, value, f"{value:.3g}", ha="center", va="bottom", fontsize=8)
+    axes.axhline(noise_um, color="tab:red", ls="--", label=f"noise {noise_um:.3g} µm")
+    axes.set_xticks(range(len(steps)), labels, rotation=15, fontsize=8)
+    axes.set(ylabel="residual RMS (µm)", title="Error ladder: RMS after each added effect")
+    axes.legend(fontsize=8)
+    return _png(figure)
+
+
+def residual_against(panels):
+    """Residual against other variables (time, direction, ambient): one panel each."""
+    figure, axes_list = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 3),
+                                     squeeze=False)
+    for axes, (label, values, residual_um) in zip(axes_list[0], panels):
+        axes.plot(values, residual_um, ".", ms=2)
+        axes.set(xlabel=label, ylabel="residual (µm)")
+        axes.grid(alpha=0.3)
+    return _png(figure)

@@ -1,0 +1,75 @@
+"""Plain-text tables of fit, diagnosis, comparison and catalog results, for the terminal."""
+from __future__ import annotations
+
+import math
+
+
+def _number(value, digits=4):
+    return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) \
+        else f"{value:.{digits}g}"
+
+
+def fit_lines(result, rms_before_um, out_path=None):
+    """Statistics, then one line per parameter with its uncertainty."""
+    s = result.statistics
+    lines = [f"effects: {', '.join(result.model.names) or '(none)'}",
+             f"RMS {rms_before_um:.4g} um -> {s.rms_um:.4g} um   max {s.max_um:.4g} um   "
+             f"P-V {s.pv_um:.4g} um   R2 {s.r2:.4f}   AIC {s.aic:.1f}   BIC {s.bic:.1f}   "
+             f"({s.n_points} points, {s.n_free} parameters)"]
+    for effect in result.model.effects:
+        for parameter in effect.parameters:
+            value = result.model.values[effect.name][parameter.name]
+            sigma = result.uncertainties.get(effect.name, {}).get(parameter.name)
+            note = result.undetermined.get(f"{effect.name}.{parameter.name}", "")
+            lines.append(f"  {effect.name}.{parameter.name:22s} {value:12.6g} +/- "
+                         f"{_number(sigma, 2):8s} {parameter.unit:12s} {note}")
+    if out_path:
+        lines.append(f"model written to {out_path}")
+    return "\n".join(lines)
+
+
+def diagnosis_lines(diagnosis):
+    """Verdict, candidates best first, unexplained structure, passed-over effects."""
+    lines = [f"residual RMS {diagnosis.rms_um:.4g} um, noise {diagnosis.noise_um:.3g} um "
+             f"({diagnosis.noise_source})", f"verdict: {diagnosis.verdict}"]
+    for candidate in diagnosis.candidates:
+        lines.append(f"  missing: {candidate.effect:22s} RMS after {candidate.rms_after_um:.4g} um"
+                     f"   dBIC {candidate.delta_bic:.1f}")
+        lines.append(f"           {candidate.meaning}")
+        lines.append(f"           evidence: {candidate.evidence}")
+    for structure in diagnosis.unexplained:
+        wavelength = "" if structure.wavelength_mm is None else \
+            f" at {structure.wavelength_mm:.4g} mm"
+        lines.append(f"  unexplained {structure.kind}{wavelength}, amplitude "
+                     f"{structure.amplitude_um:.3g} um: {structure.evidence}")
+    for name, reason in diagnosis.skipped.items():
+        lines.append(f"  passed over {name}: {reason}")
+    return "\n".join(lines)
+
+
+def comparison_lines(comparison):
+    """ISO 230-2 figures, measured against the residual after the model."""
+    lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
+             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
+             f"{'ISO 230-2 figure':32s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
+    for figure in comparison["figures"].values():
+        explained = figure["explained"]
+        lines.append(f"{figure['name']:32s} {figure['measured_um']:10.4g} "
+                     f"{figure['residual_um']:10.4g} "
+                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
+    lines.append(f"{'RMS':32s} {comparison['rms_measured_um']:10.4g} "
+                 f"{comparison['rms_residual_um']:10.4g}")
+    if not comparison["bidirectional"]:
+        lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
+    return "\n".join(lines)
+
+
+def effect_lines(effects):
+    """The catalog: name, meaning, parameters with units."""
+    lines = []
+    for name, effect in effects.items():
+        parameters = ", ".join(f"{p.name} [{p.unit}]" for p in effect.parameters) or \
+            "none (computed from axis.toml)"
+        lines += [f"{name}  (FMU {effect.fmu or '-'})", f"    {effect.meaning}",
+                  f"    parameters: {parameters}"]
+    return "\n".join(lines)
