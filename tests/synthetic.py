@@ -1,0 +1,125 @@
+"""Measurement cases generated from known parameters with a seeded generator.
+
+Every error is computed by feedaxis.physics directly (not through the effect catalog), plus
+Gaussian noise, and written with feedaxis.case.write_case in the data format.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from feedaxis.case import write_case
+from feedaxis.physics import geometry, motor, thermal
+from feedaxis.physics.mounting import screw_coordinate_m
+
+MICRO_AXIS = {"name": "micro", "screw": {"lead_mm": 1.0},
+              "motor": {"step_angle_deg": 0.72, "error_period_steps": 10}}
+MICRO_TRUTH = {"lead_error": {"offset_um": 0.25, "slope_um_per_mm": -0.51},
+               "assembly_eccentricity": {"cos_um": 0.20, "sin_um": 0.15},
+               "motor_step_error": {"harmonic1_cos_um": 0.12, "harmonic1_sin_um": 0.09}}
+MICRO_NOISE_UM = 0.05
+
+# A slender cantilevered screw, exaggerated so that its sag is well above the noise.
+LONG_AXIS = {"name": "long", "screw": {
+    "lead_mm": 10.0, "length_m": 1.5, "diameter_m": 0.02, "density_kg_m3": 7800.0,
+    "youngs_modulus_Pa": 2.1e11, "support": "fixed-free", "fixed_end_mm": -100.0}}
+LONG_NOISE_UM = 0.5
+
+ISO_AXIS = {"name": "iso", "screw": {"lead_mm": 10.0, "expansion_per_K": 11.7e-6,
+                                     "fixed_end_mm": -141.0}}
+ISO_NOISE_UM = 0.3
+
+THERMAL_AXIS = {"name": "thermal X", "screw": {
+    "lead_mm": 10.0, "length_m": 0.8, "diameter_m": 0.034, "density_kg_m3": 7800.0,
+    "specific_heat_J_kgK": 448.0, "expansion_per_K": 11.7e-6, "nut_length_m": 0.212,
+    "bearing_length_m": 0.03, "fixed_end_mm": -141.0}}
+THERMAL_NOISE_UM = 1.0
+
+
+def micro_positions_mm():
+    return np.round(np.linspace(0.0, 5.0, 2501), 6)
+
+
+def micro_error_um(position_mm, effects, periodic=None):
+    """Seed 001-like errors of the named effects; ``periodic`` = (wavelength, amplitude)."""
+    error_um = np.zeros_like(position_mm)
+    if "lead_error" in effects:
+        error_um += geometry.lead_error_um(position_mm, 0.25, -0.51)
+    if "assembly_eccentricity" in effects:
+        error_um += geometry.eccentricity_error_um(position_mm, 1.0, 0.20, 0.15)
+    if "motor_step_error" in effects:
+        error_um += motor.motor_step_error_um(position_mm, 1.0, 0.72, 10, (0.12,), (0.09,))
+    if periodic:
+        wavelength_mm, amplitude_um = periodic
+        error_um += amplitude_um * np.sin(2 * np.pi * position_mm / wavelength_mm + 0.4)
+    return error_um
+
+
+def micro_case(folder, effects, seed, periodic=None):
+    position_mm = micro_positions_mm()
+    noise = np.random.default_rng(seed).normal(0.0, MICRO_NOISE_UM, position_mm.size)
+    return write_case(folder, MICRO_AXIS, positioning={
+        "target_mm": position_mm, "error_um": micro_error_um(position_mm, effects, periodic) + noise})
+
+
+def long_case(folder, seed, with_sag=True):
+    """0-1000 mm every 2 mm on the long screw: lead error plus (optionally) its sag."""
+    screw = LONG_AXIS["screw"]
+    position_mm = np.linspace(0.0, 1000.0, 501)
+    table = geometry.gravity_sag_table(screw["length_m"], screw["diameter_m"],
+                                       screw["density_kg_m3"], screw["youngs_modulus_Pa"],
+                                       screw["support"])
+    error_um = geometry.lead_error_um(position_mm, 1.0, 0.004)
+    if with_sag:
+        error_um = error_um + geometry.gravity_sag_error_um(
+            screw_coordinate_m(position_mm, screw["fixed_end_mm"]), table)
+    error_um += np.random.default_rng(seed).normal(0.0, LONG_NOISE_UM, position_mm.size)
+    return write_case(folder, LONG_AXIS, positioning={"target_mm": position_mm, "error_um": error_um})
+
+
+def iso_layout(n_targets=21, n_runs=5, travel_mm=500.0, seed=0):
+    """ISO 230-2 targets P_i = (i-1)p + r_i, runs alternating + and - sweeps."""
+    rng = np.random.default_rng(seed)
+    targets = np.arange(n_targets) * travel_mm / (n_targets - 1) + np.round(rng.uniform(-2, 2, n_targets), 3)
+    rows = []
+    for run in range(1, n_runs + 1):
+        rows += [(t, 1.0, run) for t in targets] + [(t, -1.0, run) for t in targets[::-1]]
+    target_mm, direction, run = (np.array(column) for column in zip(*rows))
+    return target_mm, direction, run
+
+
+def iso_case(folder, seed, backlash_um=0.0, ambient_rise_K=0.0):
+    """Bidirectional ISO case: lead error, backlash, ambient drift over the runs."""
+    target_mm, direction, run = iso_layout()
+    ambient_C = 20.5 + ambient_rise_K * np.linspace(0.0, 1.0, target_mm.size)
+    error_um = (geometry.lead_error_um(target_mm, 1.5, -0.012)
+                + geometry.backlash_error_um(direction, backlash_um)
+                + np.random.default_rng(seed).normal(0.0, ISO_NOISE_UM, target_mm.size))
+    if ambient_rise_K:
+        params = thermal.ThermalScrewParams(expansion_per_K=11.7e-6, fixed_end_mm=-141.0)
+        error_um += thermal.thermal_error_um(params, np.zeros(params.n_cells), target_mm,
+                                             ambient_C - 20.0)
+    columns = {"target_mm": target_mm, "error_um": error_um, "direction": direction, "run": run}
+    if ambient_rise_K:
+        columns["ambient_C"] = ambient_C
+    return write_case(folder, ISO_AXIS, positioning=columns)
+
+
+def thermal_case(folder, seed, feed_mm_min=6000.0, params=None, run_every_s=360.0):
+    """Seed 003 Table 2 cycle; a + run over 0-500 mm every ``run_every_s``, 3 s per target."""
+    params = params or thermal.ThermalScrewParams()
+    segments = thermal.table2_cycle(feed_mm_min)
+    targets = np.arange(0.0, 501.0, 50.0)
+    starts = np.arange(0.0, segments[-1].end_s - 60.0, run_every_s)
+    time_s = (starts[:, None] + 3.0 * np.arange(targets.size)[None, :]).ravel()
+    target_mm = np.tile(targets, starts.size)
+    rise_K = thermal.simulate_duty(params, segments, np.unique(time_s))
+    index = np.searchsorted(np.unique(time_s), time_s)
+    error_um = (thermal.thermal_error_um(params, rise_K[index], target_mm)
+                + geometry.lead_error_um(target_mm, 2.0, -0.01)
+                + np.random.default_rng(seed).normal(0.0, THERMAL_NOISE_UM, target_mm.size))
+    duty = {"start_s": [s.start_s for s in segments], "duration_s": [s.duration_s for s in segments],
+            "feed_mm_min": [s.feed_mm_min for s in segments],
+            "from_mm": [s.from_mm for s in segments], "to_mm": [s.to_mm for s in segments]}
+    return write_case(folder, THERMAL_AXIS, duty=duty, positioning={
+        "target_mm": target_mm, "error_um": error_um, "direction": np.ones_like(target_mm),
+        "time_s": time_s})

@@ -1,0 +1,128 @@
+"""ISO 230-2 figures against a hand-computed example; compare, report, effects and demo
+through the CLI; the fitted model replayed through the FMUs."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+import synthetic as syn
+from feedaxis.case import read_case
+from feedaxis.cli import main
+from feedaxis.cosim.replay import replay_positioning
+from feedaxis.effects import CATALOG, Model
+from feedaxis.fit import fit
+from feedaxis.iso230 import iso230_figures
+
+ROOT2 = math.sqrt(2.0)
+
+
+def test_iso230_figures_match_the_hand_computed_example():
+    # targets 0, 10, 20; two runs each way.
+    #   up:   (1, 2) (3, 3) (0, 1)  -> means 1.5, 3, 0.5;  s = √2/2, 0, √2/2
+    #   down: (-1, 0) (2, 4) (1, 1) -> means -0.5, 3, 1;   s = √2/2, √2, 0
+    target = np.array([0, 10, 20, 0, 10, 20, 20, 10, 0, 20, 10, 0], float)
+    error = np.array([1, 3, 0, 2, 3, 1, 1, 2, -1, 1, 4, 0], float)
+    direction = np.array([1] * 6 + [-1] * 6, float)
+    s = ROOT2 / 2
+    figures = iso230_figures(target, error, direction)
+    expected = {
+        "B_um": 2.0, "B_mean_um": 0.5,                 # B_i = 2, 0, -0.5
+        "M_um": 2.5,                                   # x̄_i = 0.5, 3, 0.75
+        "E_up_um": 2.5, "E_down_um": 3.5, "E_um": 3.5,
+        "R_up_um": 4 * s, "R_down_um": 4 * ROOT2,
+        "R_um": 4 * ROOT2,                             # max(2s+2s+2, 0+2√2+0 vs 4√2, ...)
+        "A_up_um": 3 - (0.5 - 2 * s),                  # 3 - (-0.914)
+        "A_down_um": (3 + 2 * ROOT2) - (-0.5 - 2 * s),
+        "A_um": (3 + 2 * ROOT2) - (-0.5 - 2 * s),
+    }
+    for key, value in expected.items():
+        assert figures[key] == pytest.approx(value, abs=1e-12), key
+    assert figures["targets"] == 3 and figures["runs_up"] == 2 and figures["runs_down"] == 2
+
+
+def test_unidirectional_single_run_gives_only_what_it_can():
+    figures = iso230_figures([0, 1, 2], [0.0, 1.0, -1.0], [1, 1, 1])
+    assert figures["E_up_um"] == 2.0
+    assert "R_up_um" not in figures and "B_um" not in figures
+
+
+def test_compare_shows_how_much_the_model_explains(tmp_path, capsys):
+    folder = syn.iso_case(tmp_path / "case", seed=31, backlash_um=-4.0)
+    model = tmp_path / "m.toml"
+    assert main(["fit", str(folder), "--add", "lead_error", "--add", "backlash",
+                 "--out", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(folder), "--model", str(model), "--json"]) == 0
+    comparison = json.loads(capsys.readouterr().out)
+    figures = comparison["figures"]
+    assert comparison["bidirectional"] and comparison["runs_up"] == 5
+    assert figures["B_um"]["measured_um"] == pytest.approx(4.0, abs=0.5)
+    assert figures["B_um"]["explained"] > 0.8
+    assert figures["E_um"]["residual_um"] < 0.3 * figures["E_um"]["measured_um"]
+    assert figures["R_um"]["residual_um"] < figures["R_um"]["measured_um"]
+    assert main(["compare", str(folder)]) == 0
+    assert "reversal B" in capsys.readouterr().out
+
+
+def test_report_is_one_self_contained_html_page(tmp_path, capsys):
+    folder = syn.iso_case(tmp_path / "case", seed=32, backlash_um=-4.0)
+    model = tmp_path / "m.toml"
+    main(["fit", str(folder), "--add", "lead_error", "--add", "backlash", "--out", str(model)])
+    out = tmp_path / "r" / "report.html"
+    assert main(["report", str(folder), "--model", str(model), "--out", str(out)]) == 0
+    page = out.read_text()
+    assert page.count("data:image/png;base64,") == 6
+    for heading in ("Measurement against model", "Residual", "Each effect's contribution",
+                    "Error ladder", "ISO 230-2 figures", "verdict: adequate"):
+        assert heading in page
+    assert 'src="http' not in page
+
+
+def test_effects_command_lists_the_catalog(capsys):
+    assert main(["effects", "--json"]) == 0
+    catalog = json.loads(capsys.readouterr().out)
+    assert list(catalog) == ["lead_error", "gravity_sag", "assembly_eccentricity",
+                             "motor_step_error", "backlash", "thermal_screw", "ambient_expansion"]
+    assert catalog["backlash"]["parameters"]["backlash_um"]["unit"] == "um"
+
+
+@pytest.fixture(scope="module")
+def position_fmus(tmp_path_factory):
+    from feedaxis.fmu_build import build_fmus
+    out = tmp_path_factory.mktemp("fmus")
+    return {p.stem: p for p in build_fmus(out, ("GeometricError", "StepperError"))}
+
+
+@pytest.mark.parametrize("kind", ["micro", "iso", "long"])
+def test_fitted_model_through_the_fmus_equals_the_library(tmp_path, position_fmus, kind):
+    writers = {"micro": (lambda f: syn.micro_case(f, syn.MICRO_TRUTH, seed=1),
+                         ("lead_error", "assembly_eccentricity", "motor_step_error")),
+               "iso": (lambda f: syn.iso_case(f, seed=2, backlash_um=-4.0),
+                       ("lead_error", "backlash", "assembly_eccentricity")),
+               "long": (lambda f: syn.long_case(f, seed=3), ("lead_error", "gravity_sag"))}
+    write, names = writers[kind]
+    case = read_case(write(tmp_path / "case"))
+    model = fit(Model([CATALOG[n] for n in names]), case).model
+    through_fmus = replay_positioning(case, model, position_fmus)
+    predicted = model.predict_um(case)
+    assert np.max(np.abs(predicted)) > 0.1
+    np.testing.assert_allclose(through_fmus, predicted, rtol=1e-12, atol=1e-12)
+
+
+def test_demo_runs_the_loop_to_adequate(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert [r.get("added") for r in summary["rounds"]] == [
+        "lead_error", "assembly_eccentricity", "motor_step_error", None]
+    assert summary["rounds"][-1]["verdict"] == "adequate"
+    assert summary["rounds"][-1]["rms_um"] < 1.3 * 0.05
+    assert summary["fmu_max_difference_um"] < 1e-9
+    assert (tmp_path / "report.html").exists() and (tmp_path / "model.toml").exists()
+
+
+def test_bundled_case_is_the_documented_reconstruction(tmp_path):
+    from feedaxis.examples import BUNDLED_CASE, write_seed001_case
+    fresh = read_case(write_seed001_case(tmp_path / "fresh"))
+    bundled = read_case(BUNDLED_CASE)
+    np.testing.assert_allclose(bundled.positioning.error_um, fresh.positioning.error_um, atol=1e-5)
