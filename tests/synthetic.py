@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from feedaxis.case import write_case
+from feedaxis.examples import write_table2_case
 from feedaxis.physics import geometry, motor, thermal
 from feedaxis.physics.mounting import screw_coordinate_m
 
@@ -28,10 +29,6 @@ ISO_AXIS = {"name": "iso", "screw": {"lead_mm": 10.0, "expansion_per_K": 11.7e-6
                                      "fixed_end_mm": -141.0}}
 ISO_NOISE_UM = 0.3
 
-THERMAL_AXIS = {"name": "thermal X", "screw": {
-    "lead_mm": 10.0, "length_m": 0.8, "diameter_m": 0.034, "density_kg_m3": 7800.0,
-    "specific_heat_J_kgK": 448.0, "expansion_per_K": 11.7e-6, "nut_length_m": 0.212,
-    "bearing_length_m": 0.03, "fixed_end_mm": -141.0}}
 THERMAL_NOISE_UM = 1.0
 
 
@@ -39,8 +36,8 @@ def micro_positions_mm():
     return np.round(np.linspace(0.0, 5.0, 2501), 6)
 
 
-def micro_error_um(position_mm, effects, periodic=None):
-    """Seed 001-like errors of the named effects; ``periodic`` = (wavelength, amplitude)."""
+def micro_error_um(position_mm, effects):
+    """Seed 001-like errors of the named effects (µm)."""
     error_um = np.zeros_like(position_mm)
     if "lead_error" in effects:
         error_um += geometry.lead_error_um(position_mm, 0.25, -0.51)
@@ -48,17 +45,14 @@ def micro_error_um(position_mm, effects, periodic=None):
         error_um += geometry.eccentricity_error_um(position_mm, 1.0, 0.20, 0.15)
     if "motor_step_error" in effects:
         error_um += motor.motor_step_error_um(position_mm, 1.0, 0.72, 10, (0.12,), (0.09,))
-    if periodic:
-        wavelength_mm, amplitude_um = periodic
-        error_um += amplitude_um * np.sin(2 * np.pi * position_mm / wavelength_mm + 0.4)
     return error_um
 
 
-def micro_case(folder, effects, seed, periodic=None):
+def micro_case(folder, effects, seed):
     position_mm = micro_positions_mm()
     noise = np.random.default_rng(seed).normal(0.0, MICRO_NOISE_UM, position_mm.size)
     return write_case(folder, MICRO_AXIS, positioning={
-        "target_mm": position_mm, "error_um": micro_error_um(position_mm, effects, periodic) + noise})
+        "target_mm": position_mm, "error_um": micro_error_um(position_mm, effects) + noise})
 
 
 def long_case(folder, seed, with_sag=True):
@@ -104,22 +98,6 @@ def iso_case(folder, seed, backlash_um=0.0, ambient_rise_K=0.0):
     return write_case(folder, ISO_AXIS, positioning=columns)
 
 
-def thermal_case(folder, seed, feed_mm_min=6000.0, params=None, run_every_s=360.0):
-    """Seed 003 Table 2 cycle; a + run over 0-500 mm every ``run_every_s``, 3 s per target."""
-    params = params or thermal.ThermalScrewParams()
-    segments = thermal.table2_cycle(feed_mm_min)
-    targets = np.arange(0.0, 501.0, 50.0)
-    starts = np.arange(0.0, segments[-1].end_s - 60.0, run_every_s)
-    time_s = (starts[:, None] + 3.0 * np.arange(targets.size)[None, :]).ravel()
-    target_mm = np.tile(targets, starts.size)
-    rise_K = thermal.simulate_duty(params, segments, np.unique(time_s))
-    index = np.searchsorted(np.unique(time_s), time_s)
-    error_um = (thermal.thermal_error_um(params, rise_K[index], target_mm)
-                + geometry.lead_error_um(target_mm, 2.0, -0.01)
-                + np.random.default_rng(seed).normal(0.0, THERMAL_NOISE_UM, target_mm.size))
-    duty = {"start_s": [s.start_s for s in segments], "duration_s": [s.duration_s for s in segments],
-            "feed_mm_min": [s.feed_mm_min for s in segments],
-            "from_mm": [s.from_mm for s in segments], "to_mm": [s.to_mm for s in segments]}
-    return write_case(folder, THERMAL_AXIS, duty=duty, positioning={
-        "target_mm": target_mm, "error_um": error_um, "direction": np.ones_like(target_mm),
-        "time_s": time_s})
+def thermal_case(folder, seed, feed_mm_min=6000.0, params=None):
+    """Seed 003 Table 2 test with a lead error, from feedaxis.examples (physics + noise)."""
+    return write_table2_case(folder, feed_mm_min, params, noise_um=THERMAL_NOISE_UM, seed=seed)

@@ -3,6 +3,7 @@ diagnose names the hidden effect, fit --add closes it to the noise, the verdict 
 adequate; nothing is invented on null data; uncatalogued structure is described and a
 user effect file closes it."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from feedaxis.cli import main
 from feedaxis.demo import improve
 from feedaxis.diagnose import diagnose
 from feedaxis.effects import CATALOG, Model
+from feedaxis.examples import write_seed001_case
 from feedaxis.fit import fit
 
 MICRO_ALL = ("lead_error", "assembly_eccentricity", "motor_step_error")
@@ -108,21 +110,11 @@ def test_null_iso_case_invents_nothing(tmp_path):
         assert result.noise_source == "scatter of repeated samples"
 
 
-USER_EFFECTS = '''
-import numpy as np
-from feedaxis.effects import Parameter, effect
-
-@effect("coupling_ripple", "ripple of a worn coupling, once per 0.37 mm",
-        [Parameter("cos_um", "um", -5, 5), Parameter("sin_um", "um", -5, 5)],
-        wavelength_mm=0.37)
-def coupling_ripple(case, cos_um, sin_um):
-    phase = 2 * np.pi * case.positioning.target_mm / 0.37
-    return cos_um * np.cos(phase) + sin_um * np.sin(phase)
-'''
+USER_EFFECTS = Path(__file__).resolve().parents[1] / "examples" / "coupling_ripple.py"
 
 
 def test_uncatalogued_periodic_error_is_described_then_closed_by_a_user_effect(tmp_path, capsys):
-    case = str(syn.micro_case(tmp_path / "case", MICRO_ALL, seed=21, periodic=(0.37, 0.2)))
+    case = str(write_seed001_case(tmp_path / "case", seed=21, ripple=(0.37, 0.2)))
     start, final = str(tmp_path / "start.toml"), str(tmp_path / "final.toml")
     run_json(capsys, "fit", case, *adds(*MICRO_ALL), "--out", start)
 
@@ -133,8 +125,7 @@ def test_uncatalogued_periodic_error_is_described_then_closed_by_a_user_effect(t
     assert periodic["wavelength_mm"] == pytest.approx(0.37, rel=0.05)
     assert periodic["amplitude_um"] == pytest.approx(0.2, rel=0.2)
 
-    effects_file = tmp_path / "my_effects.py"
-    effects_file.write_text(USER_EFFECTS)
+    effects_file = USER_EFFECTS
     named = run_json(capsys, "diagnose", case, "--model", start, "--effects", str(effects_file))
     assert [c["effect"] for c in named["candidates"]] == ["coupling_ripple"]
     fitted = run_json(capsys, "fit", case, "--model", start, "--effects", str(effects_file),

@@ -22,11 +22,11 @@ CASE_HELP = "case folder: axis.toml + positioning.csv (+ duty.csv), see data-for
 
 
 @contextmanager
-def _progress(label):
+def _progress(label, unit):
     """A tqdm counter on stderr that shows itself only when the work takes over a second."""
     from tqdm import tqdm
 
-    with tqdm(desc=label, unit="eval", delay=1.0, leave=False, file=sys.stderr) as bar:
+    with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
         yield lambda *_: bar.update()
 
 
@@ -55,7 +55,7 @@ def _cmd_fit(args):
     starting = load_model(args.model, effects) if args.model else Model()
     model = _model(args, effects)
     before = evaluate(starting, cases)
-    with _progress("fitting") as tick:
+    with _progress("fitting", "model evaluations") as tick:
         result = fit(model, cases, progress=tick)
     if args.out:
         write_atomically(args.out, result.model.to_toml())
@@ -70,7 +70,7 @@ def _cmd_diagnose(args):
     effects = _effects(args)
     case = read_case(args.case)
     model = _model(args, effects)
-    with _progress("diagnosing") as tick:
+    with _progress("diagnosing", "fits") as tick:
         diagnosis = diagnose(case, model, effects, progress=tick)
     _emit(args, diagnosis.to_json(), text.diagnosis_lines(diagnosis))
 
@@ -201,6 +201,9 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("feedaxis: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        sys.stderr.close()
+        return 0
     except ValueError as error:
         print(f"feedaxis: {error}", file=sys.stderr)
         return 2

@@ -22,7 +22,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.signal import lombscargle
 
-from .effects import CATALOG, Model
+from .effects import CATALOG, Effect, Model, Parameter
 from .fit import FitResult, fit
 
 SIGNIFICANT_DELTA_BIC = -10.0
@@ -60,6 +60,7 @@ class Structure:
     delta_bic: float
     evidence: str
     fitted_um: np.ndarray = field(repr=False)
+    basis: np.ndarray | None = field(default=None, repr=False)
 
     def to_json(self):
         return {"kind": self.kind, "wavelength_mm": self.wavelength_mm,
@@ -138,7 +139,7 @@ def diagnose(case, model, effects=None, progress=None):
             del pending[candidate.effect]
         left = _with_all(case, left, found)
     noise_um, noise_source = estimate_noise_um(case, left.residual_um)
-    unexplained = find_structures(case, left.residual_um, noise_um, effects)
+    unexplained = find_structures(case, left, noise_um, effects)
     verdict = "missing_effect" if candidates else "unexplained" if unexplained else "adequate"
     return Diagnosis(base, noise_um, noise_source, verdict, candidates, unexplained, skipped,
                      residual_spectrum(case, base.residual_um, effects))
@@ -211,16 +212,18 @@ def _run_or_time(positioning):
     return positioning.run if positioning.run is not None else np.zeros(positioning.size)
 
 
-def find_structures(case, residual_um, noise_um, effects):
-    """Structure in the residual that no effect explains, strongest first.
+def find_structures(case, left, noise_um, effects):
+    """Structure in the residual of the fit ``left`` that no effect explains, strongest first.
 
     Repeatedly takes the strongest significant structure (periodic, direction, time, trend),
-    removes it and looks again; if nothing is found but the residual is well above the
-    noise, reports an irregular shape along the travel.
+    refits the model together with it (so the model's own parameters are not biased by it)
+    and looks again; if nothing is found but the residual is well above the noise, reports
+    an irregular shape along the travel.
     """
-    structures, remaining = [], np.array(residual_um, dtype=float)
+    structures, current = [], left
     marks = _marked_wavelengths(case.axis, effects)
     for _ in range(MAX_STRUCTURES):
+        remaining = current.residual_um
         found = [s for s in (_periodic(case, remaining, marks), _direction(case, remaining),
                              _drift(case, remaining), _trend(case, remaining),
                              _irregular(case, remaining)) if s is not None]
@@ -230,7 +233,8 @@ def find_structures(case, residual_um, noise_um, effects):
         if best.delta_bic > SIGNIFICANT_DELTA_BIC:
             break
         structures.append(best)
-        remaining = remaining - best.fitted_um
+        current = fit(current.model + _StructureEffect(len(structures), best.basis), case)
+    remaining = current.residual_um
     rms_um = float(np.sqrt(np.mean(np.square(remaining))))
     if (not structures and remaining.size >= MIN_POINTS_FOR_RATIO
             and rms_um > NOISE_RATIO_LIMIT * noise_um):
@@ -242,9 +246,33 @@ def find_structures(case, residual_um, noise_um, effects):
     return structures
 
 
+class _StructureEffect(Effect):
+    """A found structure as a temporary linear effect, refitted with the model."""
+
+    def __init__(self, number, basis):
+        self.name, self.basis = f"structure_{number}", basis
+        self.parameters = tuple(Parameter(f"c{i}_um", "um", -1e6, 1e6)
+                                for i in range(basis.shape[1]))
+
+    def prepare(self, case):
+        return lambda v: self.basis @ np.array([v[p.name] for p in self.parameters])
+
+    def guess(self, case, residual_um):
+        coefficients = np.linalg.lstsq(self.basis, residual_um, rcond=None)[0]
+        return {p.name: float(c) for p, c in zip(self.parameters, coefficients)}
+
+
 def _least_squares_structure(residual_um, basis):
     coefficients = np.linalg.lstsq(basis, residual_um, rcond=None)[0]
     return basis @ coefficients
+
+
+def _structure(kind, wavelength_mm, residual_um, basis, describe):
+    """Fit ``basis`` to the residual; ``describe(fitted)`` gives the evidence line."""
+    fitted = _least_squares_structure(residual_um, basis)
+    return Structure(kind, wavelength_mm, float(np.ptp(fitted) / 2),
+                     float(_delta_bic(residual_um, fitted, basis.shape[1] + (kind == "periodic"))),
+                     describe(fitted), fitted, basis)
 
 
 def _normalised(values):
@@ -260,16 +288,15 @@ def _periodic(case, residual_um, marks):
     peak = int(np.argmax(spectrum.amplitude_um))
     frequency = 1.0 / spectrum.wavelength_mm[peak]
     step = _frequency_step(position_mm)
-    best = minimize_scalar(lambda f: _rss(residual_um - _sinusoid(position_mm, residual_um, f)),
-                           bounds=(max(frequency - step, step / 2), frequency + step),
-                           method="bounded", options={"xatol": step * 1e-4})
-    fitted = _sinusoid(position_mm, residual_um, best.x)
-    wavelength_mm = 1.0 / best.x
-    amplitude_um = float(np.ptp(fitted) / 2)
-    return Structure("periodic", float(wavelength_mm), amplitude_um,
-                     float(_delta_bic(residual_um, fitted, 4)),
-                     f"peak at {wavelength_mm:.4g} mm, amplitude {amplitude_um:.3g} µm; "
-                     f"{_compare_to_marks(wavelength_mm, marks)}", fitted)
+    best = minimize_scalar(
+        lambda f: _rss(residual_um - _least_squares_structure(residual_um, _sinusoid(position_mm, f))),
+        bounds=(max(frequency - step, step / 2), frequency + step), method="bounded",
+        options={"xatol": step * 1e-4})
+    wavelength_mm = float(1.0 / best.x)
+    return _structure("periodic", wavelength_mm, residual_um, _sinusoid(position_mm, best.x),
+                      lambda fitted: f"peak at {wavelength_mm:.4g} mm, amplitude "
+                                     f"{np.ptp(fitted) / 2:.3g} µm; "
+                                     f"{_compare_to_marks(wavelength_mm, marks)}")
 
 
 def _compare_to_marks(wavelength_mm, marks):
@@ -284,10 +311,10 @@ def _compare_to_marks(wavelength_mm, marks):
     return f"matches no catalog wavelength ({known})"
 
 
-def _sinusoid(position_mm, residual_um, frequency_per_mm):
+def _sinusoid(position_mm, frequency_per_mm):
+    """Basis cos, sin, 1 at one spatial frequency (1/mm)."""
     phase = 2 * np.pi * frequency_per_mm * position_mm
-    basis = np.column_stack((np.cos(phase), np.sin(phase), np.ones_like(phase)))
-    return _least_squares_structure(residual_um, basis)
+    return np.column_stack((np.cos(phase), np.sin(phase), np.ones_like(phase)))
 
 
 def _direction(case, residual_um):
@@ -296,13 +323,10 @@ def _direction(case, residual_um):
         return None
     direction = positioning.direction
     basis = np.column_stack((direction, direction * _normalised(positioning.target_mm)))
-    fitted = _least_squares_structure(residual_um, basis)
-    up, down = fitted[direction > 0], fitted[direction < 0]
-    difference = float(np.mean(up) - np.mean(down))
-    return Structure("direction", None, float(np.max(np.abs(fitted))),
-                     float(_delta_bic(residual_um, fitted, 2)),
-                     f"approach + and - differ by {difference:+.3g} µm on average, changing "
-                     "along the travel (friction or stiffness, not a constant backlash)", fitted)
+    return _structure("direction", None, residual_um, basis, lambda fitted: (
+        f"approach + and - differ by {np.mean(fitted[direction > 0]) - np.mean(fitted[direction < 0]):+.3g}"
+        " µm on average, changing along the travel (friction or stiffness, not a constant "
+        "backlash)"))
 
 
 def _drift(case, residual_um):
@@ -313,12 +337,10 @@ def _drift(case, residual_um):
     if np.ptp(position_mm) > 0 and abs(np.corrcoef(time_s, position_mm)[0, 1]) > 0.9:
         return None
     scaled = _normalised(time_s)
-    fitted = _least_squares_structure(
-        residual_um, np.column_stack((np.ones_like(scaled), scaled, scaled**2)))
-    return Structure("time", None, float(np.ptp(fitted) / 2),
-                     float(_delta_bic(residual_um, fitted, 3)),
-                     f"the residual drifts by {np.ptp(fitted):.3g} µm over "
-                     f"{np.ptp(time_s) / 60:.1f} min of the test", fitted)
+    basis = np.column_stack((np.ones_like(scaled), scaled, scaled**2))
+    return _structure("time", None, residual_um, basis, lambda fitted: (
+        f"the residual drifts by {np.ptp(fitted):.3g} µm over {np.ptp(time_s) / 60:.1f} min "
+        "of the test"))
 
 
 def _trend(case, residual_um):
@@ -326,15 +348,13 @@ def _trend(case, residual_um):
     if np.unique(position_mm).size < 4:
         return None
     scaled = _normalised(position_mm)
-    options = []
-    for degree in (1, 2, 3):
-        fitted = _least_squares_structure(residual_um, np.vander(scaled, degree + 1))
-        options.append((float(_delta_bic(residual_um, fitted, degree + 1)), degree, fitted))
-    delta_bic, degree, fitted = min(options, key=lambda option: option[0])
-    shape = {1: "a straight line", 2: "a bow", 3: "an S-shape"}[degree]
-    return Structure("trend", None, float(np.ptp(fitted) / 2), delta_bic,
-                     f"the residual follows {shape} along the travel, "
-                     f"{np.ptp(fitted):.3g} µm peak to valley", fitted)
+    shapes = {1: "a straight line", 2: "a bow", 3: "an S-shape"}
+    options = [_structure("trend", None, residual_um, np.vander(scaled, degree + 1),
+                          lambda fitted, degree=degree: (
+                              f"the residual follows {shapes[degree]} along the travel, "
+                              f"{np.ptp(fitted):.3g} µm peak to valley"))
+               for degree in shapes]
+    return min(options, key=lambda structure: structure.delta_bic)
 
 
 def _irregular(case, residual_um):
@@ -343,12 +363,10 @@ def _irregular(case, residual_um):
     sizes = np.bincount(groups)
     if sizes.size < 3 or np.sum(sizes - 1) < sizes.size:
         return None
-    fitted = (np.bincount(groups, residual_um) / sizes)[groups]
-    return Structure("trend", None, float(np.ptp(fitted) / 2),
-                     float(_delta_bic(residual_um, fitted, sizes.size)),
-                     f"the mean error at each target scatters {np.std(fitted):.3g} µm beyond "
-                     "the repeatability, irregularly along the travel (a lead-error table "
-                     "would capture it)", fitted)
+    basis = (groups[:, None] == np.arange(sizes.size)[None, :]).astype(float)
+    return _structure("trend", None, residual_um, basis, lambda fitted: (
+        f"the mean error at each target scatters {np.std(fitted):.3g} µm beyond the "
+        "repeatability, irregularly along the travel (a lead-error table would capture it)"))
 
 
 def _marked_wavelengths(axis, effects):

@@ -1,10 +1,15 @@
-"""Example cases: the seed 001 micro ball screw, reconstructed from its published numbers.
+"""Example cases generated from published numbers with the project's physics.
+
+The seed 001 micro ball screw (the demo case):
 
 Seed 001 publishes the fitted lead error f1 and eccentricity f2 of a C3 micro ball screw
 (lead 1 mm, stroke 5 mm, 5-phase stepper with 0.72° steps) and a validation run of 2,501
 laser points every 0.002 mm. The motor coefficients are not published: the reconstruction
 adds a motor ripple of 0.3 µm peak to valley (0.12 / 0.09 µm, so that with the noise the
 short-wave ripple is about the paper's 0.5 µm) and 0.05 µm Gaussian measurement noise.
+
+Seed 003 thermal tests: the X axis of Table 1 + Table 3 under a Table 2 loading (stroke
+0-500 mm assumed), with a lead error and 1 µm noise, sampled by + runs over 11 targets.
 """
 from __future__ import annotations
 
@@ -13,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .case import write_case
-from .physics import geometry, motor
+from .physics import geometry, motor, thermal
 
 SEED001_AXIS = {
     "name": "micro ball screw of seed 001 (reconstructed: published f1, f2 + motor ripple + noise)",
@@ -37,11 +42,50 @@ def seed001_error_um(position_mm):
                                         (SEED001_MOTOR["cos_um"],), (SEED001_MOTOR["sin_um"],)))
 
 
-def write_seed001_case(folder, noise_um=SEED001_NOISE_UM, seed=SEED001_SEED):
-    """Write the 2,501-point validation run (0 to 5 mm every 0.002 mm, one + run)."""
+def write_seed001_case(folder, noise_um=SEED001_NOISE_UM, seed=SEED001_SEED, ripple=None):
+    """Write the 2,501-point validation run (0 to 5 mm every 0.002 mm, one + run).
+
+    ``ripple`` = (wavelength_mm, amplitude_um) adds a sinusoid no catalog effect explains,
+    to try the loop on an uncatalogued error.
+    """
     position_mm = np.round(np.linspace(0.0, 5.0, 2501), 6)
     error_um = seed001_error_um(position_mm) + np.random.default_rng(seed).normal(
         0.0, noise_um, position_mm.size)
+    if ripple:
+        wavelength_mm, amplitude_um = ripple
+        error_um += amplitude_um * np.sin(2.0 * np.pi * position_mm / wavelength_mm + 0.4)
     return write_case(folder, SEED001_AXIS, positioning={
         "target_mm": position_mm, "error_um": np.round(error_um, 5),
         "direction": np.ones_like(position_mm), "run": np.ones_like(position_mm)})
+
+
+TABLE2_AXIS = {"name": "seed 003 X axis, Table 2 loading (synthetic)", "screw": {
+    "lead_mm": 10.0, "length_m": 0.8, "diameter_m": 0.034, "density_kg_m3": 7800.0,
+    "specific_heat_J_kgK": 448.0, "expansion_per_K": 11.7e-6, "nut_length_m": 0.212,
+    "bearing_length_m": 0.03, "fixed_end_mm": -141.0}}
+TABLE2_LEAD = {"offset_um": 2.0, "slope_um_per_mm": -0.01}
+
+
+def write_table2_case(folder, feed_mm_min, params=None, noise_um=1.0, seed=0, run_every_s=360.0):
+    """A thermal case: Table 2 duty at ``feed_mm_min``; every ``run_every_s`` a + run over
+    0, 50, ..., 500 mm, 3 s per target; error = TE (seed 003 Eq. 1-19) + lead error + noise.
+
+    ``params`` (ThermalScrewParams, default Table 1 + Table 3 X) must match TABLE2_AXIS.
+    """
+    params = params or thermal.ThermalScrewParams()
+    segments = thermal.table2_cycle(feed_mm_min)
+    targets_mm = np.arange(0.0, 501.0, 50.0)
+    starts_s = np.arange(0.0, segments[-1].end_s - 60.0, run_every_s)
+    time_s = (starts_s[:, None] + 3.0 * np.arange(targets_mm.size)[None, :]).ravel()
+    target_mm = np.tile(targets_mm, starts_s.size)
+    rise_K = thermal.simulate_duty(params, segments, time_s)
+    error_um = (thermal.thermal_error_um(params, rise_K, target_mm)
+                + geometry.lead_error_um(target_mm, **TABLE2_LEAD)
+                + np.random.default_rng(seed).normal(0.0, noise_um, target_mm.size))
+    duty = {"start_s": [s.start_s for s in segments],
+            "duration_s": [s.duration_s for s in segments],
+            "feed_mm_min": [s.feed_mm_min for s in segments],
+            "from_mm": [s.from_mm for s in segments], "to_mm": [s.to_mm for s in segments]}
+    return write_case(folder, TABLE2_AXIS, duty=duty, positioning={
+        "target_mm": target_mm, "error_um": error_um, "direction": np.ones_like(target_mm),
+        "time_s": time_s})

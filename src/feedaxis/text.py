@@ -21,8 +21,8 @@ def fit_lines(result, rms_before_um, out_path=None):
             value = result.model.values[effect.name][parameter.name]
             sigma = result.uncertainties.get(effect.name, {}).get(parameter.name)
             note = result.undetermined.get(f"{effect.name}.{parameter.name}", "")
-            lines.append(f"  {effect.name}.{parameter.name:22s} {value:12.6g} +/- "
-                         f"{_number(sigma, 2):8s} {parameter.unit:12s} {note}")
+            lines.append(f"  {effect.name + '.' + parameter.name:44s} {value:12.6g} +/- "
+                         f"{_number(sigma, 2):8s} {parameter.unit:8s} {note}".rstrip())
     if out_path:
         lines.append(f"model written to {out_path}")
     return "\n".join(lines)

@@ -5,7 +5,9 @@ import base64
 import html
 from pathlib import Path
 
-from ..diagnose import diagnose
+import numpy as np
+
+from ..diagnose import diagnose, residual_spectrum
 from ..effects import Model
 from ..fit import evaluate, fit
 from ..iso230 import compare
@@ -70,6 +72,13 @@ def _comparison_html(comparison):
     return _table(("ISO 230-2 figure", "measured (µm)", "residual (µm)", "explained"), rows)
 
 
+def _detrended_spectrum(case, measured_um, effects):
+    position_mm = case.positioning.target_mm
+    trend_um = np.polyval(np.polyfit(position_mm, measured_um, 1), position_mm)
+    spectrum = residual_spectrum(case, measured_um - trend_um, effects)
+    return spectrum.wavelength_mm, spectrum.amplitude_um
+
+
 def _residual_panels(case, residual_um):
     positioning = case.positioning
     panels = []
@@ -102,7 +111,8 @@ def write_report(case, model, effects, out_path):
         "<h2>Residual</h2>",
         _image(plots.residual_vs_position(positioning.target_mm, result.residual_um,
                                           diagnosis.spectrum.marks), "residual against position"),
-        _image(plots.spectrum(diagnosis.spectrum.wavelength_mm, diagnosis.spectrum.amplitude_um,
+        _image(plots.spectrum((diagnosis.spectrum.wavelength_mm, diagnosis.spectrum.amplitude_um),
+                              _detrended_spectrum(case, result.measured_um, effects),
                               diagnosis.spectrum.marks, diagnosis.unexplained), "spectrum"),
     ]
     panels = _residual_panels(case, result.residual_um)

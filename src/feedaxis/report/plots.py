@@ -57,11 +57,16 @@ def residual_vs_position(position_mm, residual_um, marks):
     return _png(figure)
 
 
-def spectrum(wavelength_mm, amplitude_um, marks, structures=()):
-    """Amplitude spectrum of the residual against wavelength, catalog wavelengths marked."""
+def spectrum(residual, measured, marks, structures=()):
+    """Amplitude spectra (wavelength, amplitude) of the residual and of the detrended
+    measurement against wavelength, the catalog wavelengths and unexplained peaks marked."""
     figure, axes = plt.subplots(figsize=(9, 3.4))
-    if wavelength_mm.size:
-        axes.semilogx(wavelength_mm, amplitude_um, lw=0.8, color="tab:blue")
+    for (wavelength_mm, amplitude_um), style in ((measured, dict(color="0.6", lw=0.7,
+                                                                  label="measured, trend removed")),
+                                                 (residual, dict(color="tab:blue", lw=0.8,
+                                                                 label="residual"))):
+        if wavelength_mm.size:
+            axes.semilogx(wavelength_mm, amplitude_um, **style)
     for (label, wavelength), colour in zip(marks.items(), MARK_COLOURS):
         axes.axvline(wavelength, color=colour, ls="--", lw=1, label=f"{label} {wavelength:.4g} mm")
     for structure in structures:
@@ -69,7 +74,7 @@ def spectrum(wavelength_mm, amplitude_um, marks, structures=()):
             axes.axvline(structure.wavelength_mm, color="k", ls=":", lw=1.2,
                          label=f"unexplained {structure.wavelength_mm:.4g} mm")
     axes.set(xlabel="wavelength (mm)", ylabel="amplitude (µm)",
-             title="Spatial spectrum of the residual")
+             title="Spatial spectrum along the travel")
     axes.legend(loc="best", fontsize=8)
     axes.grid(alpha=0.3, which="both")
     return _png(figure)
