@@ -23,12 +23,15 @@ def _targets(case):
     return case.positioning.target_mm
 
 
-def _sinusoid_guess(position_mm, residual_um, wavelength_mm):
-    """Least-squares cosine and sine amplitudes (µm) at one wavelength."""
-    phase = 2.0 * np.pi * position_mm / wavelength_mm
-    basis = np.column_stack((np.cos(phase), np.sin(phase), np.ones_like(phase)))
-    coefficients = np.linalg.lstsq(basis, residual_um, rcond=None)[0]
-    return coefficients[0], coefficients[1]
+class _PeriodicEffect(Effect):
+    """An effect periodic along the travel; parameters: cosine and sine amplitude (µm)."""
+
+    def guess(self, case, residual_um):
+        """Least-squares cosine and sine amplitudes at the effect's wavelength."""
+        phase = 2.0 * np.pi * _targets(case) / self.wavelength_mm(case.axis)
+        basis = np.column_stack((np.cos(phase), np.sin(phase), np.ones_like(phase)))
+        coefficients = np.linalg.lstsq(basis, residual_um, rcond=None)[0]
+        return dict(zip(self.parameter_names, coefficients[:2]))
 
 
 class LeadError(Effect):
@@ -87,7 +90,7 @@ class GravitySag(Effect):
                 f"position by {np.ptp(contribution_um):.3g} µm, the residual's bend")
 
 
-class AssemblyEccentricity(Effect):
+class AssemblyEccentricity(_PeriodicEffect):
     """Sinusoid of wavelength = lead, amplitude δ·tanθ (seed 000 Eq. 1-2)."""
 
     name = "assembly_eccentricity"
@@ -105,10 +108,6 @@ class AssemblyEccentricity(Effect):
         return lambda v: geometry.eccentricity_error_um(position_mm, lead_mm, v["cos_um"],
                                                         v["sin_um"])
 
-    def guess(self, case, residual_um):
-        cos_um, sin_um = _sinusoid_guess(_targets(case), residual_um, case.axis.lead_mm)
-        return {"cos_um": cos_um, "sin_um": sin_um}
-
     def fmu_parameters(self, axis, values):
         return {self.fmu: {"eccentricity_cos_um": values["cos_um"],
                            "eccentricity_sin_um": values["sin_um"]}}
@@ -118,7 +117,7 @@ class AssemblyEccentricity(Effect):
                 f"{np.hypot(values['cos_um'], values['sin_um']):.3f} µm (δ·tanθ)")
 
 
-class MotorStepError(Effect):
+class MotorStepError(_PeriodicEffect):
     """Rotor angle error periodic over ``error_period_steps`` steps (seed 000 Eq. 6, 9-10)."""
 
     name = "motor_step_error"
@@ -139,11 +138,6 @@ class MotorStepError(Effect):
         return lambda v: motor.motor_step_error_um(
             position_mm, axis.lead_mm, step_deg, steps, (v["harmonic1_cos_um"],),
             (v["harmonic1_sin_um"],))
-
-    def guess(self, case, residual_um):
-        cos_um, sin_um = _sinusoid_guess(_targets(case), residual_um,
-                                         self.wavelength_mm(case.axis))
-        return {"harmonic1_cos_um": cos_um, "harmonic1_sin_um": sin_um}
 
     def fmu_parameters(self, axis, values):
         return {self.fmu: dict(values)}

@@ -13,6 +13,14 @@ MARK_COLOURS = ("tab:red", "tab:purple", "tab:brown", "tab:olive")
 MAX_PERIOD_LINES = 60
 
 
+def _finish(figure, axes, xlabel, ylabel, title, grid="major"):
+    """Labels, legend and grid, then the figure as PNG bytes."""
+    axes.set(xlabel=xlabel, ylabel=ylabel, title=title)
+    axes.legend(loc="best", fontsize=8)
+    axes.grid(alpha=0.3, which=grid)
+    return _png(figure)
+
+
 def _png(figure):
     buffer = io.BytesIO()
     figure.tight_layout()
@@ -31,11 +39,8 @@ def measurement_vs_model(position_mm, measured_um, predicted_um, direction):
         if chosen.size:
             axes.plot(position_mm[chosen], predicted_um[chosen], "-", lw=1.2, color=colour,
                       label=f"model ({'+' if sign > 0 else '-'} approach)")
-    axes.set(xlabel="target position (mm)", ylabel="error (µm)",
-             title="Measurement against model")
-    axes.legend(loc="best", fontsize=8)
-    axes.grid(alpha=0.3)
-    return _png(figure)
+    return _finish(figure, axes, "target position (mm)", "error (µm)",
+                   "Measurement against model")
 
 
 def residual_vs_position(position_mm, residual_um, marks):
@@ -50,11 +55,8 @@ def residual_vs_position(position_mm, residual_um, marks):
                 axes.axvline(x, color=colour, lw=0.6, alpha=0.4)
         axes.plot([start, start + wavelength], [top, top], "-", lw=3, color=colour,
                   label=f"{label}: {wavelength:.4g} mm")
-    axes.set(xlabel="target position (mm)", ylabel="residual (µm)",
-             title="Residual against position, with the marked wavelengths")
-    axes.legend(loc="best", fontsize=8)
-    axes.grid(alpha=0.3)
-    return _png(figure)
+    return _finish(figure, axes, "target position (mm)", "residual (µm)",
+                   "Residual against position, with the marked wavelengths")
 
 
 def spectrum(residual, measured, marks, structures=()):
@@ -73,11 +75,8 @@ def spectrum(residual, measured, marks, structures=()):
         if structure.wavelength_mm:
             axes.axvline(structure.wavelength_mm, color="k", ls=":", lw=1.2,
                          label=f"unexplained {structure.wavelength_mm:.4g} mm")
-    axes.set(xlabel="wavelength (mm)", ylabel="amplitude (µm)",
-             title="Spatial spectrum along the travel")
-    axes.legend(loc="best", fontsize=8)
-    axes.grid(alpha=0.3, which="both")
-    return _png(figure)
+    return _finish(figure, axes, "wavelength (mm)", "amplitude (µm)",
+                   "Spatial spectrum along the travel", grid="both")
 
 
 def contributions(position_mm, components):
@@ -106,9 +105,8 @@ def ladder(steps, noise_um):
         axes.text(index, value, f"{value:.3g}", ha="center", va="bottom", fontsize=8)
     axes.axhline(noise_um, color="tab:red", ls="--", label=f"noise {noise_um:.3g} µm")
     axes.set_xticks(range(len(steps)), labels, rotation=15, fontsize=8)
-    axes.set(ylabel="residual RMS (µm)", title="Error ladder: RMS after each added effect")
-    axes.legend(fontsize=8)
-    return _png(figure)
+    return _finish(figure, axes, "", "residual RMS (µm)",
+                   "Error ladder: RMS after each added effect")
 
 
 def residual_against(panels):
