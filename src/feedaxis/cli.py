@@ -113,8 +113,9 @@ def _cmd_build_fmus(args):
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
 
 
-def _add_model_options(sub, model_help="starting model (TOML); without it the model is empty"):
-    sub.add_argument("--model", metavar="M.toml", help=model_help)
+def _add_model_options(sub, model_help="starting model (TOML); without it the model is empty",
+                       required=False):
+    sub.add_argument("--model", metavar="M.toml", help=model_help, required=required)
     sub.add_argument("--effects", metavar="F.py", action="append",
                      help="Python file with your own effects (repeatable); see the README")
 
@@ -173,7 +174,7 @@ def build_parser():
         description="Measurement against model, residual with the marked wavelengths, "
                     "spectrum, each effect's contribution, the error ladder, the diagnosis.")
     sub.add_argument("case", metavar="CASE", help=CASE_HELP)
-    _add_model_options(sub, "fitted model (TOML)")
+    _add_model_options(sub, "fitted model (TOML)", required=True)
     sub.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
     sub.set_defaults(handler=_cmd_report)
 
