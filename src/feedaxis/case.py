@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
 from .physics.geometry import SUPPORTS
 from .physics.thermal import DutySegment
@@ -66,7 +67,6 @@ class Axis:
     name: str
     screw: dict
     motor: dict = field(default_factory=dict)
-    path: Path = Path(AXIS_FILE)
 
     @property
     def lead_mm(self):
@@ -189,7 +189,7 @@ def read_axis(path):
     if "screw" not in tables or "lead_mm" not in tables["screw"]:
         raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
                         column="screw.lead_mm")
-    return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}), path)
+    return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}))
 
 
 def _check_table(path, text, table, values):
@@ -257,16 +257,15 @@ def _read_csv(path, spec):
     names = _check_header(path, header, spec, _row_label(1, header_line))
     if len(records) == 1:
         raise CaseError(path, "no data rows below the header", _row_label(2, header_line + 1))
+    row_labels = [_row_label(i + 2, line) for i, (line, _) in enumerate(records[1:])]
     values = {name: np.empty(len(records) - 1) for name in names}
-    for index, (line_number, cells) in enumerate(records[1:]):
-        row = _row_label(index + 2, line_number)
+    for index, ((_, cells), row) in enumerate(zip(records[1:], row_labels)):
         if len(cells) != len(names):
             column = names[min(len(cells), len(names) - 1)]
             raise CaseError(path, f"{len(cells)} fields where the header has {len(names)}",
                             row, column)
         for name, cell in zip(names, cells):
             values[name][index] = _number(path, cell, row, name)
-    row_labels = [_row_label(i + 2, line) for i, (line, _) in enumerate(records[1:])]
     return values, row_labels
 
 
@@ -387,8 +386,6 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None):
     positioning, duty, tracking : dict of {column: array}, optional
         Columns of each CSV, written in the given order.
     """
-    import tomli_w
-
     folder = Path(folder)
     if folder.exists():
         raise CaseError(folder, "already exists; choose a new case folder")

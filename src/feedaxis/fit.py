@@ -118,15 +118,13 @@ def fit(model, cases, progress=None):
     model = _with_starting_values(model, cases)
     measured = measured_um(cases)
     layout = _Layout(model, cases[0].axis)
-    evaluators = [model.prepare(case) for case in cases]
+    predictors = [model.predictor(case) for case in cases]
 
     def residual(x):
         if progress:
             progress()
         values = layout.values(x)
-        predicted = [sum((f(values[e.name]) for e, f in prepared), np.zeros(case.positioning.size))
-                     for case, prepared in zip(cases, evaluators)]
-        return measured - np.concatenate(predicted)
+        return measured - np.concatenate([predict(values) for predict in predictors])
 
     if layout.size == 0:
         return evaluate(model, cases)

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .fit import evaluate
+
 TARGET_DECIMALS = 6
 
 
@@ -84,8 +86,6 @@ def compare(case, model):
     Returns {"figures": {key: {"measured_um", "residual_um", "explained"}}, "targets", ...};
     ``explained`` = 1 - residual / measured, the share of the figure the model explains.
     """
-    from .fit import evaluate
-
     positioning = case.positioning
     result = evaluate(model, case)
     measured = iso230_figures(positioning.target_mm, result.measured_um, positioning.direction)

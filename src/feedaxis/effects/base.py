@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import tomli_w
 
 
 @dataclass(frozen=True)
@@ -178,12 +179,14 @@ class Model:
         """{effect name: error_um contribution} at the case's positioning samples."""
         return {e.name: f(self.values[e.name]) for e, f in self.prepare(case)}
 
+    def predictor(self, case):
+        """``f(values) -> total error_um`` at the case's samples, each effect prepared once."""
+        prepared, size = self.prepare(case), case.positioning.size
+        return lambda values: sum((f(values[e.name]) for e, f in prepared), np.zeros(size))
+
     def predict_um(self, case):
         """Total modelled error (µm) at the case's positioning samples."""
-        total = np.zeros(case.positioning.size)
-        for contribution in self.components(case).values():
-            total = total + contribution
-        return total
+        return self.predictor(case)(self.values)
 
     def fmu_parameters(self, axis):
         """{FMU name: {parameter: value}} for the co-simulated axis to reproduce the model."""
@@ -197,7 +200,5 @@ class Model:
 
     def to_toml(self):
         """The model as TOML text: one table per effect holding its parameter values."""
-        import tomli_w
-
         header = "# feedaxis model: one table per effect, parameter values with units in names\n"
         return header + tomli_w.dumps({name: self.values[name] for name in self.names})
