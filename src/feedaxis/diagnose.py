@@ -20,10 +20,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-from scipy.signal import lombscargle
 
 from .effects import CATALOG, Effect, Model, Parameter
 from .fit import FitResult, fit
+from .iso230 import TARGET_DECIMALS
 
 SIGNIFICANT_DELTA_BIC = -10.0
 MIN_EXPLAINED_SHARE = 0.10
@@ -118,10 +118,12 @@ def diagnose(case, model, effects=None, progress=None):
     base = fit(model, case)
     pending, skipped = {}, {}
     for name, effect in effects.items():
-        reason = None if name in model else effect.unavailable(case)
+        if name in model:
+            continue
+        reason = effect.unavailable(case)
         if reason:
             skipped[name] = reason
-        elif name not in model:
+        else:
             pending[name] = effect
     candidates, left = [], base
     while pending:
@@ -202,8 +204,10 @@ def estimate_noise_um(case, residual_um):
 
 
 def _target_groups(positioning):
-    keys = np.round(positioning.target_mm, 6) * 4 + positioning.direction
-    return np.unique(keys, return_inverse=True)[1].ravel()
+    """Group index of each sample: one group per (target, approach direction)."""
+    keys = np.column_stack((np.round(positioning.target_mm, TARGET_DECIMALS),
+                            positioning.direction))
+    return np.unique(keys, axis=0, return_inverse=True)[1].ravel()
 
 
 def _run_or_time(positioning):
@@ -414,6 +418,8 @@ def _spectrum(position_mm, residual_um):
         frequency = np.fft.rfftfreq(n_fft, d=step_mm)
         amplitude = 2.0 * np.abs(np.fft.rfft(centred, n_fft)) / unique_mm.size
     else:
+        from scipy.signal import lombscargle  # 0.5 s import, only for uneven sampling
+
         frequency = np.arange(1.0 / span_mm, 0.5 / step_mm, _frequency_step(unique_mm))
         frequency = frequency[:: max(1, frequency.size // MAX_UNEVEN_FREQUENCIES)]
         amplitude = np.abs(lombscargle(unique_mm, means_um, 2 * np.pi * frequency,
