@@ -1,6 +1,8 @@
 """Command line: ``feedaxis <command>``; each command parses, calls the library, prints.
 
 Exit codes: 0 success, 2 bad input (one message on stderr, nothing written), 130 Ctrl-C.
+The numerical modules (scipy, matplotlib, pythonfmu: seconds to import) are imported by the
+commands that use them, so ``--help`` and ``effects`` answer at once.
 """
 from __future__ import annotations
 
@@ -10,12 +12,9 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-from . import __version__, demo, fmu_build, text
+from . import __version__, text
 from .case import read_case
-from .diagnose import diagnose
 from .effects import Model, available_effects, load_model
-from .fit import evaluate, fit
-from .iso230 import compare
 from .output import write_atomically
 
 CASE_HELP = "case folder: axis.toml + positioning.csv (+ duty.csv), see data-format.md"
@@ -34,9 +33,13 @@ def _effects(args):
     return available_effects(args.effects or ())
 
 
-def _model(args, effects):
-    model = load_model(args.model, effects) if args.model else Model()
-    for name in args.add or ():
+def _starting_model(args, effects):
+    return load_model(args.model, effects) if args.model else Model()
+
+
+def _with_added(model, names, effects):
+    """``model`` plus the effects named by ``--add``, in order."""
+    for name in names or ():
         if name not in effects:
             raise ValueError(f"--add {name}: unknown effect; known: {', '.join(effects)}")
         if name in model:
@@ -50,10 +53,12 @@ def _emit(args, payload, lines):
 
 
 def _cmd_fit(args):
+    from .fit import evaluate, fit
+
     effects = _effects(args)
     cases = [read_case(folder) for folder in args.cases]
-    starting = load_model(args.model, effects) if args.model else Model()
-    model = _model(args, effects)
+    starting = _starting_model(args, effects)
+    model = _with_added(starting, args.add, effects)
     before = evaluate(starting, cases)
     with _progress("fitting", "model evaluations") as tick:
         result = fit(model, cases, progress=tick)
@@ -67,18 +72,22 @@ def _cmd_fit(args):
 
 
 def _cmd_diagnose(args):
+    from .diagnose import diagnose
+
     effects = _effects(args)
     case = read_case(args.case)
-    model = _model(args, effects)
+    model = _starting_model(args, effects)
     with _progress("diagnosing", "fits") as tick:
         diagnosis = diagnose(case, model, effects, progress=tick)
     _emit(args, diagnosis.to_json(), text.diagnosis_lines(diagnosis))
 
 
 def _cmd_compare(args):
+    from .iso230 import compare
+
     effects = _effects(args)
     case = read_case(args.case)
-    comparison = compare(case, _model(args, effects))
+    comparison = compare(case, _starting_model(args, effects))
     _emit(args, comparison, text.comparison_lines(comparison))
 
 
@@ -87,7 +96,7 @@ def _cmd_report(args):
 
     effects = _effects(args)
     case = read_case(args.case)
-    model = load_model(args.model, effects)
+    model = _starting_model(args, effects)
     out = Path(args.out or f"{Path(args.case).resolve().name}-report.html")
     write_report(case, model, effects, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
@@ -103,12 +112,16 @@ def _cmd_effects(args):
 
 
 def _cmd_demo(args):
+    from . import demo
+
     summary = demo.run_demo(args.out, echo=(lambda line: None) if args.json else print)
     if args.json:
         print(json.dumps(summary, indent=2))
 
 
 def _cmd_build_fmus(args):
+    from . import fmu_build
+
     paths = fmu_build.build_fmus(args.out)
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
 
@@ -159,7 +172,7 @@ def build_parser():
                     "missing_effect or unexplained.")
     sub.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(sub)
-    sub.set_defaults(handler=_cmd_diagnose, add=None)
+    sub.set_defaults(handler=_cmd_diagnose)
 
     sub = commands.add_parser(
         "compare", help="ISO 230-2 figures of the measurement and of the residual",
@@ -167,7 +180,7 @@ def build_parser():
                     "the measured runs and of what is left after the model, side by side.")
     sub.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(sub, "model (TOML) as fitted; without it the model is empty")
-    sub.set_defaults(handler=_cmd_compare, add=None)
+    sub.set_defaults(handler=_cmd_compare)
 
     sub = commands.add_parser(
         "report", help="self-contained HTML page with the plots",
