@@ -17,7 +17,7 @@ axis coordinate mapped through P_f (Eq. 15-16), plus ambient expansion TE_a (Eq.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -101,17 +101,27 @@ def nut_cells(params, nut_screw_m):
     return _interval_overlap(params, nut_screw_m - half_m, nut_screw_m + half_m)
 
 
-def averaged_nut_cells(params, from_screw_m, to_screw_m, n_points=401):
+def averaged_nut_cells(params, from_screw_m, to_screw_m):
     """Time average of :func:`nut_cells` for a nut running back and forth between two points.
 
     A back-and-forth run at constant speed spends equal time at every point of its path, so
-    the average is the mean over evenly spaced positions (midpoint rule).
+    the average is the mean of the overlap over the path, integrated exactly: the overlap of
+    the nut [x - L_N/2, x + L_N/2] with cell [a, b] is g(x + L_N/2) - g(x - L_N/2) with
+    g(z) = clip(z - a, 0, b - a), whose antiderivative is (r(z - a)² - r(z - b)²)/2,
+    r = max(·, 0).
     """
     if np.isclose(from_screw_m, to_screw_m):
         return nut_cells(params, from_screw_m)
-    offsets = (np.arange(n_points) + 0.5) / n_points
-    positions_m = from_screw_m + (to_screw_m - from_screw_m) * offsets
-    return np.mean([nut_cells(params, x) for x in positions_m], axis=0)
+    lower_m = np.arange(params.n_cells) * params.cell_length_m
+    upper_m = lower_m + params.cell_length_m
+
+    def antiderivative(z_m):
+        return (np.maximum(z_m - lower_m, 0.0) ** 2 - np.maximum(z_m - upper_m, 0.0) ** 2) / 2.0
+
+    half_m = params.nut_length_m / 2.0
+    integral = (antiderivative(to_screw_m + half_m) - antiderivative(from_screw_m + half_m)
+                - antiderivative(to_screw_m - half_m) + antiderivative(from_screw_m - half_m))
+    return integral / ((to_screw_m - from_screw_m) * params.cell_length_m)
 
 
 def _interval_overlap(params, start_m, stop_m):
@@ -280,14 +290,32 @@ def table2_cycle(feed_mm_min, from_mm=0.0, to_mm=500.0):
 def simulate_duty(params, segments, times_s):
     """Temperature rise at ``times_s`` for a duty cycle, in closed form per segment.
 
+    k3·Θ_B + k4·Θ_N from :func:`duty_unit_fields`: the field is linear in Q_B and Q_N
+    (Eq. 10, 18, 19).
+
+    Returns
+    -------
+    ndarray, shape (len(times_s), n_cells)
+        θ per cell (K) at each sample time.
+    """
+    unit_K = duty_unit_fields(params, segments, times_s)
+    return params.k3_W_per_mm_min * unit_K[0] + params.k4_W_per_mm_min * unit_K[1]
+
+
+def duty_unit_fields(params, segments, times_s):
+    """Temperature rise per unit k3 and per unit k4 at ``times_s``, in closed form per segment.
+
     Within a segment the nut's heat and shading are averaged over its path
     (:func:`averaged_nut_cells`), which makes the system time-invariant; the explicit
     scheme of Eq. 10 is then evaluated exactly for any number of steps through the
     eigen-decomposition of the symmetric A: θ_k = V (1 + dt·μ)^k Vᵀ (θ_0 - θ*) + θ*.
+    Heat enters only through the sources, so the field is k3·Θ_B + k4·Θ_N for any
+    k3, k4 (W per mm/min) at fixed k1, k2, λ and P_f.
 
     Parameters
     ----------
     params : ThermalScrewParams
+        k3 and k4 are ignored.
     segments : sequence of DutySegment
         Consecutive segments starting at t = 0.
     times_s : array_like
@@ -295,34 +323,106 @@ def simulate_duty(params, segments, times_s):
 
     Returns
     -------
-    ndarray, shape (len(times_s), n_cells)
-        θ per cell (K) at each sample time.
+    ndarray, shape (2, len(times_s), n_cells)
+        Θ_B and Θ_N (K per W/(mm/min)) at each sample time.
     """
     times_s = np.asarray(times_s, dtype=float)
-    rise_K = np.zeros((times_s.size, params.n_cells))
-    state_K = np.zeros(params.n_cells)
+    unit_K = np.zeros((2, times_s.size, params.n_cells))
+    state_K = np.zeros((2, params.n_cells))
+    propagators = {}
     for segment in segments:
-        propagate = _segment_propagator(params, segment)
+        key = (abs(segment.feed_mm_min), segment.from_mm, segment.to_mm)
+        if key not in propagators:
+            propagators[key] = _segment_propagator(params, segment)
+        propagate = propagators[key]
         inside = (times_s >= segment.start_s) & (times_s <= segment.end_s)
         if np.any(inside):
-            rise_K[inside] = propagate(state_K, times_s[inside] - segment.start_s)
-        state_K = propagate(state_K, np.array([segment.duration_s]))[0]
-    return rise_K
+            unit_K[:, inside] = propagate(state_K, times_s[inside] - segment.start_s)
+        state_K = propagate(state_K, np.array([segment.duration_s]))[:, 0]
+    return unit_K
 
 
 def _segment_propagator(params, segment):
+    """θ(elapsed) for a start field, one row per unit source (bearing, nut), Eq. 10 exactly."""
     feed = segment.feed_mm_min
     path_m = screw_coordinate_m(np.array([segment.from_mm, segment.to_mm]), params.fixed_end_mm)
     nut_fraction = averaged_nut_cells(params, path_m[0], path_m[1])
     rates_matrix = rate_matrix(params, feed, nut_fraction)
     rates, vectors = np.linalg.eigh(rates_matrix)
-    steady_K = -vectors @ ((vectors.T @ source_rate(params, feed, nut_fraction)) / rates)
+    unit_sources = np.array([
+        source_rate(replace(params, k3_W_per_mm_min=1.0, k4_W_per_mm_min=0.0), feed, nut_fraction),
+        source_rate(replace(params, k3_W_per_mm_min=0.0, k4_W_per_mm_min=1.0), feed, nut_fraction)])
+    steady_K = -((unit_sources @ vectors) / rates) @ vectors.T
     dt_s = stable_time_step_s(params, rates_matrix)
     growth = 1.0 + dt_s * rates
 
     def propagate(state_K, elapsed_s):
-        modes = vectors.T @ (state_K - steady_K)
+        modes = (state_K - steady_K) @ vectors
         decay = growth[None, :] ** (elapsed_s[:, None] / dt_s)
-        return (decay * modes[None, :]) @ vectors.T + steady_K
+        return (decay[None, :, :] * modes[:, None, :]) @ vectors.T + steady_K[:, None, :]
 
     return propagate
+
+
+def explicit_duty(params, segments, times_s, block=4096):
+    """Temperature rise at ``times_s`` by stepping Eq. 10 explicitly with the nut moving.
+
+    The paper's scheme as written: every dt (``params.time_step_s``, reduced if unstable)
+    the nut sits where the triangle-wave run of its segment puts it, heats the cells under
+    it and shades them from convection. Each sample takes the field of the nearest step.
+    A reference for :func:`simulate_duty` and the baseline of the identification benchmark.
+
+    Returns
+    -------
+    ndarray, shape (len(times_s), n_cells)
+    """
+    times_s = np.asarray(times_s, dtype=float)
+    fastest = max(abs(s.feed_mm_min) for s in segments)
+    dt_s = stable_time_step_s(params, rate_matrix(params, fastest, np.zeros(params.n_cells)))
+    step_times_s = np.arange(int(np.ceil(segments[-1].end_s / dt_s)) + 1) * dt_s
+    owner = np.clip(np.searchsorted([s.end_s for s in segments], step_times_s, side="right"),
+                    0, len(segments) - 1)
+    nut_m = np.empty_like(step_times_s)
+    for index, segment in enumerate(segments):
+        mine = owner == index
+        nut_m[mine] = screw_coordinate_m(segment.nut_position_mm(step_times_s[mine]),
+                                         params.fixed_end_mm)
+    wanted = np.rint(times_s / dt_s).astype(int)
+    samples_at = {k: np.flatnonzero(wanted == k) for k in np.unique(wanted)}
+    feed = np.array([segments[i].feed_mm_min for i in owner])
+    conductance = params.conductivity_W_mK * params.area_m2 / params.cell_length_m
+    rate_step = dt_s / params.cell_heat_capacity_J_K
+    rise_K = np.zeros(params.n_cells)
+    fields_K = np.zeros((times_s.size, params.n_cells))
+    last_step = wanted.max(initial=0)
+    for first in range(0, last_step + 1, block):
+        steps = np.arange(first, min(first + block, last_step + 1))
+        loss_W_K, heat_K_s = _explicit_terms(params, feed[steps], nut_m[steps])
+        for k, loss, heat in zip(steps, loss_W_K, heat_K_s):
+            if k in samples_at:
+                fields_K[samples_at[k]] = rise_K
+            flow_W_K = conductance * (rise_K[1:] - rise_K[:-1])
+            net_W = -loss * rise_K
+            net_W[:-1] += flow_W_K
+            net_W[1:] -= flow_W_K
+            rise_K = rise_K + rate_step * net_W + dt_s * heat
+    return fields_K
+
+
+def _explicit_terms(params, feed_mm_min, nut_m):
+    """Convective loss (W/K) and source rate (K/s) per cell for a block of steps (Eq. 5-10)."""
+    half_m = params.nut_length_m / 2.0
+    lower_m = np.arange(params.n_cells) * params.cell_length_m
+    overlap_m = (np.minimum(lower_m + params.cell_length_m, nut_m[:, None] + half_m)
+                 - np.maximum(lower_m, nut_m[:, None] - half_m))
+    nut = np.clip(overlap_m / params.cell_length_m, 0.0, 1.0)
+    speed = np.abs(feed_mm_min)[:, None]
+    h_W_m2K = params.k1_W_m2K_per_mm_min * speed + params.k2_W_m2K
+    lateral_m2 = np.pi * params.diameter_m * params.cell_length_m
+    bearing = bearing_cells(params)
+    loss_W_K = h_W_m2K * lateral_m2 * (1.0 - bearing) * (1.0 - nut)
+    loss_W_K[:, -1] += h_W_m2K[:, 0] * params.area_m2
+    heat_W = params.cell_length_m * speed * (
+        params.k3_W_per_mm_min / params.bearing_length_m * bearing
+        + params.k4_W_per_mm_min / params.nut_length_m * nut)
+    return loss_W_K, heat_W / params.cell_heat_capacity_J_K
