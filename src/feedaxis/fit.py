@@ -8,11 +8,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 
 from .effects import Model
 
-SINGULAR_RATIO = 1e-10
+SINGULAR_RATIO = 1e-6
 
 
 @dataclass(frozen=True)
@@ -75,8 +75,14 @@ def measured_um(cases):
 
 
 def check_available(model, cases):
-    """Raise ValueError when an effect of ``model`` cannot be used on a case."""
-    for case in _as_list(cases):
+    """Raise ValueError when an effect of ``model`` cannot be used on a case, or when cases
+    fitted jointly describe different axes."""
+    cases = _as_list(cases)
+    for case in cases[1:]:
+        if (case.axis.screw, case.axis.motor) != (cases[0].axis.screw, cases[0].axis.motor):
+            raise ValueError(f"{case.folder}: axis.toml differs from {cases[0].folder}; cases "
+                             "fitted together must describe the same axis")
+    for case in cases:
         if case.positioning is None:
             raise ValueError(f"{case.folder}: the fit needs positioning.csv")
         for effect in model.effects:
@@ -128,12 +134,53 @@ def fit(model, cases, progress=None):
 
     if layout.size == 0:
         return evaluate(model, cases)
-    solution = least_squares(residual, layout.start(), bounds=layout.bounds(), x_scale="jac",
+    start = _variable_projection(model, cases, layout, measured, progress)
+    solution = least_squares(residual, start, bounds=layout.bounds(), x_scale="jac",
                              method="trf")
     fitted = model.with_values(layout.values(solution.x))
     sigma, undetermined = _uncertainties(solution, layout, measured.size)
     return FitResult(fitted, Statistics.of(measured, solution.fun, layout.size), measured,
                      solution.fun, sigma, undetermined)
+
+
+def _variable_projection(model, cases, layout, measured, progress=None):
+    """Starting vector at the optimum over the nonlinear parameters, the linear ones
+    (``Effect.linear``) solved exactly by bounded linear least squares at every step.
+
+    Fewer parameters for the optimiser and no poor start for the linear ones; with no
+    nonlinear parameter it is one linear solve.
+    """
+    separators = [model.separable_predictor(case) for case in cases]
+    lower, upper = layout.bounds()
+    linear = layout.linear_index
+    nonlinear = np.setdiff1d(np.arange(layout.size), linear)
+    x = layout.start()
+
+    def project(x_nonlinear):
+        x[nonlinear] = x_nonlinear
+        parts = [separate(layout.values(x)) for separate in separators]
+        target_um = measured - np.concatenate([base_um for base_um, _ in parts])
+        columns_um = np.vstack([columns for _, columns in parts])
+        scale = np.linalg.norm(columns_um, axis=0)
+        scale[scale == 0.0] = 1.0
+        solution = lsq_linear(columns_um / scale, target_um, method="bvls",
+                              bounds=(lower[linear] * scale, upper[linear] * scale))
+        x[linear] = solution.x / scale
+        return target_um - columns_um @ x[linear]
+
+    def residual(x_nonlinear):
+        if progress:
+            progress()
+        return project(x_nonlinear)
+
+    if nonlinear.size:
+        solution = least_squares(residual, x[nonlinear], bounds=(lower[nonlinear], upper[nonlinear]),
+                                 x_scale="jac", method="trf")
+        project(solution.x)
+    else:
+        project(x[nonlinear])
+    margin = 1e-9 * (upper - lower)
+    return np.clip(x, lower + margin, upper - margin)
 
 
 def _with_starting_values(model, cases):
@@ -158,6 +205,8 @@ class _Layout:
     def __init__(self, model, axis):
         self.model = model
         self.slots = [(e.name, p.name) for e in model.effects for p in e.parameters]
+        self.linear_index = np.array([self.slots.index((e.name, name)) for e in model.effects
+                                      for name in e.linear], dtype=int)
         limits = {e.name: e.bounds(axis) for e in model.effects}
         self.lower = np.array([limits[e][p][0] for e, p in self.slots], dtype=float)
         self.upper = np.array([limits[e][p][1] for e, p in self.slots], dtype=float)
@@ -185,20 +234,28 @@ def _uncertainties(solution, layout, n_points):
     """Standard uncertainties from the Jacobian at the optimum; flag what the data cannot fix.
 
     A parameter is undetermined when it has a share in a (nearly) singular direction of the
-    Jacobian, or when it ends on a bound.
+    Jacobian with its columns scaled to unit length (so units do not matter), or when it
+    ends on a bound.
     """
     variance = float(solution.fun @ solution.fun) / max(n_points - layout.size, 1)
-    _, singular, vt = np.linalg.svd(solution.jac, full_matrices=False)
+    scale = np.linalg.norm(solution.jac, axis=0)
+    scale[scale == 0.0] = 1.0
+    _, singular, vt = np.linalg.svd(solution.jac / scale, full_matrices=False)
     strong = singular > SINGULAR_RATIO * max(singular[0], 1e-300)
-    covariance = (vt[strong].T / singular[strong] ** 2) @ vt[strong] * variance
-    weak = np.abs(vt[~strong]).max(axis=0, initial=0.0) > 0.1
+    covariance = ((vt[strong].T / singular[strong] ** 2) @ vt[strong] * variance
+                  / np.outer(scale, scale))
+    in_weak_direction = np.abs(vt[~strong]) > 0.1
+    keys = [f"{effect_name}.{parameter_name}" for effect_name, parameter_name in layout.slots]
     sigma = {name: {} for name in layout.model.names}
     undetermined = {}
     for index, (effect_name, parameter_name) in enumerate(layout.slots):
-        key = f"{effect_name}.{parameter_name}"
+        key = keys[index]
         sigma[effect_name][parameter_name] = float(np.sqrt(covariance[index, index]))
-        if weak[index]:
-            undetermined[key] = "the data cannot separate it from other parameters"
+        partners = {keys[j] for row in in_weak_direction if row[index]
+                    for j in np.flatnonzero(row) if j != index}
+        if in_weak_direction[:, index].any():
+            undetermined[key] = (f"the data cannot separate it from {', '.join(sorted(partners))}"
+                                 if partners else "the data do not depend on it")
             sigma[effect_name][parameter_name] = float("nan")
         elif solution.active_mask[index] != 0:
             undetermined[key] = "ended on its bound"

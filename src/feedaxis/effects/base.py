@@ -40,12 +40,15 @@ class Effect:
 
     Subclasses set ``name``, ``meaning``, ``parameters`` and ``needs`` and implement
     :meth:`prepare`; :meth:`guess`, :meth:`fmu_parameters`, :meth:`evidence` and
-    :meth:`wavelength_mm` have sensible defaults.
+    :meth:`wavelength_mm` have sensible defaults. ``linear`` names the parameters the error
+    is linear in (error = base + Σ value·column, base and columns set by the others); the fit
+    solves for them exactly at each step (variable projection).
     """
 
     name = "effect"
     meaning = ""
     parameters: tuple = ()
+    linear: tuple = ()
     needs = Needs()
     fmu = None
 
@@ -81,6 +84,23 @@ class Effect:
     def prepare(self, case):
         """Return ``f(values) -> error_um`` at the case's positioning samples."""
         raise NotImplementedError
+
+    def prepare_separable(self, case):
+        """Return ``f(values) -> (base_um, columns_um)`` splitting off the ``linear`` parameters.
+
+        The error is ``base_um + columns_um @ [values[p] for p in linear]``; ``values`` of the
+        linear parameters are ignored. By default built from :meth:`prepare` (one evaluation
+        with the linear parameters at 0, one more per linear parameter at 1).
+        """
+        evaluate = self.prepare(case)
+
+        def separate(values):
+            zero = {**values, **{name: 0.0 for name in self.linear}}
+            base_um = evaluate(zero)
+            columns = [evaluate({**zero, name: 1.0}) - base_um for name in self.linear]
+            return base_um, np.array(columns).reshape(len(self.linear), base_um.size).T
+
+        return separate
 
     def bounds(self, axis):
         """{parameter: (lower, upper)} on this axis; by default the parameters' own bounds."""
@@ -183,6 +203,22 @@ class Model:
         """``f(values) -> total error_um`` at the case's samples, each effect prepared once."""
         prepared, size = self.prepare(case), case.positioning.size
         return lambda values: sum((f(values[e.name]) for e, f in prepared), np.zeros(size))
+
+    def separable_predictor(self, case):
+        """``f(values) -> (base_um, columns_um)`` of the whole model on ``case``: the total
+        error is ``base_um + columns_um @ linear values``, columns in the order of
+        ``(effect, parameter) for effect in effects for parameter in effect.linear``."""
+        prepared, size = [(e, e.prepare_separable(case)) for e in self.effects], case.positioning.size
+
+        def separate(values):
+            base_um, columns = np.zeros(size), []
+            for e, f in prepared:
+                effect_base_um, effect_columns_um = f(values[e.name])
+                base_um = base_um + effect_base_um
+                columns.append(effect_columns_um)
+            return base_um, np.hstack(columns) if columns else np.zeros((size, 0))
+
+        return separate
 
     def predict_um(self, case):
         """Total modelled error (µm) at the case's positioning samples."""

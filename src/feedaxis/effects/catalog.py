@@ -26,6 +26,10 @@ def _targets(case):
 class _PeriodicEffect(Effect):
     """An effect periodic along the travel; parameters: cosine and sine amplitude (µm)."""
 
+    @property
+    def linear(self):
+        return self.parameter_names
+
     def guess(self, case, residual_um):
         """Least-squares cosine and sine amplitudes at the effect's wavelength."""
         phase = 2.0 * np.pi * _targets(case) / self.wavelength_mm(case.axis)
@@ -41,6 +45,7 @@ class LeadError(Effect):
     meaning = "the screw's lead differs from nominal, so the error grows linearly with travel"
     parameters = (Parameter("offset_um", "um", -1e4, 1e4, "deviation b1 at position 0"),
                   Parameter("slope_um_per_mm", "um/mm", -1e3, 1e3, "lead deviation a1 per mm"))
+    linear = ("offset_um", "slope_um_per_mm")
     fmu = "GeometricError"
 
     def prepare(self, case):
@@ -156,6 +161,7 @@ class Backlash(Effect):
     meaning = "lost motion in the nut and bearings: the error depends on the approach direction"
     parameters = (Parameter("backlash_um", "um", -1e3, 1e3,
                             "reversal B = mean(+ approach) - mean(- approach)"),)
+    linear = ("backlash_um",)
     needs = Needs(columns=("direction",), both_directions=True)
     fmu = "GeometricError"
 
@@ -190,6 +196,7 @@ class ThermalScrew(Effect):
         Parameter("conductivity_W_mK", "W/(m.K)", 1.0, 5000.0, "identified λ (Table 3)"),
         Parameter("fixed_end_mm", "mm", -1e4, 1e4, "axis coordinate P_f of the fixed end"),
     )
+    linear = ("k3_W_per_mm_min", "k4_W_per_mm_min")
     needs = Needs(columns=("time_s",), screw_keys=THERMAL_SCREW_KEYS, duty=True)
     fmu = "ThermalScrew"
 
@@ -200,16 +207,28 @@ class ThermalScrew(Effect):
         return thermal.ThermalScrewParams(**{k: axis.screw[k] for k in geometry_keys}, **values)
 
     def prepare(self, case):
+        separate = self.prepare_separable(case)
+
+        def evaluate(values):
+            base_um, columns_um = separate(values)
+            return base_um + columns_um @ [values[name] for name in self.linear]
+
+        return evaluate
+
+    def prepare_separable(self, case):
+        """TE per unit k3 and per unit k4 from one closed-form pass (Eq. 10, 15-19)."""
         segments, time_s = case.duty.segments, case.positioning.time_s
         unique_s, sample_time = np.unique(time_s, return_inverse=True)
         position_mm = _targets(case)
 
-        def evaluate(values):
+        def separate(values):
             params = self.screw_params(case.axis, values)
-            rise_K = thermal.simulate_duty(params, segments, unique_s)
-            return thermal.thermal_error_um(params, rise_K[sample_time], position_mm)
+            unit_K = thermal.duty_unit_fields(params, segments, unique_s)
+            columns_um = [thermal.thermal_error_um(params, field[sample_time], position_mm)
+                          for field in unit_K]
+            return np.zeros(position_mm.size), np.column_stack(columns_um)
 
-        return evaluate
+        return separate
 
     def bounds(self, axis):
         """P_f stays on the side of the axis.toml value: Eq. 15 and 16 differ in sign."""
