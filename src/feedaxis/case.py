@@ -405,11 +405,16 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None):
 
 
 def _write_csv(path, columns):
+    path.write_text(csv_text(columns), encoding="utf-8")
+
+
+def csv_text(columns):
+    """{column: values} as CSV text in the case format (header row, full float precision)."""
     names = list(columns)
     table = np.column_stack([np.asarray(columns[name], dtype=float) for name in names])
     lines = [",".join(names)] + [",".join(_format_cell(name, v) for name, v in zip(names, row))
                                  for row in table]
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return "\n".join(lines) + "\n"
 
 
 def _format_cell(name, value):

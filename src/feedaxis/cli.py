@@ -102,6 +102,17 @@ def _cmd_report(args):
     _emit(args, {"report": str(out)}, f"report: {out}")
 
 
+def _cmd_compensate(args):
+    from .case import csv_text
+    from .compensate import compensate
+
+    case = read_case(args.case)
+    result = compensate(case, load_model(args.model, _effects(args)))
+    if args.out:
+        write_atomically(args.out, csv_text(result.columns()))
+    _emit(args, result.to_json(), text.compensation_lines(result, args.out))
+
+
 def _cmd_effects(args):
     effects = _effects(args)
     payload = {name: {"meaning": e.meaning, "fmu": e.fmu,
@@ -190,6 +201,19 @@ def build_parser():
     _add_model_options(sub, "fitted model (TOML)", required=True)
     sub.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
     sub.set_defaults(handler=_cmd_report)
+
+    sub = commands.add_parser(
+        "compensate", help="thermal correction at each sample and the error it leaves",
+        description="Apply the model's thermal effects (thermal_screw, ambient_expansion) as "
+                    "a compensation to a thermal case, as seed 003 §5.2: the thermal error is "
+                    "each target's drift from its first visit; print its max and RMS before "
+                    "and after, per target and over time.")
+    sub.add_argument("case", metavar="CASE", help=CASE_HELP)
+    _add_model_options(sub, "fitted model with thermal_screw (TOML)", required=True)
+    sub.add_argument("--out", metavar="COMPENSATION.csv",
+                     help="write per sample: time_s, target_mm, direction, measured_um, "
+                          "thermal_error_um, correction_um, left_um")
+    sub.set_defaults(handler=_cmd_compensate)
 
     sub = commands.add_parser("effects", help="list the effect catalog (and your own)",
                               description="Each effect's meaning, parameters and FMU.")

@@ -23,7 +23,7 @@ from scipy.optimize import minimize_scalar
 
 from .effects import CATALOG, Effect, Model, Parameter
 from .fit import FitResult, fit
-from .iso230 import TARGET_DECIMALS
+from .iso230 import target_groups
 
 SIGNIFICANT_DELTA_BIC = -10.0
 MIN_EXPLAINED_SHARE = 0.10
@@ -190,7 +190,7 @@ def estimate_noise_um(case, residual_um):
     standard deviation); short-wave structure left in the residual makes it an upper bound.
     """
     positioning = case.positioning
-    groups = _target_groups(positioning)
+    groups = target_groups(positioning)
     sizes = np.bincount(groups)
     if np.sum(sizes[sizes > 1] - 1) >= 5:
         means = np.bincount(groups, residual_um) / sizes
@@ -201,13 +201,6 @@ def estimate_noise_um(case, residual_um):
     steps = np.diff(residual_um[order])
     return (float(1.4826 * np.median(np.abs(steps - np.median(steps))) / np.sqrt(2)),
             "point-to-point scatter along the travel")
-
-
-def _target_groups(positioning):
-    """Group index of each sample: one group per (target, approach direction)."""
-    keys = np.column_stack((np.round(positioning.target_mm, TARGET_DECIMALS),
-                            positioning.direction))
-    return np.unique(keys, axis=0, return_inverse=True)[1].ravel()
 
 
 def _run_or_time(positioning):
@@ -363,7 +356,7 @@ def _trend(case, residual_um):
 
 def _irregular(case, residual_um):
     """Per-target means beyond repeatability: an irregular error along the travel."""
-    groups = _target_groups(case.positioning)
+    groups = target_groups(case.positioning)
     sizes = np.bincount(groups)
     if sizes.size < 3 or np.sum(sizes - 1) < sizes.size:
         return None

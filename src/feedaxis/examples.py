@@ -66,19 +66,25 @@ TABLE2_AXIS = {"name": "seed 003 X axis, Table 2 loading (synthetic)", "screw": 
 TABLE2_LEAD = {"offset_um": 2.0, "slope_um_per_mm": -0.01}
 
 
-def write_table2_case(folder, feed_mm_min, params=None, noise_um=1.0, seed=0, run_every_s=360.0):
-    """A thermal case: Table 2 duty at ``feed_mm_min``; every ``run_every_s`` a + run over
-    0, 50, ..., 500 mm, 3 s per target; error = TE (seed 003 Eq. 1-19) + lead error + noise.
+def write_table2_case(folder, feed_mm_min, params=None, noise_um=1.0, seed=0, run_every_s=360.0,
+                      stroke_mm=(0.0, 500.0), axis_fixed_end_mm=None,
+                      simulate=thermal.simulate_duty):
+    """A thermal case: Table 2 duty at ``feed_mm_min`` over ``stroke_mm``; every
+    ``run_every_s`` a + run over the stroke every 50 mm, 3 s per target;
+    error = TE (seed 003 Eq. 1-19) + lead error + noise.
 
-    ``params`` (ThermalScrewParams, default Table 1 + Table 3 X) must match TABLE2_AXIS.
+    ``params`` (ThermalScrewParams, default Table 1 + Table 3 X) must match TABLE2_AXIS's
+    geometry; axis.toml states ``axis_fixed_end_mm`` (default: the true P_f) as the user's
+    prior knowledge. ``simulate`` is :func:`thermal.simulate_duty` (nut heat averaged over
+    its path) or :func:`thermal.explicit_duty` (Eq. 10 stepped with the nut moving).
     """
     params = params or thermal.ThermalScrewParams()
-    segments = thermal.table2_cycle(feed_mm_min)
-    targets_mm = np.arange(0.0, 501.0, 50.0)
+    segments = thermal.table2_cycle(feed_mm_min, *stroke_mm)
+    targets_mm = np.arange(stroke_mm[0], stroke_mm[1] + 1.0, 50.0)
     starts_s = np.arange(0.0, segments[-1].end_s - 60.0, run_every_s)
     time_s = (starts_s[:, None] + 3.0 * np.arange(targets_mm.size)[None, :]).ravel()
     target_mm = np.tile(targets_mm, starts_s.size)
-    rise_K = thermal.simulate_duty(params, segments, time_s)
+    rise_K = simulate(params, segments, time_s)
     error_um = (thermal.thermal_error_um(params, rise_K, target_mm)
                 + geometry.lead_error_um(target_mm, **TABLE2_LEAD)
                 + np.random.default_rng(seed).normal(0.0, noise_um, target_mm.size))
@@ -86,6 +92,8 @@ def write_table2_case(folder, feed_mm_min, params=None, noise_um=1.0, seed=0, ru
             "duration_s": [s.duration_s for s in segments],
             "feed_mm_min": [s.feed_mm_min for s in segments],
             "from_mm": [s.from_mm for s in segments], "to_mm": [s.to_mm for s in segments]}
-    return write_case(folder, TABLE2_AXIS, duty=duty, positioning={
+    fixed_end_mm = params.fixed_end_mm if axis_fixed_end_mm is None else axis_fixed_end_mm
+    axis = {**TABLE2_AXIS, "screw": {**TABLE2_AXIS["screw"], "fixed_end_mm": fixed_end_mm}}
+    return write_case(folder, axis, duty=duty, positioning={
         "target_mm": target_mm, "error_um": error_um, "direction": np.ones_like(target_mm),
         "time_s": time_s})

@@ -80,6 +80,13 @@ FIGURE_NAMES = {
 }
 
 
+def target_groups(positioning):
+    """Group index of each sample: one group per (target, approach direction)."""
+    keys = np.column_stack((np.round(positioning.target_mm, TARGET_DECIMALS),
+                            positioning.direction))
+    return np.unique(keys, axis=0, return_inverse=True)[1].ravel()
+
+
 def compare(case, model):
     """ISO 230-2 figures of the measurement and of the residual after ``model``, side by side.
 

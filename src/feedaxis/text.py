@@ -64,6 +64,29 @@ def comparison_lines(comparison):
     return "\n".join(lines)
 
 
+def compensation_lines(result, out_path=None):
+    """Thermal error before and after compensation: overall, per target, over time."""
+    summary = result.summary()
+    header = f"{'max before':>11s} {'max after':>10s} {'RMS before':>11s} {'RMS after':>10s}"
+
+    def figures(row):
+        return (f"{row['max_before_um']:11.3f} {row['max_after_um']:10.3f} "
+                f"{row['rms_before_um']:11.3f} {row['rms_after_um']:10.3f}")
+
+    lines = [f"thermal error max {summary['max_before_um']:.3f} um -> {summary['max_after_um']:.3f}"
+             f" um ({100 * summary['reduction']:.1f} % less), RMS {summary['rms_before_um']:.3f}"
+             f" -> {summary['rms_after_um']:.3f} um over {result.time_s.size} samples",
+             "", f"{'target (mm)':>11s} {'dir':>3s} {header}  (um)"]
+    lines += [f"{row['target_mm']:11.3f} {row['direction']:+3d} {figures(row)}"
+              for row in result.by_target()]
+    lines += ["", f"{'visit':>5s} {'t (min)':>9s} {header}  (um)"]
+    lines += [f"{row['visit']:5d} {row['time_s'] / 60.0:9.1f} {figures(row)}"
+              for row in result.over_time()]
+    if out_path:
+        lines.append(f"per-sample correction written to {out_path}")
+    return "\n".join(lines)
+
+
 def effect_lines(effects):
     """The catalog: name, meaning, parameters with units."""
     lines = []

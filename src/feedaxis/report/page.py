@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compensate import THERMAL_EFFECTS, compensate
 from ..diagnose import diagnose, residual_spectrum
 from ..effects import Model
 from ..fit import evaluate, fit
@@ -91,6 +92,29 @@ def _residual_panels(case, residual_um):
     return panels
 
 
+def _compensation_html(case, model):
+    """Seed 003 Fig. 13 and the before/after figures, for a thermal model on a thermal case."""
+    if not (case.is_thermal and any(name in model for name in THERMAL_EFFECTS)):
+        return []
+    result = compensate(case, model)
+    summary = result.summary()
+    return [
+        "<h2>Thermal compensation (seed 003 Fig. 13)</h2>",
+        f"<p>The thermal error is each target's drift from its first visit; the correction is "
+        f"the model's thermal prediction. Max {summary['max_before_um']:.3g} µm → "
+        f"{summary['max_after_um']:.3g} µm ({100 * summary['reduction']:.1f} % less), RMS "
+        f"{summary['rms_before_um']:.3g} → {summary['rms_after_um']:.3g} µm.</p>",
+        _image(plots.thermal_compensation(result.target_mm, result.visit, result.time_s,
+                                          result.thermal_error_um, result.left_um),
+               "thermal error without and with compensation"),
+        _table(("target (mm)", "dir", "max before (µm)", "max after (µm)", "RMS before (µm)",
+                "RMS after (µm)"),
+               [(f"{r['target_mm']:g}", f"{r['direction']:+d}", f"{r['max_before_um']:.3g}",
+                 f"{r['max_after_um']:.3g}", f"{r['rms_before_um']:.3g}",
+                 f"{r['rms_after_um']:.3g}") for r in result.by_target()]),
+    ]
+
+
 def write_report(case, model, effects, out_path):
     """Write the report of ``model`` (as fitted) on ``case`` to ``out_path``; returns the path."""
     result = evaluate(model, case)
@@ -119,6 +143,7 @@ def write_report(case, model, effects, out_path):
     if panels:
         sections.append(_image(plots.residual_against(panels), "residual against time, "
                                                                "direction, ambient"))
+    sections += _compensation_html(case, model)
     sections += [
         "<h2>Each effect's contribution</h2>",
         _image(plots.contributions(positioning.target_mm, model.components(case)),

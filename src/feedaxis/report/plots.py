@@ -118,3 +118,34 @@ def residual_against(panels):
         axes.set(xlabel=label, ylabel="residual (µm)")
         axes.grid(alpha=0.3)
     return _png(figure)
+
+
+def thermal_compensation(target_mm, visit, time_s, thermal_error_um, left_um):
+    """Seed 003 Fig. 13: thermal error against position, one line per visit coloured by time,
+    without and with compensation on one scale; then the max of each visit against time."""
+    figure, axes_list = plt.subplots(1, 3, figsize=(12, 3.6),
+                                     gridspec_kw={"width_ratios": (1, 1, 1.1)})
+    colours = plt.get_cmap("viridis")
+    minutes = time_s / 60.0
+    span_min = max(float(np.ptp(minutes)), 1e-9)
+    limit = 1.05 * float(np.max(np.abs(thermal_error_um)))
+    by_visit = [visit == v for v in np.unique(visit)]
+    for axes, values_um, title in ((axes_list[0], thermal_error_um, "without compensation"),
+                                   (axes_list[1], left_um, "with compensation")):
+        for chosen in by_visit:
+            order = np.argsort(target_mm[chosen])
+            shade = (float(np.mean(minutes[chosen])) - float(np.min(minutes))) / span_min
+            axes.plot(target_mm[chosen][order], values_um[chosen][order], "-", lw=0.9,
+                      color=colours(shade))
+        axes.set(xlabel="target position (mm)", ylabel="thermal error (µm)", title=title,
+                 ylim=(-limit, limit))
+        axes.grid(alpha=0.3)
+    scale = plt.cm.ScalarMappable(cmap=colours, norm=plt.Normalize(minutes.min(), minutes.max()))
+    figure.colorbar(scale, ax=axes_list[1], label="time (min)")
+    axes = axes_list[2]
+    run_minutes = [float(np.mean(minutes[chosen])) for chosen in by_visit]
+    for values_um, label in ((thermal_error_um, "without"), (left_um, "with compensation")):
+        axes.plot(run_minutes, [np.max(np.abs(values_um[chosen])) for chosen in by_visit], "o-",
+                  ms=3, label=label)
+    return _finish(figure, axes, "time (min)", "max |thermal error| (µm)",
+                   "Largest error of each run")
