@@ -17,7 +17,7 @@ axis coordinate mapped through P_f (Eq. 15-16), plus ambient expansion TE_a (Eq.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -151,12 +151,18 @@ def rate_matrix(params, feed_mm_min, nut_fraction):
 
 
 def source_rate(params, feed_mm_min, nut_fraction):
-    """Source vector s (K/s): Q_B/L_B and Q_N/L_N per cell length (Eq. 7, 10)."""
-    dx = params.cell_length_m
-    bearing_W = params.bearing_heat_W(feed_mm_min) / params.bearing_length_m * dx
-    nut_W = params.nut_heat_W(feed_mm_min) / params.nut_length_m * dx
-    heat_W = bearing_W * bearing_cells(params) + nut_W * nut_fraction
-    return heat_W / params.cell_heat_capacity_J_K
+    """Source vector s (K/s): Q_B/L_B and Q_N/L_N per cell length (Eq. 7, 10, 18, 19)."""
+    return np.array([params.k3_W_per_mm_min, params.k4_W_per_mm_min]) @ unit_source_rates(
+        params, feed_mm_min, nut_fraction)
+
+
+def unit_source_rates(params, feed_mm_min, nut_fraction):
+    """Source vectors (K/s) of the bearing and of the nut per unit k3 and k4 (W per mm/min),
+    shape (2, n_cells): s = k3·s_B + k4·s_N (Eq. 7, 10, 18, 19)."""
+    per_cell_W = abs(feed_mm_min) * params.cell_length_m
+    return np.array([bearing_cells(params) / params.bearing_length_m,
+                     nut_fraction / params.nut_length_m]) * (per_cell_W
+                                                              / params.cell_heat_capacity_J_K)
 
 
 def stable_time_step_s(params, rates):
@@ -349,19 +355,30 @@ def _segment_propagator(params, segment):
     nut_fraction = averaged_nut_cells(params, path_m[0], path_m[1])
     rates_matrix = rate_matrix(params, feed, nut_fraction)
     rates, vectors = np.linalg.eigh(rates_matrix)
-    unit_sources = np.array([
-        source_rate(replace(params, k3_W_per_mm_min=1.0, k4_W_per_mm_min=0.0), feed, nut_fraction),
-        source_rate(replace(params, k3_W_per_mm_min=0.0, k4_W_per_mm_min=1.0), feed, nut_fraction)])
-    steady_K = -((unit_sources @ vectors) / rates) @ vectors.T
+    steady_K = -((unit_source_rates(params, feed, nut_fraction) @ vectors) / rates) @ vectors.T
     dt_s = stable_time_step_s(params, rates_matrix)
     growth = 1.0 + dt_s * rates
 
     def propagate(state_K, elapsed_s):
         modes = (state_K - steady_K) @ vectors
-        decay = growth[None, :] ** (elapsed_s[:, None] / dt_s)
+        decay = _powers(growth, elapsed_s / dt_s)
         return (decay[None, :, :] * modes[:, None, :]) @ vectors.T + steady_K[:, None, :]
 
     return propagate
+
+
+def _powers(growth, steps):
+    """growth^steps for every (step count, mode), shape (len(steps), len(growth)).
+
+    The stable scheme keeps growth in [-1, 1]; a negative growth (the fastest, zigzag modes)
+    alternates in sign, (-1)^k = cos(πk) at whole steps, continued smoothly between them so
+    the field stays smooth in the parameters that set dt.
+    """
+    steps = np.asarray(steps, dtype=float)[:, None]
+    powers = np.abs(growth)[None, :] ** steps
+    alternating = growth < 0.0
+    powers[:, alternating] *= np.cos(np.pi * steps)
+    return powers
 
 
 def explicit_duty(params, segments, times_s, block=4096):
