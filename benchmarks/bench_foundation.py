@@ -64,38 +64,6 @@ def time_bare(call):
     return (time.perf_counter() - start) / N_CALLS
 
 
-def straightforward_explicit(params, segments, times_s, dt_s=0.1):
-    """Eq. 10 stepped at dt = 0.1 s with the nut moving, written out plainly (the baseline)."""
-    n, dx = params.n_cells, params.cell_length_m
-    capacity = params.density_kg_m3 * params.specific_heat_J_kgK * params.area_m2 * dx
-    conduction = params.conductivity_W_mK * params.area_m2 / dx * dt_s / capacity
-    lower = np.arange(n) * dx
-    bearing = np.clip((np.minimum(lower + dx, params.bearing_length_m) - lower) / dx, 0, 1)
-    rise = np.zeros(n)
-    samples = {int(round(t / dt_s)): i for i, t in enumerate(times_s)}
-    out = np.zeros((len(times_s), n))
-    for k in range(int(round(segments[-1].end_s / dt_s)) + 1):
-        if k in samples:
-            out[samples[k]] = rise
-        t = k * dt_s
-        segment = next((s for s in segments if s.start_s <= t < s.end_s), segments[-1])
-        v = segment.feed_mm_min
-        nut = mounting.screw_coordinate_m(segment.nut_position_mm(t), params.fixed_end_mm)
-        half = params.nut_length_m / 2
-        nut_cells = np.clip((np.minimum(lower + dx, nut + half) - np.maximum(lower, nut - half)) / dx, 0, 1)
-        h = params.k1_W_m2K_per_mm_min * v + params.k2_W_m2K
-        exposed = (1 - bearing) * (1 - nut_cells)
-        new = rise.copy()
-        new[:-1] += conduction * (rise[1:] - rise[:-1])
-        new[1:] += conduction * (rise[:-1] - rise[1:])
-        new -= 4 * h * dt_s / (params.density_kg_m3 * params.specific_heat_J_kgK * params.diameter_m) * exposed * rise
-        new[-1] -= h * dt_s / (params.density_kg_m3 * params.specific_heat_J_kgK * dx) * rise[-1]
-        heat = (params.k3_W_per_mm_min * v / params.bearing_length_m * bearing
-                + params.k4_W_per_mm_min * v / params.nut_length_m * nut_cells)
-        rise = new + 4 * dt_s / (np.pi * params.diameter_m**2 * params.density_kg_m3 * params.specific_heat_J_kgK) * heat
-    return out
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats (default 5)")
@@ -129,7 +97,7 @@ def main():
             fast = thermal.simulate_duty(params, segments, times)
             fast_s.append(time.perf_counter() - start)
             start = time.perf_counter()
-            slow = straightforward_explicit(params, segments, times)
+            slow = thermal.explicit_duty(params, segments, times)
             slow_s.append(time.perf_counter() - start)
         positions = np.linspace(0.0, 500.0, 11)
         fast_um = np.array([thermal.thermal_error_um(params, fast, x) for x in positions])

@@ -99,3 +99,29 @@ def test_per_sample_thermal_error_equals_the_field_evaluated_row_by_row():
     per_sample = thermal.thermal_error_um(params, fields, positions)
     row_by_row = [thermal.thermal_error_um(params, field, x) for field, x in zip(fields, positions)]
     np.testing.assert_allclose(per_sample, row_by_row, rtol=1e-12)
+
+
+@pytest.mark.parametrize("conductivity_W_mK", (566.3, 4000.0))
+def test_closed_form_duty_equals_eq10_stepped_with_the_nut_moving(conductivity_W_mK):
+    """simulate_duty (nut heat averaged over its path, closed form) against explicit_duty
+    (Eq. 10 stepped at dt with the nut where its run puts it); λ = 4000 makes the
+    stability limit set dt (0.044 s), with alternating modes in the closed form."""
+    params = thermal.ThermalScrewParams(conductivity_W_mK=conductivity_W_mK)
+    segments = thermal.table2_cycle(9000.0)
+    times_s = np.arange(0.0, segments[-1].end_s, 600.0) + 3.0
+    closed = thermal.simulate_duty(params, segments, times_s)
+    stepped = thermal.explicit_duty(params, segments, times_s)
+    position_mm = np.linspace(0.0, 500.0, times_s.size)
+    closed_um = thermal.thermal_error_um(params, closed, position_mm)
+    stepped_um = thermal.thermal_error_um(params, stepped, position_mm)
+    assert np.max(np.abs(stepped_um)) > 20.0
+    np.testing.assert_allclose(closed_um, stepped_um, atol=0.01)
+
+
+def test_averaged_nut_heat_is_the_exact_path_mean():
+    params = thermal.ThermalScrewParams()
+    path_m = 0.141 + 0.5 * (np.arange(20000) + 0.5) / 20000
+    mean = np.mean([thermal.nut_cells(params, x) for x in path_m], axis=0)
+    np.testing.assert_allclose(thermal.averaged_nut_cells(params, 0.141, 0.641), mean, atol=1e-6)
+    assert thermal.averaged_nut_cells(params, 0.641, 0.141).sum() * params.cell_length_m \
+        == pytest.approx(params.nut_length_m)

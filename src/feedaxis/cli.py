@@ -233,9 +233,12 @@ def build_parser():
 
 def main(argv=None):
     """Entry point of the ``feedaxis`` console script; returns the exit code."""
+    from threadpoolctl import threadpool_limits
+
     args = build_parser().parse_args(argv)
     try:
-        args.handler(args)
+        with threadpool_limits(limits=1, user_api="blas"):  # small matrices: threads only cost
+            args.handler(args)
     except KeyboardInterrupt:
         print("feedaxis: interrupted", file=sys.stderr)
         return 130
