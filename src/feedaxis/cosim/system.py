@@ -91,6 +91,10 @@ class AxisSystem:
             self.ratio(component)
         names = {c.name for c in self.components}
         inputs = {v.name for v in self.inputs}
+        targets = [c.target for c in self.connections]
+        twice = sorted({t for t in targets if targets.count(t) > 1})
+        if twice:
+            raise ValueError(f"{', '.join(twice)}: driven by more than one connection")
         for connection in self.connections:
             if connection.target_component not in names:
                 raise ValueError(f"connection target {connection.target}: no such component")
@@ -127,7 +131,7 @@ class AxisSystem:
         while remaining:
             done = {c.name for c in ordered}
             ready = [c for c in remaining
-                     if all(s.source_component in (None, *done, c.name)
+                     if all(s.source_component in (None, *done)
                             for s in self.inputs_of(c.name))]
             if not ready:
                 raise ValueError("the connections form an algebraic loop: "
