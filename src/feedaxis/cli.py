@@ -272,8 +272,8 @@ def _cmd_export_ssp(args):
 
     system = _axis_system(args)
     path = export_ssp(args.out, system, _fmu_paths(args))
-    _emit(args, {"ssp": str(path)}, f"{path}: SystemStructure.ssd, resources/FeedAxis.ssv and "
-                                    "the four FMUs")
+    _emit(args, {"ssp": str(path)}, f"{path}: SystemStructure.ssd, a parameter-values file "
+                                    "(.ssv) per component and the four FMUs")
 
 
 def _add_model_options(sub, model_help="starting model (TOML); without it the model is empty",
@@ -430,7 +430,7 @@ def build_parser():
     sub = commands.add_parser(
         "export-ssp", help="the axis as an SSP file for other FMI system simulators",
         description="Write OUT.ssp: SystemStructure.ssd (components, connections, step "
-                    "sizes), resources/FeedAxis.ssv (parameter values) and the four FMUs. "
+                    "sizes), resources/<Component>.ssv (parameter values) and the four FMUs. "
                     "Runs in fmpy.ssp.simulate_ssp and OSP libcosim (libcosimpy); see README.")
     sub.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
     _add_axis_options(sub)
