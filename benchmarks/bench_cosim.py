@@ -63,6 +63,16 @@ def time_libcosim(ssp_path, system, stop_s):
     return elapsed
 
 
+def time_libcosim_engine(ssp_path, stop_s):
+    from libcosimpy.CosimExecution import CosimExecution
+
+    started = time.perf_counter()
+    execution = CosimExecution.from_ssp_file(str(ssp_path))
+    assert execution.simulate_until(round(stop_s * 1e9))
+    del execution
+    return time.perf_counter() - started
+
+
 def describe(values, unit="s"):
     return (f"median {statistics.median(values):.3f} {unit} "
             f"(range {min(values):.3f}-{max(values):.3f}, n = {len(values)})")
@@ -78,10 +88,11 @@ def main():
         fmu_paths = {p.stem: p for p in build_fmus(Path(folder) / "fmus")}
         ssp_path = export_ssp(Path(folder) / "axis.ssp", system, fmu_paths)
         time_master(system, fmu_paths, 1.0)  # warm-up: first imports inside the FMUs
-        master_s, libcosim_s, loop_s, fmu_s, overhead, setup = [], [], [], [], [], []
+        master_s, libcosim_s, engine_s, loop_s, fmu_s, overhead, setup = ([] for _ in range(7))
         for _ in range(args.repeats):
             master_s.append(time_master(system, fmu_paths, args.stop_s)[0])
             libcosim_s.append(time_libcosim(ssp_path, system, args.stop_s))
+            engine_s.append(time_libcosim_engine(ssp_path, args.stop_s))
             _, timing = time_master(system, fmu_paths, args.stop_s, profile=True)
             loop_s.append(timing.loop_s)
             fmu_s.append(timing.fmu_s)
@@ -95,6 +106,8 @@ def main():
     print(f"  libcosim on the .ssp       : {describe(libcosim_s)}")
     ratio = statistics.median(master_s) / statistics.median(libcosim_s)
     print(f"  master / libcosim wall time: {ratio:.2f} (target <= 1)")
+    print(f"  libcosim engine alone      : {describe(engine_s)}; master / engine "
+          f"{statistics.median(master_s) / statistics.median(engine_s):.2f}")
     print(f"  master, profiled run       : stepping loop {describe(loop_s)}, FMU calls "
           f"{describe(fmu_s)}, setup (instantiate + initialise) {describe(setup)}")
     print(f"  master overhead outside FMU calls: median {100 * statistics.median(overhead):.1f} % "
