@@ -419,8 +419,9 @@ def build_parser():
     scenario.add_argument("--duration-s", type=float, default=10.0, help="default 10")
     scenario.add_argument("--controller", choices=("pid", "npid"), default="pid")
     scenario.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
-    scenario.add_argument("--force-N", type=float, default=100.0,
-                          help="cutting force F0 at 1500 rpm (default 100 N, assumed)")
+    scenario.add_argument("--force-N", type=float, default=1.4,
+                          help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
+                               "row of seed 002 Table 2)")
     scenario.set_defaults(handler=_cmd_simulate_tracking)
     for scenario in scenarios.choices.values():
         scenario.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
