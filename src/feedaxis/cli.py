@@ -246,9 +246,10 @@ def _cmd_simulate_thermal(args):
 def _cmd_simulate_tracking(args):
     from .cosim.scenarios import simulate_tracking
 
+    force = {} if args.force_N is None else {"force_N": args.force_N}
     summary = _simulate(args, lambda master, progress: simulate_tracking(
         args.out, master, args.frequency_hz, args.amplitude_mm, args.duration_s,
-        args.controller, args.spindle_rpm, args.force_N, progress=progress))
+        args.controller, args.spindle_rpm, progress=progress, **force))
     _emit(args, summary, f"{args.out}/tracking.csv: {args.controller.upper()}, "
                          f"{args.frequency_hz:g} Hz, {args.amplitude_mm:g} mm"
                          + (f", cutting force at {args.spindle_rpm:g} rpm"
@@ -419,7 +420,7 @@ def build_parser():
     scenario.add_argument("--duration-s", type=float, default=10.0, help="default 10")
     scenario.add_argument("--controller", choices=("pid", "npid"), default="pid")
     scenario.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
-    scenario.add_argument("--force-N", type=float, default=1.4,
+    scenario.add_argument("--force-N", type=float,
                           help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
                                "row of seed 002 Table 2)")
     scenario.set_defaults(handler=_cmd_simulate_tracking)
