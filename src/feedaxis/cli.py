@@ -277,6 +277,16 @@ def _cmd_export_ssp(args):
                                     "(.ssv) per component and the four FMUs")
 
 
+
+def _cmd_export_fmu(args):
+    from .cosim.container import export_container_fmu
+
+    system = _axis_system(args)
+    path = export_container_fmu(args.out, system, _fmu_paths(args))
+    _emit(args, {"fmu": str(path)}, f"{path}: the axis as one FMU (fmpy container of the four "
+                                    f"FMUs, one {args.step_ms:g} ms step for all)")
+
+
 def _add_model_options(sub, model_help="starting model (TOML); without it the model is empty",
                        required=False):
     sub.add_argument("--model", metavar="M.toml", help=model_help, required=required)
@@ -437,6 +447,17 @@ def build_parser():
     sub.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
     _add_axis_options(sub)
     sub.set_defaults(handler=_cmd_export_ssp)
+
+    sub = commands.add_parser(
+        "export-fmu", help="the axis as one FMU (fmpy container FMU)",
+        description="Wrap the four FMUs in one FMI 2.0 co-simulation FMU with fmpy's container "
+                    "FMU: inputs position_ref_mm, disturbance_N, ambient_C; every component "
+                    "output; the parameter values as fixed parameters. All four FMUs step at "
+                    "the container's one step (--step-ms; --thermal-step-s does not apply), "
+                    "Jacobi: the error FMUs see the servo one step late.")
+    sub.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
+    _add_axis_options(sub)
+    sub.set_defaults(handler=_cmd_export_fmu)
 
     for sub in commands.choices.values():
         sub.add_argument("--json", action="store_true", help="print machine-readable JSON")

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.lib import recfunctions
 
 from .fmu_runner import LoadedFmu
+from .system import check_parameter_values
 
 CHUNK_STEPS = 1000
 FMI_WARNING = 1
@@ -190,10 +191,7 @@ class Master:
         """Instantiate and initialise one component; return (slave, its loop plan entry)."""
         loaded = self.loaded[component.fmu]
         variables = loaded.variables
-        unknown = [p for p in component.parameters
-                   if p not in variables or variables[p].causality != "parameter"]
-        if unknown:
-            raise ValueError(f"{component.name}: no parameter {', '.join(unknown)}")
+        check_parameter_values(component, variables)
         connections = system.inputs_of(component.name)
         for connection in connections:
             if connection.target.split(".", 1)[1] not in variables:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from ..output import write_atomically
 from .fmu_runner import LoadedFmu
+from .system import FMI_TYPES, check_parameter_values, fmi_text
 
 NAMESPACES = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -35,7 +36,6 @@ NAMESPACES = {
     "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
 }
 OSP_ANNOTATION = "com.opensimulationplatform"
-SSV_TYPES = {bool: "Boolean", int: "Integer", float: "Real", str: "String"}
 
 for _prefix, _uri in NAMESPACES.items():
     ET.register_namespace(_prefix, _uri)
@@ -64,7 +64,7 @@ def export_ssp(out, system, fmu_paths):
         loaded = LoadedFmu(fmu_paths[component.fmu])
         loaded.close()
         descriptions[component.fmu] = loaded.variables
-        _check_parameters(component, loaded.variables)
+        check_parameter_values(component, loaded.variables)
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
         archive.writestr("SystemStructure.ssd", _xml(system_structure(system, descriptions)))
@@ -74,15 +74,6 @@ def export_ssp(out, system, fmu_paths):
         for fmu in sorted({c.fmu for c in system.components}):
             archive.write(fmu_paths[fmu], f"resources/{fmu}.fmu")
     return write_atomically(out, buffer.getvalue())
-
-
-def _check_parameters(component, variables):
-    for name, value in component.parameters.items():
-        if name not in variables or variables[name].causality != "parameter":
-            raise ValueError(f"{component.name}: no parameter {name}")
-        if SSV_TYPES[type(value)] != variables[name].type:
-            raise ValueError(f"{component.name}.{name}: {variables[name].type} parameter, "
-                             f"got {value!r}")
 
 
 def _xml(root):
@@ -147,10 +138,8 @@ def parameter_values(component):
     root = ET.Element(_tag("ssv:ParameterSet"), {"version": "1.0", "name": component.name})
     parameters = _element(root, "ssv:Parameters")
     for name, value in component.parameters.items():
-        text = str(value).lower() if isinstance(value, bool) else repr(value) \
-            if isinstance(value, float) else str(value)
         _element(_element(parameters, "ssv:Parameter", name=name),
-                 f"ssv:{SSV_TYPES[type(value)]}", value=text)
+                 f"ssv:{FMI_TYPES[type(value)]}", value=fmi_text(value))
     return root
 
 

@@ -164,6 +164,26 @@ class AxisSystem:
 
 
 ERROR_COMPONENTS = ("StepperError", "GeometricError", "ThermalScrew")
+FMI_TYPES = {bool: "Boolean", int: "Integer", float: "Real", str: "String"}
+
+
+def check_parameter_values(component, variables):
+    """Raise ValueError unless every parameter value of ``component`` names a parameter of
+    its FMU (``variables``: name -> model variable) with a value of its type."""
+    for name, value in component.parameters.items():
+        declared = variables.get(name)
+        if declared is None or declared.causality != "parameter":
+            raise ValueError(f"{component.name}: no parameter {name}")
+        kind = FMI_TYPES.get(type(value))
+        if kind != declared.type and not (kind == "Integer" and declared.type == "Real"):
+            raise ValueError(f"{component.name}.{name}: {declared.type} parameter, "
+                             f"got {value!r}")
+
+
+def fmi_text(value):
+    """A parameter value as FMI/SSP XML text (Booleans as true/false)."""
+    return str(value).lower() if isinstance(value, bool) else repr(value) \
+        if isinstance(value, float) else str(value)
 
 
 def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
