@@ -207,9 +207,10 @@ def _simulate(args, scenario):
     if Path(args.out).exists():
         raise ValueError(f"{args.out}: already exists; choose a new case folder")
     system = _axis_system(args)
-    with Master(system, _fmu_paths(args)) as master, _step_progress() as progress:
+    with Master(system, _fmu_paths(args)) as master:
         try:
-            return scenario(master, progress)
+            with _step_progress() as progress:
+                return scenario(master, progress)
         except ScenarioInterrupted as stopped:
             print(f"feedaxis: {stopped.message}", file=sys.stderr)
             raise
