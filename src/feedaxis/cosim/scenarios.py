@@ -62,10 +62,9 @@ class Sample:
 class Motion:
     """Consecutive motion segments from t = 0 and the positioning samples taken on them."""
 
-    def __init__(self, start_mm, ambient_C=None):
+    def __init__(self, start_mm):
         self.segments, self.ambient_C, self.samples = [], [], []
         self.position_mm, self.time_s = float(start_mm), 0.0
-        self._ambient_C = ambient_C
 
     def move(self, to_mm, feed_mm_min, ambient_C=None):
         """Travel to ``to_mm`` at ``feed_mm_min`` (nothing when already there)."""
@@ -94,7 +93,7 @@ class Motion:
 
     def _add(self, duration_s, feed_mm_min, from_mm, to_mm, ambient_C):
         self.segments.append(DutySegment(self.time_s, duration_s, feed_mm_min, from_mm, to_mm))
-        self.ambient_C.append(self._ambient_C if ambient_C is None else ambient_C)
+        self.ambient_C.append(ambient_C)
         self.time_s += duration_s
 
     def position_at(self, time_s):
@@ -198,7 +197,7 @@ def thermal_motion(duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0.5):
     return motion
 
 
-def run_motion(master, motion, parameters=None, disturbance_N=0.0, progress=None):
+def run_motion(master, motion, parameters=None, progress=None):
     """Drive the axis along ``motion``; return (rows at the samples, completed flag).
 
     The run records at every sample time; on Ctrl-C it returns the samples reached.
@@ -206,7 +205,7 @@ def run_motion(master, motion, parameters=None, disturbance_N=0.0, progress=None
     h = master.system.macro_step_s
     stop_s = math.ceil(motion.time_s / h - 1e-9) * h
     inputs = {"position_ref_mm": lambda t: motion.position_at(t + h),
-              "ambient_C": motion.ambient_at, "disturbance_N": disturbance_N}
+              "ambient_C": motion.ambient_at}
     times_s = [s.time_s for s in motion.samples]
     try:
         rows = master.run(stop_s, inputs, parameters, record_at_s=times_s, progress=progress)
