@@ -141,12 +141,12 @@ class Master:
         fmu_time = [0.0]
         slaves, plan = [], []
         started = time.perf_counter()
+        for j, source in input_values:
+            signals[j] = float(_values(source, np.zeros(1))[0])
         try:
             for component in system.ordered_components():
-                slave, entry = self._instantiate(system, component, signals, input_values,
-                                                 fmu_time if profile else None)
-                slaves.append(slave)
-                plan.append(entry)
+                plan.append(self._instantiate(system, component, signals, slaves,
+                                              fmu_time if profile else None))
             fmu_time[0] = 0.0
             loop_started = time.perf_counter()
             rows = self._loop(plan, signals, table, input_values, record_steps, n_steps, h,
@@ -187,8 +187,9 @@ class Master:
                 raise ValueError(f"input {name}: {len(source)} values for {n_steps} macro steps")
         return [(j, inputs.get(v.name, v.start)) for j, v in enumerate(self.system.inputs)]
 
-    def _instantiate(self, system, component, signals, input_values, fmu_time):
-        """Instantiate and initialise one component; return (slave, its loop plan entry)."""
+    def _instantiate(self, system, component, signals, slaves, fmu_time):
+        """Instantiate (appending to ``slaves``) and initialise one component with the
+        current ``signals``; return its loop plan entry."""
         loaded = self.loaded[component.fmu]
         variables = loaded.variables
         check_parameter_values(component, variables)
@@ -205,11 +206,10 @@ class Master:
                               ctypes.POINTER(ctypes.c_double))
         in_buf = (ctypes.c_double * max(1, len(copies)))()
         slave = loaded.instantiate(component.name)
+        slaves.append(slave)
         loaded.set_values(slave, component.parameters)
         slave.setupExperiment(startTime=0.0)
         slave.enterInitializationMode()
-        for j, source in input_values:
-            signals[j] = float(_values(source, np.zeros(1))[0])
         functions = [slave._functions[f] for f in ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")]
         if fmu_time is not None:
             functions = [_timed(f, fmu_time) for f in functions]
@@ -219,10 +219,9 @@ class Master:
         _check(set_real(slave.component, in_vrs, len(copies), in_buf), component.name, 0.0)
         slave.exitInitializationMode()
         _check(get_real(slave.component, out_vrs, len(out_vrs), out_ptr), component.name, 0.0)
-        entry = (system.ratio(component), copies, in_buf, set_real, slave.component, in_vrs,
-                 len(copies), do_step, component.step_s, get_real, out_vrs, len(out_vrs),
-                 out_ptr, component.name)
-        return slave, entry
+        return (system.ratio(component), copies, in_buf, set_real, slave.component, in_vrs,
+                len(copies), do_step, component.step_s, get_real, out_vrs, len(out_vrs),
+                out_ptr, component.name)
 
     def _loop(self, plan, signals, table, input_values, record_steps, n_steps, h, progress):
         """The macro steps; returns the number of rows recorded (fewer on Ctrl-C)."""
