@@ -87,37 +87,75 @@ def simulate_with_libcosim(fmu_path, step_size_s, n_steps, inputs=None, paramete
     _check(bool(slave.ptr()), f"loading {fmu_path}")
     index = execution.add_local_slave(slave)
     _check(index >= 0, f"adding {fmu_path}")
+    results = _drive(execution, n_steps, {(index, n): v for n, v in inputs.items()},
+                     {(index, n): v for n, v in parameters.items()},
+                     [(index, name) for name in outputs], step_size_s)
+    return dict(zip(outputs, results))
+
+
+def simulate_ssp_with_libcosim(ssp_path, n_steps, inputs=None, parameters=None, outputs=()):
+    """Run an SSP in OSP libcosim at the base step of its ``osp:FixedStepAlgorithm``.
+
+    Names are ``"Component.variable"``; ``inputs``, ``parameters`` and the result follow
+    :func:`simulate_with_libcosim` (input k applied to step k, output k read after it).
+    """
+    execution = CosimExecution.from_ssp_file(str(ssp_path))
+    indices = {info.name.decode(): info.index for info in execution.slave_infos()}
+
+    def qualify(name):
+        component, variable = name.split(".", 1)
+        return indices[component], variable
+
+    results = _drive(execution, n_steps,
+                     {qualify(n): v for n, v in dict(inputs or {}).items()},
+                     {qualify(n): v for n, v in dict(parameters or {}).items()},
+                     [qualify(n) for n in outputs], None)
+    return dict(zip(outputs, results))
+
+
+def _drive(execution, n_steps, inputs, parameters, outputs, step_size_s):
+    """Step ``execution`` n_steps times: overrides before each step, outputs after it.
+
+    ``inputs``/``parameters`` map (slave index, variable name) to values; returns one array
+    per ``(slave index, variable name)`` of ``outputs``.
+    """
     manipulator = CosimManipulator.create_override()
     observer = CosimObserver.create_last_value()
     _check(execution.add_manipulator(manipulator), "adding the override manipulator")
     _check(execution.add_observer(observer), "adding the last-value observer")
-
     # Value references are only unique per type in FMI 2, so always keep the type alongside.
-    variables = {v.name.decode(): (v.reference, CosimVariableType(v.type)) for v in execution.slave_variables(index)}
+    variables = {}
 
-    def lookup(name, allowed=_SETTERS):
-        if name not in variables:
-            raise KeyError(f"{name!r} is not a variable of {fmu_path}")
-        reference, vtype = variables[name]
+    def lookup(key, allowed=_SETTERS):
+        index, name = key
+        if index not in variables:
+            variables[index] = {v.name.decode(): (v.reference, CosimVariableType(v.type))
+                                for v in execution.slave_variables(index)}
+        if name not in variables[index]:
+            raise KeyError(f"{name!r} is not a variable of slave {index}")
+        reference, vtype = variables[index][name]
         if vtype not in allowed:
             raise TypeError(f"variable {name!r} has unsupported type {vtype.name}")
         return reference, vtype
 
-    for name, value in parameters.items():
-        reference, vtype = lookup(name)
+    for key, value in parameters.items():
+        reference, vtype = lookup(key)
         convert, set_initial, _ = _SETTERS[vtype]
-        _check(set_initial(execution, index, reference, convert(value)), f"setting parameter {name!r}")
+        _check(set_initial(execution, key[0], reference, convert(value)),
+               f"setting parameter {key[1]!r}")
 
-    input_refs = {name: lookup(name) for name in inputs}
-    output_refs = [lookup(name, allowed=(CosimVariableType.REAL,))[0] for name in outputs]
+    input_refs = {key: lookup(key) for key in inputs}
+    output_refs = [(key[0], lookup(key, allowed=(CosimVariableType.REAL,))[0]) for key in outputs]
     results = np.empty((n_steps, len(output_refs)))
     for k in range(n_steps):
         # Overrides are applied when the step commences, i.e. to the step that follows.
-        for name, (reference, vtype) in input_refs.items():
+        for key, (reference, vtype) in input_refs.items():
             convert, _, set_override = _SETTERS[vtype]
-            _check(set_override(manipulator, index, [reference], [convert(inputs[name][k])]), f"setting input {name!r}")
-        # The first step() also initializes the FMU (setup, enter/exit initialization mode).
-        _check(execution.step(), f"step {k} (t = {k * step_size_s:g} s)")
-        if output_refs:
-            results[k] = observer.last_real_values(index, output_refs)
-    return {name: results[:, j].copy() for j, name in enumerate(outputs)}
+            _check(set_override(manipulator, key[0], [reference], [convert(inputs[key][k])]),
+                   f"setting input {key[1]!r}")
+        # The first step() also initializes the FMUs (setup, enter/exit initialization mode).
+        where = f" (t = {k * step_size_s:g} s)" if step_size_s else ""
+        _check(execution.step(), f"step {k}{where}")
+        for j, (index, reference) in enumerate(output_refs):
+            results[k, j] = observer.last_real_values(index, [reference])[0]
+    return [results[:, j].copy() for j in range(len(output_refs))]

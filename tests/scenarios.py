@@ -35,16 +35,20 @@ def scripted_inputs(name):
             "ambient_C": 20.0 + 0.002 * t}
 
 
-def direct(name, inputs, parameters):
-    """Outputs of FMU ``name`` computed by feedaxis.physics alone: (t=0 row, step rows)."""
+def direct(name, inputs, parameters, step_size_s=None):
+    """Outputs of FMU ``name`` computed by feedaxis.physics alone: (t=0 row, step rows).
+
+    ``step_size_s`` defaults to ``STEP_SIZE_S[name]``.
+    """
     n = len(next(iter(inputs.values())))
+    step_size_s = step_size_s or STEP_SIZE_S[name]
     rows = []
     if name == "NpidServo":
         loop = servo.Servo(servo.ServoParams(**_only(servo.ServoParams, parameters)),
                            initial_reference_mm=inputs["position_ref_mm"][0])
         rows.append((loop.position_mm, loop.velocity_mm_s, loop.tracking_error_mm))
         for k in range(n):
-            loop.advance(STEP_SIZE_S[name], inputs["position_ref_mm"][k], inputs["disturbance_N"][k])
+            loop.advance(step_size_s, inputs["position_ref_mm"][k], inputs["disturbance_N"][k])
             rows.append((loop.position_mm, loop.velocity_mm_s, loop.tracking_error_mm))
     elif name == "StepperError":
         p = {"lead_mm": 1.0, "step_angle_deg": 0.72, "error_period_steps": 10,
@@ -59,7 +63,7 @@ def direct(name, inputs, parameters):
     elif name == "GeometricError":
         rows = _geometric(inputs, parameters)
     else:
-        rows = _thermal(inputs, parameters)
+        rows = _thermal(inputs, parameters, step_size_s)
     return np.asarray(rows, dtype=float)
 
 
@@ -88,10 +92,10 @@ def _geometric(inputs, parameters):
     return rows
 
 
-def _thermal(inputs, parameters):
+def _thermal(inputs, parameters, step_size_s):
     params = thermal.ThermalScrewParams(**_only(thermal.ThermalScrewParams, parameters))
     rise = np.zeros(params.n_cells)
-    steps = [0.0] + [STEP_SIZE_S["ThermalScrew"]] * len(inputs["position_mm"])
+    steps = [0.0] + [step_size_s] * len(inputs["position_mm"])
     index = [0] + list(range(len(inputs["position_mm"])))
     rows = []
     for dt, k in zip(steps, index):
@@ -100,3 +104,40 @@ def _thermal(inputs, parameters):
         rows.append((thermal.thermal_error_um(params, rise, x, inputs["ambient_C"][k] - 20.0),
                      thermal.screw_elongation_um(params, rise, params.length_m), rise.max()))
     return rows
+
+
+def direct_axis(system, inputs):
+    """The four-FMU axis composed from feedaxis.physics with the master's multi-rate scheme.
+
+    Same scheme as :mod:`feedaxis.cosim.system`: the servo steps first; StepperError and
+    GeometricError see its position and velocity at the end of the same macro step; the
+    thermal screw steps every ``ratio`` macro steps with the inputs of the macro step that
+    ends its step and holds its outputs in between. Returns {signal name: array}, one
+    value per macro step (the value at its end).
+    """
+    h = system.macro_step_s
+    values = {c.name: c.parameters for c in system.components}
+    servo_rows = direct("NpidServo", {k: inputs[k] for k in ("position_ref_mm", "disturbance_N")},
+                        values["NpidServo"], h)[1:]
+    position, velocity = servo_rows[:, 0], servo_rows[:, 1]
+    result = {f"NpidServo.{name}": servo_rows[:, i] for i, name in enumerate(OUTPUTS["NpidServo"])}
+    result["StepperError.error_um"] = direct(
+        "StepperError", {"position_mm": position}, values["StepperError"], h)[1:, 0]
+    result["GeometricError.error_um"] = direct(
+        "GeometricError", {"position_mm": position, "velocity_mm_s": velocity},
+        values["GeometricError"], h)[1:, 0]
+    ratio = system.ratio(system.component("ThermalScrew"))
+    ends = np.arange(ratio - 1, position.size, ratio)
+    initial = {"position_mm": inputs["position_ref_mm"][:1], "velocity_mm_s": [0.0],
+               "ambient_C": inputs["ambient_C"][:1]}
+    stepped = {"position_mm": position[ends], "velocity_mm_s": velocity[ends],
+               "ambient_C": inputs["ambient_C"][ends]}
+    thermal_rows = np.vstack([direct("ThermalScrew", initial, values["ThermalScrew"])[:1],
+                              direct("ThermalScrew", stepped, values["ThermalScrew"],
+                                     ratio * h)[1:]])
+    held = thermal_rows[(np.arange(position.size) + 1) // ratio]
+    for i, name in enumerate(OUTPUTS["ThermalScrew"]):
+        result[f"ThermalScrew.{name}"] = held[:, i]
+    result["positioning_error_um"] = sum(result[f"{name}.error_um"] for name in
+                                         ("StepperError", "GeometricError", "ThermalScrew"))
+    return result

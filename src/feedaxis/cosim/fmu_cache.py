@@ -1,0 +1,50 @@
+"""The four FMUs built once per feedaxis version and FMU source, kept in the user cache.
+
+Building takes seconds per FMU (pythonfmu), so ``feedaxis simulate`` and ``export-ssp``
+reuse ``<cache>/feedaxis/fmus-<version>-<hash>/``, where the hash covers every file that
+goes into an FMU (the slave scripts, the adapter, the physics package, the build script):
+a changed source builds a new folder, never a stale FMU. The folder is built in a staging
+folder and renamed into place, so a crash or Ctrl-C never leaves half a cache.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from .. import __version__
+from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus
+
+
+def source_hash():
+    """SHA-256 (first 12 hex digits) of every source file that goes into the FMUs."""
+    digest = hashlib.sha256()
+    files = sorted([*(SOURCE_DIR / "fmus").glob("*.py"), *(SOURCE_DIR / "physics").glob("*.py"),
+                    SOURCE_DIR / "fmu_build.py"])
+    for path in files:
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+def cache_root():
+    """``$XDG_CACHE_HOME/feedaxis`` (default ``~/.cache/feedaxis``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "feedaxis"
+
+
+def cached_fmus(root=None):
+    """{FMU name: path} of the four FMUs, built into the cache on first use."""
+    folder = Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}"
+    if not all((folder / f"{name}.fmu").exists() for name in FMU_NAMES):
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
+        try:
+            build_fmus(staging)
+            shutil.rmtree(folder, ignore_errors=True)
+            os.replace(staging, folder)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+    return {name: folder / f"{name}.fmu" for name in FMU_NAMES}

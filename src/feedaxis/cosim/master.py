@@ -1,0 +1,337 @@
+"""Multi-rate fixed-step co-simulation master over fmpy's low-level FMI 2 API.
+
+The master runs an :class:`~feedaxis.cosim.system.AxisSystem` (the scheme is stated there):
+fixed macro step h, each component stepped every ``ratio`` macro steps, components in
+dependency order, system outputs as linear combinations of component outputs. Results are
+a structured NumPy array addressed by variable name (``result["NpidServo.position_mm"]``,
+``result["positioning_error_um"]``).
+
+Speed: every value reference is resolved before the run; all signals live in one
+preallocated ctypes array that each FMU's ``fmi2GetReal`` writes straight into; the loop
+calls fmpy's raw ctypes functions ``fmi2SetReal``/``fmi2DoStep``/``fmi2GetReal`` and checks
+their status, with no per-step dict lookup or allocation.
+"""
+from __future__ import annotations
+
+import ctypes
+import signal
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.lib import recfunctions
+
+from .fmu_runner import LoadedFmu
+from .system import check_parameter_values
+
+CHUNK_STEPS = 1000
+FMI_WARNING = 1
+
+
+class SimulationInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a run: ``partial`` holds the rows recorded up to the stop."""
+
+    def __init__(self, partial):
+        super().__init__("interrupted")
+        self.partial = partial
+
+
+class FmuStepError(RuntimeError):
+    """An FMU call returned fmi2Discard, fmi2Error or fmi2Fatal (its log says why)."""
+
+
+@dataclass
+class Timing:
+    """Times of the last run (s): all of it, the stepping loop, and (when profiled) the
+    FMUs' own fmi2SetReal/fmi2DoStep/fmi2GetReal calls within the loop."""
+
+    wall_s: float
+    loop_s: float
+    fmu_s: float | None = None
+    macro_steps: int = 0
+
+    @property
+    def overhead_fraction(self):
+        """Share of the stepping loop spent outside FMU calls (None unless profiled)."""
+        return None if self.fmu_s is None else 1.0 - self.fmu_s / self.loop_s
+
+
+class Master:
+    """Runs one system many times; the FMUs are extracted once.
+
+    Parameters
+    ----------
+    system : AxisSystem
+    fmu_paths : dict
+        FMU name -> path of the .fmu (:func:`feedaxis.cosim.fmu_cache.cached_fmus`).
+    """
+
+    def __init__(self, system, fmu_paths):
+        self.system = system
+        self.loaded = {}
+        for component in system.components:
+            if component.fmu not in self.loaded:
+                self.loaded[component.fmu] = LoadedFmu(fmu_paths[component.fmu])
+        self.outputs = {c.name: [v.name for v in self.loaded[c.fmu].description.modelVariables
+                                 if v.causality == "output" and v.type == "Real"]
+                        for c in system.components}
+        self.signal_names = [v.name for v in system.inputs] + [
+            f"{c.name}.{name}" for c in system.components for name in self.outputs[c.name]]
+        self.timing = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        """Remove the extracted FMUs."""
+        for loaded in self.loaded.values():
+            loaded.close()
+
+    @property
+    def names(self):
+        """Fields of the result array: time, inputs, component outputs, system outputs."""
+        return ["time", *self.signal_names, *(o.variable.name for o in self.system.outputs)]
+
+    def run(self, stop_s, inputs=None, parameters=None, output_interval_s=None,
+            record_at_s=None, progress=None, profile=False):
+        """Simulate from 0 to ``stop_s`` and return the recorded rows.
+
+        Parameters
+        ----------
+        stop_s : float
+            End time (s), a whole number of macro steps.
+        inputs : dict, optional
+            System input name -> a constant, an array of one value per macro step (value k
+            held over [t_k, t_{k+1})) or a function of the time array t_k (s). Inputs not
+            given keep their start value.
+        parameters : dict, optional
+            {component: {parameter: value}} over the system's values for this run only,
+            e.g. ``Model.fmu_parameters(axis)`` of a fitted model.
+        output_interval_s : float, optional
+            Record every this many seconds (a whole number of macro steps); default: every
+            macro step unless ``record_at_s`` is given.
+        record_at_s : array_like, optional
+            Also record at these times (s), rounded to the macro grid.
+        progress : callable, optional
+            ``progress(done_steps, total_steps)`` after every chunk of macro steps.
+        profile : bool
+            Time every FMU call; ``self.timing.fmu_s`` then holds their sum.
+
+        Returns
+        -------
+        numpy structured array
+            Row 0 is t = 0 (after initialisation), then one row per recorded macro step.
+
+        Raises
+        ------
+        SimulationInterrupted
+            On Ctrl-C; it carries the rows recorded so far.
+        """
+        system = self.system.with_parameters(parameters or {})
+        h = system.macro_step_s
+        n_steps = _whole_steps(stop_s, h, "stop time")
+        record_steps = self._record_steps(n_steps, h, output_interval_s, record_at_s)
+        input_values = self._input_sources(inputs or {}, n_steps)
+        signals = (ctypes.c_double * len(self.signal_names))()
+        table = np.zeros((record_steps.size, len(self.signal_names)))
+        fmu_time = [0.0]
+        slaves, plan = [], []
+        started = time.perf_counter()
+        for j, source in input_values:
+            signals[j] = float(_values(source, np.zeros(1))[0])
+        try:
+            for component in system.ordered_components():
+                plan.append(self._instantiate(system, component, signals, slaves,
+                                              fmu_time if profile else None))
+            fmu_time[0] = 0.0
+            loop_started = time.perf_counter()
+            rows = self._loop(plan, signals, table, input_values, record_steps, n_steps, h,
+                              progress)
+            loop_s = time.perf_counter() - loop_started
+        finally:
+            for slave in slaves:
+                slave.freeInstance()
+        self.timing = Timing(time.perf_counter() - started, loop_s,
+                             fmu_time[0] if profile else None, n_steps)
+        result = self._result(table[:rows], record_steps[:rows] * h)
+        if rows < record_steps.size:
+            raise SimulationInterrupted(result)
+        return result
+
+    def _record_steps(self, n_steps, h, output_interval_s, record_at_s):
+        """Sorted macro-step indices k + 1 to record after, starting with 0 (initialisation)."""
+        steps = [np.array([0])]
+        if output_interval_s is not None or record_at_s is None:
+            every = _whole_steps(output_interval_s or h, h, "output interval")
+            steps.append(np.arange(every, n_steps + 1, every))
+        if record_at_s is not None:
+            at = np.round(np.asarray(record_at_s, dtype=float) / h).astype(int)
+            if at.size and (at.min() < 0 or at.max() > n_steps):
+                raise ValueError("record_at_s: times must lie within 0 and the stop time")
+            steps.append(at)
+        return np.unique(np.concatenate(steps))
+
+    def _input_sources(self, inputs, n_steps):
+        """[(signal index, source)] for every system input; unknown names are an error."""
+        known = [v.name for v in self.system.inputs]
+        unknown = set(inputs) - set(known)
+        if unknown:
+            raise ValueError(f"no system input {', '.join(sorted(unknown))}; inputs: "
+                             f"{', '.join(known)}")
+        for name, source in inputs.items():
+            if not callable(source) and np.ndim(source) and len(source) < n_steps:
+                raise ValueError(f"input {name}: {len(source)} values for {n_steps} macro steps")
+        return [(j, inputs.get(v.name, v.start)) for j, v in enumerate(self.system.inputs)]
+
+    def _instantiate(self, system, component, signals, slaves, fmu_time):
+        """Instantiate (appending to ``slaves``) and initialise one component with the
+        current ``signals``; return its loop plan entry."""
+        loaded = self.loaded[component.fmu]
+        variables = loaded.variables
+        check_parameter_values(component, variables)
+        connections = system.inputs_of(component.name)
+        for connection in connections:
+            if connection.target.split(".", 1)[1] not in variables:
+                raise ValueError(f"connection target {connection.target}: no such input")
+        in_vrs = _vr_array([variables[c.target.split(".", 1)[1]].valueReference
+                            for c in connections])
+        copies = tuple((i, self.signal_names.index(c.source)) for i, c in enumerate(connections))
+        out_vrs = _vr_array([variables[n].valueReference for n in self.outputs[component.name]])
+        offset = self.signal_names.index(f"{component.name}.{self.outputs[component.name][0]}")
+        out_ptr = ctypes.cast(ctypes.addressof(signals) + offset * ctypes.sizeof(ctypes.c_double),
+                              ctypes.POINTER(ctypes.c_double))
+        in_buf = (ctypes.c_double * max(1, len(copies)))()
+        slave = loaded.instantiate(component.name)
+        slaves.append(slave)
+        loaded.set_values(slave, component.parameters)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        functions = [slave._functions[f] for f in ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")]
+        if fmu_time is not None:
+            functions = [_timed(f, fmu_time) for f in functions]
+        set_real, do_step, get_real = functions
+        for i, j in copies:
+            in_buf[i] = signals[j]
+        _check(set_real(slave.component, in_vrs, len(copies), in_buf), component.name, 0.0)
+        slave.exitInitializationMode()
+        _check(get_real(slave.component, out_vrs, len(out_vrs), out_ptr), component.name, 0.0)
+        return (system.ratio(component), copies, in_buf, set_real, slave.component, in_vrs,
+                len(copies), do_step, component.step_s, get_real, out_vrs, len(out_vrs),
+                out_ptr, component.name)
+
+    def _loop(self, plan, signals, table, input_values, record_steps, n_steps, h, progress):
+        """The macro steps; returns the number of rows recorded (fewer on Ctrl-C)."""
+        view = np.ctypeslib.as_array(signals)
+        table[0] = view
+        row, next_record = 1, (int(record_steps[1]) if record_steps.size > 1 else -1)
+        stop = _StopFlag()
+        with stop:
+            for k_start in range(0, n_steps, CHUNK_STEPS):
+                if stop.requested:
+                    break
+                k_end = min(n_steps, k_start + CHUNK_STEPS)
+                t_chunk = np.arange(k_start, k_end) * h
+                chunk = [(j, _values(source, t_chunk, k_start).tolist())
+                         for j, source in input_values]
+                for k in range(k_start, k_end):
+                    kk = k - k_start
+                    for j, values in chunk:
+                        signals[j] = values[kk]
+                    k1 = k + 1
+                    for (ratio, copies, in_buf, set_real, c, in_vrs, n_in, do_step, step_s,
+                         get_real, out_vrs, n_out, out_ptr, name) in plan:
+                        if k1 % ratio:
+                            continue
+                        for i, j in copies:
+                            in_buf[i] = signals[j]
+                        if (set_real(c, in_vrs, n_in, in_buf) > FMI_WARNING
+                                or do_step(c, (k1 - ratio) * h, step_s, 1) > FMI_WARNING
+                                or get_real(c, out_vrs, n_out, out_ptr) > FMI_WARNING):
+                            raise FmuStepError(f"{name} failed in the step ending at "
+                                               f"t = {k1 * h:.6g} s (its log above says why)")
+                    if k1 == next_record:
+                        table[row] = view
+                        row += 1
+                        next_record = int(record_steps[row]) if row < record_steps.size else -1
+                if progress is not None:
+                    progress(k_end, n_steps)
+        return row
+
+    def _result(self, table, time_s):
+        """The structured result: recorded signals plus the system outputs."""
+        columns = {name: table[:, i] for i, name in enumerate(self.signal_names)}
+        for output in self.system.outputs:
+            columns[output.variable.name] = sum(factor * columns[term]
+                                                for term, factor in output.terms)
+        stacked = np.column_stack([time_s, *columns.values()]) if len(time_s) else \
+            np.zeros((0, len(columns) + 1))
+        dtype = np.dtype([(name, float) for name in self.names])
+        return recfunctions.unstructured_to_structured(stacked, dtype)
+
+
+def _whole_steps(duration_s, h, what):
+    steps = duration_s / h
+    if not (np.isfinite(steps) and steps >= 0 and abs(steps - round(steps)) < 1e-6):
+        raise ValueError(f"{what} {duration_s!r} s must be a whole number of macro steps "
+                         f"of {h:g} s")
+    return int(round(steps))
+
+
+def _values(source, t_s, first_step=0):
+    """Values of an input source at the times ``t_s`` (macro steps from ``first_step``)."""
+    if callable(source):
+        return np.broadcast_to(np.asarray(source(t_s), dtype=float), t_s.shape)
+    array = np.asarray(source, dtype=float)
+    if array.ndim == 0:
+        return np.full(t_s.shape, float(array))
+    return array[first_step:first_step + t_s.size]
+
+
+def _vr_array(references):
+    return (ctypes.c_uint * len(references))(*references)
+
+
+def _check(status, name, time_s):
+    if status > FMI_WARNING:
+        raise FmuStepError(f"{name} failed at t = {time_s:g} s (its log above says why)")
+
+
+def _timed(function, total):
+    """``function`` with its wall time added to ``total[0]``."""
+    clock = time.perf_counter
+
+    def call(*args):
+        started = clock()
+        status = function(*args)
+        total[0] += clock() - started
+        return status
+
+    return call
+
+
+class _StopFlag:
+    """Within ``with``: Ctrl-C sets ``requested`` instead of raising inside an FMU call.
+
+    A KeyboardInterrupt raised in the Python code of a pythonfmu slave would surface as
+    fmi2Fatal; the master instead finishes the current chunk and stops cleanly.
+    """
+
+    def __init__(self):
+        self.requested = False
+        self._previous = None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._request)
+        return self
+
+    def __exit__(self, *exc):
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    def _request(self, *_):
+        self.requested = True

@@ -1,0 +1,412 @@
+"""Scenarios on the co-simulated axis that write measurement cases (data-format.md).
+
+- :func:`simulate_iso230`: ISO 230-2 positioning cycle -> ``axis.toml`` + ``positioning.csv``;
+- :func:`simulate_thermal`: a duty cycle with measurement passes -> + ``duty.csv``;
+- :func:`simulate_tracking`: sinusoidal tracking (seed 002) -> ``axis.toml`` + ``tracking.csv``.
+
+Every motion is a sequence of :class:`~feedaxis.physics.thermal.DutySegment` (travel between
+two points at a feed, or standing still), the same segments duty.csv holds, so what the
+thermal scenario writes is exactly the motion it simulated. The servo's reference input
+k is the motion at t_{k+1}: NpidServo ramps its reference linearly over each communication
+step, so it then follows the motion without the one-step delay of a held sample.
+
+A measured deviation is what a laser interferometer sees: table position - target, with
+the table position = servo position + the three FMUs' errors (``table_position_mm``).
+Ctrl-C stops the run cleanly; the samples computed so far are written as a (shorter) case
+and :class:`ScenarioInterrupted` says where.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..case import write_case
+from ..physics.thermal import DutySegment
+from .master import SimulationInterrupted
+
+ISO_REFERENCE_C = 20.0
+SCREW_FROM = {"GeometricError": ("lead_mm", "length_m", "diameter_m", "density_kg_m3",
+                                 "youngs_modulus_Pa", "support", "fixed_end_mm"),
+              "ThermalScrew": ("specific_heat_J_kgK", "expansion_per_K", "nut_length_m",
+                               "bearing_length_m")}
+SHARED_SCREW_KEYS = ("length_m", "diameter_m", "density_kg_m3", "fixed_end_mm")
+MOTOR_FROM = {"StepperError": ("step_angle_deg", "error_period_steps")}
+SETTLE_S = 1.0
+TEETH = 2
+# F0 (N) calibrated on one row of seed 002 Table 2 (PID, 0.4 Hz, 10 mm, 1500 rpm: 0.0757 mm)
+# with the assumed force_constant_N_per_V = 100; it then gives 0.2211 mm at 0.7 Hz, 20 mm,
+# 1500 rpm (paper 0.2217), but falls faster with spindle speed than the paper.
+CUTTING_FORCE_N = 1.4
+
+
+class ScenarioInterrupted(KeyboardInterrupt):
+    """Ctrl-C: the partial result was written; ``message`` says where and how much."""
+
+    def __init__(self, message):
+        super().__init__(message)
+        self.message = message
+
+
+@dataclass(frozen=True)
+class Sample:
+    """A positioning sample: at ``time_s`` the axis stands at ``target_mm``."""
+
+    time_s: float
+    target_mm: float
+    direction: int
+    run: int
+
+
+class Motion:
+    """Consecutive motion segments from t = 0 and the positioning samples taken on them."""
+
+    def __init__(self, start_mm):
+        self.segments, self.ambient_C, self.samples = [], [], []
+        self.position_mm, self.time_s = float(start_mm), 0.0
+
+    def move(self, to_mm, feed_mm_min, ambient_C=None):
+        """Travel to ``to_mm`` at ``feed_mm_min`` (nothing when already there)."""
+        distance_mm = abs(to_mm - self.position_mm)
+        if distance_mm > 1e-12:
+            self._add(distance_mm / (feed_mm_min / 60.0), feed_mm_min, self.position_mm, to_mm,
+                      ambient_C)
+            self.position_mm = float(to_mm)
+
+    def dwell(self, duration_s, ambient_C=None):
+        """Stand still at the current position."""
+        self._add(duration_s, 0.0, self.position_mm, self.position_mm, ambient_C)
+
+    def cycle(self, duration_s, feed_mm_min, from_mm, to_mm, ambient_C=None):
+        """Back and forth between two points, starting at ``from_mm`` (a duty.csv row)."""
+        self._add(duration_s, feed_mm_min, from_mm, to_mm, ambient_C)
+        self.position_mm = float(DutySegment(0.0, duration_s, feed_mm_min, from_mm,
+                                             to_mm).nut_position_mm(duration_s))
+
+    def measure(self, target_mm, feed_mm_min, dwell_s, run, ambient_C=None):
+        """Approach ``target_mm``, dwell and sample at the end of the dwell."""
+        direction = 1 if target_mm >= self.position_mm else -1
+        self.move(target_mm, feed_mm_min, ambient_C)
+        self.dwell(dwell_s, ambient_C)
+        self.samples.append(Sample(self.time_s, float(target_mm), direction, run))
+
+    def _add(self, duration_s, feed_mm_min, from_mm, to_mm, ambient_C):
+        self.segments.append(DutySegment(self.time_s, duration_s, feed_mm_min, from_mm, to_mm))
+        self.ambient_C.append(ambient_C)
+        self.time_s += duration_s
+
+    def position_at(self, time_s):
+        """Commanded position (mm) at the times ``time_s`` (array)."""
+        return self._per_segment(time_s, lambda segment, t, _: segment.nut_position_mm(t))
+
+    def ambient_at(self, time_s):
+        """Ambient temperature (°C) of the segment at each time, ISO 20 °C when unknown."""
+        return self._per_segment(
+            time_s, lambda _, t, ambient: np.full(t.shape, ISO_REFERENCE_C if ambient is None
+                                                  else ambient))
+
+    def _per_segment(self, time_s, value):
+        starts = np.array([s.start_s for s in self.segments])
+        index = np.clip(np.searchsorted(starts, time_s, side="right") - 1, 0,
+                        len(self.segments) - 1)
+        result = np.empty(np.shape(time_s))
+        for i in np.unique(index):
+            inside = index == i
+            result[inside] = value(self.segments[i], time_s[inside], self.ambient_C[i])
+        return result
+
+    def duty_columns(self, until_s=None):
+        """duty.csv columns of the motion, cut at ``until_s`` (an interrupted run)."""
+        end_s = self.time_s if until_s is None else until_s
+        kept = [(s, a) for s, a in zip(self.segments, self.ambient_C) if s.start_s < end_s]
+        rows = [replace(s, duration_s=min(s.duration_s, end_s - s.start_s)) for s, _ in kept]
+        columns = {name: [getattr(s, name) for s in rows]
+                   for name in ("start_s", "duration_s", "feed_mm_min", "from_mm", "to_mm")}
+        if any(a is not None for _, a in kept):
+            columns["ambient_C"] = [ISO_REFERENCE_C if a is None else a for _, a in kept]
+        return columns
+
+
+def iso230_targets(n_targets, spacing_mm, first_mm=0.0):
+    """Targets P_i = (i - 1) p + r_i (ISO 230-2) with a different offset r_i at each.
+
+    r_i = p (frac(0.618034 i) - 0.5) / 5 stays within ±10 % of the spacing p and differs at
+    every target, so periodic errors (screw lead, motor steps) are not sampled in phase.
+    """
+    if n_targets < 2 or not spacing_mm > 0:
+        raise ValueError(f"iso230 needs at least 2 targets (got {n_targets}) and a spacing > 0 "
+                         f"(got {spacing_mm})")
+    i = np.arange(1, n_targets + 1)
+    offsets_mm = spacing_mm * (np.mod(0.618034 * i, 1.0) - 0.5) / 5.0
+    return first_mm + (i - 1) * spacing_mm + offsets_mm
+
+
+def iso230_motion(targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5, overrun_mm=2.0):
+    """The ISO 230-2 linear cycle: each run approaches every target in +, then in -.
+
+    Each run starts ``overrun_mm`` below the first target, stops at every target in
+    ascending order (approach +), overruns the last one, then stops at every target in
+    descending order (approach -) and overruns the first one.
+    """
+    targets_mm = np.sort(np.asarray(targets_mm, dtype=float))
+    _require_positive(runs=runs, feed_mm_min=feed_mm_min, dwell_s=dwell_s)
+    if overrun_mm < 0:
+        raise ValueError(f"overrun_mm must be >= 0, got {overrun_mm}")
+    motion = Motion(targets_mm[0] - overrun_mm)
+    for run in range(1, runs + 1):
+        for target in targets_mm:
+            motion.measure(target, feed_mm_min, dwell_s, run)
+        motion.move(targets_mm[-1] + overrun_mm, feed_mm_min)
+        for target in targets_mm[::-1]:
+            motion.measure(target, feed_mm_min, dwell_s, run)
+        motion.move(targets_mm[0] - overrun_mm, feed_mm_min)
+    return motion
+
+
+def thermal_motion(duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0.5):
+    """The duty of ``duty`` with a measurement pass over ``targets_mm`` every ``every_s``.
+
+    A pass (approach each target in the given order at ``feed_mm_min``, dwell, sample) runs
+    at t = 0 (cold axis), after every ``every_s`` of duty time and at the end of the duty.
+    Duty segments keep their durations: a segment cut by a pass resumes from its
+    ``from_mm`` after it, reached by a move at ``feed_mm_min``; the motion (and the duty.csv
+    written) is the input duty with these passes and moves inserted.
+    """
+    _require_positive(every_s=every_s, feed_mm_min=feed_mm_min, dwell_s=dwell_s)
+    cuts_s = list(np.arange(every_s, duty.end_s, every_s))
+    ambient = list(duty.ambient_C) if duty.ambient_C is not None else [None] * len(duty.segments)
+    motion = Motion(targets_mm[0])
+    passes = 0
+
+    def measurement_pass(ambient_C):
+        nonlocal passes
+        passes += 1
+        for target in targets_mm:
+            motion.measure(target, feed_mm_min, dwell_s, passes, ambient_C)
+
+    measurement_pass(ambient[0])
+    for segment, ambient_C in zip(duty.segments, ambient):
+        edges_s = [segment.start_s] + [c for c in cuts_s if segment.start_s < c < segment.end_s]
+        for piece_start_s, piece_end_s in zip(edges_s, edges_s[1:] + [segment.end_s]):
+            motion.move(segment.from_mm, feed_mm_min, ambient_C)
+            motion.cycle(piece_end_s - piece_start_s, segment.feed_mm_min, segment.from_mm,
+                         segment.to_mm, ambient_C)
+            if any(abs(piece_end_s - c) < 1e-9 for c in cuts_s + [duty.end_s]):
+                measurement_pass(ambient_C)
+    return motion
+
+
+def run_motion(master, motion, parameters=None, progress=None):
+    """Drive the axis along ``motion``; return (rows at the samples, completed flag).
+
+    The run records at every sample time; on Ctrl-C it returns the samples reached.
+    """
+    h = master.system.macro_step_s
+    stop_s = math.ceil(motion.time_s / h - 1e-9) * h
+    inputs = {"position_ref_mm": lambda t: motion.position_at(t + h),
+              "ambient_C": motion.ambient_at}
+    times_s = [s.time_s for s in motion.samples]
+    try:
+        rows = master.run(stop_s, inputs, parameters, record_at_s=times_s, progress=progress)
+        completed = True
+    except SimulationInterrupted as stopped:
+        rows, completed = stopped.partial, False
+    if rows.size < 2:
+        raise ScenarioInterrupted("interrupted before the first sample; nothing written")
+    return rows[1:], completed
+
+
+def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5,
+                    overrun_mm=2.0, parameters=None, progress=None):
+    """Simulate an ISO 230-2 positioning test and write it as a case folder.
+
+    Parameters
+    ----------
+    out : path
+        Case folder to create (it must not exist).
+    master : Master
+    targets_mm : array_like
+        Target positions P_i (mm), e.g. from :func:`iso230_targets`.
+    runs : int
+        Runs in each direction (ISO 230-2: 5).
+    feed_mm_min, dwell_s, overrun_mm : float
+        Travel feed between targets (mm/min), dwell at each target before the sample (s),
+        overrun beyond the end targets (mm).
+    parameters : dict, optional
+        {component: {parameter: value}} for this run (e.g. a fitted model's FMU values).
+
+    Returns
+    -------
+    dict
+        Case folder, number of samples, and the deviation range (µm).
+    """
+    motion = iso230_motion(targets_mm, runs, feed_mm_min, dwell_s, overrun_mm)
+    rows, completed = run_motion(master, motion, parameters, progress=progress)
+    positioning = _positioning_columns(motion.samples[:rows.size], rows)
+    write_case(out, axis_values(master, parameters, "simulated ISO 230-2 test"),
+               positioning=positioning)
+    return _finish(out, positioning, completed, motion.samples)
+
+
+def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
+                     dwell_s=0.5, parameters=None, progress=None):
+    """Simulate a thermal test: the duty with measurement passes; write duty + positioning.
+
+    Parameters
+    ----------
+    out : path
+    master : Master
+    duty : feedaxis.case.Duty
+        The heating duty (e.g. ``read_duty("duty.csv")``).
+    targets_mm : sequence of float
+        Targets of every measurement pass, visited in this order.
+    every_s : float
+        Duty time between measurement passes (s).
+    feed_mm_min, dwell_s : float
+        Feed of the measurement moves and dwell before each sample.
+    parameters : dict, optional
+
+    Returns
+    -------
+    dict
+    """
+    if len(targets_mm) < 1:
+        raise ValueError("thermal needs at least one target")
+    motion = thermal_motion(duty, targets_mm, every_s, feed_mm_min, dwell_s)
+    rows, completed = run_motion(master, motion, parameters, progress=progress)
+    positioning = _positioning_columns(motion.samples[:rows.size], rows, with_time=True)
+    until_s = None if completed else float(positioning["time_s"][-1])
+    write_case(out, axis_values(master, parameters, "simulated thermal test"),
+               positioning=positioning, duty=motion.duty_columns(until_s))
+    return _finish(out, positioning, completed, motion.samples)
+
+
+def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
+    """Milling force at the tooth-passing frequency, an assumption (seed 002 gives none).
+
+    F(t) = F0 · (1500 / n) · (1 + sin(2π z n / 60 · t)) / 2: the mean force falls with
+    spindle speed n as the feed per tooth does (seed 002's explanation of Table 2), z teeth.
+    """
+    _require_positive(spindle_rpm=spindle_rpm)
+    scale = force_N * 1500.0 / spindle_rpm
+    return scale * 0.5 * (1.0 + np.sin(2 * np.pi * teeth * spindle_rpm / 60.0 * time_s))
+
+
+def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, controller="pid",
+                      spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
+    """Sinusoidal tracking (seed 002): write tracking.csv; return max and RMS error.
+
+    Parameters
+    ----------
+    out : path
+        Case folder to create (axis.toml + tracking.csv).
+    master : Master
+    frequency_hz, amplitude_mm, duration_s : float
+        Reference A sin(2π f t) (mm) for ``duration_s`` seconds.
+    controller : {"pid", "npid"}
+        PID (seed 002 Eq. 6) or NPID (Eq. 8).
+    spindle_rpm : float, optional
+        Adds the cutting force of :func:`cutting_force_N` (1500/2500/3500 rpm in seed 002).
+    force_N : float
+        Cutting-force amplitude F0 at 1500 rpm (N); see :data:`CUTTING_FORCE_N`.
+
+    Returns
+    -------
+    dict
+        ``max_tracking_error_mm`` and ``rms_tracking_error_mm`` over t > 1 s (after the
+        start-up transient, as the seed 002 Table 1 reproduction), the case folder.
+    """
+    _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
+                      duration_s=duration_s)
+    if controller not in ("pid", "npid"):
+        raise ValueError(f"controller must be pid or npid, got {controller!r}")
+    h = master.system.macro_step_s
+    overrides = {**(parameters or {})}
+    overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
+
+    def reference_mm(t):
+        return amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
+
+    inputs = {"position_ref_mm": lambda t: reference_mm(t + h)}
+    if spindle_rpm is not None:
+        inputs["disturbance_N"] = lambda t: cutting_force_N(t, spindle_rpm, force_N)
+    stop_s = math.ceil(duration_s / h - 1e-9) * h
+    try:
+        rows, completed = master.run(stop_s, inputs, overrides, progress=progress), True
+    except SimulationInterrupted as stopped:
+        rows, completed = stopped.partial, False
+    rows = rows[1:]
+    tracking = {"time_s": rows["time"], "reference_mm": reference_mm(rows["time"]),
+                "actual_mm": rows["NpidServo.position_mm"]}
+    if spindle_rpm is not None:
+        tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
+    if rows.size == 0:
+        raise ScenarioInterrupted("interrupted before the first step; nothing written")
+    write_case(out, axis_values(master, overrides, "simulated tracking test"), tracking=tracking)
+    settled = rows["time"] > SETTLE_S
+    error_mm = np.abs(rows["NpidServo.tracking_error_mm"][settled])
+    summary = {"case": str(out), "controller": controller, "frequency_hz": frequency_hz,
+               "amplitude_mm": amplitude_mm, "spindle_rpm": spindle_rpm,
+               "simulated_s": float(rows["time"][-1]),
+               "max_tracking_error_mm": float(error_mm.max()) if error_mm.size else math.nan,
+               "rms_tracking_error_mm": float(np.sqrt(np.mean(error_mm**2)))
+               if error_mm.size else math.nan}
+    if not completed:
+        raise ScenarioInterrupted(f"interrupted at t = {summary['simulated_s']:g} s; the "
+                                  f"partial tracking.csv is in {out}")
+    return summary
+
+
+def axis_values(master, parameters, name):
+    """axis.toml content from the co-simulated axis's effective parameter values."""
+    system = master.system.with_parameters(parameters or {})
+
+    def values(component, keys):
+        c = system.component(component)
+        variables = master.loaded[c.fmu].variables
+        return {k: c.parameters[k] if k in c.parameters else _start(variables[k]) for k in keys}
+
+    screw = {k: v for c, keys in SCREW_FROM.items() for k, v in values(c, keys).items()}
+    thermal = values("ThermalScrew", SHARED_SCREW_KEYS)
+    differ = [k for k in SHARED_SCREW_KEYS if thermal[k] != screw[k]]
+    if differ:
+        raise ValueError(f"GeometricError and ThermalScrew disagree on {', '.join(differ)}: "
+                         "one axis has one screw")
+    motor = {k: v for c, keys in MOTOR_FROM.items() for k, v in values(c, keys).items()}
+    return {"name": name, "screw": screw, "motor": motor}
+
+
+def _start(variable):
+    """The declared start value of an FMU variable as a Python value."""
+    convert = {"Real": float, "Integer": int, "String": str,
+               "Boolean": lambda text: text in ("true", "1")}[variable.type]
+    return convert(variable.start)
+
+
+def _positioning_columns(samples, rows, with_time=False):
+    target_mm = np.array([s.target_mm for s in samples])
+    columns = {"target_mm": target_mm,
+               "error_um": (rows["table_position_mm"] - target_mm) * 1e3,
+               "direction": [s.direction for s in samples], "run": [s.run for s in samples]}
+    if with_time:
+        columns["time_s"] = [s.time_s for s in samples]
+        columns["ambient_C"] = rows["ambient_C"]
+    return columns
+
+
+def _finish(out, positioning, completed, planned):
+    summary = {"case": str(out), "samples": len(positioning["target_mm"]),
+               "planned_samples": len(planned),
+               "error_min_um": float(np.min(positioning["error_um"])),
+               "error_max_um": float(np.max(positioning["error_um"]))}
+    if not completed:
+        raise ScenarioInterrupted(f"interrupted: {summary['samples']} of "
+                                  f"{summary['planned_samples']} samples written to {out}")
+    return summary
+
+
+def _require_positive(**values):
+    for name, value in values.items():
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be > 0, got {value!r}")

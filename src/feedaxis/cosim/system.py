@@ -1,0 +1,261 @@
+"""The one description of the co-simulated axis: components, connections, parameters, steps.
+
+The fmpy master (:mod:`.master`), the SSP export (:mod:`.ssp`) and the README's system
+table (:func:`markdown_tables`) are all generated from an :class:`AxisSystem`. The default
+axis (:func:`default_axis`) is the signal flow of issue 3::
+
+    position_ref_mm, disturbance_N -> NpidServo -> position_mm, velocity_mm_s
+        -> StepperError, GeometricError, ThermalScrew (+ ambient_C) -> error_um each
+    positioning_error_um = sum of the three error_um
+    table_position_mm    = NpidServo.position_mm + positioning_error_um / 1000
+
+Multi-rate scheme: the macro step h is the master's clock. A component with communication
+step r·h (r a whole number) steps on the macro steps k with (k + 1) mod r = 0, over
+[t_{k+1} - r·h, t_{k+1}], so every step ends on a macro grid point; between its steps its
+outputs are held. Components step in dependency order within a macro step (Gauss-Seidel):
+an input connected to an upstream output sees that output at t_{k+1}; a system input sees
+its value k (held over [t_k, t_{k+1})).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+
+@dataclass(frozen=True)
+class Variable:
+    """A system input or output: name with its unit suffix, unit, meaning."""
+
+    name: str
+    unit: str
+    description: str
+    start: float = 0.0
+
+
+@dataclass(frozen=True)
+class Component:
+    """One FMU instance: its model (FMU name), communication step and parameter values."""
+
+    name: str
+    fmu: str
+    step_s: float
+    parameters: dict = field(default_factory=dict)
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class Connection:
+    """``source`` ("Component.variable" or a system input name) drives ``target``."""
+
+    source: str
+    target: str
+
+    @property
+    def target_component(self):
+        return self.target.split(".", 1)[0]
+
+    @property
+    def source_component(self):
+        """The source's component, or None for a system input."""
+        return self.source.split(".", 1)[0] if "." in self.source else None
+
+
+@dataclass(frozen=True)
+class Output:
+    """A system output: a linear combination of component outputs, sum(factor x term)."""
+
+    variable: Variable
+    terms: tuple
+
+    def formula(self):
+        """The combination as text, e.g. ``A.x + 0.001 B.y``."""
+        parts = [(f"{factor:g} " if factor != 1.0 else "") + term for term, factor in self.terms]
+        return " + ".join(parts)
+
+
+@dataclass(frozen=True)
+class AxisSystem:
+    """Components, connections, inputs and outputs of the co-simulated axis, and its clock."""
+
+    name: str
+    macro_step_s: float
+    inputs: tuple
+    components: tuple
+    connections: tuple
+    outputs: tuple
+
+    def __post_init__(self):
+        if not (math.isfinite(self.macro_step_s) and self.macro_step_s > 0):
+            raise ValueError(f"macro step must be > 0 s, got {self.macro_step_s!r}")
+        for component in self.components:
+            self.ratio(component)
+        names = {c.name for c in self.components}
+        inputs = {v.name for v in self.inputs}
+        targets = [c.target for c in self.connections]
+        twice = sorted({t for t in targets if targets.count(t) > 1})
+        if twice:
+            raise ValueError(f"{', '.join(twice)}: driven by more than one connection")
+        for connection in self.connections:
+            if connection.target_component not in names:
+                raise ValueError(f"connection target {connection.target}: no such component")
+            source = connection.source_component
+            if (source is None and connection.source not in inputs) or (
+                    source is not None and source not in names):
+                raise ValueError(f"connection source {connection.source}: no such input "
+                                 "or component")
+        self.ordered_components()
+
+    def component(self, name):
+        """The component called ``name``."""
+        for component in self.components:
+            if component.name == name:
+                return component
+        raise ValueError(f"no component {name!r}; components: "
+                         f"{', '.join(c.name for c in self.components)}")
+
+    def ratio(self, component):
+        """Macro steps per communication step of ``component`` (a whole number >= 1)."""
+        ratio = component.step_s / self.macro_step_s
+        if not (math.isfinite(ratio) and ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) < 1e-6):
+            raise ValueError(f"{component.name} step {component.step_s:g} s must be a whole "
+                             f"multiple of the macro step {self.macro_step_s:g} s")
+        return int(round(ratio))
+
+    def inputs_of(self, component_name):
+        """Connections that drive ``component_name``, in declaration order."""
+        return [c for c in self.connections if c.target_component == component_name]
+
+    def ordered_components(self):
+        """Components in dependency order (every source before its targets)."""
+        ordered, remaining = [], list(self.components)
+        while remaining:
+            done = {c.name for c in ordered}
+            ready = [c for c in remaining
+                     if all(s.source_component in (None, *done)
+                            for s in self.inputs_of(c.name))]
+            if not ready:
+                raise ValueError("the connections form an algebraic loop: "
+                                 f"{', '.join(c.name for c in remaining)}")
+            ordered.extend(ready)
+            remaining = [c for c in remaining if c not in ready]
+        return ordered
+
+    def with_parameters(self, overrides):
+        """A copy with ``{component: {parameter: value}}`` merged over the parameter values.
+
+        ``Model.fmu_parameters(axis)`` of a fitted model has this form; components it names
+        that this system lacks are an error.
+        """
+        for name in overrides:
+            self.component(name)
+        components = tuple(
+            replace(c, parameters={**c.parameters, **overrides.get(c.name, {})})
+            for c in self.components)
+        return replace(self, components=components)
+
+    def with_steps(self, macro_step_s=None, **step_s):
+        """A copy with a new macro step and/or component steps (``ThermalScrew=1.0``)."""
+        for name in step_s:
+            self.component(name)
+        components = tuple(replace(c, step_s=step_s.get(c.name, c.step_s))
+                           for c in self.components)
+        return replace(self, macro_step_s=macro_step_s or self.macro_step_s,
+                       components=components)
+
+
+ERROR_COMPONENTS = ("StepperError", "GeometricError", "ThermalScrew")
+FMI_TYPES = {bool: "Boolean", int: "Integer", float: "Real", str: "String"}
+
+
+def check_parameter_values(component, variables):
+    """Raise ValueError unless every parameter value of ``component`` names a parameter of
+    its FMU (``variables``: name -> model variable) with a value of its type."""
+    for name, value in component.parameters.items():
+        declared = variables.get(name)
+        if declared is None or declared.causality != "parameter":
+            raise ValueError(f"{component.name}: no parameter {name}")
+        kind = FMI_TYPES.get(type(value))
+        if kind != declared.type and not (kind == "Integer" and declared.type == "Real"):
+            raise ValueError(f"{component.name}.{name}: {declared.type} parameter, "
+                             f"got {value!r}")
+
+
+def fmi_text(value):
+    """A parameter value as FMI/SSP XML text (Booleans as true/false)."""
+    return str(value).lower() if isinstance(value, bool) else repr(value) \
+        if isinstance(value, float) else str(value)
+
+
+def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
+    """The four-FMU feed axis with the FMUs' default physics (seeds 000-003).
+
+    Parameters
+    ----------
+    macro_step_s : float
+        Master clock h (s).
+    servo_step_s : float
+        Communication step of NpidServo, StepperError and GeometricError (s).
+    thermal_step_s : float
+        Communication step of ThermalScrew (s); its field is advanced in sub-steps of at
+        most its ``time_step_s`` (0.1 s, seed 003).
+    """
+    inputs = (
+        Variable("position_ref_mm", "mm", "commanded axis position"),
+        Variable("disturbance_N", "N", "axial disturbance force, e.g. cutting force"),
+        Variable("ambient_C", "degC", "ambient air temperature", 20.0),
+    )
+    components = (
+        Component("NpidServo", "NpidServo", servo_step_s,
+                  {"nonlinear": False, "time_step_s": 1e-4},
+                  "position loop, PID (seed 002 Eq. 1-8)"),
+        Component("StepperError", "StepperError", servo_step_s, {},
+                  "motor step error (seed 000 Eq. 6, 9, 10)"),
+        Component("GeometricError", "GeometricError", servo_step_s, {"sag_enabled": True},
+                  "lead, eccentricity, backlash, sag (seed 000/001)"),
+        Component("ThermalScrew", "ThermalScrew", thermal_step_s,
+                  {"reference_ambient_C": 20.0, "time_step_s": 0.1},
+                  "screw heating (seed 003 Eq. 1-19)"),
+    )
+    connections = (
+        Connection("position_ref_mm", "NpidServo.position_ref_mm"),
+        Connection("disturbance_N", "NpidServo.disturbance_N"),
+        Connection("NpidServo.position_mm", "StepperError.position_mm"),
+        Connection("NpidServo.position_mm", "GeometricError.position_mm"),
+        Connection("NpidServo.velocity_mm_s", "GeometricError.velocity_mm_s"),
+        Connection("NpidServo.position_mm", "ThermalScrew.position_mm"),
+        Connection("NpidServo.velocity_mm_s", "ThermalScrew.velocity_mm_s"),
+        Connection("ambient_C", "ThermalScrew.ambient_C"),
+    )
+    errors = tuple((f"{name}.error_um", 1.0) for name in ERROR_COMPONENTS)
+    outputs = (
+        Output(Variable("positioning_error_um", "um",
+                        "table position - servo position, sum of the three error_um"), errors),
+        Output(Variable("table_position_mm", "mm", "actual table position"),
+               (("NpidServo.position_mm", 1.0),) + tuple((t, 1e-3) for t, _ in errors)),
+    )
+    return AxisSystem("FeedAxis", macro_step_s, inputs, components, connections, outputs)
+
+
+def markdown_tables(system):
+    """The system as Markdown tables (components, connections, outputs) for the README.
+
+    Regenerate the README section with ``python -m feedaxis.cosim.system``.
+    """
+    lines = [f"Macro step {system.macro_step_s * 1e3:g} ms; components in dependency order.",
+             "", "| component | FMU | step | parameter values | role |", "|---|---|---|---|---|"]
+    for c in system.ordered_components():
+        values = ", ".join(f"`{k}` = {v!r}" for k, v in c.parameters.items()) or "FMU defaults"
+        lines.append(f"| `{c.name}` | {c.fmu}.fmu | {c.step_s * 1e3:g} ms "
+                     f"(every {system.ratio(c)} macro steps) | {values} | {c.description} |")
+    lines += ["", "| from | to |", "|---|---|"]
+    lines += [f"| `{c.source}` | `{c.target}` |" for c in system.connections]
+    lines += ["", "| system variable | kind | unit | value |", "|---|---|---|---|"]
+    lines += [f"| `{v.name}` | input | {v.unit} | start {v.start:g}: {v.description} |"
+              for v in system.inputs]
+    lines += [f"| `{o.variable.name}` | output | {o.variable.unit} | {o.formula()} |"
+              for o in system.outputs]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(markdown_tables(default_axis()))

@@ -1,0 +1,57 @@
+"""The axis as one FMU (fmpy container): valid, runs in fmpy and libcosim, equals the master.
+
+The container steps all four FMUs at its one step, Jacobi: the servo's outputs are the
+master's, the error FMUs see the servo one step late. Both are asserted exactly (1e-9).
+"""
+import numpy as np
+import pytest
+from fmpy.validation import validate_fmu
+
+from feedaxis.cli import main
+from feedaxis.cosim.fmu_runner import run_fmu
+from feedaxis.cosim.master import Master
+from feedaxis.cosim.system import default_axis
+from libcosim_driver import simulate_with_libcosim
+from test_ssp import ERRORS, PARAMETERS, assert_same
+
+SETS = ("--set", "NpidServo.nonlinear=true", "--set", "GeometricError.backlash_um=2.0",
+        "--set", "StepperError.error_period_steps=4")
+OUTPUTS = ("NpidServo.position_mm",) + ERRORS + ("ThermalScrew.error_um",)
+
+
+@pytest.fixture(scope="module")
+def container_path(fmu_paths, tmp_path_factory):
+    path = tmp_path_factory.mktemp("container") / "axis.fmu"
+    fmu_dir = str(next(iter(fmu_paths.values())).parent)
+    assert main(["export-fmu", str(path), "--fmus", fmu_dir, *SETS]) == 0
+    return path
+
+
+def test_container_fmu_passes_fmpy_validation(container_path):
+    assert validate_fmu(str(container_path)) == []
+
+
+def test_container_runs_in_fmpy_and_libcosim_like_the_master(container_path, fmu_paths):
+    h, n_steps = 1e-3, 600
+    inputs = {"position_ref_mm": 40.0 * np.sin(2 * np.pi * 0.5 * np.arange(n_steps) * h),
+              "ambient_C": np.full(n_steps, 25.0)}
+    in_fmpy = run_fmu(container_path, h, n_steps, inputs, {}, OUTPUTS)
+    in_libcosim = simulate_with_libcosim(container_path, h, n_steps, inputs, {}, OUTPUTS)
+    system = default_axis().with_parameters(PARAMETERS).with_steps(ThermalScrew=h)
+    with Master(system, fmu_paths) as master:
+        expected = master.run(n_steps * h, {"position_ref_mm": inputs["position_ref_mm"],
+                                            "ambient_C": 25.0})
+    for name in OUTPUTS:
+        assert_same(in_libcosim[name], in_fmpy[name], name)
+    assert_same(in_fmpy["NpidServo.position_mm"], expected["NpidServo.position_mm"][1:],
+                "position")
+    for name in OUTPUTS[1:]:
+        assert_same(in_fmpy[name][1:], expected[name][1:-1], name)
+
+
+def test_bad_parameter_is_refused_before_writing(fmu_paths, tmp_path, capsys):
+    fmu_dir = str(next(iter(fmu_paths.values())).parent)
+    assert main(["export-fmu", str(tmp_path / "axis.fmu"), "--fmus", fmu_dir,
+                 "--set", "NpidServo.nonlinear=3.5"]) == 2
+    assert "NpidServo.nonlinear: Boolean parameter, got 3.5" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

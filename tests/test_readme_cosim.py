@@ -1,0 +1,43 @@
+"""The README's "One axis" section: the system table is current and every snippet runs."""
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from feedaxis import __version__
+from feedaxis.cli import main
+from feedaxis.cosim.fmu_cache import source_hash
+from feedaxis.cosim.system import default_axis, markdown_tables
+
+README = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
+SNIPPETS = dict(re.findall(r"<!-- snippet: ([\w-]+) -->\n```python\n(.*?)```", README, re.S))
+
+
+def test_readme_system_table_is_generated_from_the_system_description():
+    table = re.search(r"<!-- system table:[^\n]*-->\n(.*?)\n<!-- end of system table -->",
+                      README, re.S).group(1)
+    assert table == markdown_tables(default_axis()), \
+        "regenerate it with: python -m feedaxis.cosim.system"
+
+
+@pytest.fixture
+def user_folder(fmu_paths, tmp_path, monkeypatch):
+    """A working folder with axis.ssp and axis.fmu, and a user cache holding the FMUs."""
+    cache = tmp_path / "cache" / "feedaxis" / f"fmus-{__version__}-{source_hash()}"
+    cache.mkdir(parents=True)
+    for path in fmu_paths.values():
+        shutil.copy2(path, cache / path.name)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["export-ssp", "axis.ssp"]) == 0
+    assert main(["export-fmu", "axis.fmu"]) == 0
+    return tmp_path
+
+
+@pytest.mark.parametrize("name", ["master", "fmpy-ssp", "libcosim-ssp", "container"])
+def test_readme_snippet_runs(user_folder, capsys, name):
+    capsys.readouterr()
+    exec(compile(SNIPPETS[name], f"README snippet {name}", "exec"), {})
+    printed = capsys.readouterr().out
+    assert re.search(r"\d", printed), printed
