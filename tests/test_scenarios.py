@@ -13,10 +13,9 @@ from feedaxis.cosim.system import default_axis
 from feedaxis.physics import geometry, motor, mounting
 from test_seed_reproduction import TABLE1_PID_MM
 
-# A servo without static error (a0 = 0: the plant integrates, seed 002's a0 = 193.3 leaves
-# target/364 of it) and a screw that does not heat: the deviation is then the geometry.
-QUIET_AXIS = ("--set", "NpidServo.plant_stiffness_per_s2=0", "--set",
-              "ThermalScrew.k3_W_per_mm_min=0", "--set", "ThermalScrew.k4_W_per_mm_min=0")
+# A screw that does not heat; the positioning scenarios' default servo (a0 = 0: the plant
+# integrates) has no static error: the deviation is then the geometry.
+QUIET_AXIS = ("--set", "ThermalScrew.k3_W_per_mm_min=0", "--set", "ThermalScrew.k4_W_per_mm_min=0")
 
 
 @pytest.fixture(scope="module")
@@ -68,8 +67,7 @@ def test_thermal_case_has_duty_and_timed_samples_that_drift_with_heat(tmp_path, 
                     "0,20,9000,0,300,20\n20,10,0,0,0,21\n")
     out = tmp_path / "thermal"
     assert simulate("thermal", out, "--duty", duty, "--targets", "50,250", "--every-s", 10,
-                    "--dwell-s", 0.2, "--fmus", fmu_dir, "--step-ms", 2,
-                    "--set", "NpidServo.plant_stiffness_per_s2=0") == 0
+                    "--dwell-s", 0.2, "--fmus", fmu_dir, "--step-ms", 2) == 0
     case = read_case(out)
     assert case.is_thermal
     p = case.positioning
@@ -143,3 +141,10 @@ def test_bad_input_exits_2_with_one_message_and_writes_nothing(tmp_path, capsys,
     assert message in error and error.count("\n") == 1
     assert not (tmp_path / "out").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv", "existing", "good.csv"]
+
+
+def test_positioning_scenarios_default_to_a_type1_servo_that_set_overrides():
+    from feedaxis.cosim.scenarios import _positioning_parameters
+    assert _positioning_parameters(None)["NpidServo"] == {"plant_stiffness_per_s2": 0.0}
+    published = {"NpidServo": {"plant_stiffness_per_s2": 193.3, "nonlinear": True}}
+    assert _positioning_parameters(published) == published
