@@ -21,7 +21,7 @@ from feedaxis.fit import fit
 
 # where the time goes: function name (file suffix, function) -> label
 STAGES = {
-    ("thermal.py", "simulate_duty"): "thermal field (simulate_duty)",
+    ("thermal.py", "duty_unit_fields"): "thermal field (duty_unit_fields)",
     ("_lsq/least_squares.py", "least_squares"): "least-squares fits (all, incl. model evaluations)",
     ("diagnose.py", "find_structures"): "unexplained-structure search",
     ("diagnose.py", "residual_spectrum"): "residual spectrum",

@@ -17,7 +17,8 @@ Eq. 10 stepped at dt = 0.1 s with the nut moving; so the start is not the answer
   point is evaluated on the explicit model for the baseline's final cost.
 
 Run: ``python benchmarks/bench_thermal_identification.py [--repeats 5]``. Times are medians
-of interleaved repeats in this one run.
+of interleaved repeats in this one run; every method runs with BLAS on one thread, as
+``feedaxis.fit`` does.
 """
 import argparse
 import statistics
@@ -27,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares, minimize
+from threadpoolctl import threadpool_limits
 
 from feedaxis.case import read_case
 from feedaxis.effects import CATALOG, Model
@@ -160,4 +162,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    with threadpool_limits(limits=1, user_api="blas"):
+        main()
