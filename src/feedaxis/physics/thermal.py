@@ -134,35 +134,45 @@ def _interval_overlap(params, start_m, stop_m):
 def rate_matrix(params, feed_mm_min, nut_fraction):
     """System matrix A (1/s) of dθ/dt = A θ + s, from Eq. 5-10.
 
-    Conduction between neighbours, lateral convection on cells not under the bearing or
-    the nut (Eq. 7), convection on the free-end face (Eq. 6, n = N). A is symmetric.
+    Conduction between neighbours and the convective loss of :func:`convective_loss_W_K`
+    on the diagonal. A is symmetric.
     """
     n = params.n_cells
-    capacity = params.cell_heat_capacity_J_K
     conductance = params.conductivity_W_mK * params.area_m2 / params.cell_length_m
-    h = params.convection_W_m2K(feed_mm_min)
-    lateral_area_m2 = np.pi * params.diameter_m * params.cell_length_m
-    exposed = (1.0 - bearing_cells(params)) * (1.0 - nut_fraction)
-    loss_W_K = h * lateral_area_m2 * exposed
-    loss_W_K[-1] += h * params.area_m2
     coupling = np.full(n - 1, conductance)
-    diagonal = -loss_W_K - np.concatenate((coupling, [0.0])) - np.concatenate(([0.0], coupling))
-    return (np.diag(diagonal) + np.diag(coupling, 1) + np.diag(coupling, -1)) / capacity
+    diagonal = (-convective_loss_W_K(params, feed_mm_min, nut_fraction)
+                - np.concatenate((coupling, [0.0])) - np.concatenate(([0.0], coupling)))
+    return ((np.diag(diagonal) + np.diag(coupling, 1) + np.diag(coupling, -1))
+            / params.cell_heat_capacity_J_K)
+
+
+def convective_loss_W_K(params, feed_mm_min, nut_fraction):
+    """Conductance to ambient per cell (W/K): h on the lateral surface not under the bearing
+    or the nut (Eq. 7), plus the free-end face (Eq. 6, n = N).
+
+    ``feed_mm_min`` may be an array of steps, ``nut_fraction`` then one row per step.
+    """
+    h_W_m2K = params.convection_W_m2K(np.asarray(feed_mm_min, dtype=float)[..., None])
+    lateral_area_m2 = np.pi * params.diameter_m * params.cell_length_m
+    loss_W_K = h_W_m2K * lateral_area_m2 * (1.0 - bearing_cells(params)) * (1.0 - nut_fraction)
+    loss_W_K[..., -1] += h_W_m2K[..., 0] * params.area_m2
+    return loss_W_K
 
 
 def source_rate(params, feed_mm_min, nut_fraction):
-    """Source vector s (K/s): Q_B/L_B and Q_N/L_N per cell length (Eq. 7, 10, 18, 19)."""
-    return np.array([params.k3_W_per_mm_min, params.k4_W_per_mm_min]) @ unit_source_rates(
-        params, feed_mm_min, nut_fraction)
+    """Source vector s (K/s): Q_B/L_B and Q_N/L_N per cell length (Eq. 7, 10, 18, 19);
+    one row per step for an array of feeds."""
+    return np.tensordot([params.k3_W_per_mm_min, params.k4_W_per_mm_min],
+                        unit_source_rates(params, feed_mm_min, nut_fraction), axes=1)
 
 
 def unit_source_rates(params, feed_mm_min, nut_fraction):
     """Source vectors (K/s) of the bearing and of the nut per unit k3 and k4 (W per mm/min),
-    shape (2, n_cells): s = k3·s_B + k4·s_N (Eq. 7, 10, 18, 19)."""
-    per_cell_W = abs(feed_mm_min) * params.cell_length_m
-    return np.array([bearing_cells(params) / params.bearing_length_m,
-                     nut_fraction / params.nut_length_m]) * (per_cell_W
-                                                              / params.cell_heat_capacity_J_K)
+    stacked on the first axis: s = k3·s_B + k4·s_N (Eq. 7, 10, 18, 19)."""
+    per_cell_W = np.abs(np.asarray(feed_mm_min, dtype=float))[..., None] * params.cell_length_m
+    per_unit = np.broadcast_arrays(bearing_cells(params) / params.bearing_length_m,
+                                   nut_fraction / params.nut_length_m)
+    return np.stack(per_unit) * (per_cell_W / params.cell_heat_capacity_J_K)
 
 
 def stable_time_step_s(params, rates):
@@ -428,18 +438,6 @@ def explicit_duty(params, segments, times_s, block=4096):
 
 def _explicit_terms(params, feed_mm_min, nut_m):
     """Convective loss (W/K) and source rate (K/s) per cell for a block of steps (Eq. 5-10)."""
-    half_m = params.nut_length_m / 2.0
-    lower_m = np.arange(params.n_cells) * params.cell_length_m
-    overlap_m = (np.minimum(lower_m + params.cell_length_m, nut_m[:, None] + half_m)
-                 - np.maximum(lower_m, nut_m[:, None] - half_m))
-    nut = np.clip(overlap_m / params.cell_length_m, 0.0, 1.0)
-    speed = np.abs(feed_mm_min)[:, None]
-    h_W_m2K = params.k1_W_m2K_per_mm_min * speed + params.k2_W_m2K
-    lateral_m2 = np.pi * params.diameter_m * params.cell_length_m
-    bearing = bearing_cells(params)
-    loss_W_K = h_W_m2K * lateral_m2 * (1.0 - bearing) * (1.0 - nut)
-    loss_W_K[:, -1] += h_W_m2K[:, 0] * params.area_m2
-    heat_W = params.cell_length_m * speed * (
-        params.k3_W_per_mm_min / params.bearing_length_m * bearing
-        + params.k4_W_per_mm_min / params.nut_length_m * nut)
-    return loss_W_K, heat_W / params.cell_heat_capacity_J_K
+    nut = nut_cells(params, nut_m[:, None])
+    return (convective_loss_W_K(params, feed_mm_min, nut),
+            source_rate(params, feed_mm_min, nut))
