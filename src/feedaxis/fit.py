@@ -124,10 +124,10 @@ def fit(model, cases, progress=None):
     FitResult
     """
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit(_as_list(cases), model, progress)
+        return _fit(model, _as_list(cases), progress)
 
 
-def _fit(cases, model, progress):
+def _fit(model, cases, progress):
     check_available(model, cases)
     model = _with_starting_values(model, cases)
     measured = measured_um(cases)
