@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .effects import Model
-from .fit import check_available
+from .fit import check_available, rms
 from .iso230 import target_groups
 
 THERMAL_EFFECTS = ("thermal_screw", "ambient_expansion")
@@ -22,8 +22,7 @@ def _figures(before_um, after_um):
     """Max |·| and RMS of the thermal error before and after compensation (µm)."""
     return {"max_before_um": float(np.max(np.abs(before_um))),
             "max_after_um": float(np.max(np.abs(after_um))),
-            "rms_before_um": float(np.sqrt(np.mean(np.square(before_um)))),
-            "rms_after_um": float(np.sqrt(np.mean(np.square(after_um))))}
+            "rms_before_um": rms(before_um), "rms_after_um": rms(after_um)}
 
 
 @dataclass(frozen=True)

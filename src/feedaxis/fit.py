@@ -36,13 +36,14 @@ class Statistics:
         rss = max(float(residual_um @ residual_um), 1e-300)
         tss = float(np.sum((measured_um - measured_um.mean()) ** 2))
         log_likelihood_term = n * np.log(rss / n)
-        return cls(n, n_free, _rms(measured_um), _rms(residual_um),
+        return cls(n, n_free, rms(measured_um), rms(residual_um),
                    float(np.max(np.abs(residual_um))), float(np.ptp(residual_um)),
                    1.0 - rss / tss if tss > 0 else float("nan"),
                    log_likelihood_term + 2 * n_free, log_likelihood_term + n_free * np.log(n))
 
 
-def _rms(values):
+def rms(values):
+    """Root mean square of ``values``."""
     return float(np.sqrt(np.mean(np.square(values))))
 
 

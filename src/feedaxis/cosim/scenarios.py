@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..case import write_case
+from ..physics.checks import require_positive
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
 
@@ -424,5 +425,4 @@ def _finish(out, positioning, completed, planned):
 
 def _require_positive(**values):
     for name, value in values.items():
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be > 0, got {value!r}")
+        require_positive(name, value)

@@ -5,8 +5,12 @@ import numpy as np
 
 
 def require_finite(name, value):
-    """Raise ValueError naming ``name`` unless every element of ``value`` is finite."""
-    if not np.all(np.isfinite(np.asarray(value, dtype=float))):
+    """Raise ValueError naming ``name`` unless every element of ``value`` is a finite number."""
+    try:
+        numbers = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.all(np.isfinite(numbers)):
         raise ValueError(f"{name} must be finite, got {value!r}")
 
 
