@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
+from .errors import InputError
 from .physics.geometry import SUPPORTS
 from .physics.thermal import DutySegment
 
@@ -47,17 +48,11 @@ TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
                     "disturbance_N": False}
 
 
-class CaseError(ValueError):
+class CaseError(InputError, ValueError):
     """A case file breaks the format: the message names file, row and column."""
 
     def __init__(self, path, message, row=None, column=None):
-        where = [str(path)]
-        if row is not None:
-            where.append(f"row {row}")
-        if column is not None:
-            where.append(f"column '{column}'")
-        super().__init__(f"{', '.join(where)}: {message}")
-        self.path, self.row, self.column = Path(path), row, column
+        super().__init__(message, path=path, row=row, column=column)
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from . import __version__, text
 from .case import read_case
+from .errors import InputError
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
 
@@ -505,7 +506,7 @@ def main(argv=None):
     except BrokenPipeError:
         sys.stderr.close()
         return 0
-    except ValueError as error:
+    except (InputError, ValueError) as error:
         print(f"feedaxis: {error}", file=sys.stderr)
         return 2
     return 0
