@@ -1,0 +1,75 @@
+"""Pitch-error compensation tables for CNC controllers, from the fitted model or the
+measured means, verified on the measured case before they are loaded.
+
+One module per controller (``linuxcnc``, ``siemens``, ``fanuc``, ``heidenhain``,
+``beckhoff``, ``mach4``), each with ``write(table, axis_id) -> text`` and
+``read(text) -> CompTable`` (the table as that controller applies it), its limits, its sign
+convention (``SIGN``) and how to load the file (``LOAD``).
+"""
+from __future__ import annotations
+
+from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
+from .table import (NEVER_IN_TABLE, CompTable, default_spacing_mm, from_measurement, from_model,
+                    grid_mm)
+from .verify import verify
+
+CONTROLLERS = {module.NAME: module for module in (linuxcnc, siemens, fanuc, heidenhain,
+                                                  beckhoff, mach4)}
+
+
+def build_table(case, model, controller, spacing_mm=None, from_measured=False):
+    """The table for ``controller`` on ``case``: from ``model`` (default) or the measured means.
+
+    The points are equidistant every ``spacing_mm`` (default lead / 8, widened to the
+    controller's point limit) over the measured targets; a table from the measurement on a
+    controller that takes free positions uses the targets themselves unless ``spacing_mm``
+    is given.
+    """
+    module = CONTROLLERS[controller]
+    target_mm = case.positioning.target_mm
+    if from_measured:
+        if spacing_mm is None and not module.EQUIDISTANT:
+            return from_measurement(case)
+        count = len(set(target_mm.round(6)))
+        spacing_mm = spacing_mm or (target_mm.max() - target_mm.min()) / max(count - 1, 1)
+        return from_measurement(case, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
+    spacing_mm = spacing_mm or default_spacing_mm(case, module.MAX_POINTS)
+    return from_model(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
+
+
+def comp_table(case, model, controller, spacing_mm=None, from_measured=False, axis_id=None):
+    """Write the ``controller`` file text, read it back as the controller does and verify it.
+
+    Returns (text, applied CompTable, report dict for printing and ``--json``).
+    """
+    module = CONTROLLERS[controller]
+    table = build_table(case, model, controller, spacing_mm, from_measured)
+    text = module.write(table, axis_id or module.DEFAULT_AXIS_ID)
+    applied = module.read(text)
+    report = {"controller": controller, "source": table.source, "points": table.size,
+              "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),
+              "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
+              "included": list(table.included), "excluded": dict(table.excluded),
+              "sign": module.SIGN, "load": module.LOAD, **verify(case, applied)}
+    if not from_measured:
+        report["excluded"].update({name: reason for name, reason in NEVER_IN_TABLE.items()
+                                   if name not in report["excluded"]})
+    return text, applied, report
+
+
+def summary_lines(report):
+    """The comp-table result for the terminal: the table, what went in, before and after."""
+    lines = [f"{report['controller']} table from the {report['source']}: {report['points']} "
+             f"points {report['first_mm']:g} to {report['last_mm']:g} mm every "
+             f"{report['spacing_mm']:.4g} mm"
+             + (", direction-dependent" if report["direction_dependent"] else ""),
+             f"  in the table: {', '.join(report['included']) or '(nothing)'}"]
+    lines += [f"  left out {name}: {reason}" for name, reason in report["excluded"].items()]
+    lines += [f"  sign: {report['sign']}", f"  load: {report['load']}", "",
+              f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
+    lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
+              for f in report["figures"].values()]
+    lines += [f"warning: {warning}" for warning in report["warnings"]]
+    for path in report.get("files", []):
+        lines.append(f"written: {path}")
+    return "\n".join(lines)
