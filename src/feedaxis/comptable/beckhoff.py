@@ -25,11 +25,6 @@ LOAD = ("list file named by achs_kw[i] with achs_kw_log_ax_nr[i] in the start-up
 PATTERN = r"^((?:kopf|kw)\.[A-Za-z0-9_.\[\]]+)\s+(\S+)"
 
 
-def value_01um(setpoint_um, measured_um):
-    """The stored value (0.1 µm) for a point measured at ``measured_um`` for ``setpoint_um``."""
-    return int(np.round((measured_um - setpoint_um) / UNIT_UM))
-
-
 def write(table, axis_id=DEFAULT_AXIS_ID):
     """The compensation value list of ``table`` for logical axis number ``axis_id``."""
     check_points(table, MAX_POINTS, NAME)
