@@ -33,10 +33,10 @@ LOAD = ("parameter tape (or MDI): 3605#0 = 1 for bidirectional, 3620-3627, 1240,
 PATTERN = r"^N(\d+)\s*(?:A(\d+))?\s*P([-+]?\d+)\s*$"
 
 
-def _magnification(correction_um):
-    """The smallest 3623 that keeps every increment within ±127."""
-    steps = np.abs(np.diff(correction_um)) / DETECTION_UNIT_UM
-    return max(1, int(np.ceil(np.max(steps, initial=0.0) / (MAX_VALUE - 0.5))))
+def _magnification(*corrections_um):
+    """The smallest 3623 that keeps every increment of each table within ±127."""
+    steps = max(float(np.max(np.abs(np.diff(c)), initial=0.0)) for c in corrections_um)
+    return max(1, int(np.ceil(steps / DETECTION_UNIT_UM / (MAX_VALUE - 0.5))))
 
 
 def _increments(correction, reference):
@@ -51,7 +51,7 @@ def write(table, axis_id=DEFAULT_AXIS_ID):
     spacing_mm = check_equidistant(table, NAME)
     j_ref = reference_index(table.position_mm)
     forward, reverse = -table.forward_um, -table.reverse_um
-    magnification = _magnification(np.concatenate((forward, reverse)))
+    magnification = _magnification(forward, reverse)
     unit = DETECTION_UNIT_UM * magnification
     forward_units, reverse_units = quantized(forward, unit), quantized(reverse, unit)
     reference = max(j_ref, 1)
