@@ -9,8 +9,9 @@ convention (``SIGN``) and how to load the file (``LOAD``).
 from __future__ import annotations
 
 from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
-from .table import (NEVER_IN_TABLE, CompTable, default_spacing_mm, from_measurement, from_model,
-                    grid_mm)
+from .base import reference_index
+from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
+                    from_measurement, from_model, grid_mm)
 from .verify import verify
 
 CONTROLLERS = {module.NAME: module for module in (linuxcnc, siemens, fanuc, heidenhain,
@@ -51,10 +52,32 @@ def comp_table(case, model, controller, spacing_mm=None, from_measured=False, ax
               "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
               "included": list(table.included), "excluded": dict(table.excluded),
               "sign": module.SIGN, "load": module.LOAD, **verify(case, applied)}
+    report["notes"] = _notes(case, table, module, spacing_mm)
     if not from_measured:
         report["excluded"].update({name: reason for name, reason in NEVER_IN_TABLE.items()
                                    if name not in report["excluded"]})
     return text, applied, report
+
+
+def _notes(case, table, module, spacing_mm):
+    """What limits this table: the point limit forcing a spacing over lead / 8, a missing
+    direction-dependent part, the controller's reference."""
+    notes = []
+    lead_mm = case.axis.lead_mm
+    if (table.source == "model" and spacing_mm is None
+            and "assembly_eccentricity" in table.included
+            and table.spacing_mm > lead_mm / POINTS_PER_WAVELENGTH + 1e-9):
+        notes.append(f"{module.NAME} takes at most {module.MAX_POINTS} points: "
+                     f"{table.spacing_mm:.4g} mm between points (over lead / "
+                     f"{POINTS_PER_WAVELENGTH} = {lead_mm / POINTS_PER_WAVELENGTH:.4g} mm) "
+                     "follows the once-per-revolution error only roughly")
+    if module.NAME in ("siemens", "fanuc"):
+        notes.append(f"values are relative to the table point nearest 0 mm "
+                     f"({table.position_mm[reference_index(table.position_mm)]:g} mm), where "
+                     "the control references; the figures are unchanged by that offset")
+    if module.NAME == "siemens":
+        notes.append(f"needs MD38000 $MA_MM_ENC_COMP_MAX_POINTS >= {table.size}")
+    return notes
 
 
 def summary_lines(report):
@@ -69,6 +92,7 @@ def summary_lines(report):
               f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
     lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
               for f in report["figures"].values()]
+    lines += [f"note: {note}" for note in report["notes"]]
     lines += [f"warning: {warning}" for warning in report["warnings"]]
     for path in report.get("files", []):
         lines.append(f"written: {path}")
