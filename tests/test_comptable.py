@@ -10,7 +10,7 @@ from feedaxis.case import Positioning, read_case, write_case
 from feedaxis.cli import main
 from feedaxis.comptable import CONTROLLERS, from_model, grid_mm, verify
 from feedaxis.comptable import beckhoff, fanuc, heidenhain, linuxcnc, siemens
-from feedaxis.comptable.base import TableFormatError
+from feedaxis.linefile import LineError
 from feedaxis.comptable.table import CompTable
 from feedaxis.comptable.verify import ALPHA, systematic_test
 from feedaxis.effects import CATALOG, Model
@@ -187,7 +187,7 @@ def test_linuxcnc_type1_example_matches_the_type0_example():
 def test_linuxcnc_loader_stops_at_the_first_line_not_three_numbers():
     table = linuxcnc.read("0 0 0\n10 0.001 0.001\n# comment\n20 0.5 0.5\n")
     assert table.size == 2
-    with pytest.raises(TableFormatError, match="line 2.*strictly"):
+    with pytest.raises(LineError, match="line 2.*strictly"):
         linuxcnc.read("0 0 0\n0 0 0\n")
 
 

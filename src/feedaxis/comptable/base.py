@@ -1,5 +1,5 @@
-"""What every controller format shares: reading numbers back with the line they came from,
-the equidistant grid and the reference point, and the one error for a malformed table."""
+"""What every controller format shares: assignments read back with the line they came from,
+the point limit, the equidistant grid, the reference point and integer units."""
 from __future__ import annotations
 
 import re
@@ -7,29 +7,9 @@ import re
 import numpy as np
 
 from ..errors import InputError
+from ..linefile import LineError
 
 UM_PER_MM = 1000.0
-
-
-class TableFormatError(InputError):
-    """A compensation file that does not parse: names the file, line and field."""
-
-    def __init__(self, path, message, line=None, field=None):
-        super().__init__(message, path=path, row=line, column=field)
-        where = [str(path)] + ([f"line {line}"] if line is not None else []) + \
-            ([f"field '{field}'"] if field is not None else [])
-        self.args = (f"{', '.join(where)}: {message}",)
-
-
-def number(text, path, line, field):
-    """``text`` as a finite float, else :class:`TableFormatError` naming line and field."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise TableFormatError(path, f"not a number: {text!r}", line, field) from None
-    if not np.isfinite(value):
-        raise TableFormatError(path, f"must be finite, got {text!r}", line, field)
-    return value
 
 
 def assignments(text, path, pattern):
@@ -43,9 +23,9 @@ def assignments(text, path, pattern):
 
 
 def require(found, key, path):
-    """The (value text, line) of ``key`` in ``found``, else a :class:`TableFormatError`."""
+    """The (value text, line) of ``key`` in ``found``, else a :class:`LineError`."""
     if key not in found:
-        raise TableFormatError(path, "missing", field=key)
+        raise LineError(path, "missing", field=key)
     return found[key]
 
 

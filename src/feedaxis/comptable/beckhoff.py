@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import (TableFormatError, assignments, check_equidistant, check_points, number,
-                   quantized, require)
+from ..linefile import LineError, number
+from .base import assignments, check_equidistant, check_points, quantized, require
 from .table import CompTable
 
 NAME = "beckhoff"
@@ -50,7 +50,7 @@ def read(text, path="achskw.lis"):
     count = int(number(require(found, "kw.ssfk.kw_nr_max", path)[0], path,
                        found["kw.ssfk.kw_nr_max"][1], "kw.ssfk.kw_nr_max"))
     if not 2 <= count <= MAX_POINTS:
-        raise TableFormatError(path, f"must be 2 to {MAX_POINTS}", found["kw.ssfk.kw_nr_max"][1],
+        raise LineError(path, f"must be 2 to {MAX_POINTS}", found["kw.ssfk.kw_nr_max"][1],
                                "kw.ssfk.kw_nr_max")
     columns = {}
     for name in ("setpoint", "pos", "neg"):
@@ -60,5 +60,5 @@ def read(text, path="achskw.lis"):
     setpoint_mm = columns["setpoint"] * UNIT_UM / 1e3
     for index in np.flatnonzero(np.diff(setpoint_mm) <= 0):
         key = f"kw.ssfk.table[{index + 1}].setpoint"
-        raise TableFormatError(path, "setpoints must increase", found[key][1], key)
+        raise LineError(path, "setpoints must increase", found[key][1], key)
     return CompTable(setpoint_mm, columns["pos"] * UNIT_UM, columns["neg"] * UNIT_UM, "file")

@@ -16,8 +16,8 @@ import re
 
 import numpy as np
 
-from .base import (TableFormatError, check_equidistant, check_points, quantized,
-                   reference_index)
+from ..linefile import LineError
+from .base import check_equidistant, check_points, quantized, reference_index
 from .table import CompTable
 
 NAME = "fanuc"
@@ -100,7 +100,7 @@ def read(text, path="PITCH.TXT"):
             continue
         match = re.match(PATTERN, stripped)
         if not match:
-            raise TableFormatError(path, "expected N<number> [A<axis>] P<value>", line_number)
+            raise LineError(path, "expected N<number> [A<axis>] P<value>", line_number)
         number_, value = int(match.group(1)), int(match.group(3))
         if number_ >= PITCH_DATA:
             data[number_ - PITCH_DATA] = value
@@ -108,10 +108,10 @@ def read(text, path="PITCH.TXT"):
             parameters[number_] = value
     for key in (1240, 3620, 3621, 3622, 3623, 3624):
         if key not in parameters:
-            raise TableFormatError(path, "missing parameter", field=str(key))
+            raise LineError(path, "missing parameter", field=str(key))
     reference, lowest, highest = parameters[3620], parameters[3621], parameters[3622]
     if not lowest <= reference <= highest or parameters[3624] <= 0:
-        raise TableFormatError(path, "needs 3621 <= 3620 <= 3622 and 3624 > 0", field="3620")
+        raise LineError(path, "needs 3621 <= 3620 <= 3622 and 3624 > 0", field="3620")
     unit = DETECTION_UNIT_UM * parameters[3623]
     position_mm = (parameters[1240] + parameters[3624] * np.arange(lowest - 1 - reference,
                                                                  highest - reference + 1)) \

@@ -15,7 +15,8 @@ import re
 
 import numpy as np
 
-from .base import UM_PER_MM, TableFormatError, check_points, number
+from ..linefile import LineError, number
+from .base import UM_PER_MM, check_points
 from .table import CompTable
 
 NAME = "heidenhain"
@@ -51,21 +52,21 @@ def read(text, path="X.COM"):
     header_at = next((i for i, line in enumerate(lines) if line.split()[:2] == ["NR", "AXISPOS"]),
                      None)
     if header_at is None:
-        raise TableFormatError(path, "no 'NR AXISPOS ...' header line", field="AXISPOS")
+        raise LineError(path, "no 'NR AXISPOS ...' header line", field="AXISPOS")
     header = lines[header_at].split()
     if len(header) < 3:
-        raise TableFormatError(path, "needs a column for the axis", header_at + 1)
+        raise LineError(path, "needs a column for the axis", header_at + 1)
     rows = []
     for line_number in range(header_at + 2, len(lines) + 1):
         fields = lines[line_number - 1].split()
         if not fields or re.match(r"\[END\]", fields[0]):
             break
         if len(fields) != len(header):
-            raise TableFormatError(path, f"{len(fields)} fields, the header has {len(header)}",
+            raise LineError(path, f"{len(fields)} fields, the header has {len(header)}",
                                    line_number)
         rows.append([number(v, path, line_number, name) for v, name in zip(fields, header)])
     if not 2 <= len(rows) <= MAX_POINTS:
-        raise TableFormatError(path, f"needs 2 to {MAX_POINTS} entries, found {len(rows)}",
+        raise LineError(path, f"needs 2 to {MAX_POINTS} entries, found {len(rows)}",
                                header_at + 2)
     values = np.array(rows)
     columns = dict(zip(header, values.T))
@@ -73,5 +74,5 @@ def read(text, path="X.COM"):
     reverse_um = columns["BACKLASH"] * UM_PER_MM if "BACKLASH" in columns else forward_um
     position_mm = columns["AXISPOS"]
     for index in np.flatnonzero(np.diff(position_mm) <= 0):
-        raise TableFormatError(path, "AXISPOS must increase", header_at + index + 3, "AXISPOS")
+        raise LineError(path, "AXISPOS must increase", header_at + index + 3, "AXISPOS")
     return CompTable(position_mm, forward_um, reverse_um, "file")

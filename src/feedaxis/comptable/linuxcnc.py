@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import UM_PER_MM, TableFormatError, check_points
+from ..linefile import LineError
+from .base import UM_PER_MM, check_points
 from .table import CompTable
 
 NAME = "linuxcnc"
@@ -42,16 +43,16 @@ def read(text, path="COMP_FILE"):
             rows.pop()
             break
     if len(rows) < 2:
-        raise TableFormatError(path, "needs at least two lines of 'nominal forward reverse'",
+        raise LineError(path, "needs at least two lines of 'nominal forward reverse'",
                                len(rows) + 1)
     if len(rows) > MAX_POINTS:
-        raise TableFormatError(path, f"more than {MAX_POINTS} lines", MAX_POINTS + 1)
+        raise LineError(path, f"more than {MAX_POINTS} lines", MAX_POINTS + 1)
     values = np.array(rows)
     for index in np.flatnonzero(np.diff(values[:, 0]) <= 0):
-        raise TableFormatError(path, "nominals must increase strictly", index + 2, "nominal")
+        raise LineError(path, "nominals must increase strictly", index + 2, "nominal")
     bad = np.argwhere(~np.isfinite(values))
     if bad.size:
-        raise TableFormatError(path, "must be finite", bad[0][0] + 1,
+        raise LineError(path, "must be finite", bad[0][0] + 1,
                                ("nominal", "forward", "reverse")[bad[0][1]])
     return CompTable(values[:, 0], -values[:, 1] * UM_PER_MM, -values[:, 2] * UM_PER_MM,
                      "file")

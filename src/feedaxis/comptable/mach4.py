@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import (UM_PER_MM, TableFormatError, assignments, check_equidistant, check_points,
-                   number, require)
+from ..linefile import LineError, number
+from .base import UM_PER_MM, assignments, check_equidistant, check_points, require
 from .table import CompTable
 
 NAME = "mach4"
@@ -48,12 +48,12 @@ def read(text, path="screwmap.txt"):
         values[key] = number(value, path, line, key)
     count = int(values["Number of points"])
     if count < 2 or values["Length"] <= 0:
-        raise TableFormatError(path, "needs at least 2 points over a length > 0",
+        raise LineError(path, "needs at least 2 points over a length > 0",
                                found["Number of points"][1], "Number of points")
     rows = [line.split() for line in text.splitlines()
             if line.strip() and not line.lstrip().startswith("#") and "=" not in line]
     if len(rows) != count:
-        raise TableFormatError(path, f"{len(rows)} point lines for {count} points",
+        raise LineError(path, f"{len(rows)} point lines for {count} points",
                                field="Number of points")
     errors = np.array([[number(v, path, None, f"point {i}") for v in row[2:4]]
                        for i, row in enumerate(rows)])

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import (UM_PER_MM, TableFormatError, assignments, check_equidistant, check_points,
-                   number, reference_index, require)
+from ..linefile import LineError, number
+from .base import (UM_PER_MM, assignments, check_equidistant, check_points, reference_index,
+                   require)
 from .table import CompTable
 
 NAME = "siemens"
@@ -72,7 +73,7 @@ def _grid(found, prefix, suffix, path):
         values[name] = (number(text, path, line, key), line, key)
     step, line, key = values["STEP"]
     if step <= 0:
-        raise TableFormatError(path, "must be > 0", line, key)
+        raise LineError(path, "must be > 0", line, key)
     count = int(round((values["MAX"][0] - values["MIN"][0]) / step)) + 1
     return values["MIN"][0] + step * np.arange(count)
 
@@ -87,7 +88,7 @@ def read(text, path="AX_EEC.INI"):
     found = assignments(text, path, PATTERN)
     axes = {key.split(",")[-1].rstrip("]") for key in found if key.startswith("$AA_ENC_COMP[")}
     if len(axes) != 1:
-        raise TableFormatError(path, "expected the $AA_ENC_COMP values of one axis",
+        raise LineError(path, "expected the $AA_ENC_COMP values of one axis",
                                field="$AA_ENC_COMP")
     axis_id = axes.pop()
     position_mm = _grid(found, "$AA_ENC_COMP", f"[0,{axis_id}]", path)

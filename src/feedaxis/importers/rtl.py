@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..comptable.base import TableFormatError
+from ..linefile import LineError, number
 from . import Measurement
 
 REQUIRED = ("TARGET DATA", "RUNS", "DEVIATIONS")
@@ -37,50 +37,40 @@ def _key(text):
 def _sections(path, lines):
     """{SECTION: [(line number, text), ...]} in file order."""
     sections, current = {}, None
-    for number, line in enumerate(lines, 1):
+    for row, line in enumerate(lines, 1):
         stripped = line.strip()
         if stripped.endswith("::"):
             current = _key(stripped[:-2])
             if current in sections:
-                raise TableFormatError(path, "section appears twice", number, current)
+                raise LineError(path, "section appears twice", row, current)
             sections[current] = []
         elif stripped and current is not None:
-            sections[current].append((number, stripped))
+            sections[current].append((row, stripped))
         elif stripped:
-            raise TableFormatError(path, "text before the first section", number)
+            raise LineError(path, "text before the first section", row)
     for name in REQUIRED:
         if name not in sections:
-            raise TableFormatError(path, "missing section", field=f"{name}::")
+            raise LineError(path, "missing section", field=f"{name}::")
     return sections
 
 
 def _fields(section):
     """{KEY: (value, line)} of the ``key : value`` lines of a section."""
     found = {}
-    for number, text in section:
+    for row, text in section:
         key, colon, value = text.partition(":")
         if colon:
-            found[_key(key)] = (value.strip(), number)
+            found[_key(key)] = (value.strip(), row)
     return found
 
 
 def _integer(path, fields, key, section_line):
     if key not in fields:
-        raise TableFormatError(path, "missing", section_line, key)
+        raise LineError(path, "missing", section_line, key)
     text, line = fields[key]
     if not re.fullmatch(r"\+?\d+", text):
-        raise TableFormatError(path, f"expected a whole number, got {text!r}", line, key)
+        raise LineError(path, f"expected a whole number, got {text!r}", line, key)
     return int(text), line
-
-
-def _number(path, text, line, field):
-    try:
-        value = float(text)
-    except ValueError:
-        raise TableFormatError(path, f"not a number: {text!r}", line, field) from None
-    if not np.isfinite(value):
-        raise TableFormatError(path, f"must be finite, got {text!r}", line, field)
-    return value
 
 
 def _targets(path, section):
@@ -88,43 +78,43 @@ def _targets(path, section):
     fields = _fields(section)
     count, count_line = _integer(path, fields, "TARGET-COUNT", section[0][0] if section else None)
     if "TARGETS" not in fields:
-        raise TableFormatError(path, "missing", count_line, "Targets")
+        raise LineError(path, "missing", count_line, "Targets")
     start = fields["TARGETS"][1]
     values = []
-    for number, text in section:
-        if number < start:
+    for row, text in section:
+        if row < start:
             continue
-        if number > start and ":" in text:
+        if row > start and ":" in text:
             break
-        words = text.partition(":")[2].split() if number == start else text.split()
-        values += [(_number(path, w, number, "Targets"), number) for w in words]
+        words = text.partition(":")[2].split() if row == start else text.split()
+        values += [(number(w, path, row, "Targets"), row) for w in words]
     if len(values) != count:
-        raise TableFormatError(path, f"{len(values)} targets listed, Target-count says {count}",
+        raise LineError(path, f"{len(values)} targets listed, Target-count says {count}",
                                count_line, "Target-count")
     target_mm = np.array([v for v, _ in values])
     for index in np.flatnonzero(np.diff(target_mm) <= 0):
-        raise TableFormatError(path, "targets must increase", values[index + 1][1], "Targets")
+        raise LineError(path, "targets must increase", values[index + 1][1], "Targets")
     return target_mm
 
 
 def _deviations(path, section, n_targets, n_runs):
     """{run: [(target number, deviation_um, line), ...]} in listed order."""
     runs = {}
-    for number, text in section:
+    for row, text in section:
         words = text.split()
         if not runs and _key(text).startswith("RUN TARGET"):
             continue  # the "Run Target Data:" header
         if len(words) != 3:
-            raise TableFormatError(path, "expected 'run target deviation'", number)
-        run = _number(path, words[0], number, "run")
-        target = _number(path, words[1], number, "target")
+            raise LineError(path, "expected 'run target deviation'", row)
+        run = number(words[0], path, row, "run")
+        target = number(words[1], path, row, "target")
         if run != int(run) or not 1 <= run <= n_runs:
-            raise TableFormatError(path, f"run must be 1 to Run-count {n_runs}", number, "run")
+            raise LineError(path, f"run must be 1 to Run-count {n_runs}", row, "run")
         if target != int(target) or not 1 <= target <= n_targets:
-            raise TableFormatError(path, f"target must be 1 to Target-count {n_targets}",
-                                   number, "target")
-        runs.setdefault(int(run), []).append((int(target), _number(path, words[2], number,
-                                                                    "deviation"), number))
+            raise LineError(path, f"target must be 1 to Target-count {n_targets}",
+                                   row, "target")
+        runs.setdefault(int(run), []).append((int(target), number(words[2], path, row,
+                                                                    "deviation"), row))
     return runs
 
 
@@ -133,10 +123,10 @@ def _direction(path, run, rows, bidirectional):
     order = np.diff([target for target, _, _ in rows])
     sign = 1.0 if np.all(order > 0) else -1.0 if np.all(order < 0) else 0.0
     if sign == 0.0:
-        raise TableFormatError(path, f"run {run} lists its targets out of travel order",
+        raise LineError(path, f"run {run} lists its targets out of travel order",
                                rows[0][2], "target")
     if bidirectional and sign != (1.0 if run % 2 else -1.0):
-        raise TableFormatError(path, f"run {run}: in a bidirectional test odd runs move in + "
+        raise LineError(path, f"run {run}: in a bidirectional test odd runs move in + "
                                      "(targets ascending), even runs in - (descending)",
                                rows[0][2], "target")
     return sign
@@ -154,7 +144,7 @@ def read_rtl(path):
     for run in range(1, n_runs + 1):
         listed = sorted(target for target, _, _ in runs.get(run, []))
         if listed != list(range(1, target_mm.size + 1)):
-            raise TableFormatError(path, f"run {run} must list every target once "
+            raise LineError(path, f"run {run} must list every target once "
                                          f"({len(listed)} of {target_mm.size} rows)",
                                    runs_line, "Run-count")
     bidirectional = n_runs > 1 and any(
@@ -186,9 +176,9 @@ def _dropped(sections):
         for key, (value, _) in _fields(lines).items():
             if not (section == "USER-TEXT" and key in KEPT) and value:
                 dropped[f"{section}.{key}"] = value
-        for number, text in lines:
+        for row, text in lines:
             if ":" not in text:
-                dropped[f"{section}.line {number}"] = text
+                dropped[f"{section}.line {row}"] = text
     return dropped
 
 

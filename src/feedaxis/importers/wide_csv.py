@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..comptable.base import TableFormatError
+from ..linefile import LineError, number
 from . import Measurement
 
 COLUMN = re.compile(r"^run(\d+)(?:_?(up|down)|([+-]))$")
@@ -30,7 +30,7 @@ def _separator(header):
 def _run_column(path, name, line):
     match = COLUMN.match(re.sub(r"\s+", "", name).lower())
     if not match or int(match.group(1)) < 1:
-        raise TableFormatError(path, "expected run<N>+ or run<N>- (or run<N>_up / _down)",
+        raise LineError(path, "expected run<N>+ or run<N>- (or run<N>_up / _down)",
                                line, name)
     sign = match.group(3) or ("+" if match.group(2) == "up" else "-")
     return int(match.group(1)), 1.0 if sign == "+" else -1.0
@@ -38,15 +38,7 @@ def _run_column(path, name, line):
 
 def _cell(path, text, line, column, decimal_comma):
     text = text.strip()
-    if decimal_comma:
-        text = text.replace(",", ".")
-    try:
-        value = float(text)
-    except ValueError:
-        raise TableFormatError(path, f"not a number: {text!r}", line, column) from None
-    if not np.isfinite(value):
-        raise TableFormatError(path, f"must be finite, got {text!r}", line, column)
-    return value
+    return number(text.replace(",", ".") if decimal_comma else text, path, line, column)
 
 
 def read_wide_csv(path):
@@ -56,29 +48,29 @@ def read_wide_csv(path):
             enumerate(path.read_text(encoding="utf-8-sig").splitlines(), 1)
             if line.strip() and not line.lstrip().startswith("#")]
     if len(rows) < 2:
-        raise TableFormatError(path, "needs a header row and at least one target row")
+        raise LineError(path, "needs a header row and at least one target row")
     header_line, header_text = rows[0]
     separator = _separator(header_text)
     header = [name.strip() for name in header_text.split(separator)]
     if header[0] != "target_mm":
-        raise TableFormatError(path, "the first column must be target_mm", header_line,
+        raise LineError(path, "the first column must be target_mm", header_line,
                                header[0])
     runs = [_run_column(path, name, header_line) for name in header[1:]]
     if not runs:
-        raise TableFormatError(path, "no run columns after target_mm", header_line)
+        raise LineError(path, "no run columns after target_mm", header_line)
     for index, run in enumerate(runs):
         if run in runs[:index]:
-            raise TableFormatError(path, "column appears twice", header_line, header[index + 1])
+            raise LineError(path, "column appears twice", header_line, header[index + 1])
     columns = {"target_mm": [], "error_um": [], "direction": [], "run": []}
     targets = []
     for line, text in rows[1:]:
         cells = text.split(separator)
         if len(cells) != len(header):
-            raise TableFormatError(path, f"{len(cells)} fields, the header has {len(header)}",
+            raise LineError(path, f"{len(cells)} fields, the header has {len(header)}",
                                    line)
         target = _cell(path, cells[0], line, "target_mm", separator != ",")
         if target in targets:
-            raise TableFormatError(path, "target appears twice", line, "target_mm")
+            raise LineError(path, "target appears twice", line, "target_mm")
         targets.append(target)
         for (run, sign), name, cell in zip(runs, header[1:], cells[1:]):
             if cell.strip():
@@ -87,5 +79,5 @@ def read_wide_csv(path):
                 columns["direction"].append(sign)
                 columns["run"].append(run)
     if not columns["error_um"]:
-        raise TableFormatError(path, "no deviations: every run cell is empty")
+        raise LineError(path, "no deviations: every run cell is empty")
     return Measurement(*(np.array(columns[k], dtype=float) for k in columns))
