@@ -135,6 +135,7 @@ def test_beckhoff_reproduces_the_manuals_worked_example():
     assert "kw.ssfk.table[0].pos          -102" in text
     assert "kw.ssfk.table[0].neg          80" in text
     assert "kw.ssfk.interval              100000" in text
+    assert "kw.ssfk.unit                  1" in text  # P-COMP-00017: 1 = metric, 0.1 um
     back = beckhoff.read(text)
     assert back.forward_um[0] == pytest.approx(-10.2) and back.reverse_um[0] == pytest.approx(8.0)
 

@@ -174,6 +174,8 @@ BROKEN = {
     "backward run out of travel order": (_swap_first_backward_rows, "target", r"^2\s+6\s"),
     "even run moving in +": (lambda t: _renumber(_renumber(_renumber(t, 1, "X"), 2, 1), "X", 2),
                              "target", r"^1\s+7\s"),
+    "run count zero": (lambda t: t.replace("Run-count:6", "Run-count:0"), "Run-count",
+                       r"Run-count"),
     "run count too high": (lambda t: t.replace("Run-count:6", "Run-count:8"), "Run-count",
                            r"Run-count"),
     "row of two fields": (lambda t: re.sub(r"^(5\s+2)\s+\S+$", r"\1", t, flags=re.M), None,

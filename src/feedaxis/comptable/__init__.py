@@ -76,7 +76,9 @@ def _notes(case, table, module, spacing_mm):
                      f"({table.position_mm[reference_index(table.position_mm)]:g} mm), where "
                      "the control references; the figures are unchanged by that offset")
     if module.NAME == "siemens":
-        notes.append(f"needs MD38000 $MA_MM_ENC_COMP_MAX_POINTS >= {table.size}")
+        notes.append(f"needs MD38000 $MA_MM_ENC_COMP_MAX_POINTS >= {table.size}"
+                     + (f" and MD18342 $MN_MM_CEC_MAX_POINTS[0] and [1] >= {table.size}"
+                        if table.bidirectional else ""))
     return notes
 
 

@@ -1,7 +1,8 @@
 """Beckhoff TwinCAT CNC (TF5200) leadscrew error compensation, ``kw.ssfk.*``.
 
 A compensation value list (``achskw*.lis``) with a bilateral table: per point the setpoint
-and the value in the positive (``pos``) and negative (``neg``) direction, in 0.1 µm.
+and the value in the positive (``pos``) and negative (``neg``) direction, in 0.1 µm
+(``kw.ssfk.unit`` = 1, P-COMP-00017; 0 would mean encoder increments).
 The manual's worked example: setpoint 19866.7 µm, measured 19856.5 µm in + gives
 ``pos = -102``; measured 19874.7 µm in − gives ``neg = +80``: value = measured − setpoint.
 Positions between points are interpolated linearly, the end values hold beyond.
@@ -31,7 +32,7 @@ def write(table, axis_id=DEFAULT_AXIS_ID):
     spacing_mm = check_equidistant(table, NAME)
     setpoint = quantized(table.position_mm * 1e3, UNIT_UM)
     lines = [f"kopf.log_achs_nr              {axis_id}",
-             "kw.ssfk.unit                  0",
+             "kw.ssfk.unit                  1",
              f"kw.ssfk.interval              {int(round(spacing_mm * 1e3 / UNIT_UM))}",
              f"kw.ssfk.kw_startpos           {setpoint[0]}",
              f"kw.ssfk.kw_nr_max             {table.size}",
@@ -47,6 +48,10 @@ def write(table, axis_id=DEFAULT_AXIS_ID):
 def read(text, path="achskw.lis"):
     """The bilateral table of a ``kw.ssfk`` list (setpoints, pos, neg in 0.1 µm)."""
     found = assignments(text, path, PATTERN)
+    unit, line = require(found, "kw.ssfk.unit", path)
+    if unit != "1":
+        raise LineError(path, "only metric values (1: 0.1 um) are read; 0 means encoder "
+                              "increments", line, "kw.ssfk.unit")
     count = int(number(require(found, "kw.ssfk.kw_nr_max", path)[0], path,
                        found["kw.ssfk.kw_nr_max"][1], "kw.ssfk.kw_nr_max"))
     if not 2 <= count <= MAX_POINTS:

@@ -32,7 +32,8 @@ def systematic_test(positioning):
     share = between / total if total > 0 else 0.0
     if all(s.size < 2 for s in samples) or len(samples) < 2:
         return {"p_value": None, "systematic_share": share}
-    return {"p_value": float(stats.f_oneway(*samples).pvalue), "systematic_share": share}
+    p_value = float(stats.f_oneway(*samples).pvalue)
+    return {"p_value": p_value if np.isfinite(p_value) else None, "systematic_share": share}
 
 
 def verify(case, applied):

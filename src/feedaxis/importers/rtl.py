@@ -65,11 +65,13 @@ def _fields(section):
 
 
 def _integer(path, fields, key, section_line):
+    """The count ``key`` (>= 1) and its line; the field is named as the format writes it."""
     if key not in fields:
-        raise LineError(path, "missing", section_line, key)
+        raise LineError(path, "missing", section_line, key.capitalize())
     text, line = fields[key]
-    if not re.fullmatch(r"\+?\d+", text):
-        raise LineError(path, f"expected a whole number, got {text!r}", line, key)
+    if not re.fullmatch(r"\+?\d+", text) or int(text) < 1:
+        raise LineError(path, f"expected a whole number >= 1, got {text!r}", line,
+                        key.capitalize())
     return int(text), line
 
 
