@@ -89,6 +89,9 @@ def test_round_trip_removes_lead_eccentricity_and_backlash_between_targets(
     assert figures["E_um"]["after_um"] < 0.2 * figures["E_um"]["before_um"]
     assert figures["B_um"]["after_um"] < 0.2 * figures["B_um"]["before_um"]
     assert not report["warnings"]
+    between = report["between_targets"]  # the fitted model's view, close to the truth's
+    assert between["pv_before_um"] == pytest.approx(before_um, rel=0.05)
+    assert between["pv_after_um"] <= 0.2 * between["pv_before_um"]
 
 
 def test_the_measured_means_leave_the_eccentricity_between_targets(tmp_path, fitted, capsys):
@@ -104,6 +107,10 @@ def test_the_measured_means_leave_the_eccentricity_between_targets(tmp_path, fit
     assert report["source"] == "measurement" and report["points"] == 21
     assert report["figures"]["E_um"]["after_um"] < 1e-3  # exact at the targets (0.1 nm digits)
     assert left[("--from-measurement",)] > 2 * TRUTH["cos_um"] > 4 * left[()]
+    # the fitted model sees what the measured means leave between the targets
+    assert report["between_targets"]["pv_after_um"] == pytest.approx(
+        left[("--from-measurement",)], rel=0.1)
+    assert any("in-sample" in note for note in report["notes"])
 
 
 def test_thermal_effects_and_unresolvable_ripples_stay_out(tmp_path):

@@ -12,7 +12,7 @@ from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
 from .base import reference_index
 from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
                     from_measurement, from_model, grid_mm)
-from .verify import verify
+from .verify import between_targets, verify
 
 CONTROLLERS = {module.NAME: module for module in (linuxcnc, siemens, fanuc, heidenhain,
                                                   beckhoff, mach4)}
@@ -51,7 +51,8 @@ def comp_table(case, model, controller, spacing_mm=None, from_measured=False, ax
               "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),
               "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
               "included": list(table.included), "excluded": dict(table.excluded),
-              "sign": module.SIGN, "load": module.LOAD, **verify(case, applied)}
+              "sign": module.SIGN, "load": module.LOAD, **verify(case, applied),
+              "between_targets": between_targets(case, model, applied)}
     report["notes"] = _notes(case, table, module, spacing_mm)
     if not from_measured:
         report["excluded"].update({name: reason for name, reason in NEVER_IN_TABLE.items()
@@ -71,6 +72,9 @@ def _notes(case, table, module, spacing_mm):
                      f"{table.spacing_mm:.4g} mm between points (over lead / "
                      f"{POINTS_PER_WAVELENGTH} = {lead_mm / POINTS_PER_WAVELENGTH:.4g} mm) "
                      "follows the once-per-revolution error only roughly")
+    if table.source == "measurement":
+        notes.append("the table is the measured means at the targets: the figures after are "
+                     "in-sample there (optimistic); between the targets it is blind")
     if module.NAME in ("siemens", "fanuc"):
         notes.append(f"values are relative to the table point nearest 0 mm "
                      f"({table.position_mm[reference_index(table.position_mm)]:g} mm), where "
@@ -94,6 +98,10 @@ def summary_lines(report):
               f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
     lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
               for f in report["figures"].values()]
+    between = report["between_targets"]
+    if between:
+        lines.append(f"{'between targets (model), P-V':34s} {between['pv_before_um']:9.3f} "
+                     f"{between['pv_after_um']:9.3f}")
     lines += [f"note: {note}" for note in report["notes"]]
     lines += [f"warning: {warning}" for warning in report["warnings"]]
     for path in report.get("files", []):

@@ -152,6 +152,14 @@ def from_model(case, model, position_mm):
     return CompTable(position_mm, forward_um, reverse_um, "model", tuple(included), excluded)
 
 
+def position_error_um(case, model, position_mm, direction):
+    """The deviation (µm) at ``position_mm`` in ``direction`` of ``model``'s effects that a
+    position table could remove (every catalog position effect and backlash, none left out)."""
+    effects = [e for e in model.effects
+               if e.name in POSITION_TABLE_EFFECTS + DIRECTIONAL_EFFECTS]
+    return Model(effects, model.values).predict_um(_grid_case(case, position_mm, direction))
+
+
 def _spacing(position_mm):
     return float(np.ptp(position_mm) / max(position_mm.size - 1, 1))
 

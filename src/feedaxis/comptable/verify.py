@@ -14,9 +14,11 @@ import numpy as np
 from scipy import stats
 
 from ..iso230 import FIGURE_NAMES, iso230_figures, target_groups
+from .table import position_error_um
 
 ALPHA = 0.05
 LITTLE_GAIN = 0.2
+DENSE_POINTS = 8001
 
 
 def systematic_test(positioning):
@@ -78,3 +80,23 @@ def _warnings(figures, systematic):
                         "systematic (the part a table removes); the rest is repeatability or "
                         "drift")
     return warnings
+
+
+def between_targets(case, model, applied):
+    """The fitted model's view between the targets: peak to valley (µm, both directions) of
+    its position-table effects over ``DENSE_POINTS`` positions from the first to the last
+    target, before and after the table ``applied``; None when the model has none.
+
+    At the targets the figures of :func:`verify` are in-sample for a table made from the
+    measured means there; between them only a model can say what is left.
+    """
+    target_mm = case.positioning.target_mm
+    dense_mm = np.linspace(target_mm.min(), target_mm.max(), DENSE_POINTS)
+    before, after = [], []
+    for direction in (1.0, -1.0):
+        predicted_um = position_error_um(case, model, dense_mm, direction)
+        before.append(predicted_um)
+        after.append(predicted_um - applied.error_um(dense_mm, direction))
+    if not np.any(np.concatenate(before)):
+        return None
+    return {"pv_before_um": float(np.ptp(before)), "pv_after_um": float(np.ptp(after))}
