@@ -61,8 +61,8 @@ def comp_table(case, model, controller, spacing_mm=None, from_measured=False, ax
 
 
 def _notes(case, table, module, spacing_mm):
-    """What limits this table: the point limit forcing a spacing over lead / 8, a missing
-    direction-dependent part, the controller's reference."""
+    """What limits this table: the point limit forcing a spacing over lead / 8, figures
+    in-sample for measured means, the controller's reference and machine data."""
     notes = []
     lead_mm = case.axis.lead_mm
     if (table.source == "model" and spacing_mm is None

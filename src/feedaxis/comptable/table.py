@@ -52,7 +52,7 @@ class CompTable:
     @property
     def spacing_mm(self):
         """The mean distance between table points (mm)."""
-        return float(np.ptp(self.position_mm) / max(self.size - 1, 1))
+        return _spacing(self.position_mm)
 
     @property
     def bidirectional(self):
@@ -101,7 +101,7 @@ def _effect_on(effect, values, case, position_mm, direction):
 
 
 def _table_helps(effect, values, case, position_mm):
-    """True when linear interpolation between the table points leaves less of the effect
+    """True when linear interpolation between the table points leaves no more of the effect
     (RMS over a dense grid, both directions) than not compensating it at all."""
     dense_mm = np.linspace(position_mm[0], position_mm[-1],
                            (position_mm.size - 1) * DENSE_PER_SPACING + 1)
@@ -111,7 +111,7 @@ def _table_helps(effect, values, case, position_mm):
         at_points_um = _effect_on(effect, values, case, position_mm, direction)
         before += float(np.sum(truth_um ** 2))
         after += float(np.sum((truth_um - np.interp(dense_mm, position_mm, at_points_um)) ** 2))
-    return after < before
+    return after <= before
 
 
 def from_model(case, model, position_mm):
@@ -139,9 +139,8 @@ def from_model(case, model, position_mm):
         if missing:
             raise InputError(f"the model's {effect.name} needs {', '.join(missing)}",
                              path=case.folder / "axis.toml")
-        if effect.name in POSITION_TABLE_EFFECTS and not _table_helps(effect, values, case,
-                                                                      position_mm):
-            wavelength_mm = effect.wavelength_mm(case.axis)
+        wavelength_mm = effect.wavelength_mm(case.axis)
+        if wavelength_mm and not _table_helps(effect, values, case, position_mm):
             excluded[effect.name] = (f"its {wavelength_mm:.4g} mm wavelength is too short for "
                                      f"{_spacing(position_mm):.4g} mm between table points: "
                                      "interpolated, it would add error")
@@ -161,6 +160,7 @@ def position_error_um(case, model, position_mm, direction):
 
 
 def _spacing(position_mm):
+    """The mean distance between ``position_mm`` (mm)."""
     return float(np.ptp(position_mm) / max(position_mm.size - 1, 1))
 
 
