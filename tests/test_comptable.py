@@ -130,6 +130,11 @@ def test_thermal_effects_and_unresolvable_ripples_stay_out(tmp_path):
     assert "0.02 mm wavelength" in table.excluded["motor_step_error"]
     fine = from_model(case, model, grid_mm(0.0, 5.0, 0.0025))
     assert "motor_step_error" in fine.included
+    thermal = Model([CATALOG["lead_error"], CATALOG["ambient_expansion"]],
+                    {"lead_error": {"offset_um": 0.0, "slope_um_per_mm": 0.0}})
+    table = from_model(case, thermal, grid_mm(0.0, 5.0, 0.5))
+    assert table.included == ("lead_error",) and not np.any(table.forward_um)
+    assert "thermal" in table.excluded["ambient_expansion"]
 
 
 def test_beckhoff_reproduces_the_manuals_worked_example():
