@@ -2,6 +2,7 @@
 imported gives back the same samples and ISO 230-2 figures; every structural variation of
 the format note reads; every broken file is refused naming file, line and field, exit 2,
 nothing written."""
+import json
 import re
 
 import numpy as np
@@ -84,6 +85,20 @@ def test_rtl_round_trips_a_generated_case_exactly(tmp_path, axis, capsys):
     report = capsys.readouterr().out
     assert "USER-TEXT.DATE = 2026-11-02" in report and "Air temp 20.3" in report
     assert read_case(out).positioning.bidirectional
+
+
+def test_axis_toml_name_wins_and_the_files_name_is_reported(tmp_path, capsys):
+    axis = tmp_path / "axis.toml"
+    axis.write_text('name = "X of mill 4"\n[screw]\nlead_mm = 10.0\n')
+    text = rtl_text(TARGETS_MM, generated_runs(), {"Machine": "VMC-800", "Axis": "X"})
+    source = tmp_path / "x.rtl"
+    source.write_text(text)
+    out = tmp_path / "case"
+    assert main(["import", str(source), "--axis", str(axis), "--out", str(out), "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["name"] == "X of mill 4" == read_case(out).name
+    assert payload["dropped"]["axis name"].startswith("VMC-800 axis X")
+    assert payload["samples"] == 42 and payload["targets"] == 7 and payload["runs"] == 3
 
 
 def _exponents(text):

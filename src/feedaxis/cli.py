@@ -117,16 +117,16 @@ def _cmd_compensate(args):
 def _cmd_import(args):
     from .importers import import_case
 
-    folder, measurement = import_case(args.file, args.axis, args.out)
+    folder, measurement, dropped = import_case(args.file, args.axis, args.out)
     directions = sorted({int(d) for d in measurement.direction}, reverse=True)
     payload = {"case": str(folder), "samples": int(measurement.error_um.size),
                "targets": int(len(set(measurement.target_mm))),
                "runs": int(measurement.run.max()), "directions": directions,
-               "name": measurement.name, "dropped": measurement.dropped}
+               "name": read_case(folder).name, "dropped": dropped}
     lines = [f"{folder}: {payload['samples']} samples, {payload['targets']} targets, "
              f"{payload['runs']} runs, directions {', '.join(f'{d:+d}' for d in directions)}"]
     lines += [f"  dropped (the case format has no place for it): {key} = {value}"
-              for key, value in measurement.dropped.items()]
+              for key, value in dropped.items()]
     _emit(args, payload, "\n".join(lines))
 
 

@@ -58,7 +58,8 @@ def read_measurement(path):
 def import_case(path, axis_path, out):
     """Read ``path``, write case folder ``out`` with the axis of ``axis_path``.
 
-    The case's name is axis.toml's, else the file's. Returns (folder, measurement).
+    The case's name is axis.toml's, else the file's. Returns (folder, measurement, dropped):
+    {field: value} of what the case does not hold.
     """
     axis_path = Path(axis_path)
     axis_file = axis_path / "axis.toml" if axis_path.is_dir() else axis_path
@@ -67,7 +68,11 @@ def import_case(path, axis_path, out):
         raise InputError("already exists; choose a new case folder", path=out)
     measurement = read_measurement(path)
     axis_values = tomllib.loads(axis_file.read_text(encoding="utf-8"))
-    if not axis_values.get("name") and measurement.name:
-        axis_values["name"] = measurement.name
+    dropped = dict(measurement.dropped)
+    if measurement.name:
+        if axis_values.get("name"):
+            dropped["axis name"] = f"{measurement.name} (axis.toml names the case)"
+        else:
+            axis_values["name"] = measurement.name
     folder = write_case(out, axis_values, positioning=measurement.columns())
-    return folder, measurement
+    return folder, measurement, dropped
