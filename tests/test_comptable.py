@@ -324,3 +324,21 @@ def test_heidenhain_writes_the_cma_beside_the_com(tmp_path, fitted, capsys):
     cma = (tmp_path / "X.CMA").read_text()
     assert "X.COM" in cma and "*" in cma
     assert heidenhain.read(out.read_text()).size == 255
+
+
+@pytest.mark.parametrize("module, old, new, line", [
+    (heidenhain, "+10.0000", "-10.0000", 4),
+    (beckhoff, "kw.ssfk.table[1].setpoint     100000", "kw.ssfk.table[1].setpoint     0", 11),
+])
+def test_readers_refuse_positions_not_increasing(module, old, new, line):
+    table = CompTable(np.array([0.0, 10.0, 20.0]), np.zeros(3), np.zeros(3))
+    text = module.write(table)
+    assert old in text
+    with pytest.raises(LineError, match=f"line {line}"):
+        module.read(text.replace(old, new))
+
+
+def test_the_cli_offers_every_controller():
+    from feedaxis.cli import COMP_TABLE_CONTROLLERS
+
+    assert set(COMP_TABLE_CONTROLLERS) == set(CONTROLLERS)

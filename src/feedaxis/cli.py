@@ -18,6 +18,7 @@ from .errors import InputError
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
 
+COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
 CASE_HELP = "case folder: axis.toml + positioning.csv (+ duty.csv), see data-format.md"
 
 
@@ -472,9 +473,10 @@ def build_parser():
                     "with a warning when a table cannot help. See docs/compensation-tables.md.")
     sub.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(sub, "fitted model (TOML); needed unless --from-measurement")
-    sub.add_argument("--controller", required=True,
-                     choices=("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4"))
-    sub.add_argument("--out", required=True, metavar="FILE", help="the file to write")
+    sub.add_argument("--controller", required=True, choices=COMP_TABLE_CONTROLLERS,
+                     help="the controller whose file, unit and sign convention to write")
+    sub.add_argument("--out", required=True, metavar="FILE",
+                     help="the file to write (heidenhain: the .COM; its .CMA goes beside it)")
     sub.add_argument("--spacing-mm", type=float, metavar="S",
                      help="distance between table points (default: lead / 8, widened to the "
                           "controller's point limit; with --from-measurement the targets)")
