@@ -27,6 +27,7 @@ DEFAULT_AXIS_ID = "1"
 DETECTION_UNIT_UM = 1.0
 MAX_VALUE = 127
 PITCH_DATA = 10000
+BIDIRECTIONAL_BITS = 3605  # bit parameter, written bit 7 .. bit 0; #0 = bidirectional
 SIGN = "increment of -(measured - target) per interval, detection units (1 um) x 3623"
 LOAD = ("parameter tape (or MDI): 3605#0 = 1 for bidirectional, 3620-3627, 1240, then the "
         "pitch data; power off and on, reference return (G28)")
@@ -63,7 +64,7 @@ def write(table, axis_id=DEFAULT_AXIS_ID):
     data = _point_values(lowest, reference, j_ref, _increments(forward_units, j_ref))
     if table.bidirectional:
         start = highest + 1
-        parameters.update({3605: 1, 3626: start,
+        parameters.update({BIDIRECTIONAL_BITS: "00000001", 3626: start,
                            3627: int(reverse_units[j_ref] - forward_units[j_ref])})
         data.update(_point_values(start, start + reference - lowest, j_ref,
                                   _increments(reverse_units, j_ref)))
@@ -93,7 +94,7 @@ def _absolute(data, lowest, highest, reference, start_value):
 
 def read(text, path="PITCH.TXT"):
     """The corrections the control applies, as the deviation per direction (µm)."""
-    parameters, data = {}, {}
+    parameters, data, bits = {}, {}, "0"
     for line_number, line in enumerate(text.splitlines(), 1):
         stripped = line.strip()
         if stripped in ("", "%"):
@@ -102,23 +103,27 @@ def read(text, path="PITCH.TXT"):
         if not match:
             raise LineError(path, "expected N<number> [A<axis>] P<value>", line_number)
         number_, value = int(match.group(1)), int(match.group(3))
-        if number_ >= PITCH_DATA:
+        if number_ == BIDIRECTIONAL_BITS:
+            bits = match.group(3)
+        elif number_ >= PITCH_DATA:
             data[number_ - PITCH_DATA] = value
         else:
             parameters[number_] = value
-    for key in (1240, 3620, 3621, 3622, 3623, 3624):
+    bidirectional = bits.endswith("1")
+    for key in (1240, 3620, 3621, 3622, 3623, 3624) + ((3626, 3627) if bidirectional else ()):
         if key not in parameters:
             raise LineError(path, "missing parameter", field=str(key))
     reference, lowest, highest = parameters[3620], parameters[3621], parameters[3622]
-    if not lowest <= reference <= highest or parameters[3624] <= 0:
-        raise LineError(path, "needs 3621 <= 3620 <= 3622 and 3624 > 0", field="3620")
+    if not lowest <= reference <= highest or parameters[3624] <= 0 or parameters[3623] < 1:
+        raise LineError(path, "needs 3621 <= 3620 <= 3622, 3623 >= 1 and 3624 > 0",
+                        field="3620")
     unit = DETECTION_UNIT_UM * parameters[3623]
     position_mm = (parameters[1240] + parameters[3624] * np.arange(lowest - 1 - reference,
                                                                  highest - reference + 1)) \
         * DETECTION_UNIT_UM / 1e3
     forward = _absolute(data, lowest, highest, reference, 0.0) * unit
     reverse = forward
-    if parameters.get(3605, 0) & 1:
+    if bidirectional:
         start = parameters[3626]
         reverse = _absolute(data, start, start + highest - lowest, start + reference - lowest,
                             parameters[3627]) * unit
