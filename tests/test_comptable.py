@@ -342,3 +342,15 @@ def test_the_cli_offers_every_controller():
     from feedaxis.cli import COMP_TABLE_CONTROLLERS
 
     assert set(COMP_TABLE_CONTROLLERS) == set(CONTROLLERS)
+
+
+def test_mach4_map_reads_back_and_refuses_a_short_line():
+    mach4 = CONTROLLERS["mach4"]
+    table = CompTable(np.array([0.0, 10.0, 20.0]), np.array([1.0, 2.0, 3.0]),
+                      np.array([-1.0, 0.0, 1.0]))
+    text = mach4.write(table)
+    back = mach4.read(text)
+    np.testing.assert_allclose(back.forward_um, table.forward_um)
+    np.testing.assert_allclose(back.reverse_um, table.reverse_um)
+    with pytest.raises(LineError, match="line 7"):
+        mach4.read(text.replace("1 10.000000 0.002000 0.000000", "1 10.000000 0.002000"))

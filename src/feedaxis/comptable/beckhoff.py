@@ -56,7 +56,7 @@ def read(text, path="achskw.lis"):
                        found["kw.ssfk.kw_nr_max"][1], "kw.ssfk.kw_nr_max"))
     if not 2 <= count <= MAX_POINTS:
         raise LineError(path, f"must be 2 to {MAX_POINTS}", found["kw.ssfk.kw_nr_max"][1],
-                               "kw.ssfk.kw_nr_max")
+                        "kw.ssfk.kw_nr_max")
     columns = {}
     for name in ("setpoint", "pos", "neg"):
         keys = [f"kw.ssfk.table[{i}].{name}" for i in range(count)]

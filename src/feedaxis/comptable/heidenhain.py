@@ -63,11 +63,11 @@ def read(text, path="X.COM"):
             break
         if len(fields) != len(header):
             raise LineError(path, f"{len(fields)} fields, the header has {len(header)}",
-                                   line_number)
+                            line_number)
         rows.append([number(v, path, line_number, name) for v, name in zip(fields, header)])
     if not 2 <= len(rows) <= MAX_POINTS:
         raise LineError(path, f"needs 2 to {MAX_POINTS} entries, found {len(rows)}",
-                               header_at + 2)
+                        header_at + 2)
     values = np.array(rows)
     columns = dict(zip(header, values.T))
     forward_um = columns[header[2]] * UM_PER_MM

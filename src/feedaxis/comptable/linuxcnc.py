@@ -44,7 +44,7 @@ def read(text, path="COMP_FILE"):
             break
     if len(rows) < 2:
         raise LineError(path, "needs at least two lines of 'nominal forward reverse'",
-                               len(rows) + 1)
+                        len(rows) + 1)
     if len(rows) > MAX_POINTS:
         raise LineError(path, f"more than {MAX_POINTS} lines", MAX_POINTS + 1)
     values = np.array(rows)
@@ -53,6 +53,6 @@ def read(text, path="COMP_FILE"):
     bad = np.argwhere(~np.isfinite(values))
     if bad.size:
         raise LineError(path, "must be finite", bad[0][0] + 1,
-                               ("nominal", "forward", "reverse")[bad[0][1]])
+                        ("nominal", "forward", "reverse")[bad[0][1]])
     return CompTable(values[:, 0], -values[:, 1] * UM_PER_MM, -values[:, 2] * UM_PER_MM,
                      "file")

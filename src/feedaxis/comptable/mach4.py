@@ -49,13 +49,18 @@ def read(text, path="screwmap.txt"):
     count = int(values["Number of points"])
     if count < 2 or values["Length"] <= 0:
         raise LineError(path, "needs at least 2 points over a length > 0",
-                               found["Number of points"][1], "Number of points")
-    rows = [line.split() for line in text.splitlines()
+                        found["Number of points"][1], "Number of points")
+    rows = [(line_number, line.split()) for line_number, line in enumerate(text.splitlines(), 1)
             if line.strip() and not line.lstrip().startswith("#") and "=" not in line]
     if len(rows) != count:
         raise LineError(path, f"{len(rows)} point lines for {count} points",
-                               field="Number of points")
-    errors = np.array([[number(v, path, None, f"point {i}") for v in row[2:4]]
-                       for i, row in enumerate(rows)])
+                        found["Number of points"][1], "Number of points")
+    for line_number, fields in rows:
+        if len(fields) != 4:
+            raise LineError(path, "expected 'point position error_positive error_negative'",
+                            line_number)
+    errors = np.array([[number(v, path, line_number, name) for v, name in
+                        zip(fields[2:], ("error_positive_mm", "error_negative_mm"))]
+                       for line_number, fields in rows])
     position_mm = values["Start point"] + values["Length"] * np.linspace(0.0, 1.0, count)
     return CompTable(position_mm, errors[:, 0] * UM_PER_MM, errors[:, 1] * UM_PER_MM, "file")

@@ -89,7 +89,7 @@ def read(text, path="AX_EEC.INI"):
     axes = {key.split(",")[-1].rstrip("]") for key in found if key.startswith("$AA_ENC_COMP[")}
     if len(axes) != 1:
         raise LineError(path, "expected the $AA_ENC_COMP values of one axis",
-                               field="$AA_ENC_COMP")
+                        field="$AA_ENC_COMP")
     axis_id = axes.pop()
     position_mm = _grid(found, "$AA_ENC_COMP", f"[0,{axis_id}]", path)
     mean_um = _values(found, lambda i: f"$AA_ENC_COMP[0,{i},{axis_id}]", position_mm.size,

@@ -92,7 +92,7 @@ def _targets(path, section):
         values += [(number(w, path, row, "Targets"), row) for w in words]
     if len(values) != count:
         raise LineError(path, f"{len(values)} targets listed, Target-count says {count}",
-                               count_line, "Target-count")
+                        count_line, "Target-count")
     target_mm = np.array([v for v, _ in values])
     for index in np.flatnonzero(np.diff(target_mm) <= 0):
         raise LineError(path, "targets must increase", values[index + 1][1], "Targets")
@@ -114,7 +114,7 @@ def _deviations(path, section, n_targets, n_runs):
             raise LineError(path, f"run must be 1 to Run-count {n_runs}", row, "run")
         if target != int(target) or not 1 <= target <= n_targets:
             raise LineError(path, f"target must be 1 to Target-count {n_targets}",
-                                   row, "target")
+                            row, "target")
         runs.setdefault(int(run), []).append((int(target), number(words[2], path, row,
                                                                     "deviation"), row))
     return runs
@@ -126,11 +126,11 @@ def _direction(path, run, rows, bidirectional):
     sign = 1.0 if np.all(order > 0) else -1.0 if np.all(order < 0) else 0.0
     if sign == 0.0:
         raise LineError(path, f"run {run} lists its targets out of travel order",
-                               rows[0][2], "target")
+                        rows[0][2], "target")
     if bidirectional and sign != (1.0 if run % 2 else -1.0):
         raise LineError(path, f"run {run}: in a bidirectional test odd runs move in + "
-                                     "(targets ascending), even runs in - (descending)",
-                               rows[0][2], "target")
+                              "(targets ascending), even runs in - (descending)",
+                        rows[0][2], "target")
     return sign
 
 
@@ -147,8 +147,8 @@ def read_rtl(path):
         listed = sorted(target for target, _, _ in runs.get(run, []))
         if listed != list(range(1, target_mm.size + 1)):
             raise LineError(path, f"run {run} must list every target once "
-                                         f"({len(listed)} of {target_mm.size} rows)",
-                                   runs_line, "Run-count")
+                                  f"({len(listed)} of {target_mm.size} rows)",
+                            runs_line, "Run-count")
     bidirectional = n_runs > 1 and any(
         runs[r][0][0] > runs[r][-1][0] for r in runs) and any(
         runs[r][0][0] < runs[r][-1][0] for r in runs)

@@ -31,7 +31,7 @@ def _run_column(path, name, line):
     match = COLUMN.match(re.sub(r"\s+", "", name).lower())
     if not match or int(match.group(1)) < 1:
         raise LineError(path, "expected run<N>+ or run<N>- (or run<N>_up / _down)",
-                               line, name)
+                        line, name)
     sign = match.group(3) or ("+" if match.group(2) == "up" else "-")
     return int(match.group(1)), 1.0 if sign == "+" else -1.0
 
@@ -54,7 +54,7 @@ def read_wide_csv(path):
     header = [name.strip() for name in header_text.split(separator)]
     if header[0] != "target_mm":
         raise LineError(path, "the first column must be target_mm", header_line,
-                               header[0])
+                        header[0])
     runs = [_run_column(path, name, header_line) for name in header[1:]]
     if not runs:
         raise LineError(path, "no run columns after target_mm", header_line)
@@ -67,7 +67,7 @@ def read_wide_csv(path):
         cells = text.split(separator)
         if len(cells) != len(header):
             raise LineError(path, f"{len(cells)} fields, the header has {len(header)}",
-                                   line)
+                            line)
         target = _cell(path, cells[0], line, "target_mm", separator != ",")
         if target in targets:
             raise LineError(path, "target appears twice", line, "target_mm")
