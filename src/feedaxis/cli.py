@@ -132,7 +132,7 @@ def _cmd_import(args):
 
 
 def _cmd_comp_table(args):
-    from .comptable import CONTROLLERS, comp_table, summary_lines
+    from .comptable import comp_table, summary_lines
 
     case = read_case(args.case)
     if case.positioning is None:
@@ -141,15 +141,10 @@ def _cmd_comp_table(args):
         raise InputError("give the fitted model (--model M.toml) or --from-measurement",
                          parameter="--model")
     model = load_model(args.model, _effects(args)) if args.model else Model()
-    text, _, report = comp_table(case, model, args.controller, args.spacing_mm,
-                                 args.from_measurement, args.axis_id)
-    out = Path(args.out)
-    companions = getattr(CONTROLLERS[args.controller], "companions", lambda *_: {})
-    files = {**companions(out, args.axis_id or CONTROLLERS[args.controller].DEFAULT_AXIS_ID),
-             out: text}
+    files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
+                               args.from_measurement, args.axis_id)
     for path, content in files.items():
         write_atomically(path, content)
-    report["files"] = [str(path) for path in files]
     _emit(args, report, summary_lines(report))
 
 

@@ -8,6 +8,8 @@ convention (``SIGN``) and how to load the file (``LOAD``).
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
 from .base import reference_index
 from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
@@ -38,26 +40,32 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
     return from_model(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
 
 
-def comp_table(case, model, controller, spacing_mm=None, from_measured=False, axis_id=None):
-    """Write the ``controller`` file text, read it back as the controller does and verify it.
+def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured=False,
+               axis_id=None):
+    """The ``controller`` file for ``out_path``, read back as the controller does and verified.
 
-    Returns (text, applied CompTable, report dict for printing and ``--json``).
+    Returns ({path: text} of the files to write, ``out_path`` and any companion such as
+    Heidenhain's ``.CMA``; the report dict for printing and ``--json``).
     """
     module = CONTROLLERS[controller]
+    axis_id = axis_id or module.DEFAULT_AXIS_ID
     table = build_table(case, model, controller, spacing_mm, from_measured)
-    text = module.write(table, axis_id or module.DEFAULT_AXIS_ID)
+    text = module.write(table, axis_id)
     applied = module.read(text)
+    out_path = Path(out_path)
+    files = {**getattr(module, "companions", lambda *_: {})(out_path, axis_id), out_path: text}
     report = {"controller": controller, "source": table.source, "points": table.size,
               "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),
               "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
               "included": list(table.included), "excluded": dict(table.excluded),
               "sign": module.SIGN, "load": module.LOAD, **verify(case, applied),
-              "between_targets": between_targets(case, model, applied)}
+              "between_targets": between_targets(case, model, applied),
+              "files": [str(path) for path in files]}
     report["notes"] = _notes(case, table, module, spacing_mm)
     if not from_measured:
         report["excluded"].update({name: reason for name, reason in NEVER_IN_TABLE.items()
                                    if name not in report["excluded"]})
-    return text, applied, report
+    return files, report
 
 
 def _notes(case, table, module, spacing_mm):
@@ -104,6 +112,5 @@ def summary_lines(report):
                      f"{between['pv_after_um']:9.3f}")
     lines += [f"note: {note}" for note in report["notes"]]
     lines += [f"warning: {warning}" for warning in report["warnings"]]
-    for path in report.get("files", []):
-        lines.append(f"written: {path}")
+    lines += [f"written: {path}" for path in report["files"]]
     return "\n".join(lines)
