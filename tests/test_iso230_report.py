@@ -72,9 +72,9 @@ def test_report_is_one_self_contained_html_page(tmp_path, capsys):
     out = tmp_path / "r" / "report.html"
     assert main(["report", str(folder), "--model", str(model), "--out", str(out)]) == 0
     page = out.read_text()
-    assert page.count("data:image/png;base64,") == 6
+    assert page.count("data:image/png;base64,") == 7
     for heading in ("Measurement against model", "Residual", "Each effect's contribution",
-                    "Error ladder", "ISO 230-2 figures", "verdict: adequate"):
+                    "Error ladder", "ISO 230-2 figures", "verdict: adequate", "Compensation table"):
         assert heading in page
     assert 'src="http' not in page
 

@@ -18,6 +18,7 @@ from .errors import InputError
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
 
+COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
 CASE_HELP = "case folder: axis.toml + positioning.csv (+ duty.csv), see data-format.md"
 
 
@@ -112,6 +113,39 @@ def _cmd_compensate(args):
     if args.out:
         write_atomically(args.out, csv_text(result.columns()))
     _emit(args, result.to_json(), text.compensation_lines(result, args.out))
+
+
+def _cmd_import(args):
+    from .importers import import_case
+
+    folder, measurement, dropped = import_case(args.file, args.axis, args.out)
+    directions = sorted({int(d) for d in measurement.direction}, reverse=True)
+    payload = {"case": str(folder), "samples": int(measurement.error_um.size),
+               "targets": int(len(set(measurement.target_mm))),
+               "runs": int(measurement.run.max()), "directions": directions,
+               "name": read_case(folder).name, "dropped": dropped}
+    lines = [f"{folder}: {payload['samples']} samples, {payload['targets']} targets, "
+             f"{payload['runs']} runs, directions {', '.join(f'{d:+d}' for d in directions)}"]
+    lines += [f"  dropped (the case format has no place for it): {key} = {value}"
+              for key, value in dropped.items()]
+    _emit(args, payload, "\n".join(lines))
+
+
+def _cmd_comp_table(args):
+    from .comptable import comp_table, summary_lines
+
+    case = read_case(args.case)
+    if case.positioning is None:
+        raise InputError("a compensation table needs positioning.csv", path=case.folder)
+    if not (args.model or args.from_measurement):
+        raise InputError("give the fitted model (--model M.toml) or --from-measurement",
+                         parameter="--model")
+    model = load_model(args.model, _effects(args)) if args.model else Model()
+    files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
+                               args.from_measurement, args.axis_id)
+    for path, content in files.items():
+        write_atomically(path, content)
+    _emit(args, report, summary_lines(report))
 
 
 def _cmd_effects(args):
@@ -398,6 +432,55 @@ def build_parser():
                      help="write per sample: time_s, target_mm, direction, measured_um, "
                           "thermal_error_um, correction_um, left_um")
     sub.set_defaults(handler=_cmd_compensate)
+
+    sub = commands.add_parser(
+        "import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Read a laser-interferometer export and write a case folder (data-format "
+                    "1.1: AXIS.toml + positioning.csv), all files or none. Says which metadata "
+                    "the case format cannot hold.",
+        epilog="Formats, by extension:\n"
+               "  .rtl  Renishaw linear data file (sections HEADER::, TARGET DATA::, RUNS::,\n"
+               "        DEVIATIONS::, ...): odd runs approach in +, even runs in -.\n"
+               "  .csv  wide spreadsheet layout, one row per target:\n"
+               "          target_mm,run1+,run1-,run2+,run2-\n"
+               "          0.000,1.2,3.4,1.1,3.6\n"
+               "          50.012,0.8,2.9,,3.0\n"
+               "        target_mm first (mm); then one column per run and direction,\n"
+               "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
+               "        measured - target in um; an empty cell = not measured; '#' comment\n"
+               "        lines; ';'- or tab-separated files may use a decimal comma.")
+    sub.add_argument("file", metavar="FILE", help="the export: .rtl or .csv")
+    sub.add_argument("--axis", required=True, metavar="AXIS.toml",
+                     help="axis.toml (or a case folder holding one) describing the axis")
+    sub.add_argument("--out", required=True, metavar="CASE", help="case folder to create")
+    sub.set_defaults(handler=_cmd_import)
+
+    sub = commands.add_parser(
+        "comp-table", help="pitch-error compensation table for a CNC controller",
+        description="Write the table a controller loads (linuxcnc, siemens, fanuc, "
+                    "heidenhain, beckhoff, mach4) from the fitted model: lead, eccentricity, "
+                    "motor and sag in both directions, backlash as a direction-dependent "
+                    "table, thermal effects never (a fixed table cannot follow them). With "
+                    "--from-measurement: the classical table of the measured means. Then "
+                    "read the file back as the controller does and print the ISO 230-2 "
+                    "figures expected after it on the measured case, next to those before, "
+                    "with a warning when a table cannot help. See docs/compensation-tables.md.")
+    sub.add_argument("case", metavar="CASE", help=CASE_HELP)
+    _add_model_options(sub, "fitted model (TOML); needed unless --from-measurement")
+    sub.add_argument("--controller", required=True, choices=COMP_TABLE_CONTROLLERS,
+                     help="the controller whose file, unit and sign convention to write")
+    sub.add_argument("--out", required=True, metavar="FILE",
+                     help="the file to write (heidenhain: the .COM; its .CMA goes beside it)")
+    sub.add_argument("--spacing-mm", type=float, metavar="S",
+                     help="distance between table points (default: lead / 8, widened to the "
+                          "controller's point limit; with --from-measurement the targets)")
+    sub.add_argument("--from-measurement", action="store_true",
+                     help="the table from the measured means at the targets, not the model")
+    sub.add_argument("--axis-id", metavar="ID",
+                     help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
+                          "axis number 1, fanuc axis 1: the defaults)")
+    sub.set_defaults(handler=_cmd_comp_table)
 
     sub = commands.add_parser("effects", help="list the effect catalog (and your own)",
                               description="Each effect's meaning, parameters and FMU.")

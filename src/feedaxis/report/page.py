@@ -14,6 +14,7 @@ from ..fit import evaluate, fit
 from ..iso230 import compare
 from ..output import write_atomically
 from . import plots
+from .compensation_table import compensation_table_html
 
 STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;
@@ -144,6 +145,7 @@ def write_report(case, model, effects, out_path):
         sections.append(_image(plots.residual_against(panels), "residual against time, "
                                                                "direction, ambient"))
     sections += _compensation_html(case, model)
+    sections += compensation_table_html(case, model, _image, _table)
     sections += [
         "<h2>Each effect's contribution</h2>",
         _image(plots.contributions(positioning.target_mm, model.components(case)),

@@ -149,3 +149,20 @@ def thermal_compensation(target_mm, visit, time_s, thermal_error_um, left_um):
                   ms=3, label=label)
     return _finish(figure, axes, "time (min)", "max |thermal error| (µm)",
                    "Largest error of each run")
+
+
+def compensation_table(target_mm, means_um, table_mm, table_um):
+    """Measured mean deviation per target and direction (dots) with the compensation table's
+    deviation per direction (lines through its points, as the controller interpolates).
+
+    ``means_um`` and ``table_um`` map a label ("+", "-") to arrays at ``target_mm[label]``
+    and ``table_mm``.
+    """
+    figure, axes = plt.subplots(figsize=(9, 3.6))
+    for (label, mean_um), colour in zip(means_um.items(), ("tab:blue", "tab:orange")):
+        axes.plot(target_mm[label], mean_um, "o", ms=4, color=colour,
+                  label=f"measured mean, {label} approach")
+        axes.plot(table_mm, table_um[label], ".-", ms=2, lw=1, color=colour,
+                  label=f"table, {label} direction")
+    return _finish(figure, axes, "position (mm)", "deviation removed (µm)",
+                   "Compensation table over the measured means")

@@ -1,0 +1,116 @@
+"""Pitch-error compensation tables for CNC controllers, from the fitted model or the
+measured means, verified on the measured case before they are loaded.
+
+One module per controller (``linuxcnc``, ``siemens``, ``fanuc``, ``heidenhain``,
+``beckhoff``, ``mach4``), each with ``write(table, axis_id) -> text`` and
+``read(text) -> CompTable`` (the table as that controller applies it), its limits, its sign
+convention (``SIGN``) and how to load the file (``LOAD``).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
+from .base import reference_index
+from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
+                    from_measurement, from_model, grid_mm)
+from .verify import between_targets, verify
+
+CONTROLLERS = {module.NAME: module for module in (linuxcnc, siemens, fanuc, heidenhain,
+                                                  beckhoff, mach4)}
+
+
+def build_table(case, model, controller, spacing_mm=None, from_measured=False):
+    """The table for ``controller`` on ``case``: from ``model`` (default) or the measured means.
+
+    The points are equidistant every ``spacing_mm`` (default lead / 8, widened to the
+    controller's point limit) over the measured targets; a table from the measurement on a
+    controller that takes free positions uses the targets themselves unless ``spacing_mm``
+    is given.
+    """
+    module = CONTROLLERS[controller]
+    target_mm = case.positioning.target_mm
+    if from_measured:
+        if spacing_mm is None and not module.EQUIDISTANT:
+            return from_measurement(case)
+        count = len(set(target_mm.round(6)))
+        spacing_mm = spacing_mm or (target_mm.max() - target_mm.min()) / max(count - 1, 1)
+        return from_measurement(case, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
+    spacing_mm = spacing_mm or default_spacing_mm(case, module.MAX_POINTS)
+    return from_model(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
+
+
+def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured=False,
+               axis_id=None):
+    """The ``controller`` file for ``out_path``, read back as the controller does and verified.
+
+    Returns ({path: text} of the files to write, ``out_path`` and any companion such as
+    Heidenhain's ``.CMA``; the report dict for printing and ``--json``).
+    """
+    module = CONTROLLERS[controller]
+    axis_id = axis_id or module.DEFAULT_AXIS_ID
+    table = build_table(case, model, controller, spacing_mm, from_measured)
+    text = module.write(table, axis_id)
+    applied = module.read(text)
+    out_path = Path(out_path)
+    files = {**getattr(module, "companions", lambda *_: {})(out_path, axis_id), out_path: text}
+    report = {"controller": controller, "source": table.source, "points": table.size,
+              "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),
+              "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
+              "included": list(table.included), "excluded": dict(table.excluded),
+              "sign": module.SIGN, "load": module.LOAD, **verify(case, applied),
+              "between_targets": between_targets(case, model, applied),
+              "files": [str(path) for path in files]}
+    report["notes"] = _notes(case, table, module, spacing_mm)
+    if not from_measured:
+        report["excluded"].update({name: reason for name, reason in NEVER_IN_TABLE.items()
+                                   if name not in report["excluded"]})
+    return files, report
+
+
+def _notes(case, table, module, spacing_mm):
+    """What limits this table: the point limit forcing a spacing over lead / 8, figures
+    in-sample for measured means, the controller's reference and machine data."""
+    notes = []
+    lead_mm = case.axis.lead_mm
+    if (table.source == "model" and spacing_mm is None
+            and "assembly_eccentricity" in table.included
+            and table.spacing_mm > lead_mm / POINTS_PER_WAVELENGTH + 1e-9):
+        notes.append(f"{module.NAME} takes at most {module.MAX_POINTS} points: "
+                     f"{table.spacing_mm:.4g} mm between points (over lead / "
+                     f"{POINTS_PER_WAVELENGTH} = {lead_mm / POINTS_PER_WAVELENGTH:.4g} mm) "
+                     "follows the once-per-revolution error only roughly")
+    if table.source == "measurement":
+        notes.append("the table is the measured means at the targets: the figures after are "
+                     "in-sample there (optimistic); between the targets it is blind")
+    if module.NAME in ("siemens", "fanuc"):
+        notes.append(f"values are relative to the table point nearest 0 mm "
+                     f"({table.position_mm[reference_index(table.position_mm)]:g} mm), where "
+                     "the control references; the figures are unchanged by that offset")
+    if module.NAME == "siemens":
+        notes.append(f"needs MD38000 $MA_MM_ENC_COMP_MAX_POINTS >= {table.size}"
+                     + (f" and MD18342 $MN_MM_CEC_MAX_POINTS[0] and [1] >= {table.size}"
+                        if table.bidirectional else ""))
+    return notes
+
+
+def summary_lines(report):
+    """The comp-table result for the terminal: the table, what went in, before and after."""
+    lines = [f"{report['controller']} table from the {report['source']}: {report['points']} "
+             f"points {report['first_mm']:g} to {report['last_mm']:g} mm every "
+             f"{report['spacing_mm']:.4g} mm"
+             + (", direction-dependent" if report["direction_dependent"] else ""),
+             f"  in the table: {', '.join(report['included']) or '(nothing)'}"]
+    lines += [f"  left out {name}: {reason}" for name, reason in report["excluded"].items()]
+    lines += [f"  sign: {report['sign']}", f"  load: {report['load']}", "",
+              f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
+    lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
+              for f in report["figures"].values()]
+    between = report["between_targets"]
+    if between:
+        lines.append(f"{'between targets (model), P-V':34s} {between['pv_before_um']:9.3f} "
+                     f"{between['pv_after_um']:9.3f}")
+    lines += [f"note: {note}" for note in report["notes"]]
+    lines += [f"warning: {warning}" for warning in report["warnings"]]
+    lines += [f"written: {path}" for path in report["files"]]
+    return "\n".join(lines)

@@ -1,0 +1,78 @@
+"""Measurement files of other tools turned into a case folder (data-format 1.1).
+
+Readers return a :class:`Measurement`; :func:`import_case` writes it with the axis of an
+``axis.toml`` through :func:`feedaxis.case.write_case` (atomically: the whole folder or
+nothing). Formats: Renishaw ``.rtl`` (:mod:`.rtl`) and the wide CSV of spreadsheets
+(:mod:`.wide_csv`).
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..case import read_axis, write_case
+from ..errors import InputError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """Deviations (µm) at targets (mm), approach direction ±1 and run (cycle) number;
+    ``name`` the axis name the file gives, ``dropped`` what the case format cannot hold."""
+
+    target_mm: np.ndarray
+    error_um: np.ndarray
+    direction: np.ndarray
+    run: np.ndarray
+    name: str = ""
+    dropped: dict = field(default_factory=dict)
+
+    def columns(self):
+        """positioning.csv columns."""
+        return {"target_mm": self.target_mm, "error_um": self.error_um,
+                "direction": self.direction, "run": self.run}
+
+
+def read_measurement(path):
+    """Read ``path`` by its extension: ``.rtl`` or ``.csv``."""
+    from . import rtl, wide_csv
+
+    path = Path(path)
+    readers = {".rtl": rtl.read_rtl, ".csv": wide_csv.read_wide_csv}
+    if not path.is_file():
+        raise InputError("file not found", path=path)
+    reader = readers.get(path.suffix.lower())
+    if reader is None:
+        raise InputError(f"unknown format '{path.suffix}'; known: .rtl (Renishaw), .csv "
+                         "(wide: target_mm, then one column per run and direction)", path=path)
+    return reader(path)
+
+
+def import_case(path, axis_path, out):
+    """Read ``path``, write case folder ``out`` with the axis of ``axis_path``.
+
+    The case's name is axis.toml's, else the file's. Returns (folder, measurement, dropped):
+    {field: value} of what the case does not hold.
+    """
+    axis_path = Path(axis_path)
+    axis_file = axis_path / "axis.toml" if axis_path.is_dir() else axis_path
+    read_axis(axis_file)
+    if Path(out).exists():
+        raise InputError("already exists; choose a new case folder", path=out)
+    measurement = read_measurement(path)
+    axis_values = tomllib.loads(axis_file.read_text(encoding="utf-8"))
+    dropped = dict(measurement.dropped)
+    if measurement.name:
+        if axis_values.get("name"):
+            dropped["axis name"] = f"{measurement.name} (axis.toml names the case)"
+        else:
+            axis_values["name"] = measurement.name
+    folder = write_case(out, axis_values, positioning=measurement.columns())
+    return folder, measurement, dropped

@@ -1,0 +1,28 @@
+"""Line-oriented text files of other tools (laser exports, controller tables): the one error
+naming file, line and field, and reading a number with that error."""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError
+
+
+class LineError(InputError):
+    """A file that does not parse: the message names the file, line and field."""
+
+    def __init__(self, path, message, line=None, field=None):
+        super().__init__(message, path=path, row=line, column=field)
+        where = [str(path)] + ([f"line {line}"] if line is not None else []) + \
+            ([f"field '{field}'"] if field is not None else [])
+        self.args = (f"{', '.join(where)}: {message}",)
+
+
+def number(text, path, line, field):
+    """``text`` as a finite float, else :class:`LineError` naming line and field."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise LineError(path, f"not a number: {text!r}", line, field) from None
+    if not np.isfinite(value):
+        raise LineError(path, f"must be finite, got {text!r}", line, field)
+    return value
