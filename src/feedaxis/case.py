@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .errors import InputError
+from .errors import InputError, read_text
 from .physics.geometry import SUPPORTS
 from .physics.thermal import DutySegment
 
@@ -164,7 +164,7 @@ def read_axis(path):
     path = Path(path)
     if not path.exists():
         raise CaseError(path, "missing: every case needs axis.toml")
-    text = path.read_text(encoding="utf-8")
+    text = _read_text(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
@@ -185,6 +185,14 @@ def read_axis(path):
         raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
                         column="screw.lead_mm")
     return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}))
+
+
+def _read_text(path):
+    """The file's text; a folder, unreadable file or foreign encoding is a :class:`CaseError`."""
+    try:
+        return read_text(path, "case file")
+    except InputError as error:
+        raise CaseError(path, error.message, error.row) from None
 
 
 def _check_table(path, text, table, values):
@@ -242,7 +250,7 @@ def _read_csv(path, spec):
     """
     path = Path(path)
     records = []
-    for line_number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+    for line_number, line in enumerate(_read_text(path).splitlines(), 1):
         stripped = line.strip()
         if stripped and not stripped.startswith("#"):
             records.append((line_number, [cell.strip() for cell in line.split(",")]))

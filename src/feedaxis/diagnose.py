@@ -22,7 +22,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .effects import CATALOG, Effect, Model, Parameter
-from .fit import FitResult, fit
+from .fit import FitResult, fit, too_few_samples
 from .iso230 import target_groups
 
 SIGNIFICANT_DELTA_BIC = -10.0
@@ -32,6 +32,7 @@ NOISE_RATIO_LIMIT = 1.5
 MIN_POINTS_FOR_RATIO = 30
 SPECTRUM_OVERSAMPLING = 5
 MAX_UNEVEN_FREQUENCIES = 4000
+MAX_GRID_FREQUENCIES = 1_000_000  # memory bound of the grid before thinning (8 MB)
 
 
 @dataclass
@@ -120,7 +121,7 @@ def diagnose(case, model, effects=None, progress=None):
     for name, effect in effects.items():
         if name in model:
             continue
-        reason = effect.unavailable(case)
+        reason = effect.unavailable(case) or too_few_samples(model + effect, case)
         if reason:
             skipped[name] = reason
         else:
@@ -413,7 +414,11 @@ def _spectrum(position_mm, residual_um):
     else:
         from scipy.signal import lombscargle  # 0.5 s import, only for uneven sampling
 
-        frequency = np.arange(1.0 / span_mm, 0.5 / step_mm, _frequency_step(unique_mm))
+        frequency_step = _frequency_step(unique_mm)
+        band = 0.5 / step_mm - 1.0 / span_mm
+        if band > MAX_GRID_FREQUENCIES * frequency_step:  # nearly coincident targets would
+            frequency_step = band / MAX_UNEVEN_FREQUENCIES  # ask for billions of points
+        frequency = np.arange(1.0 / span_mm, 0.5 / step_mm, frequency_step)
         frequency = frequency[:: max(1, frequency.size // MAX_UNEVEN_FREQUENCIES)]
         amplitude = np.abs(lombscargle(unique_mm, means_um, 2 * np.pi * frequency,
                                        floating_mean=True, normalize="amplitude"))
