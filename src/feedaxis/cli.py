@@ -67,6 +67,8 @@ def _emit(args, payload, lines):
 def _cmd_fit(args):
     from .fit import evaluate, fit
 
+    if args.out:
+        check_writable_target(args.out)
     effects = _effects(args)
     cases = [read_case(folder) for folder in args.cases]
     starting = _starting_model(args, effects)
@@ -110,6 +112,7 @@ def _cmd_report(args):
     case = read_case(args.case)
     model = _starting_model(args, effects)
     out = Path(args.out or f"{Path(args.case).resolve().name}-report.html")
+    check_writable_target(out)
     write_report(case, model, effects, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
@@ -118,6 +121,8 @@ def _cmd_compensate(args):
     from .case import csv_text
     from .compensate import compensate
 
+    if args.out:
+        check_writable_target(args.out)
     case = read_case(args.case)
     result = compensate(case, load_model(args.model, _effects(args)))
     if args.out:
@@ -137,6 +142,7 @@ def _cmd_effects(args):
 def _cmd_demo(args):
     from . import demo
 
+    check_writable_target(args.out, "folder")
     summary = demo.run_demo(args.out, echo=(lambda line: None) if args.json else print)
     if args.json:
         print(_json_text(summary))
@@ -145,6 +151,7 @@ def _cmd_demo(args):
 def _cmd_build_fmus(args):
     from . import fmu_build
 
+    check_writable_target(args.out, "folder")
     paths = fmu_build.build_fmus(args.out)
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
 

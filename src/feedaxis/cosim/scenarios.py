@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..case import write_case
+from ..errors import ParameterError
 from ..physics.checks import require_positive
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
@@ -141,8 +142,8 @@ def iso230_targets(n_targets, spacing_mm, first_mm=0.0):
     every target, so periodic errors (screw lead, motor steps) are not sampled in phase.
     """
     if n_targets < 2 or not spacing_mm > 0:
-        raise ValueError(f"iso230 needs at least 2 targets (got {n_targets}) and a spacing > 0 "
-                         f"(got {spacing_mm})")
+        raise ParameterError(f"iso230 needs at least 2 targets (got {n_targets}) and a "
+                             f"spacing > 0 (got {spacing_mm})", "--targets/--spacing-mm")
     i = np.arange(1, n_targets + 1)
     offsets_mm = spacing_mm * (np.mod(0.618034 * i, 1.0) - 0.5) / 5.0
     return first_mm + (i - 1) * spacing_mm + offsets_mm
@@ -158,7 +159,7 @@ def iso230_motion(targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5, overrun_m
     targets_mm = np.sort(np.asarray(targets_mm, dtype=float))
     _require_positive(runs=runs, feed_mm_min=feed_mm_min, dwell_s=dwell_s)
     if overrun_mm < 0:
-        raise ValueError(f"overrun_mm must be >= 0, got {overrun_mm}")
+        raise ParameterError(f"must be >= 0, got {overrun_mm}", "overrun_mm")
     motion = Motion(targets_mm[0] - overrun_mm)
     for run in range(1, runs + 1):
         for target in targets_mm:
@@ -280,7 +281,7 @@ def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
     dict
     """
     if len(targets_mm) < 1:
-        raise ValueError("thermal needs at least one target")
+        raise ParameterError("thermal needs at least one target", "targets")
     parameters = _positioning_parameters(parameters)
     motion = thermal_motion(duty, targets_mm, every_s, feed_mm_min, dwell_s)
     rows, completed = run_motion(master, motion, parameters, progress=progress)
@@ -329,7 +330,7 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
                       duration_s=duration_s)
     if controller not in ("pid", "npid"):
-        raise ValueError(f"controller must be pid or npid, got {controller!r}")
+        raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
     h = master.system.macro_step_s
     overrides = {**(parameters or {})}
     overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
@@ -388,8 +389,8 @@ def axis_values(master, parameters, name):
     thermal = values("ThermalScrew", SHARED_SCREW_KEYS)
     differ = [k for k in SHARED_SCREW_KEYS if thermal[k] != screw[k]]
     if differ:
-        raise ValueError(f"GeometricError and ThermalScrew disagree on {', '.join(differ)}: "
-                         "one axis has one screw")
+        raise ParameterError(f"GeometricError and ThermalScrew disagree on "
+                             f"{', '.join(differ)}: one axis has one screw", "--set")
     motor = {k: v for c, keys in MOTOR_FROM.items() for k, v in values(c, keys).items()}
     return {"name": name, "screw": screw, "motor": motor}
 
