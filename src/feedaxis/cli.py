@@ -345,11 +345,13 @@ def _add_motion_options(sub):
                      help="dwell at each target before the sample (default 0.5 s)")
 
 
-def _add_axis_options(sub):
+def _add_axis_options(sub, thermal_step=True):
     sub.add_argument("--step-ms", type=float, default=1.0,
                      help="macro step = servo, motor and geometry step (default 1 ms)")
-    sub.add_argument("--thermal-step-s", type=float, default=0.1,
-                     help="ThermalScrew step, a multiple of the macro step (default 0.1 s)")
+    if thermal_step:
+        sub.add_argument("--thermal-step-s", type=float,
+                         help="ThermalScrew step, a whole multiple of the macro step (default "
+                              "0.1 s, rounded up to a multiple of the macro step)")
     sub.add_argument("--set", metavar="COMPONENT.PARAMETER=VALUE", action="append",
                      help="parameter value (repeatable), e.g. NpidServo.nonlinear=true")
     _add_model_options(sub, "fitted model (TOML): its FMU parameter values (needs --axis)")
@@ -524,10 +526,10 @@ def build_parser():
         description="Wrap the four FMUs in one FMI 2.0 co-simulation FMU with fmpy's container "
                     "FMU: inputs position_ref_mm, disturbance_N, ambient_C; every component "
                     "output; the parameter values as fixed parameters. All four FMUs step at "
-                    "the container's one step (--step-ms; --thermal-step-s does not apply), "
+                    "the container's one step (--step-ms), "
                     "Jacobi: the error FMUs see the servo one step late.")
     sub.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
-    _add_axis_options(sub)
+    _add_axis_options(sub, thermal_step=False)
     sub.set_defaults(handler=_cmd_export_fmu)
 
     for sub in commands.choices.values():
@@ -553,9 +555,10 @@ def main(argv=None):
         args = build_parser().parse_args(argv)
         with threadpool_limits(limits=1, user_api="blas"):  # small matrices: threads only cost
             args.handler(args)
-    except KeyboardInterrupt as stopped:
-        return _fail(wants_json, f"interrupted{': ' + str(stopped) if str(stopped) else ''}",
-                     130)
+    except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
+        message = str(stopped)
+        return _fail(wants_json, message if message.startswith("interrupted") else
+                     "interrupted", 130)
     except BrokenPipeError:
         sys.stderr.close()
         return 0

@@ -252,9 +252,16 @@ def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s
     parameters = _positioning_parameters(parameters)
     motion = iso230_motion(targets_mm, runs, feed_mm_min, dwell_s, overrun_mm)
     rows, completed = run_motion(master, motion, parameters, progress=progress)
+    name = "simulated ISO 230-2 test"
+    if not completed:  # ISO 230-2 statistics need equal runs: keep the complete ones
+        complete_runs = rows.size // (2 * len(targets_mm))
+        if complete_runs == 0:
+            raise ScenarioInterrupted("interrupted before the first complete run; nothing "
+                                      "written")
+        rows = rows[:complete_runs * 2 * len(targets_mm)]
+        name += f" (interrupted: {complete_runs} of {runs} runs)"
     positioning = _positioning_columns(motion.samples[:rows.size], rows)
-    write_case(out, axis_values(master, parameters, "simulated ISO 230-2 test"),
-               positioning=positioning)
+    write_case(out, axis_values(master, parameters, name), positioning=positioning)
     return _finish(out, positioning, completed, motion.samples)
 
 
@@ -287,7 +294,9 @@ def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
     rows, completed = run_motion(master, motion, parameters, progress=progress)
     positioning = _positioning_columns(motion.samples[:rows.size], rows, with_time=True)
     until_s = None if completed else float(positioning["time_s"][-1])
-    write_case(out, axis_values(master, parameters, "simulated thermal test"),
+    name = "simulated thermal test" + ("" if completed else
+                                       f" (interrupted at t = {until_s:g} s)")
+    write_case(out, axis_values(master, parameters, name),
                positioning=positioning, duty=motion.duty_columns(until_s))
     return _finish(out, positioning, completed, motion.samples)
 
@@ -329,6 +338,10 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     """
     _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
                       duration_s=duration_s)
+    if not duration_s > SETTLE_S:
+        raise ParameterError(f"must exceed {SETTLE_S:g} s: the tracking error is measured "
+                             f"after the first {SETTLE_S:g} s (the start-up transient), got "
+                             f"{duration_s:g}", "duration_s")
     if controller not in ("pid", "npid"):
         raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
     h = master.system.macro_step_s
@@ -353,7 +366,9 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
         tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
     if rows.size == 0:
         raise ScenarioInterrupted("interrupted before the first step; nothing written")
-    write_case(out, axis_values(master, overrides, "simulated tracking test"), tracking=tracking)
+    name = "simulated tracking test" + ("" if completed else
+                                        f" (interrupted at t = {rows['time'][-1]:g} s)")
+    write_case(out, axis_values(master, overrides, name), tracking=tracking)
     settled = rows["time"] > SETTLE_S
     error_mm = np.abs(rows["NpidServo.tracking_error_mm"][settled])
     summary = {"case": str(out), "controller": controller, "frequency_hz": frequency_hz,
