@@ -65,7 +65,7 @@ def _emit(args, payload, lines):
 
 
 def _cmd_fit(args):
-    from .fit import evaluate, fit
+    from .fit import check_available, evaluate, fit
 
     if args.out:
         check_writable_target(args.out)
@@ -73,6 +73,7 @@ def _cmd_fit(args):
     cases = [read_case(folder) for folder in args.cases]
     starting = _starting_model(args, effects)
     model = _with_added(starting, args.add, effects)
+    check_available(model, cases)
     before = evaluate(starting, cases)
     with _progress("fitting", "model evaluations") as tick:
         result = fit(model, cases, progress=tick)

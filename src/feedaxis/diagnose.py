@@ -121,7 +121,7 @@ def diagnose(case, model, effects=None, progress=None):
     for name, effect in effects.items():
         if name in model:
             continue
-        reason = effect.unavailable(case) or too_few_samples(model + effect, case)
+        reason = effect.unavailable(case)
         if reason:
             skipped[name] = reason
         else:
@@ -129,7 +129,12 @@ def diagnose(case, model, effects=None, progress=None):
     candidates, left = [], base
     while pending:
         found = []
-        for effect in pending.values():
+        for effect in list(pending.values()):
+            shortfall = too_few_samples(left.model + effect, case)
+            if shortfall:
+                skipped[effect.name] = shortfall
+                del pending[effect.name]
+                continue
             notify(effect.name)
             candidate = _try_effect(case, left, effect)
             if candidate:
@@ -137,6 +142,9 @@ def diagnose(case, model, effects=None, progress=None):
         if not found:
             break
         found.sort(key=lambda c: c.delta_bic)
+        while len(found) > 1 and too_few_samples(
+                left.model + Model([c.result.model.effects[-1] for c in found]), case):
+            found.pop()  # the samples cannot carry them all at once: the weakest waits
         candidates += found
         for candidate in found:
             del pending[candidate.effect]
@@ -231,7 +239,10 @@ def find_structures(case, left, noise_um, effects):
         if best.delta_bic > SIGNIFICANT_DELTA_BIC:
             break
         structures.append(best)
-        current = fit(current.model + _StructureEffect(len(structures), best.basis), case)
+        model = current.model + _StructureEffect(len(structures), best.basis)
+        if too_few_samples(model, case):
+            break
+        current = fit(model, case)
     remaining = current.residual_um
     rms_um = float(np.sqrt(np.mean(np.square(remaining))))
     if (not structures and remaining.size >= MIN_POINTS_FOR_RATIO

@@ -112,7 +112,8 @@ def too_few_samples(model, cases):
     n_parameters = sum(len(effect.parameters) for effect in model.effects)
     needed = n_parameters + NOISE_DOF
     if n_samples < needed:
-        return (f"{n_samples} samples; fitting {model!r} needs at least {needed} "
+        return (f"{n_samples} samples; a fit of {' + '.join(model.names) or 'the empty model'} "
+                f"needs at least {needed} "
                 f"({n_parameters} parameters + {NOISE_DOF} degrees of freedom for the noise)")
     targets = np.unique(np.concatenate([case.positioning.target_mm for case in cases]))
     if targets.size < 2 and not any(case.positioning.time_s is not None for case in cases):
