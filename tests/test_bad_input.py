@@ -336,7 +336,8 @@ def test_sigint_handler_of_the_cli_is_left_as_found(tmp_path, capsys):
 
 @pytest.mark.parametrize("setting, words", [
     ("ThermalScrew.length_m=-1", ["ThermalScrew.length_m", "must be >= 0"]),
-    ("ThermalScrew.length_m=0", ["ThermalScrew", "refuses these parameter values"]),
+    ("ThermalScrew.length_m=0", ["ThermalScrew.length_m", "must be > 0"]),
+    ("GeometricError.support=free", ["GeometricError.support", "must be one of"]),
     ("NpidServo.nonlinear=3", ["NpidServo.nonlinear", "Boolean parameter"]),
 ])
 @pytest.mark.parametrize("command, out", [

@@ -306,10 +306,10 @@ def _numbers(text, option):
 
 def _checked_axis(args):
     """The axis system and FMU paths, its parameter values accepted by every FMU."""
-    from .cosim.master import check_initialises
+    from .cosim.physics_check import check_parameters
 
     system, paths = _axis_system(args), _fmu_paths(args)
-    check_initialises(system, paths)
+    check_parameters(system, paths)
     return system, paths
 
 

@@ -26,6 +26,7 @@ from fmpy.fmi1 import FMICallException
 
 from ..errors import ParameterError
 from .fmu_runner import LoadedFmu
+from .physics_check import check_physics
 from .system import check_parameter_values
 
 CHUNK_STEPS = 1000
@@ -197,6 +198,7 @@ class Master:
         loaded = self.loaded[component.fmu]
         variables = loaded.variables
         check_parameter_values(component, variables)
+        check_physics(component, variables)
         connections = system.inputs_of(component.name)
         for connection in connections:
             if connection.target.split(".", 1)[1] not in variables:
@@ -278,19 +280,6 @@ class Master:
             np.zeros((0, len(columns) + 1))
         dtype = np.dtype([(name, float) for name in self.names])
         return recfunctions.unstructured_to_structured(stacked, dtype)
-
-
-def check_initialises(system, fmu_paths):
-    """Instantiate and initialise every component of ``system`` without a step.
-
-    Raises
-    ------
-    ParameterError
-        When a parameter value is unknown, of the wrong type, outside the FMU's bounds, or
-        refused by the FMU's physics at initialisation.
-    """
-    with Master(system, fmu_paths) as master:
-        master.run(0.0)
 
 
 def _whole_steps(duration_s, h, what):

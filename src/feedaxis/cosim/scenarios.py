@@ -27,6 +27,7 @@ from ..errors import ParameterError
 from ..physics.checks import require_positive
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
+from .physics_check import start_value
 
 ISO_REFERENCE_C = 20.0
 SCREW_FROM = {"GeometricError": ("lead_mm", "length_m", "diameter_m", "density_kg_m3",
@@ -398,7 +399,7 @@ def axis_values(master, parameters, name):
     def values(component, keys):
         c = system.component(component)
         variables = master.loaded[c.fmu].variables
-        return {k: c.parameters[k] if k in c.parameters else _start(variables[k]) for k in keys}
+        return {k: c.parameters[k] if k in c.parameters else start_value(variables[k]) for k in keys}
 
     screw = {k: v for c, keys in SCREW_FROM.items() for k, v in values(c, keys).items()}
     thermal = values("ThermalScrew", SHARED_SCREW_KEYS)
@@ -408,13 +409,6 @@ def axis_values(master, parameters, name):
                              f"{', '.join(differ)}: one axis has one screw", "--set")
     motor = {k: v for c, keys in MOTOR_FROM.items() for k, v in values(c, keys).items()}
     return {"name": name, "screw": screw, "motor": motor}
-
-
-def _start(variable):
-    """The declared start value of an FMU variable as a Python value."""
-    convert = {"Real": float, "Integer": int, "String": str,
-               "Boolean": lambda text: text in ("true", "1")}[variable.type]
-    return convert(variable.start)
 
 
 def _positioning_columns(samples, rows, with_time=False):
