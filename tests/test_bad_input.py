@@ -312,6 +312,20 @@ def test_tracking_shorter_than_the_settling_time_is_refused_not_nan(tmp_path, ca
     assert "nan" not in err and not (tmp_path / "t").exists()
 
 
+@pytest.mark.parametrize("options, words", [
+    (["--feed-mm-min", "1e-9"], ["the run would take"]),
+    (["--step-ms", "1e-300"], ["the run would take"]),
+    (["--spacing-mm", "1e300"], ["the run would take"]),
+    (["--targets", "100000000"], ["--targets", "must be 2 to 100000"]),
+    (["--targets", "1000", "--runs", "1000"], ["runs", "more than the 100000 samples"]),
+])
+def test_a_run_that_would_never_end_is_refused(tmp_path, capsys, fmu_paths, options, words):
+    fmus = next(iter(fmu_paths.values())).parent
+    assert_refused(capsys, ["simulate", "iso230", tmp_path / "c", "--fmus", fmus, *options],
+                   *words)
+    assert not (tmp_path / "c").exists()
+
+
 def test_a_coarse_macro_step_needs_no_thermal_step_option():
     args = cli.build_parser().parse_args(["simulate", "tracking", "out", "--step-ms", "1000"])
     system = cli._axis_system(args)

@@ -37,6 +37,8 @@ SCREW_FROM = {"GeometricError": ("lead_mm", "length_m", "diameter_m", "density_k
 SHARED_SCREW_KEYS = ("length_m", "diameter_m", "density_kg_m3", "fixed_end_mm")
 MOTOR_FROM = {"StepperError": ("step_angle_deg", "error_period_steps")}
 SETTLE_S = 1.0
+MAX_SAMPLES = 100_000  # samples of one simulated test (ISO 230-2: 5 runs x 2 x ~20 targets)
+MAX_MACRO_STEPS = 1e9  # 11.6 days of axis time at 1 ms: days of computing
 TEETH = 2
 # F0 (N) calibrated on one row of seed 002 Table 2 (PID, 0.4 Hz, 10 mm, 1500 rpm: 0.0757 mm)
 # with the assumed force_constant_N_per_V = 100; it then gives 0.2211 mm at 0.7 Hz, 20 mm,
@@ -142,6 +144,8 @@ def iso230_targets(n_targets, spacing_mm, first_mm=0.0):
     r_i = p (frac(0.618034 i) - 0.5) / 5 stays within ±10 % of the spacing p and differs at
     every target, so periodic errors (screw lead, motor steps) are not sampled in phase.
     """
+    if n_targets > MAX_SAMPLES:
+        raise ParameterError(f"must be 2 to {MAX_SAMPLES}, got {n_targets}", "--targets")
     if n_targets < 2 or not spacing_mm > 0:
         raise ParameterError(f"iso230 needs at least 2 targets (got {n_targets}) and a "
                              f"spacing > 0 (got {spacing_mm})", "--targets/--spacing-mm")
@@ -159,6 +163,9 @@ def iso230_motion(targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5, overrun_m
     """
     targets_mm = np.sort(np.asarray(targets_mm, dtype=float))
     _require_positive(runs=runs, feed_mm_min=feed_mm_min, dwell_s=dwell_s)
+    if 2 * len(targets_mm) * runs > MAX_SAMPLES:
+        raise ParameterError(f"{len(targets_mm)} targets x {runs} runs x 2 directions is more "
+                             f"than the {MAX_SAMPLES} samples a test may hold", "runs")
     if overrun_mm < 0:
         raise ParameterError(f"must be >= 0, got {overrun_mm}", "overrun_mm")
     motion = Motion(targets_mm[0] - overrun_mm)
@@ -211,7 +218,7 @@ def run_motion(master, motion, parameters=None, progress=None):
     The run records at every sample time; on Ctrl-C it returns the samples reached.
     """
     h = master.system.macro_step_s
-    stop_s = math.ceil(motion.time_s / h - 1e-9) * h
+    stop_s = _stop_time_s(motion.time_s, h)
     inputs = {"position_ref_mm": lambda t: motion.position_at(t + h),
               "ambient_C": motion.ambient_at}
     times_s = [s.time_s for s in motion.samples]
@@ -355,7 +362,7 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     inputs = {"position_ref_mm": lambda t: reference_mm(t + h)}
     if spindle_rpm is not None:
         inputs["disturbance_N"] = lambda t: cutting_force_N(t, spindle_rpm, force_N)
-    stop_s = math.ceil(duration_s / h - 1e-9) * h
+    stop_s = _stop_time_s(duration_s, h)
     try:
         rows, completed = master.run(stop_s, inputs, overrides, progress=progress), True
     except SimulationInterrupted as stopped:
@@ -431,6 +438,18 @@ def _finish(out, positioning, completed, planned):
         raise ScenarioInterrupted(f"interrupted: {summary['samples']} of "
                                   f"{summary['planned_samples']} samples written to {out}")
     return summary
+
+
+def _stop_time_s(duration_s, macro_step_s):
+    """``duration_s`` rounded up to whole macro steps; refused beyond :data:`MAX_MACRO_STEPS`
+    (a feed near 0 or a step near 0 would otherwise run for ever)."""
+    steps = duration_s / macro_step_s
+    if not steps <= MAX_MACRO_STEPS:
+        raise ParameterError(f"the run would take {duration_s:.4g} s in {steps:.4g} macro steps "
+                             f"of {macro_step_s:g} s, more than the {MAX_MACRO_STEPS:.0e} "
+                             "feedaxis simulates; check the feed, the targets and --step-ms",
+                             "duration")
+    return math.ceil(steps - 1e-9) * macro_step_s
 
 
 def _require_positive(**values):
