@@ -326,6 +326,16 @@ def test_a_run_that_would_never_end_is_refused(tmp_path, capsys, fmu_paths, opti
     assert not (tmp_path / "c").exists()
 
 
+def test_a_thermal_run_with_too_many_passes_is_refused(tmp_path, capsys, fmu_paths):
+    fmus = next(iter(fmu_paths.values())).parent
+    (tmp_path / "duty.csv").write_text("start_s,duration_s,feed_mm_min,from_mm,to_mm\n"
+                                       "0,3600,1000,0,100\n")
+    assert_refused(capsys, ["simulate", "thermal", tmp_path / "c", "--duty",
+                            tmp_path / "duty.csv", "--targets", "0,50", "--every-s", "1e-9",
+                            "--fmus", fmus], "every_s", "more than the 100000 samples")
+    assert not (tmp_path / "c").exists()
+
+
 def test_a_coarse_macro_step_needs_no_thermal_step_option():
     args = cli.build_parser().parse_args(["simulate", "tracking", "out", "--step-ms", "1000"])
     system = cli._axis_system(args)

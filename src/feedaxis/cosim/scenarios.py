@@ -189,6 +189,10 @@ def thermal_motion(duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0.5):
     written) is the input duty with these passes and moves inserted.
     """
     _require_positive(every_s=every_s, feed_mm_min=feed_mm_min, dwell_s=dwell_s)
+    if (duty.end_s / every_s + 2) * len(targets_mm) > MAX_SAMPLES:
+        raise ParameterError(f"a pass over {len(targets_mm)} targets every {every_s:g} s of a "
+                             f"{duty.end_s:g} s duty is more than the {MAX_SAMPLES} samples a "
+                             "test may hold", "every_s")
     cuts_s = list(np.arange(every_s, duty.end_s, every_s))
     ambient = list(duty.ambient_C) if duty.ambient_C is not None else [None] * len(duty.segments)
     motion = Motion(targets_mm[0])
