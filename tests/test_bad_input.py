@@ -306,6 +306,17 @@ def test_ctrl_c_is_reported_once(tmp_path, capsys, monkeypatch):
     assert code == 130 and err == "feedaxis: interrupted: 12 of 30 samples written to out\n"
 
 
+@pytest.mark.parametrize("options, words", [
+    (["--amplitude-mm", "1e300"], ["amplitude_mm", "beyond any physical axis"]),
+    (["--frequency-hz", "600"], ["frequency_hz", "Nyquist"]),
+])
+def test_tracking_beyond_the_axis_or_the_step_is_refused(tmp_path, capsys, fmu_paths, options,
+                                                          words):
+    fmus = next(iter(fmu_paths.values())).parent
+    assert_refused(capsys, ["simulate", "tracking", tmp_path / "t", "--fmus", fmus, *options],
+                   *words)
+
+
 def test_tracking_shorter_than_the_settling_time_is_refused_not_nan(tmp_path, capsys):
     err = assert_refused(capsys, ["simulate", "tracking", tmp_path / "t", "--duration-s", 0.5],
                          "duration_s", "must exceed 1 s")

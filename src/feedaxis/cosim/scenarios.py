@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..case import write_case
+from ..case import PHYSICAL_RANGE, write_case
 from ..errors import ParameterError
 from ..physics.checks import require_positive
 from ..physics.thermal import DutySegment
@@ -37,6 +37,7 @@ SCREW_FROM = {"GeometricError": ("lead_mm", "length_m", "diameter_m", "density_k
 SHARED_SCREW_KEYS = ("length_m", "diameter_m", "density_kg_m3", "fixed_end_mm")
 MOTOR_FROM = {"StepperError": ("step_angle_deg", "error_period_steps")}
 SETTLE_S = 1.0
+MAX_TRAVEL_MM = PHYSICAL_RANGE["reference_mm"][1]  # beyond any physical axis
 MAX_SAMPLES = 100_000  # samples of one simulated test (ISO 230-2: 5 runs x 2 x ~20 targets)
 MAX_MACRO_STEPS = 1e9  # 11.6 days of axis time at 1 ms: days of computing
 TEETH = 2
@@ -350,13 +351,19 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     """
     _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
                       duration_s=duration_s)
+    h = master.system.macro_step_s
+    if amplitude_mm > MAX_TRAVEL_MM:
+        raise ParameterError(f"must be <= {MAX_TRAVEL_MM:g} mm (beyond any physical axis), "
+                             f"got {amplitude_mm:g}", "amplitude_mm")
+    if frequency_hz >= 0.5 / h:
+        raise ParameterError(f"must be below {0.5 / h:g} Hz, the Nyquist frequency of the "
+                             f"{h:g} s macro step, got {frequency_hz:g}", "frequency_hz")
     if not duration_s > SETTLE_S:
         raise ParameterError(f"must exceed {SETTLE_S:g} s: the tracking error is measured "
                              f"after the first {SETTLE_S:g} s (the start-up transient), got "
                              f"{duration_s:g}", "duration_s")
     if controller not in ("pid", "npid"):
         raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
-    h = master.system.macro_step_s
     overrides = {**(parameters or {})}
     overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
 
