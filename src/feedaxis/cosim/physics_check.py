@@ -3,7 +3,7 @@
 An FMU refuses bad parameter values only at initialisation, after it was instantiated,
 and a pythonfmu slave that raises there can leave the host unstable; so every component's
 values (the FMU's start values under the system's) first go through the same physics
-constructors the FMU adapters call (``src/feedaxis/fmus/*.py``, ``build``), here, in-process.
+constructors the FMU adapters' ``build`` calls, here, in-process.
 """
 from __future__ import annotations
 
