@@ -78,12 +78,36 @@ def test_ctrl_c_stops_cleanly_with_the_rows_computed(master):
         if done_steps == 1000:
             signal.raise_signal(signal.SIGINT)
 
+    before = signal.getsignal(signal.SIGINT)  # SIG_IGN when the suite runs under nohup ... &
     with pytest.raises(SimulationInterrupted) as stopped:
         master.run(5.0, {"position_ref_mm": 1.0}, progress=press_ctrl_c)
     partial = stopped.value.partial
     assert partial["time"][-1] == pytest.approx(1.0)
     assert np.isfinite(partial["table_position_mm"]).all()
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_ctrl_c_while_the_fmus_are_instantiated_stops_cleanly(master, monkeypatch):
+    instantiate = master._instantiate
+
+    def instantiate_then_ctrl_c(*args):
+        entry = instantiate(*args)
+        signal.raise_signal(signal.SIGINT)
+        return entry
+
+    monkeypatch.setattr(master, "_instantiate", instantiate_then_ctrl_c)
+    with pytest.raises(SimulationInterrupted) as stopped:
+        master.run(1.0, {"position_ref_mm": 1.0})
+    assert stopped.value.partial["time"].tolist() == [0.0]
+
+
+def test_sigint_ignored_by_the_parent_is_restored_after_a_run(master):
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        master.run(0.01, {"position_ref_mm": 1.0})
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @pytest.mark.parametrize("change, message", [

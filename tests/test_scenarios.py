@@ -109,8 +109,11 @@ def test_ctrl_c_writes_the_samples_computed_so_far(tmp_path, master):
     with pytest.raises(ScenarioInterrupted, match=r"interrupted: \d+ of 30 samples written"):
         simulate_iso230(tmp_path / "partial", master, iso230_targets(3, 2.0), dwell_s=0.2,
                         progress=press_ctrl_c)
-    positioning = read_case(tmp_path / "partial").positioning
-    assert 0 < positioning.size < 30
+    partial = read_case(tmp_path / "partial")
+    assert 0 < partial.positioning.size < 30
+    assert partial.positioning.size % 6 == 0  # whole runs only: 3 targets x 2 directions
+    runs = partial.positioning.size // 6
+    assert partial.name == f"simulated ISO 230-2 test (interrupted: {runs} of 5 runs)"
 
 
 @pytest.mark.parametrize("args, message", [
@@ -119,9 +122,9 @@ def test_ctrl_c_writes_the_samples_computed_so_far(tmp_path, master):
     (("iso230", "{out}", "--set", "Spindle.rpm=2"), "no component 'Spindle'"),
     (("iso230", "{out}", "--set", "nonlinear"), "expected COMPONENT.PARAMETER=VALUE"),
     (("iso230", "{out}", "--thermal-step-s", 0.0015), "whole multiple of the macro step"),
-    (("iso230", "{out}", "--model", "m.toml"), "--model needs --axis"),
-    (("tracking", "{out}", "--frequency-hz", -1), "frequency_hz must be > 0"),
-    (("thermal", "{out}", "--duty", "missing.csv", "--targets", "1"), "missing.csv: file not found"),
+    (("iso230", "{out}", "--model", "m.toml"), "--model: needs --axis"),
+    (("tracking", "{out}", "--frequency-hz", -1), "frequency_hz: must be > 0"),
+    (("thermal", "{out}", "--duty", "missing.csv", "--targets", "1"), "missing.csv: case file not found"),
     (("thermal", "{out}", "--duty", "{bad}", "--targets", "1"), "bad.csv, row 2, column 'duration_s'"),
     (("thermal", "{out}", "--duty", "{good}", "--targets", "1,x"), "--targets 1,x: expected"),
     (("tracking", "{existing}"), "already exists"),

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .errors import InputError
+from .errors import InputError, read_text
+from .output import umask_mode
 from .physics.geometry import SUPPORTS
 from .physics.thermal import DutySegment
 
@@ -39,6 +40,20 @@ SCREW_KEYS = {
 }
 MOTOR_KEYS = {"step_angle_deg": "positive", "error_period_steps": "positive_integer"}
 TABLES = {"screw": SCREW_KEYS, "motor": MOTOR_KEYS}
+# Beyond these no machine axis goes: a value outside is a typing or unit slip, refused
+# rather than fitted (a 1e-300 Pa screw or 1e300 um deviations overflow the numerics).
+PHYSICAL_RANGE = {
+    "lead_mm": (1e-3, 1e3), "length_m": (1e-3, 100.0), "diameter_m": (1e-4, 2.0),
+    "density_kg_m3": (100.0, 1e5), "specific_heat_J_kgK": (10.0, 1e5),
+    "expansion_per_K": (1e-9, 1e-3), "youngs_modulus_Pa": (1e6, 1e13),
+    "nut_length_m": (1e-4, 100.0), "bearing_length_m": (1e-4, 100.0),
+    "fixed_end_mm": (-1e5, 1e5), "step_angle_deg": (1e-3, 360.0),
+    "error_period_steps": (1, 1e6),
+    "target_mm": (-1e5, 1e5), "error_um": (-1e5, 1e5), "time_s": (0.0, 1e9),
+    "ambient_C": (-100.0, 200.0), "start_s": (0.0, 1e9), "duration_s": (0.0, 1e9),
+    "feed_mm_min": (0.0, 1e6), "from_mm": (-1e5, 1e5), "to_mm": (-1e5, 1e5),
+    "reference_mm": (-1e5, 1e5), "actual_mm": (-1e5, 1e5), "disturbance_N": (-1e7, 1e7),
+}
 
 POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
                        "time_s": False, "ambient_C": False}
@@ -143,11 +158,12 @@ def read_case(folder):
     if not folder.is_dir():
         raise CaseError(folder, "not a case folder (expected a folder holding axis.toml)")
     axis = read_axis(folder / AXIS_FILE)
-    duty = read_duty(folder / DUTY_FILE) if (folder / DUTY_FILE).exists() else None
+    length_mm = axis.screw["length_m"] * 1e3 if "length_m" in axis.screw else None
+    duty = read_duty(folder / DUTY_FILE, length_mm) if (folder / DUTY_FILE).exists() else None
     positioning = tracking = None
     if (folder / POSITIONING_FILE).exists():
         positioning = read_positioning(folder / POSITIONING_FILE,
-                                       duty.end_s if duty is not None else None)
+                                       duty.end_s if duty is not None else None, length_mm)
     elif duty is not None:
         raise CaseError(folder / DUTY_FILE, f"a thermal test needs {POSITIONING_FILE} "
                                             "with time_s beside duty.csv")
@@ -164,7 +180,7 @@ def read_axis(path):
     path = Path(path)
     if not path.exists():
         raise CaseError(path, "missing: every case needs axis.toml")
-    text = path.read_text(encoding="utf-8")
+    text = _read_text(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
@@ -187,13 +203,21 @@ def read_axis(path):
     return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}))
 
 
+def _read_text(path):
+    """The file's text; a folder, unreadable file or foreign encoding is a :class:`CaseError`."""
+    try:
+        return read_text(path, "case file")
+    except InputError as error:
+        raise CaseError(path, error.message, error.row) from None
+
+
 def _check_table(path, text, table, values):
     known = TABLES[table]
     for key, value in values.items():
         row, column = _key_line(text, key, table), f"{table}.{key}"
         if key not in known:
             raise CaseError(path, _unknown_key_message(key, list(known)), row, column)
-        problem = _value_problem(known[key], value)
+        problem = _value_problem(known[key], key, value)
         if problem:
             raise CaseError(path, f"{key} {problem}, got {value!r}", row, column)
     return dict(values)
@@ -204,7 +228,7 @@ def _unknown_key_message(key, known):
     return f"unknown or unit-less key '{key}'{hint}; known: {', '.join(known)}"
 
 
-def _value_problem(rule, value):
+def _value_problem(rule, key, value):
     if rule == "support":
         return None if value in SUPPORTS else f"must be one of {', '.join(SUPPORTS)}"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -215,7 +239,15 @@ def _value_problem(rule, value):
         return "must be > 0"
     if rule == "positive_integer" and (not isinstance(value, int) or value < 1):
         return "must be a whole number >= 1"
-    return None
+    return _range_problem(key, value)
+
+
+def _range_problem(key, value):
+    """Why ``value`` lies beyond any physical axis for ``key`` (None when it does not)."""
+    low, high = PHYSICAL_RANGE.get(key, (-math.inf, math.inf))
+    if low <= value <= high:
+        return None
+    return f"is beyond any physical axis: expected {low:g} to {high:g}"
 
 
 def _key_line(text, key, table=None):
@@ -242,7 +274,7 @@ def _read_csv(path, spec):
     """
     path = Path(path)
     records = []
-    for line_number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+    for line_number, line in enumerate(_read_text(path).splitlines(), 1):
         stripped = line.strip()
         if stripped and not stripped.startswith("#"):
             records.append((line_number, [cell.strip() for cell in line.split(",")]))
@@ -261,6 +293,13 @@ def _read_csv(path, spec):
                             row, column)
         for name, cell in zip(names, cells):
             values[name][index] = _number(path, cell, row, name)
+    for name, column in values.items():
+        low, high = PHYSICAL_RANGE.get(name, (-math.inf, math.inf))
+        bad = np.flatnonzero((column < low) | (column > high))
+        if bad.size:
+            value = column[bad[0]]
+            raise CaseError(path, f"{value:g} {_range_problem(name, value)}",
+                            row_labels[bad[0]], name)
     return values, row_labels
 
 
@@ -298,13 +337,15 @@ def _first_bad(path, mask, rows, column, message):
         raise CaseError(path, message, rows[bad[0]], column)
 
 
-def read_positioning(path, duty_end_s=None):
+def read_positioning(path, duty_end_s=None, length_mm=None):
     """Read positioning.csv: target and deviation, optional direction, run, time, ambient.
 
-    With ``duty_end_s`` (a thermal case) every sample needs a time within the duty.
+    With ``duty_end_s`` (a thermal case) every sample needs a time within the duty; with
+    ``length_mm`` (the screw's length) the targets must span no more than the screw.
     """
     path = Path(path)
     values, rows = _read_csv(path, POSITIONING_COLUMNS)
+    _check_travel(path, values, rows, ("target_mm",), length_mm)
     direction = values.get("direction")
     if direction is not None:
         _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
@@ -325,14 +366,23 @@ def read_positioning(path, duty_end_s=None):
                        values.get("ambient_C"), has_direction=direction is not None)
 
 
-def read_duty(path):
-    """Read duty.csv: contiguous segments from t = 0, durations > 0, feeds >= 0."""
+def read_duty(path, length_mm=None):
+    """Read duty.csv: contiguous segments from t = 0, durations > 0, feeds >= 0; a segment
+    at a feed travels (``from_mm`` != ``to_mm``), one standing still stays put; with
+    ``length_mm`` the travel must fit on the screw."""
     path = Path(path)
     values, rows = _read_csv(path, DUTY_COLUMNS)
     start, duration = values["start_s"], values["duration_s"]
     _first_bad(path, duration <= 0, rows, "duration_s", "duration_s must be > 0")
-    _first_bad(path, values["feed_mm_min"] < 0, rows, "feed_mm_min",
+    feed, from_mm, to_mm = values["feed_mm_min"], values["from_mm"], values["to_mm"]
+    _first_bad(path, feed < 0, rows, "feed_mm_min",
                "feed_mm_min must be >= 0 (0 means standing still)")
+    _first_bad(path, (feed > 0) & (from_mm == to_mm), rows, "to_mm",
+               "a segment at a feed > 0 must travel: to_mm equals from_mm (a standstill has "
+               "feed_mm_min 0)")
+    _first_bad(path, (feed == 0) & (from_mm != to_mm), rows, "to_mm",
+               "a standstill (feed_mm_min 0) stays at from_mm: to_mm must equal it")
+    _check_travel(path, values, rows, ("from_mm", "to_mm"), length_mm)
     if start[0] != 0.0:
         raise CaseError(path, f"the first segment must start at 0 s, got {start[0]:g}",
                         rows[0], "start_s")
@@ -358,6 +408,19 @@ def read_tracking(path):
                "time_s must be strictly increasing")
     return Tracking(time_s, values["reference_mm"], values["actual_mm"],
                     values.get("disturbance_N"))
+
+
+def _check_travel(path, values, rows, columns, length_mm):
+    """Raise unless the positions in ``columns`` span at most the screw's ``length_mm``."""
+    if length_mm is None:
+        return
+    positions = np.column_stack([values[name] for name in columns])
+    span_mm = float(np.ptp(positions))
+    if span_mm > length_mm * (1 + 1e-9):
+        row, column = np.unravel_index(np.argmax(positions), positions.shape)
+        raise CaseError(path, f"the positions span {span_mm:g} mm ({positions.min():g} to "
+                              f"{positions.max():g}) on a screw {length_mm:g} mm long "
+                              "([screw] length_m of axis.toml)", rows[row], columns[column])
 
 
 def _check_within_duty(path, time_s, rows, duty_end_s):
@@ -392,6 +455,7 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None):
                               (TRACKING_FILE, tracking)):
             if columns is not None:
                 _write_csv(staging / name, columns)
+        os.chmod(staging, umask_mode(0o777))  # mkdtemp's 0700 would hide it from others
         os.replace(staging, folder)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)

@@ -1,6 +1,9 @@
 """Command line: ``feedaxis <command>``; each command parses, calls the library, prints.
 
-Exit codes: 0 success, 2 bad input (one message on stderr, nothing written), 130 Ctrl-C.
+Exit codes: 0 success, 2 bad input (an :class:`~feedaxis.errors.InputError`: one message on
+stderr naming the file, row and column or the option, nothing written), 1 a bug (one line;
+``--debug`` shows the traceback), 130 Ctrl-C. With ``--json`` every result and every error is
+strict JSON on stdout (no NaN or Infinity: a value that is not finite is ``null``).
 The numerical modules (scipy, matplotlib, pythonfmu: seconds to import) are imported by the
 commands that use them, so ``--help`` and ``effects`` answer at once.
 """
@@ -8,17 +11,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from contextlib import contextmanager
 from pathlib import Path
 
 from . import __version__, text
 from .case import read_case
-from .errors import InputError
+from .errors import InputError, check_writable_target, json_safe
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
 
 COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
+DEFAULT_THERMAL_STEP_S = 0.1
 CASE_HELP = "case folder: axis.toml + positioning.csv (+ duty.csv), see data-format.md"
 
 
@@ -43,24 +48,33 @@ def _with_added(model, names, effects):
     """``model`` plus the effects named by ``--add``, in order."""
     for name in names or ():
         if name not in effects:
-            raise ValueError(f"--add {name}: unknown effect; known: {', '.join(effects)}")
+            raise InputError(f"unknown effect; known: {', '.join(effects)}",
+                             parameter=f"--add {name}")
         if name in model:
-            raise ValueError(f"--add {name}: already in the model")
+            raise InputError("already in the model", parameter=f"--add {name}")
         model = model + effects[name]
     return model
 
 
+def _json_text(payload):
+    """``payload`` as strict JSON: non-finite numbers become null, never NaN or Infinity."""
+    return json.dumps(json_safe(payload), indent=2, allow_nan=False)
+
+
 def _emit(args, payload, lines):
-    print(json.dumps(payload, indent=2) if args.json else lines)
+    print(_json_text(payload) if args.json else lines)
 
 
 def _cmd_fit(args):
-    from .fit import evaluate, fit
+    from .fit import check_available, evaluate, fit
 
+    if args.out:
+        check_writable_target(args.out)
     effects = _effects(args)
     cases = [read_case(folder) for folder in args.cases]
     starting = _starting_model(args, effects)
     model = _with_added(starting, args.add, effects)
+    check_available(model, cases)
     before = evaluate(starting, cases)
     with _progress("fitting", "model evaluations") as tick:
         result = fit(model, cases, progress=tick)
@@ -100,6 +114,7 @@ def _cmd_report(args):
     case = read_case(args.case)
     model = _starting_model(args, effects)
     out = Path(args.out or f"{Path(args.case).resolve().name}-report.html")
+    check_writable_target(out)
     write_report(case, model, effects, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
@@ -108,6 +123,8 @@ def _cmd_compensate(args):
     from .case import csv_text
     from .compensate import compensate
 
+    if args.out:
+        check_writable_target(args.out)
     case = read_case(args.case)
     result = compensate(case, load_model(args.model, _effects(args)))
     if args.out:
@@ -160,14 +177,16 @@ def _cmd_effects(args):
 def _cmd_demo(args):
     from . import demo
 
+    check_writable_target(args.out, "folder")
     summary = demo.run_demo(args.out, echo=(lambda line: None) if args.json else print)
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print(_json_text(summary))
 
 
 def _cmd_build_fmus(args):
     from . import fmu_build
 
+    check_writable_target(args.out, "folder")
     paths = fmu_build.build_fmus(args.out)
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
 
@@ -189,8 +208,8 @@ def _axis_overrides(args):
     overrides = {}
     if args.model:
         if not args.axis:
-            raise ValueError("--model needs --axis (the axis.toml or case folder it was "
-                             "fitted on): the FMU parameters depend on the axis")
+            raise InputError("needs --axis (the axis.toml or case folder it was fitted on): "
+                             "the FMU parameters depend on the axis", parameter="--model")
         from .case import read_axis
 
         axis_path = Path(args.axis)
@@ -200,21 +219,31 @@ def _axis_overrides(args):
         name, _, value = item.partition("=")
         component, _, parameter = name.partition(".")
         if not (component and parameter and value):
-            raise ValueError(f"--set {item}: expected COMPONENT.PARAMETER=VALUE, e.g. "
-                             "NpidServo.nonlinear=true")
+            raise InputError("expected COMPONENT.PARAMETER=VALUE, e.g. NpidServo.nonlinear=true",
+                             parameter=f"--set {item}")
         overrides.setdefault(component, {})[parameter] = _parameter_value(value)
     return overrides
 
 
 def _axis_system(args):
-    from .cosim.system import default_axis
+    """The default axis at ``--step-ms`` (and ``--thermal-step-s``) with the overrides.
 
-    for option, value in (("--step-ms", args.step_ms), ("--thermal-step-s", args.thermal_step_s)):
-        if not value > 0:
-            raise ValueError(f"{option} must be > 0, got {value:g}")
+    Without ``--thermal-step-s`` ThermalScrew steps every 0.1 s rounded up to a whole
+    number of macro steps, so any ``--step-ms`` works.
+    """
+    from .cosim.system import default_axis, whole_ratio
+
+    thermal_step_s = getattr(args, "thermal_step_s", None)
+    for option, value in (("--step-ms", args.step_ms), ("--thermal-step-s", thermal_step_s)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise InputError(f"must be > 0, got {value:g}", parameter=option)
     step_s = args.step_ms * 1e-3
-    return default_axis(step_s, step_s, args.thermal_step_s).with_parameters(
-        _axis_overrides(args))
+    if thermal_step_s is None:
+        thermal_step_s = step_s * math.ceil(DEFAULT_THERMAL_STEP_S / step_s - 1e-9)
+    elif whole_ratio(thermal_step_s, step_s) is None:
+        raise InputError(f"{thermal_step_s:g} s must be a whole multiple of the macro step "
+                         f"--step-ms {args.step_ms:g}", parameter="--thermal-step-s")
+    return default_axis(step_s, step_s, thermal_step_s).with_parameters(_axis_overrides(args))
 
 
 def _fmu_paths(args):
@@ -224,7 +253,7 @@ def _fmu_paths(args):
         paths = {name: Path(args.fmus) / f"{name}.fmu" for name in FMU_NAMES}
         missing = [str(p) for p in paths.values() if not p.exists()]
         if missing:
-            raise ValueError(f"--fmus {args.fmus}: missing {', '.join(missing)}")
+            raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {args.fmus}")
         return paths
     from .cosim.fmu_cache import cached_fmus
 
@@ -248,18 +277,14 @@ def _step_progress():
 def _simulate(args, scenario):
     """Run one scenario into a new case folder; Ctrl-C keeps what was computed."""
     from .cosim.master import Master
-    from .cosim.scenarios import ScenarioInterrupted
 
     if Path(args.out).exists():
-        raise ValueError(f"{args.out}: already exists; choose a new case folder")
+        raise InputError("already exists; choose a new case folder", path=args.out)
+    check_writable_target(args.out, "folder")
     system = _axis_system(args)
     with Master(system, _fmu_paths(args)) as master:
-        try:
-            with _step_progress() as progress:
-                return scenario(master, progress)
-        except ScenarioInterrupted as stopped:
-            print(f"feedaxis: {stopped.message}", file=sys.stderr)
-            raise
+        with _step_progress() as progress:
+            return scenario(master, progress)
 
 
 def _cmd_simulate_iso230(args):
@@ -278,8 +303,6 @@ def _cmd_simulate_thermal(args):
     from .case import read_duty
     from .cosim.scenarios import simulate_thermal
 
-    if not Path(args.duty).is_file():
-        raise ValueError(f"--duty {args.duty}: file not found")
     duty = read_duty(args.duty)
     targets = _numbers(args.targets, "--targets")
     summary = _simulate(args, lambda master, progress: simulate_thermal(
@@ -310,16 +333,25 @@ def _numbers(text, option):
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
-        raise ValueError(f"{option} {text}: expected comma-separated numbers, e.g. 10,100,190") \
-            from None
+        raise InputError("expected comma-separated numbers, e.g. 10,100,190",
+                         parameter=f"{option} {text}") from None
     return values
+
+
+def _checked_axis(args):
+    """The axis system and FMU paths, its parameter values accepted by every FMU."""
+    from .cosim.physics_check import check_parameters
+
+    system, paths = _axis_system(args), _fmu_paths(args)
+    check_parameters(system, paths)
+    return system, paths
 
 
 def _cmd_export_ssp(args):
     from .cosim.ssp import export_ssp
 
-    system = _axis_system(args)
-    path = export_ssp(args.out, system, _fmu_paths(args))
+    check_writable_target(args.out)
+    path = export_ssp(args.out, *_checked_axis(args))
     _emit(args, {"ssp": str(path)}, f"{path}: SystemStructure.ssd, a parameter-values file "
                                     "(.ssv) per component and the four FMUs")
 
@@ -328,8 +360,8 @@ def _cmd_export_ssp(args):
 def _cmd_export_fmu(args):
     from .cosim.container import export_container_fmu
 
-    system = _axis_system(args)
-    path = export_container_fmu(args.out, system, _fmu_paths(args))
+    check_writable_target(args.out)
+    path = export_container_fmu(args.out, *_checked_axis(args))
     _emit(args, {"fmu": str(path)}, f"{path}: the axis as one FMU (fmpy container of the four "
                                     f"FMUs, one {args.step_ms:g} ms step for all)")
 
@@ -348,11 +380,13 @@ def _add_motion_options(sub):
                      help="dwell at each target before the sample (default 0.5 s)")
 
 
-def _add_axis_options(sub):
+def _add_axis_options(sub, thermal_step=True):
     sub.add_argument("--step-ms", type=float, default=1.0,
                      help="macro step = servo, motor and geometry step (default 1 ms)")
-    sub.add_argument("--thermal-step-s", type=float, default=0.1,
-                     help="ThermalScrew step, a multiple of the macro step (default 0.1 s)")
+    if thermal_step:
+        sub.add_argument("--thermal-step-s", type=float,
+                         help="ThermalScrew step, a whole multiple of the macro step (default "
+                              "0.1 s, rounded up to a multiple of the macro step)")
     sub.add_argument("--set", metavar="COMPONENT.PARAMETER=VALUE", action="append",
                      help="parameter value (repeatable), e.g. NpidServo.nonlinear=true")
     _add_model_options(sub, "fitted model (TOML): its FMU parameter values (needs --axis)")
@@ -362,16 +396,26 @@ def _add_axis_options(sub):
                                                    "into the user cache)")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse whose usage errors are :class:`InputError`, so ``--json`` reports them too."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        raise InputError(f"{message} (see {self.prog} --help)")
+
+
 def build_parser():
     """The argparse parser with every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="feedaxis",
         description="Digital twin of a ball-screw feed axis. Compare a model with "
                     "laser-interferometer and thermal-test data, see where it fails, learn "
                     "which physical effect is missing, add it, watch the error fall. The "
                     "model runs as FMI 2.0 FMUs (NpidServo, StepperError, GeometricError, "
                     "ThermalScrew).",
-        epilog="Start with `feedaxis demo`. Exit codes: 0 ok, 2 bad input, 130 interrupted.")
+        epilog="Start with `feedaxis demo`. Exit codes: 0 ok, 2 bad input (the message names "
+               "the file, row and column or the option), 1 an internal error (a bug: add "
+               "--debug for the traceback), 130 interrupted.")
     parser.add_argument("--version", action="version", version=f"feedaxis {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -549,6 +593,8 @@ def build_parser():
         scenario.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
         _add_axis_options(scenario)
         scenario.add_argument("--json", action="store_true", help="print machine-readable JSON")
+        scenario.add_argument("--debug", action="store_true",
+                              help="on an internal error, show the Python traceback")
 
     sub = commands.add_parser(
         "export-ssp", help="the axis as an SSP file for other FMI system simulators",
@@ -564,35 +610,60 @@ def build_parser():
         description="Wrap the four FMUs in one FMI 2.0 co-simulation FMU with fmpy's container "
                     "FMU: inputs position_ref_mm, disturbance_N, ambient_C; every component "
                     "output; the parameter values as fixed parameters. All four FMUs step at "
-                    "the container's one step (--step-ms; --thermal-step-s does not apply), "
+                    "the container's one step (--step-ms), "
                     "Jacobi: the error FMUs see the servo one step late.")
     sub.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
-    _add_axis_options(sub)
+    _add_axis_options(sub, thermal_step=False)
     sub.set_defaults(handler=_cmd_export_fmu)
 
     for sub in commands.choices.values():
-        sub.add_argument("--json", action="store_true", help="print machine-readable JSON")
+        sub.add_argument("--json", action="store_true",
+                         help="print strict JSON on stdout (errors too: error, file, row, column)")
+        sub.add_argument("--debug", action="store_true",
+                         help="on an internal error, show the Python traceback")
     return parser
 
 
 def main(argv=None):
-    """Entry point of the ``feedaxis`` console script; returns the exit code."""
+    """Entry point of the ``feedaxis`` console script; returns the exit code.
+
+    Bad input (:class:`InputError`, a usage error) exits 2 with one message naming where;
+    anything else is a bug: exit 1 with one line (``--debug`` re-raises it for the
+    traceback). With ``--json`` the message is a JSON object on stdout.
+    """
     from threadpoolctl import threadpool_limits
 
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    wants_json, debug = "--json" in argv, "--debug" in argv
     try:
+        args = build_parser().parse_args(argv)
         with threadpool_limits(limits=1, user_api="blas"):  # small matrices: threads only cost
             args.handler(args)
-    except KeyboardInterrupt:
-        print("feedaxis: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
+        message = str(stopped)
+        return _fail(wants_json, message if message.startswith("interrupted") else
+                     "interrupted", 130)
     except BrokenPipeError:
         sys.stderr.close()
         return 0
-    except (InputError, ValueError) as error:
-        print(f"feedaxis: {error}", file=sys.stderr)
-        return 2
+    except InputError as error:
+        return _fail(wants_json, str(error), 2, error.as_json())
+    except Exception as error:  # a bug: one line, the traceback with --debug
+        if debug:
+            raise
+        return _fail(wants_json, f"internal error (a bug, please report it): "
+                                 f"{type(error).__name__}: {error}; run the command again "
+                                 "with --debug to see the traceback", 1)
     return 0
+
+
+def _fail(wants_json, message, code, payload=None):
+    """Report a failure on stderr, and as JSON on stdout with ``--json``; return ``code``."""
+    print(f"feedaxis: {message}", file=sys.stderr)
+    if wants_json:
+        print(_json_text(payload or {"error": message, "file": None, "row": None,
+                                     "column": None, "parameter": None}))
+    return code
 
 
 if __name__ == "__main__":

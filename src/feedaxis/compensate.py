@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .effects import Model
+from .errors import InputError
 from .fit import check_available, rms
 from .iso230 import target_groups
 
@@ -95,19 +96,20 @@ def compensate(case, model):
     Compensation
     """
     if not case.is_thermal:
-        raise ValueError(f"{case.folder}: compensation needs a thermal case "
-                         "(duty.csv and time_s in positioning.csv)")
+        raise InputError("compensation needs a thermal case (duty.csv and time_s in "
+                         "positioning.csv)", path=case.folder)
     thermal = Model([e for e in model.effects if e.name in THERMAL_EFFECTS], model.values)
     if not thermal.effects:
-        raise ValueError(f"the model ({' + '.join(model.names) or 'empty'}) has no thermal "
+        raise InputError(f"the model ({' + '.join(model.names) or 'empty'}) has no thermal "
                          f"effect ({' or '.join(THERMAL_EFFECTS)}); identify one first: "
-                         "feedaxis fit CASE... --add thermal_screw --out M.toml")
+                         "feedaxis fit CASE... --add thermal_screw --out M.toml",
+                         parameter="--model")
     check_available(thermal, case)
     positioning = case.positioning
     visit, reference = _visits(positioning)
     if visit.max() == 0:
-        raise ValueError(f"{case.folder}: no target is measured twice; the thermal error is "
-                         "the drift of a target from its first visit")
+        raise InputError("no target is measured twice; the thermal error is the drift of a "
+                         "target from its first visit", path=case.folder)
     predicted_um = thermal.predict_um(case)
     measured_um = positioning.error_um
     thermal_error_um = measured_um - measured_um[reference]

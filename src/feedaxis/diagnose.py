@@ -22,7 +22,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .effects import CATALOG, Effect, Model, Parameter
-from .fit import FitResult, fit
+from .fit import FitResult, fit, too_few_samples
 from .iso230 import target_groups
 
 SIGNIFICANT_DELTA_BIC = -10.0
@@ -32,6 +32,7 @@ NOISE_RATIO_LIMIT = 1.5
 MIN_POINTS_FOR_RATIO = 30
 SPECTRUM_OVERSAMPLING = 5
 MAX_UNEVEN_FREQUENCIES = 4000
+MAX_GRID_FREQUENCIES = 1_000_000  # memory bound of the grid before thinning (8 MB)
 
 
 @dataclass
@@ -128,7 +129,12 @@ def diagnose(case, model, effects=None, progress=None):
     candidates, left = [], base
     while pending:
         found = []
-        for effect in pending.values():
+        for effect in list(pending.values()):
+            shortfall = too_few_samples(left.model + effect, case)
+            if shortfall:
+                skipped[effect.name] = shortfall
+                del pending[effect.name]
+                continue
             notify(effect.name)
             candidate = _try_effect(case, left, effect)
             if candidate:
@@ -136,6 +142,9 @@ def diagnose(case, model, effects=None, progress=None):
         if not found:
             break
         found.sort(key=lambda c: c.delta_bic)
+        while len(found) > 1 and too_few_samples(
+                left.model + Model([c.result.model.effects[-1] for c in found]), case):
+            found.pop()  # the samples cannot carry them all at once: the weakest waits
         candidates += found
         for candidate in found:
             del pending[candidate.effect]
@@ -230,7 +239,10 @@ def find_structures(case, left, noise_um, effects):
         if best.delta_bic > SIGNIFICANT_DELTA_BIC:
             break
         structures.append(best)
-        current = fit(current.model + _StructureEffect(len(structures), best.basis), case)
+        model = current.model + _StructureEffect(len(structures), best.basis)
+        if too_few_samples(model, case):
+            break
+        current = fit(model, case)
     remaining = current.residual_um
     rms_um = float(np.sqrt(np.mean(np.square(remaining))))
     if (not structures and remaining.size >= MIN_POINTS_FOR_RATIO
@@ -413,7 +425,11 @@ def _spectrum(position_mm, residual_um):
     else:
         from scipy.signal import lombscargle  # 0.5 s import, only for uneven sampling
 
-        frequency = np.arange(1.0 / span_mm, 0.5 / step_mm, _frequency_step(unique_mm))
+        frequency_step = _frequency_step(unique_mm)
+        band = 0.5 / step_mm - 1.0 / span_mm
+        if band > MAX_GRID_FREQUENCIES * frequency_step:  # nearly coincident targets would
+            frequency_step = band / MAX_UNEVEN_FREQUENCIES  # ask for billions of points
+        frequency = np.arange(1.0 / span_mm, 0.5 / step_mm, frequency_step)
         frequency = frequency[:: max(1, frequency.size // MAX_UNEVEN_FREQUENCIES)]
         amplitude = np.abs(lombscargle(unique_mm, means_um, 2 * np.pi * frequency,
                                        floating_mean=True, normalize="amplitude"))

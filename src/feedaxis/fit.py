@@ -12,8 +12,13 @@ from scipy.optimize import least_squares, lsq_linear
 from threadpoolctl import threadpool_limits
 
 from .effects import Model
+from .errors import InputError
 
 SINGULAR_RATIO = 1e-6
+# Residual degrees of freedom a fit must leave for the noise: with nu of them the noise
+# estimate s has a relative standard error of about 1/sqrt(2 nu) (chi-square with nu degrees
+# of freedom), 25 % at nu = 8; with fewer, BIC and the noise-based verdicts mean nothing.
+NOISE_DOF = 8
 
 
 @dataclass(frozen=True)
@@ -77,20 +82,44 @@ def measured_um(cases):
 
 
 def check_available(model, cases):
-    """Raise ValueError when an effect of ``model`` cannot be used on a case, or when cases
-    fitted jointly describe different axes."""
+    """Raise :class:`InputError` when an effect of ``model`` cannot be used on a case, when
+    cases fitted jointly describe different axes, or when the data are too few to fit."""
     cases = _as_list(cases)
     for case in cases[1:]:
         if (case.axis.screw, case.axis.motor) != (cases[0].axis.screw, cases[0].axis.motor):
-            raise ValueError(f"{case.folder}: axis.toml differs from {cases[0].folder}; cases "
-                             "fitted together must describe the same axis")
+            raise InputError(f"axis.toml differs from {cases[0].folder}; cases fitted "
+                             "together must describe the same axis", path=case.folder)
     for case in cases:
         if case.positioning is None:
-            raise ValueError(f"{case.folder}: the fit needs positioning.csv")
+            raise InputError("the fit needs positioning.csv", path=case.folder)
         for effect in model.effects:
             reason = effect.unavailable(case)
             if reason:
-                raise ValueError(f"{case.folder}: effect {effect.name} {reason}")
+                raise InputError(f"effect {effect.name} {reason}", path=case.folder)
+    shortfall = too_few_samples(model, cases)
+    if shortfall:
+        raise InputError(shortfall, path=cases[0].folder / "positioning.csv")
+
+
+def too_few_samples(model, cases):
+    """Why the cases' positioning samples cannot support a fit of ``model`` (None if they can).
+
+    A fit needs one sample per parameter plus :data:`NOISE_DOF` for the noise, and, unless
+    the samples are spread in time (a thermal test), at least two distinct targets.
+    """
+    cases = _as_list(cases)
+    n_samples = sum(case.positioning.size for case in cases)
+    n_parameters = sum(len(effect.parameters) for effect in model.effects)
+    needed = n_parameters + NOISE_DOF
+    if n_samples < needed:
+        return (f"{n_samples} samples; a fit of {' + '.join(model.names) or 'the empty model'} "
+                f"needs at least {needed} "
+                f"({n_parameters} parameters + {NOISE_DOF} degrees of freedom for the noise)")
+    targets = np.unique(np.concatenate([case.positioning.target_mm for case in cases]))
+    if targets.size < 2 and not any(case.positioning.time_s is not None for case in cases):
+        return (f"every sample is at the one target {targets[0]:g} mm: a positioning test "
+                "needs at least two targets")
+    return None
 
 
 def evaluate(model, cases):
@@ -148,8 +177,21 @@ def _fit(model, cases, progress):
                              method="trf")
     fitted = model.with_values(layout.values(solution.x))
     sigma, undetermined = _uncertainties(solution, layout, measured.size)
-    return FitResult(fitted, Statistics.of(measured, solution.fun, layout.size), measured,
-                     solution.fun, sigma, undetermined)
+    result = FitResult(fitted, Statistics.of(measured, solution.fun, layout.size), measured,
+                       solution.fun, sigma, undetermined)
+    _check_finite(result, cases)
+    return result
+
+
+def _check_finite(result, cases):
+    """Raise :class:`InputError` unless the fitted values and residual are finite numbers."""
+    values = [(f"{e}.{p}", v) for e, params in result.params().items() for p, v in params.items()]
+    values.append(("the residual RMS", result.rms_um))
+    bad = [name for name, value in values if not np.isfinite(value)]
+    if bad:
+        raise InputError(f"the fit gives no finite value for {', '.join(bad)}; nothing was "
+                         "written (the data cannot determine the model)",
+                         path=", ".join(str(case.folder) for case in cases))
 
 
 def _variable_projection(model, cases, layout, measured, progress=None):

@@ -1,21 +1,39 @@
-"""Writing results: whole files or nothing, so a failure never leaves a half-written file."""
+"""Writing results: whole files or nothing, so a failure never leaves a half-written file.
+
+The temporary files and folders staged for that are private (mode 0600/0700); what is
+published gets the mode a plain ``open``/``mkdir`` would give under the user's umask.
+"""
 from __future__ import annotations
 
 import os
 import tempfile
 from pathlib import Path
 
+from .errors import check_writable_target
+
 
 def write_atomically(path, content):
-    """Write text or bytes to ``path`` through a temporary file in the same folder."""
+    """Write text or bytes to ``path`` through a temporary file in the same folder.
+
+    Raises :class:`~feedaxis.errors.InputError` when ``path`` is a folder or lies under a file.
+    """
     path = Path(path)
+    check_writable_target(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, staging = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
     try:
         with os.fdopen(handle, "wb") as stream:
             stream.write(content.encode("utf-8") if isinstance(content, str) else content)
+        os.chmod(staging, umask_mode(0o666))
         os.replace(staging, path)
     except BaseException:
         Path(staging).unlink(missing_ok=True)
         raise
     return path
+
+
+def umask_mode(mode):
+    """``mode`` (0o666 for a file, 0o777 for a folder) with the process umask applied."""
+    mask = os.umask(0o022)  # reading the umask means setting it; restored at once
+    os.umask(mask)
+    return mode & ~mask

@@ -27,6 +27,7 @@ import zipfile
 from pathlib import Path
 
 from ..output import write_atomically
+from ..errors import InputError
 from .system import check_parameter_values, fmi_text
 
 CONTAINER_TYPES = {"Real": "Float64"}
@@ -38,7 +39,7 @@ def export_container_fmu(out, system, fmu_paths):
 
     out = Path(out)
     if out.suffix != ".fmu":
-        raise ValueError(f"{out}: the FMU file name must end in .fmu")
+        raise InputError("the FMU file name must end in .fmu", path=out)
     configuration = container_configuration(system, fmu_paths)
     with tempfile.TemporaryDirectory(prefix="feedaxis_container_") as folder:
         unzip_dir, built = Path(folder) / "unzip", Path(folder) / "built.fmu"

@@ -22,7 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib import recfunctions
 
+from fmpy.fmi1 import FMICallException
+
+from ..errors import ParameterError
 from .fmu_runner import LoadedFmu
+from .physics_check import check_physics
 from .system import check_parameter_values
 
 CHUNK_STEPS = 1000
@@ -144,14 +148,15 @@ class Master:
         for j, source in input_values:
             signals[j] = float(_values(source, np.zeros(1))[0])
         try:
-            for component in system.ordered_components():
-                plan.append(self._instantiate(system, component, signals, slaves,
-                                              fmu_time if profile else None))
-            fmu_time[0] = 0.0
-            loop_started = time.perf_counter()
-            rows = self._loop(plan, signals, table, input_values, record_steps, n_steps, h,
-                              progress)
-            loop_s = time.perf_counter() - loop_started
+            with _StopFlag() as stop:
+                for component in system.ordered_components():
+                    plan.append(self._instantiate(system, component, signals, slaves,
+                                                  fmu_time if profile else None))
+                fmu_time[0] = 0.0
+                loop_started = time.perf_counter()
+                rows = self._loop(plan, signals, table, input_values, record_steps, n_steps, h,
+                                  progress, stop)
+                loop_s = time.perf_counter() - loop_started
         finally:
             for slave in slaves:
                 slave.freeInstance()
@@ -193,6 +198,7 @@ class Master:
         loaded = self.loaded[component.fmu]
         variables = loaded.variables
         check_parameter_values(component, variables)
+        check_physics(component, variables)
         connections = system.inputs_of(component.name)
         for connection in connections:
             if connection.target.split(".", 1)[1] not in variables:
@@ -217,48 +223,51 @@ class Master:
         for i, j in copies:
             in_buf[i] = signals[j]
         _check(set_real(slave.component, in_vrs, len(copies), in_buf), component.name, 0.0)
-        slave.exitInitializationMode()
+        try:
+            slave.exitInitializationMode()
+        except FMICallException:
+            raise ParameterError("the FMU refuses these parameter values at initialisation "
+                                 "(its log above says why)", component.name) from None
         _check(get_real(slave.component, out_vrs, len(out_vrs), out_ptr), component.name, 0.0)
         return (system.ratio(component), copies, in_buf, set_real, slave.component, in_vrs,
                 len(copies), do_step, component.step_s, get_real, out_vrs, len(out_vrs),
                 out_ptr, component.name)
 
-    def _loop(self, plan, signals, table, input_values, record_steps, n_steps, h, progress):
+    def _loop(self, plan, signals, table, input_values, record_steps, n_steps, h, progress,
+              stop):
         """The macro steps; returns the number of rows recorded (fewer on Ctrl-C)."""
         view = np.ctypeslib.as_array(signals)
         table[0] = view
         row, next_record = 1, (int(record_steps[1]) if record_steps.size > 1 else -1)
-        stop = _StopFlag()
-        with stop:
-            for k_start in range(0, n_steps, CHUNK_STEPS):
-                if stop.requested:
-                    break
-                k_end = min(n_steps, k_start + CHUNK_STEPS)
-                t_chunk = np.arange(k_start, k_end) * h
-                chunk = [(j, _values(source, t_chunk, k_start).tolist())
-                         for j, source in input_values]
-                for k in range(k_start, k_end):
-                    kk = k - k_start
-                    for j, values in chunk:
-                        signals[j] = values[kk]
-                    k1 = k + 1
-                    for (ratio, copies, in_buf, set_real, c, in_vrs, n_in, do_step, step_s,
-                         get_real, out_vrs, n_out, out_ptr, name) in plan:
-                        if k1 % ratio:
-                            continue
-                        for i, j in copies:
-                            in_buf[i] = signals[j]
-                        if (set_real(c, in_vrs, n_in, in_buf) > FMI_WARNING
-                                or do_step(c, (k1 - ratio) * h, step_s, 1) > FMI_WARNING
-                                or get_real(c, out_vrs, n_out, out_ptr) > FMI_WARNING):
-                            raise FmuStepError(f"{name} failed in the step ending at "
-                                               f"t = {k1 * h:.6g} s (its log above says why)")
-                    if k1 == next_record:
-                        table[row] = view
-                        row += 1
-                        next_record = int(record_steps[row]) if row < record_steps.size else -1
-                if progress is not None:
-                    progress(k_end, n_steps)
+        for k_start in range(0, n_steps, CHUNK_STEPS):
+            if stop.requested:
+                break
+            k_end = min(n_steps, k_start + CHUNK_STEPS)
+            t_chunk = np.arange(k_start, k_end) * h
+            chunk = [(j, _values(source, t_chunk, k_start).tolist())
+                     for j, source in input_values]
+            for k in range(k_start, k_end):
+                kk = k - k_start
+                for j, values in chunk:
+                    signals[j] = values[kk]
+                k1 = k + 1
+                for (ratio, copies, in_buf, set_real, c, in_vrs, n_in, do_step, step_s,
+                     get_real, out_vrs, n_out, out_ptr, name) in plan:
+                    if k1 % ratio:
+                        continue
+                    for i, j in copies:
+                        in_buf[i] = signals[j]
+                    if (set_real(c, in_vrs, n_in, in_buf) > FMI_WARNING
+                            or do_step(c, (k1 - ratio) * h, step_s, 1) > FMI_WARNING
+                            or get_real(c, out_vrs, n_out, out_ptr) > FMI_WARNING):
+                        raise FmuStepError(f"{name} failed in the step ending at "
+                                           f"t = {k1 * h:.6g} s (its log above says why)")
+                if k1 == next_record:
+                    table[row] = view
+                    row += 1
+                    next_record = int(record_steps[row]) if row < record_steps.size else -1
+            if progress is not None:
+                progress(k_end, n_steps)
         return row
 
     def _result(self, table, time_s):

@@ -22,10 +22,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..case import write_case
+from ..case import PHYSICAL_RANGE, write_case
+from ..errors import ParameterError
 from ..physics.checks import require_positive
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
+from .physics_check import start_value
 
 ISO_REFERENCE_C = 20.0
 SCREW_FROM = {"GeometricError": ("lead_mm", "length_m", "diameter_m", "density_kg_m3",
@@ -35,6 +37,9 @@ SCREW_FROM = {"GeometricError": ("lead_mm", "length_m", "diameter_m", "density_k
 SHARED_SCREW_KEYS = ("length_m", "diameter_m", "density_kg_m3", "fixed_end_mm")
 MOTOR_FROM = {"StepperError": ("step_angle_deg", "error_period_steps")}
 SETTLE_S = 1.0
+MAX_TRAVEL_MM = PHYSICAL_RANGE["reference_mm"][1]  # beyond any physical axis
+MAX_SAMPLES = 100_000  # samples of one simulated test (ISO 230-2: 5 runs x 2 x ~20 targets)
+MAX_MACRO_STEPS = 1e9  # 11.6 days of axis time at 1 ms: days of computing
 TEETH = 2
 # F0 (N) calibrated on one row of seed 002 Table 2 (PID, 0.4 Hz, 10 mm, 1500 rpm: 0.0757 mm)
 # with the assumed force_constant_N_per_V = 100; it then gives 0.2211 mm at 0.7 Hz, 20 mm,
@@ -140,9 +145,11 @@ def iso230_targets(n_targets, spacing_mm, first_mm=0.0):
     r_i = p (frac(0.618034 i) - 0.5) / 5 stays within ±10 % of the spacing p and differs at
     every target, so periodic errors (screw lead, motor steps) are not sampled in phase.
     """
+    if n_targets > MAX_SAMPLES:
+        raise ParameterError(f"must be 2 to {MAX_SAMPLES}, got {n_targets}", "--targets")
     if n_targets < 2 or not spacing_mm > 0:
-        raise ValueError(f"iso230 needs at least 2 targets (got {n_targets}) and a spacing > 0 "
-                         f"(got {spacing_mm})")
+        raise ParameterError(f"iso230 needs at least 2 targets (got {n_targets}) and a "
+                             f"spacing > 0 (got {spacing_mm})", "--targets/--spacing-mm")
     i = np.arange(1, n_targets + 1)
     offsets_mm = spacing_mm * (np.mod(0.618034 * i, 1.0) - 0.5) / 5.0
     return first_mm + (i - 1) * spacing_mm + offsets_mm
@@ -157,8 +164,11 @@ def iso230_motion(targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5, overrun_m
     """
     targets_mm = np.sort(np.asarray(targets_mm, dtype=float))
     _require_positive(runs=runs, feed_mm_min=feed_mm_min, dwell_s=dwell_s)
+    if 2 * len(targets_mm) * runs > MAX_SAMPLES:
+        raise ParameterError(f"{len(targets_mm)} targets x {runs} runs x 2 directions is more "
+                             f"than the {MAX_SAMPLES} samples a test may hold", "runs")
     if overrun_mm < 0:
-        raise ValueError(f"overrun_mm must be >= 0, got {overrun_mm}")
+        raise ParameterError(f"must be >= 0, got {overrun_mm}", "overrun_mm")
     motion = Motion(targets_mm[0] - overrun_mm)
     for run in range(1, runs + 1):
         for target in targets_mm:
@@ -180,6 +190,10 @@ def thermal_motion(duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0.5):
     written) is the input duty with these passes and moves inserted.
     """
     _require_positive(every_s=every_s, feed_mm_min=feed_mm_min, dwell_s=dwell_s)
+    if (duty.end_s / every_s + 2) * len(targets_mm) > MAX_SAMPLES:
+        raise ParameterError(f"a pass over {len(targets_mm)} targets every {every_s:g} s of a "
+                             f"{duty.end_s:g} s duty is more than the {MAX_SAMPLES} samples a "
+                             "test may hold", "every_s")
     cuts_s = list(np.arange(every_s, duty.end_s, every_s))
     ambient = list(duty.ambient_C) if duty.ambient_C is not None else [None] * len(duty.segments)
     motion = Motion(targets_mm[0])
@@ -209,7 +223,7 @@ def run_motion(master, motion, parameters=None, progress=None):
     The run records at every sample time; on Ctrl-C it returns the samples reached.
     """
     h = master.system.macro_step_s
-    stop_s = math.ceil(motion.time_s / h - 1e-9) * h
+    stop_s = _stop_time_s(motion.time_s, h)
     inputs = {"position_ref_mm": lambda t: motion.position_at(t + h),
               "ambient_C": motion.ambient_at}
     times_s = [s.time_s for s in motion.samples]
@@ -251,9 +265,16 @@ def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s
     parameters = _positioning_parameters(parameters)
     motion = iso230_motion(targets_mm, runs, feed_mm_min, dwell_s, overrun_mm)
     rows, completed = run_motion(master, motion, parameters, progress=progress)
+    name = "simulated ISO 230-2 test"
+    if not completed:  # ISO 230-2 statistics need equal runs: keep the complete ones
+        complete_runs = rows.size // (2 * len(targets_mm))
+        if complete_runs == 0:
+            raise ScenarioInterrupted("interrupted before the first complete run; nothing "
+                                      "written")
+        rows = rows[:complete_runs * 2 * len(targets_mm)]
+        name += f" (interrupted: {complete_runs} of {runs} runs)"
     positioning = _positioning_columns(motion.samples[:rows.size], rows)
-    write_case(out, axis_values(master, parameters, "simulated ISO 230-2 test"),
-               positioning=positioning)
+    write_case(out, axis_values(master, parameters, name), positioning=positioning)
     return _finish(out, positioning, completed, motion.samples)
 
 
@@ -280,13 +301,15 @@ def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
     dict
     """
     if len(targets_mm) < 1:
-        raise ValueError("thermal needs at least one target")
+        raise ParameterError("thermal needs at least one target", "targets")
     parameters = _positioning_parameters(parameters)
     motion = thermal_motion(duty, targets_mm, every_s, feed_mm_min, dwell_s)
     rows, completed = run_motion(master, motion, parameters, progress=progress)
     positioning = _positioning_columns(motion.samples[:rows.size], rows, with_time=True)
     until_s = None if completed else float(positioning["time_s"][-1])
-    write_case(out, axis_values(master, parameters, "simulated thermal test"),
+    name = "simulated thermal test" + ("" if completed else
+                                       f" (interrupted at t = {until_s:g} s)")
+    write_case(out, axis_values(master, parameters, name),
                positioning=positioning, duty=motion.duty_columns(until_s))
     return _finish(out, positioning, completed, motion.samples)
 
@@ -328,9 +351,19 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     """
     _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
                       duration_s=duration_s)
-    if controller not in ("pid", "npid"):
-        raise ValueError(f"controller must be pid or npid, got {controller!r}")
     h = master.system.macro_step_s
+    if amplitude_mm > MAX_TRAVEL_MM:
+        raise ParameterError(f"must be <= {MAX_TRAVEL_MM:g} mm (beyond any physical axis), "
+                             f"got {amplitude_mm:g}", "amplitude_mm")
+    if frequency_hz >= 0.5 / h:
+        raise ParameterError(f"must be below {0.5 / h:g} Hz, the Nyquist frequency of the "
+                             f"{h:g} s macro step, got {frequency_hz:g}", "frequency_hz")
+    if not duration_s > SETTLE_S:
+        raise ParameterError(f"must exceed {SETTLE_S:g} s: the tracking error is measured "
+                             f"after the first {SETTLE_S:g} s (the start-up transient), got "
+                             f"{duration_s:g}", "duration_s")
+    if controller not in ("pid", "npid"):
+        raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
     overrides = {**(parameters or {})}
     overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
 
@@ -340,7 +373,7 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     inputs = {"position_ref_mm": lambda t: reference_mm(t + h)}
     if spindle_rpm is not None:
         inputs["disturbance_N"] = lambda t: cutting_force_N(t, spindle_rpm, force_N)
-    stop_s = math.ceil(duration_s / h - 1e-9) * h
+    stop_s = _stop_time_s(duration_s, h)
     try:
         rows, completed = master.run(stop_s, inputs, overrides, progress=progress), True
     except SimulationInterrupted as stopped:
@@ -352,7 +385,9 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
         tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
     if rows.size == 0:
         raise ScenarioInterrupted("interrupted before the first step; nothing written")
-    write_case(out, axis_values(master, overrides, "simulated tracking test"), tracking=tracking)
+    name = "simulated tracking test" + ("" if completed else
+                                        f" (interrupted at t = {rows['time'][-1]:g} s)")
+    write_case(out, axis_values(master, overrides, name), tracking=tracking)
     settled = rows["time"] > SETTLE_S
     error_mm = np.abs(rows["NpidServo.tracking_error_mm"][settled])
     summary = {"case": str(out), "controller": controller, "frequency_hz": frequency_hz,
@@ -382,23 +417,16 @@ def axis_values(master, parameters, name):
     def values(component, keys):
         c = system.component(component)
         variables = master.loaded[c.fmu].variables
-        return {k: c.parameters[k] if k in c.parameters else _start(variables[k]) for k in keys}
+        return {k: c.parameters[k] if k in c.parameters else start_value(variables[k]) for k in keys}
 
     screw = {k: v for c, keys in SCREW_FROM.items() for k, v in values(c, keys).items()}
     thermal = values("ThermalScrew", SHARED_SCREW_KEYS)
     differ = [k for k in SHARED_SCREW_KEYS if thermal[k] != screw[k]]
     if differ:
-        raise ValueError(f"GeometricError and ThermalScrew disagree on {', '.join(differ)}: "
-                         "one axis has one screw")
+        raise ParameterError(f"GeometricError and ThermalScrew disagree on "
+                             f"{', '.join(differ)}: one axis has one screw", "--set")
     motor = {k: v for c, keys in MOTOR_FROM.items() for k, v in values(c, keys).items()}
     return {"name": name, "screw": screw, "motor": motor}
-
-
-def _start(variable):
-    """The declared start value of an FMU variable as a Python value."""
-    convert = {"Real": float, "Integer": int, "String": str,
-               "Boolean": lambda text: text in ("true", "1")}[variable.type]
-    return convert(variable.start)
 
 
 def _positioning_columns(samples, rows, with_time=False):
@@ -421,6 +449,18 @@ def _finish(out, positioning, completed, planned):
         raise ScenarioInterrupted(f"interrupted: {summary['samples']} of "
                                   f"{summary['planned_samples']} samples written to {out}")
     return summary
+
+
+def _stop_time_s(duration_s, macro_step_s):
+    """``duration_s`` rounded up to whole macro steps; refused beyond :data:`MAX_MACRO_STEPS`
+    (a feed near 0 or a step near 0 would otherwise run for ever)."""
+    steps = duration_s / macro_step_s
+    if not steps <= MAX_MACRO_STEPS:
+        raise ParameterError(f"the run would take {duration_s:.4g} s in {steps:.4g} macro steps "
+                             f"of {macro_step_s:g} s, more than the {MAX_MACRO_STEPS:.0e} "
+                             "feedaxis simulates; check the feed, the targets and --step-ms",
+                             "duration")
+    return math.ceil(steps - 1e-9) * macro_step_s
 
 
 def _require_positive(**values):

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from ..output import write_atomically
 from .fmu_runner import LoadedFmu
+from ..errors import InputError
 from .system import FMI_TYPES, check_parameter_values, fmi_text
 
 NAMESPACES = {
@@ -58,7 +59,7 @@ def export_ssp(out, system, fmu_paths):
     """
     out = Path(out)
     if out.suffix != ".ssp":
-        raise ValueError(f"{out}: the SSP file name must end in .ssp")
+        raise InputError("the SSP file name must end in .ssp", path=out)
     descriptions = {}
     for component in system.components:
         loaded = LoadedFmu(fmu_paths[component.fmu])

@@ -21,6 +21,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+from ..errors import ParameterError
+
 
 @dataclass(frozen=True)
 class Variable:
@@ -110,16 +112,17 @@ class AxisSystem:
         for component in self.components:
             if component.name == name:
                 return component
-        raise ValueError(f"no component {name!r}; components: "
-                         f"{', '.join(c.name for c in self.components)}")
+        raise ParameterError(f"no component {name!r}; components: "
+                             f"{', '.join(c.name for c in self.components)}", name)
 
     def ratio(self, component):
         """Macro steps per communication step of ``component`` (a whole number >= 1)."""
-        ratio = component.step_s / self.macro_step_s
-        if not (math.isfinite(ratio) and ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) < 1e-6):
-            raise ValueError(f"{component.name} step {component.step_s:g} s must be a whole "
-                             f"multiple of the macro step {self.macro_step_s:g} s")
-        return int(round(ratio))
+        ratio = whole_ratio(component.step_s, self.macro_step_s)
+        if ratio is None:
+            raise ParameterError(f"{component.name} step {component.step_s:g} s must be a whole "
+                                 f"multiple of the macro step {self.macro_step_s:g} s",
+                                 f"{component.name} step")
+        return ratio
 
     def inputs_of(self, component_name):
         """Connections that drive ``component_name``, in declaration order."""
@@ -163,21 +166,45 @@ class AxisSystem:
                        components=components)
 
 
+def whole_ratio(step_s, macro_step_s):
+    """``step_s / macro_step_s`` when it is a whole number >= 1, else None."""
+    ratio = step_s / macro_step_s
+    if math.isfinite(ratio) and ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) < 1e-6:
+        return int(round(ratio))
+    return None
+
+
 ERROR_COMPONENTS = ("StepperError", "GeometricError", "ThermalScrew")
 FMI_TYPES = {bool: "Boolean", int: "Integer", float: "Real", str: "String"}
 
 
 def check_parameter_values(component, variables):
-    """Raise ValueError unless every parameter value of ``component`` names a parameter of
-    its FMU (``variables``: name -> model variable) with a value of its type."""
+    """Raise :class:`ParameterError` unless every parameter value of ``component`` names a
+    parameter of its FMU (``variables``: name -> model variable) with a value of its type
+    within its declared min and max."""
     for name, value in component.parameters.items():
+        where = f"{component.name}.{name}"
         declared = variables.get(name)
         if declared is None or declared.causality != "parameter":
-            raise ValueError(f"{component.name}: no parameter {name}")
+            known = sorted(n for n, v in variables.items() if v.causality == "parameter")
+            raise ParameterError(f"no parameter {name}; its parameters: {', '.join(known)}",
+                                 component.name)
         kind = FMI_TYPES.get(type(value))
         if kind != declared.type and not (kind == "Integer" and declared.type == "Real"):
-            raise ValueError(f"{component.name}.{name}: {declared.type} parameter, "
-                             f"got {value!r}")
+            raise ParameterError(f"{declared.type} parameter, got {value!r}", where)
+        if kind in ("Integer", "Real"):
+            _check_within(where, value, declared)
+
+
+def _check_within(where, value, declared):
+    if not math.isfinite(value):
+        raise ParameterError(f"must be finite, got {value!r}", where)
+    if declared.min is not None and value < float(declared.min):
+        raise ParameterError(f"must be >= {declared.min} (the FMU's minimum), got {value!r}",
+                             where)
+    if declared.max is not None and value > float(declared.max):
+        raise ParameterError(f"must be <= {declared.max} (the FMU's maximum), got {value!r}",
+                             where)
 
 
 def fmi_text(value):

@@ -6,6 +6,9 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from ..errors import InputError, read_text
 from .base import Effect, Model
 from .catalog import CATALOG
 
@@ -22,22 +25,60 @@ def load_user_effects(path):
     :func:`feedaxis.effects.effect`. Names must not clash with the catalog.
     """
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: effects file not found")
+    read_text(path, "effects file")
     spec = importlib.util.spec_from_file_location(f"feedaxis_user_effects_{path.stem}", path)
     module = importlib.util.module_from_spec(spec)
     try:
         spec.loader.exec_module(module)
     except Exception as error:
-        raise ValueError(f"{path}: could not load the effects file: "
-                         f"{type(error).__name__}: {error}") from None
+        raise InputError(f"could not load the effects file: {type(error).__name__}: {error}",
+                         path=path) from None
     found = {value.name: value for value in vars(module).values() if isinstance(value, Effect)}
     if not found:
-        raise ValueError(f"{path}: defines no effect (an Effect instance or an @effect function)")
+        raise InputError("defines no effect (an Effect instance or an @effect function)",
+                         path=path)
     clash = sorted(set(found) & set(CATALOG))
     if clash:
-        raise ValueError(f"{path}: effect name '{clash[0]}' is taken by the catalog")
+        raise InputError(f"effect name '{clash[0]}' is taken by the catalog", path=path)
+    for user_effect in found.values():
+        user_effect.prepare = _checked_prepare(user_effect, path)
     return found
+
+
+def _checked_prepare(user_effect, path):
+    """``user_effect.prepare`` held to the contract: one finite error_um per positioning
+    sample; a breach or an exception in the user's code is an :class:`InputError` naming
+    the file and the effect."""
+    prepare = user_effect.prepare
+
+    def checked(case):
+        evaluate = _user_call(user_effect, path, prepare, case)
+        size = case.positioning.size
+
+        def run(values):
+            error_um = np.asarray(_user_call(user_effect, path, evaluate, values))
+            if error_um.shape != (size,):
+                raise InputError(f"effect {user_effect.name} returned shape {error_um.shape} "
+                                 f"for {size} samples; it must return one error_um per "
+                                 "positioning sample", path=path)
+            if not np.issubdtype(error_um.dtype, np.number) or not np.all(np.isfinite(error_um)):
+                raise InputError(f"effect {user_effect.name} returned values that are not "
+                                 f"finite numbers with {values}", path=path)
+            return error_um.astype(float)
+
+        return run
+
+    return checked
+
+
+def _user_call(user_effect, path, function, argument):
+    try:
+        return function(argument)
+    except InputError:
+        raise
+    except Exception as error:
+        raise InputError(f"effect {user_effect.name} raised {type(error).__name__}: {error}",
+                         path=path) from error
 
 
 def available_effects(effect_files=()):
@@ -52,16 +93,14 @@ def load_model(path, effects):
     """Read a model TOML (one table per effect) against the ``effects`` known by name."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ValueError(f"{path}: model file not found") from None
+        data = tomllib.loads(read_text(path, "model file"))
     except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{path}: not valid TOML: {error}") from None
+        raise InputError(f"not valid TOML: {error}", path=path) from None
     chosen, values = [], {}
     for name, table in data.items():
         if name not in effects or not isinstance(table, dict):
-            raise ValueError(f"{path}: unknown effect [{name}]; known: {', '.join(effects)} "
-                             "(load your own with --effects FILE.py)")
+            raise InputError(f"unknown effect [{name}]; known: {', '.join(effects)} "
+                             "(load your own with --effects FILE.py)", path=path, column=name)
         chosen.append(effects[name])
         values[name] = _checked_values(path, effects[name], table)
     return Model(chosen, values)
@@ -71,11 +110,14 @@ def _checked_values(path, effect, table):
     expected = set(effect.parameter_names)
     for key, value in table.items():
         if key not in expected:
-            raise ValueError(f"{path}: [{effect.name}] has no parameter '{key}'; expected: "
-                             f"{', '.join(effect.parameter_names) or 'none'}")
+            raise InputError(f"[{effect.name}] has no parameter '{key}'; expected: "
+                             f"{', '.join(effect.parameter_names) or 'none'}", path=path,
+                             column=f"{effect.name}.{key}")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ValueError(f"{path}: [{effect.name}] {key} must be a finite number, got {value!r}")
+            raise InputError(f"[{effect.name}] {key} must be a finite number, got {value!r}",
+                             path=path, column=f"{effect.name}.{key}")
     missing = expected - set(table)
     if missing:
-        raise ValueError(f"{path}: [{effect.name}] lacks {', '.join(sorted(missing))}")
+        raise InputError(f"[{effect.name}] lacks {', '.join(sorted(missing))}", path=path,
+                         column=effect.name)
     return {key: float(value) for key, value in table.items()}

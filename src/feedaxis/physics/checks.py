@@ -1,28 +1,43 @@
-"""Parameter checks shared by the physics: one clear error naming the parameter."""
+"""Parameter checks shared by the physics: one clear error naming the parameter.
+
+The physics is also copied alone into every FMU, so it imports nothing of feedaxis but
+this: within feedaxis a refused value is :class:`feedaxis.errors.ParameterError` (bad input,
+exit 2); inside an FMU without feedaxis, a plain ``ValueError`` subclass of the same name.
+"""
 from __future__ import annotations
 
 import numpy as np
 
+try:
+    from feedaxis.errors import ParameterError
+except ImportError:  # inside an FMU on a host without feedaxis
+    class ParameterError(ValueError):
+        """A refused parameter value; ``parameter`` names it."""
+
+        def __init__(self, message, parameter=None):
+            super().__init__(f"{parameter}: {message}" if parameter else message)
+            self.parameter = parameter
+
 
 def require_finite(name, value):
-    """Raise ValueError naming ``name`` unless every element of ``value`` is a finite number."""
+    """Raise :class:`ParameterError` naming ``name`` unless ``value`` is all finite numbers."""
     try:
         numbers = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
+        raise ParameterError(f"must be a number, got {value!r}", name) from None
     if not np.all(np.isfinite(numbers)):
-        raise ValueError(f"{name} must be finite, got {value!r}")
+        raise ParameterError(f"must be finite, got {value!r}", name)
 
 
 def require_positive(name, value):
-    """Raise ValueError naming ``name`` unless ``value`` is finite and > 0."""
+    """Raise :class:`ParameterError` naming ``name`` unless ``value`` is finite and > 0."""
     require_finite(name, value)
     if not np.all(np.asarray(value, dtype=float) > 0):
-        raise ValueError(f"{name} must be > 0, got {value!r}")
+        raise ParameterError(f"must be > 0, got {value!r}", name)
 
 
 def require_non_negative(name, value):
-    """Raise ValueError naming ``name`` unless ``value`` is finite and >= 0."""
+    """Raise :class:`ParameterError` naming ``name`` unless ``value`` is finite and >= 0."""
     require_finite(name, value)
     if not np.all(np.asarray(value, dtype=float) >= 0):
-        raise ValueError(f"{name} must be >= 0, got {value!r}")
+        raise ParameterError(f"must be >= 0, got {value!r}", name)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .checks import require_positive
+from .checks import ParameterError, require_positive
 
 GRAVITY_M_S2 = 9.80665
 SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
@@ -101,7 +101,7 @@ def sag_slope(screw_coord_m, length_m, line_load_N_per_m, flexural_rigidity_Nm2,
         return scale * y * (L - y) * (L - 2 * y) / 12.0
     if support == "supported-supported":
         return scale * (L**3 - 6 * L * y**2 + 4 * y**3) / 24.0
-    raise ValueError(f"support must be one of {SUPPORTS}, got {support!r}")
+    raise ParameterError(f"must be one of {SUPPORTS}, got {support!r}", "support")
 
 
 def gravity_sag_table(length_m, diameter_m, density_kg_m3, youngs_modulus_Pa, support,

@@ -21,7 +21,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .checks import require_finite, require_non_negative, require_positive
+from .checks import ParameterError, require_finite, require_non_negative, require_positive
 from .mounting import axis_sign, screw_coordinate_m
 
 
@@ -59,8 +59,8 @@ class ThermalScrewParams:
         for name in ("k1_W_m2K_per_mm_min", "k2_W_m2K", "k3_W_per_mm_min", "k4_W_per_mm_min"):
             require_non_negative(name, getattr(self, name))
         if self.n_cells < 2:
-            raise ValueError(f"length_m / cell_length_m must give at least 2 cells, "
-                             f"got {self.length_m} / {self.cell_length_m}")
+            raise ParameterError(f"length_m / cell_length_m must give at least 2 cells, "
+                                 f"got {self.length_m} / {self.cell_length_m}", "length_m")
 
     @property
     def n_cells(self):
