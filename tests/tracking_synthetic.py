@@ -41,8 +41,9 @@ def step_loop(reference, duration_s, sample_s=1e-3, plant=None, servo=None, fric
               damping_N_s_per_mm=0.0, force_N=None):
     """Noise-free (time_s, reference_mm, position_mm) sampled every ``sample_s``.
 
-    ``reference`` and ``force_N`` are functions of time (s); the loop starts at rest on
-    ``reference(0)``.
+    ``reference`` and ``force_N`` are functions of time (s). The drive receives the
+    reference as set-points every ``sample_s`` and interpolates them linearly, sampling
+    the result at the start of each loop step; the loop starts at rest on ``reference(0)``.
     """
     plant = {**SEED002, **(plant or {})}
     servo = {**SERVO, **(servo or {})}
@@ -54,11 +55,14 @@ def step_loop(reference, duration_s, sample_s=1e-3, plant=None, servo=None, fric
     per_sample = int(round(sample_s / h))
     n_samples = int(round(duration_s / sample_s)) + 1
     commands = [0.0] * (whole + 2)
-    x1, x2, integral, previous = reference(0.0), 0.0, 0.0, 0.0
+    set_points = [reference(i * sample_s) for i in range(n_samples)]
+    x1, x2, integral, previous = set_points[0], 0.0, 0.0, 0.0
     positions = [x1]
     for k in range((n_samples - 1) * per_sample):
         t = k * h
-        error = reference(t) - x1
+        sample, within = divmod(k, per_sample)
+        error = (set_points[sample] + (set_points[min(sample + 1, n_samples - 1)]
+                                       - set_points[sample]) * within / per_sample - x1)
         if servo["controller"] == "npid":
             error *= math.cosh(servo["ko_per_mm"] * min(abs(error), servo["e_max_mm"]))
         integral += 0.5 * (error + previous) * h
@@ -76,7 +80,7 @@ def step_loop(reference, duration_s, sample_s=1e-3, plant=None, servo=None, fric
         if (k + 1) % per_sample == 0:
             positions.append(x1)
     time_s = np.arange(n_samples) * sample_s
-    return time_s, np.array([reference(t) for t in time_s]), np.array(positions)
+    return time_s, np.array(set_points), np.array(positions)
 
 
 def noise_um(size, seed):

@@ -1,7 +1,9 @@
 """Least-squares fit of a tracking model: every parameter moves the closed-loop simulation.
 
 The residual is actual - predicted position (µm) at every sample of tracking.csv, several
-cases concatenated. Each simulation runs :func:`feedaxis.physics.servo.simulate` (the
+cases concatenated. Its samples are far from independent, so the standard uncertainties
+from the Jacobian are widened by √τ, τ the residual's integrated autocorrelation time
+(the effective number of independent samples is n / τ). Each simulation runs :func:`feedaxis.physics.servo.simulate` (the
 FMU's loop, compiled); the optimiser is scipy's trust-region reflective least squares with
 finite-difference Jacobian. Statistics and uncertainties are those of positioning fits.
 """
@@ -12,6 +14,7 @@ from scipy.optimize import least_squares
 
 from ..fit import FitResult, Statistics, _Layout, _uncertainties
 from .model import Record, servo_params
+from .tests import autocorrelation_time
 
 
 def check_available(model, cases):
@@ -33,10 +36,10 @@ def check_available(model, cases):
 class Problem:
     """Measured deviations of the cases and the model's prediction for given values."""
 
-    def __init__(self, model, cases):
+    def __init__(self, model, cases, offset_um=0.0):
         self.model, self.cases = model, cases
         self.records = [Record.of(case) for case in cases]
-        self.measured_um = np.concatenate([r.measured_um for r in self.records])
+        self.measured_um = np.concatenate([r.measured_um for r in self.records]) - offset_um
 
     def predicted_um(self, values):
         params = servo_params(self.cases[0].axis, self.model, values)
@@ -55,11 +58,12 @@ def evaluate(model, cases):
                      problem.measured_um, residual)
 
 
-def fit(model, cases, progress=None):
+def fit(model, cases, progress=None, offset_um=0.0):
     """Fit every parameter of the tracking ``model`` to ``cases`` (list of Case).
 
     Effects without values start from their neutral values (seed 002's plant, no friction);
     a friction effect then takes one linearised least-squares step from the residual.
+    ``offset_um`` (structure found by the diagnosis) is taken off the measured deviations.
 
     Returns
     -------
@@ -67,7 +71,7 @@ def fit(model, cases, progress=None):
     """
     check_available(model, cases)
     model = _with_starting_values(model, cases)
-    problem = Problem(model, cases)
+    problem = Problem(model, cases, offset_um)
     layout = _Layout(model, cases[0].axis)
     if layout.size == 0:
         return evaluate(model, cases)
@@ -81,6 +85,9 @@ def fit(model, cases, progress=None):
                              method="trf")
     fitted = model.with_values(layout.values(solution.x))
     sigma, undetermined = _uncertainties(solution, layout, problem.measured_um.size)
+    widening = np.sqrt(autocorrelation_time(solution.fun))
+    sigma = {name: {p: value * widening for p, value in values.items()}
+             for name, values in sigma.items()}
     return FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
                      problem.measured_um, solution.fun, sigma, undetermined)
 
