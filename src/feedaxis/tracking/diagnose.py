@@ -2,10 +2,13 @@
 
 The model is refitted to the case; then
 
-- each tracking effect not yet in the model is fitted on top; it is a candidate when the
+- each tracking effect not yet in the model is fitted on top; it is significant when the
   F test with the residual's autocorrelation accounted for (:mod:`.tests`) rejects "no
   effect" at ``FAMILY_ALPHA`` shared (Bonferroni) among the effects tried in that round.
-  The candidates are added and the rest tried again on top of them;
+  The significant one leaving the smallest residual is named and added, and the rest tried
+  again on top of it (forward selection: the tracking effects overlap, viscous friction
+  acting exactly as plant damping, so adding all significant ones at once would name
+  effects that only stand in for the first);
 - the residual left is searched for structure no effect explains, each kind tested at
   ``FAMILY_ALPHA`` shared among the kinds: a sinusoid of free frequency (an unknown
   periodic force, e.g. a cutting force at the tooth-passing frequency, seed 002 Table 2),
@@ -24,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..effects import CATALOG, Model
+from ..effects import CATALOG
 from ..fit import FitResult
 from ..physics.servo import simulate
 from .effects import is_tracking_effect
@@ -34,6 +37,7 @@ from .tests import autocorrelation_time, nested_p_value, peak_p_value
 
 FAMILY_ALPHA = 1e-3
 MAX_STRUCTURES = 4
+RESOLUTION_UM = 1e-3  # 1 nm: structure below it is rounding, not a measurement
 REVERSAL_WINDOW_S = 0.2
 REVERSAL_BINS = 8
 UNIFORM_SAMPLING_TOLERANCE = 0.01
@@ -136,11 +140,10 @@ def diagnose(case, model, effects=None, progress=None):
                 found.append(candidate)
         if not found:
             break
-        found.sort(key=lambda c: c.p_value)
-        candidates += found
-        for candidate in found:
-            del pending[candidate.effect]
-        left = _with_all(case, left, found)
+        best = min(found, key=lambda c: c.rms_after_um)
+        candidates.append(best)
+        del pending[best.effect]
+        left = best.result
     unexplained, final = find_structures(case, left)
     remaining = final.residual_um
     tau = autocorrelation_time(remaining)
@@ -157,7 +160,8 @@ def _try_effect(case, base, effect, alpha):
     p_value = nested_p_value(_rss(base.residual_um), _rss(result.residual_um),
                              result.residual_um.size, base.statistics.n_free,
                              len(effect.parameters), result.residual_um)
-    if p_value >= alpha:
+    explained_um = np.sqrt(max(base.rms_um ** 2 - result.rms_um ** 2, 0.0))
+    if p_value >= alpha or explained_um < RESOLUTION_UM:
         return None
     contribution = base.residual_um - result.residual_um
     evidence = effect.evidence(case, result.model.values[effect.name], contribution)
@@ -165,17 +169,6 @@ def _try_effect(case, base, effect, alpha):
                      float(result.statistics.bic - base.statistics.bic), p_value,
                      f"{evidence} (p = {p_value:.2g}, coloured-noise F test)", effect.meaning,
                      result)
-
-
-def _with_all(case, left, found):
-    """``left``'s model with every found effect added at its fitted values, refitted."""
-    if len(found) == 1:
-        return found[0].result
-    model = left.model
-    for candidate in found:
-        fitted = candidate.result.model
-        model = model + Model((fitted.effects[-1],), fitted.values)
-    return fit(model, [case])
 
 
 def _rss(values):
@@ -193,7 +186,7 @@ def find_structures(case, left):
         found = [s for s in (_periodic(case, current, residual),
                              _constant_force(case, current, residual, n_free),
                              _reversals(case, residual, n_free), _trend(case, residual, n_free))
-                 if s is not None]
+                 if s is not None and s.amplitude_um >= RESOLUTION_UM]
         if not found:
             break
         best = min(found, key=lambda s: s.p_value)
