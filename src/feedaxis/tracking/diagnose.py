@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from threadpoolctl import threadpool_limits
 
 from ..effects import CATALOG
 from ..fit import FitResult
@@ -116,6 +117,11 @@ def diagnose(case, model, effects=None, progress=None):
     progress : callable, optional
         Called with a label before each fit.
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _diagnose(case, model, effects, progress)
+
+
+def _diagnose(case, model, effects, progress):
     effects = CATALOG if effects is None else effects
     notify = progress or (lambda label: None)
     notify("model")
