@@ -184,3 +184,18 @@ def test_cli_loop_on_a_tracking_case(tmp_path, capsys, friction_run):
     assert main(["report", folder, "--model", str(model), "--out", str(tmp_path / "r.html")]) == 0
     page = (tmp_path / "r.html").read_text()
     assert page.count("<img") == 5 and "coulomb_friction" in page
+
+
+def test_scenario_with_hidden_friction_closes_the_loop(tmp_path, capsys, fmu_paths):
+    """simulate tracking --set NpidServo.friction_N=1 -> diagnose names it, fit finds 1 N."""
+    out = str(tmp_path / "run")
+    fmus = str(next(iter(fmu_paths.values())).parent)
+    assert main(["simulate", "tracking", out, "--duration-s", "3", "--set",
+                 "NpidServo.friction_N=1", "--fmus", fmus]) == 0
+    assert read_case(out).axis.servo["kp_V_per_mm"] == AXIS["servo"]["kp_V_per_mm"]
+    capsys.readouterr()
+    assert main(["diagnose", out, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["candidates"][0]["effect"] == "coulomb_friction"
+    assert main(["fit", out, "--add", "coulomb_friction", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["params"]["coulomb_friction"]["friction_N"] == \
+        pytest.approx(1.0, rel=1e-6)
