@@ -15,6 +15,10 @@ unlike seed 002's, 1.5 N of friction, white + AR(1) noise).
 Then the diagnosis's measured error rates: the null false-alarm rate (servo_plant fitted to
 runs without friction or force) and the power for a small friction, over ``--seeds`` seeds.
 
+Last, the two tests' calibration on pure coloured noise (``--seeds`` x 3 records): the
+rejection rate at α = 0.01 and 0.001 of the periodic test and of the n/τ F test (for a trend
+and for a square wave locked to the reversals).
+
 Run: ``python benchmarks/bench_tracking_fit.py [--repeats 5] [--seeds 100]``. Times are
 medians of repeats in this one run, BLAS on one thread for both.
 """
@@ -37,7 +41,8 @@ from feedaxis.fit import _Layout, fit  # noqa: E402
 from feedaxis.physics.servo import ServoParams, compiled_loop, simulate  # noqa: E402
 from feedaxis.tracking.diagnose import diagnose  # noqa: E402
 from feedaxis.tracking.fit import _with_starting_values  # noqa: E402
-from tracking_synthetic import step_loop, two_sines, write_tracking_case  # noqa: E402
+from feedaxis.tracking.tests import nested_p_value, peak_p_value  # noqa: E402
+from tracking_synthetic import noise_um, step_loop, two_sines, write_tracking_case  # noqa: E402
 
 PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
          "plant_stiffness_per_s2": 250.0, "delay_s": 0.0015}
@@ -96,6 +101,23 @@ def error_rates(folder, seeds):
     return rates.pop(0.0), rates
 
 
+def calibration(seeds):
+    """{test: (rate at 0.01, rate at 0.001)} on pure noise, 5,001 samples at 1 ms."""
+    time_s = np.arange(5001) * 1e-3
+    regressors = {"F test, trend": time_s - time_s.mean(),
+                  "F test, reversal square wave": np.sign(np.sin(np.pi * time_s))}
+    p_values = {"periodic (whitened max periodogram)": [], **{name: [] for name in regressors}}
+    for seed in range(3 * seeds):
+        residual = noise_um(time_s.size, 10_000 + seed)
+        p_values["periodic (whitened max periodogram)"].append(peak_p_value(residual, 1e-3)[1])
+        for name, column in regressors.items():
+            after = residual - column * (column @ residual) / (column @ column)
+            p_values[name].append(nested_p_value(residual @ residual, after @ after,
+                                                 residual.size, 0, 1, after))
+    return {name: (np.mean(np.array(p) < 0.01), np.mean(np.array(p) < 0.001))
+            for name, p in p_values.items()}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
@@ -138,6 +160,10 @@ def main():
         print(f"diagnosis over {args.seeds} seeds (2 s records, noise 0.1 um white + 0.3 um "
               f"AR(1)): null false-alarm rate {false_alarm:.3f}; power (friction named first) "
               + ", ".join(f"{f:g} N: {p:.2f}" for f, p in power.items()))
+        print(f"calibration on pure coloured noise, {3 * args.seeds} records:")
+        for name, (at_1pc, at_01pc) in calibration(args.seeds).items():
+            print(f"  {name:38s} rejects {100 * at_1pc:5.2f} % at alpha 0.01, "
+                  f"{100 * at_01pc:5.2f} % at 0.001")
 
 
 if __name__ == "__main__":

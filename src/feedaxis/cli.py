@@ -465,7 +465,9 @@ def build_parser():
         description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
                     "after the first second. --spindle-rpm adds a milling force at the "
                     "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, seed 002 "
-                    "publishes none).")
+                    "publishes none). axis.toml gets the [servo] table (the controller), not "
+                    "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
+                    "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).")
     scenario.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
     scenario.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
     scenario.add_argument("--duration-s", type=float, default=10.0, help="default 10")

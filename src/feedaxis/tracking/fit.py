@@ -10,10 +10,13 @@ finite-difference Jacobian. Statistics and uncertainties are those of positionin
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
+from ..case import AXIS_FILE, CaseError
 from ..fit import FitResult, Statistics, _Layout, _uncertainties
 from .model import Record, servo_params
 from .tests import autocorrelation_time
@@ -29,8 +32,8 @@ def check_available(model, cases):
                              "fitted together must describe the same axis")
     for case in cases:
         if not case.axis.servo:
-            raise ValueError(f"{case.folder}: a tracking case needs the [servo] table in "
-                             "axis.toml (the controller as set in the drive)")
+            raise CaseError(Path(case.folder) / AXIS_FILE, "a tracking case needs the [servo] "
+                            "table (the controller as set in the drive)", column="servo")
         for effect in model.effects:
             reason = effect.unavailable(case)
             if reason:
