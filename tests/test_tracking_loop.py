@@ -111,7 +111,8 @@ def test_fmu_and_fit_agree(loaded_fmus):
     # run_fmu starts at rest on reference[0] and applies input k over step k: as samples,
     # the interval ending at time (k+1)h is driven toward reference[k] under force[k].
     time_s = np.arange(n + 1) * h
-    fitted_mm = simulate(ServoParams(**parameters), time_s, np.concatenate(([reference[0]], reference)),
+    fitted_mm = simulate(ServoParams(**parameters), time_s,
+                         np.concatenate(([reference[0]], reference)),
                          np.concatenate(([0.0], force)))[1:]
     assert np.max(np.abs(result["position_mm"] - fitted_mm)) < 1e-9
 
@@ -151,13 +152,15 @@ def test_plant_is_recovered_from_an_exciting_run_and_a_smooth_sine_says_what_it_
     exciting = fit(SERVO_PLANT, read_case(write_tracking_case(
         tmp_path / "e", step_loop(two_sines, 5.0, plant=PLANT), 3)))
     for name, value in PLANT.items():
-        fitted, sigma = exciting.params()["servo_plant"][name], exciting.uncertainties["servo_plant"][name]
+        fitted = exciting.params()["servo_plant"][name]
+        sigma = exciting.uncertainties["servo_plant"][name]
         assert fitted == pytest.approx(value, rel=0.02)
         assert abs(fitted - value) < 4 * sigma
     assert exciting.undetermined == {}
 
     def smooth_sine(t):  # started gently: no transient, one frequency
-        return 10 * math.sin(2 * math.pi * 0.4 * t) * (0.5 - 0.5 * math.cos(math.pi * min(t, 2) / 2))
+        ramp = 0.5 - 0.5 * math.cos(math.pi * min(t, 2.0) / 2.0)
+        return 10 * math.sin(2 * math.pi * 0.4 * t) * ramp
 
     single = fit(SERVO_PLANT, read_case(write_tracking_case(
         tmp_path / "s", step_loop(smooth_sine, 5.0, plant=PLANT), 3)))

@@ -4,9 +4,10 @@ The residual is actual - predicted position (µm) at every sample of tracking.cs
 cases concatenated. Its samples are far from independent, so the standard uncertainties
 from the Jacobian are widened by √τ, τ the residual's integrated autocorrelation time
 (the effective number of independent samples is n / τ). A parameter whose widened
-uncertainty exceeds ``LOOSE_SHARE`` of its value is reported undetermined as well. Each simulation runs :func:`feedaxis.physics.servo.simulate` (the
-FMU's loop, compiled); the optimiser is scipy's trust-region reflective least squares with
-finite-difference Jacobian. Statistics and uncertainties are those of positioning fits.
+uncertainty exceeds ``LOOSE_SHARE`` of its value is reported undetermined as well. Each
+simulation runs :func:`feedaxis.physics.servo.simulate` (the FMU's loop, compiled); the
+optimiser is scipy's trust-region reflective least squares with finite-difference
+Jacobian. Statistics and uncertainties are those of positioning fits.
 """
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.servo import ServoParams, simulate, step_counts
-from .effects import TRACKING_EFFECTS, is_tracking_effect
+from .effects import is_tracking_effect
 
 CONTROLLER_KEYS = ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm", "e_max_mm",
                    "force_constant_N_per_V")
@@ -84,9 +84,4 @@ def components(case, model):
         without = {**model.values, effect.name: dict(effect.neutral)}
         parts[effect.name] = full_um - record.predicted_um(servo_params(case.axis, model, without))
     return parts
-
-
-def tracking_catalog(effects):
-    """The tracking effects among ``effects`` ({name: effect})."""
-    return {name: e for name, e in effects.items() if is_tracking_effect(e)}
 

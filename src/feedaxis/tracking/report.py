@@ -59,7 +59,8 @@ def write_report(case, model, effects, out_path):
     steps = error_ladder(case, model)
     velocity_mm_s = np.gradient(tracking.reference_mm, tracking.time_s)
     reversals_s = tracking.time_s[1:][np.diff(np.sign(velocity_mm_s)) != 0]
-    frequency_hz, power = periodogram(result.residual_um, float(np.median(np.diff(tracking.time_s))))
+    step_s = float(np.median(np.diff(tracking.time_s)))
+    frequency_hz, power = periodogram(result.residual_um, step_s)
     amplitude_um = 2.0 * np.sqrt(power / result.residual_um.size)
     sections = [
         f"<h1>feedaxis tracking report: {html.escape(case.name)}</h1>",

@@ -8,14 +8,15 @@ there. Two tests allow for the colour:
   test on the drop of the residual sum of squares with the sample count replaced by the
   effective count n / τ, τ the integrated autocorrelation time of the larger model's
   residual (Sokal's adaptive window; for a smooth regressor the variance of a least-squares
-  coefficient grows by the factor τ under coloured noise, Priestley 1981, Sec. 5.3);
+  coefficient grows by the factor τ under coloured noise: the noise's long-run variance
+  is τ·σ²);
 - a sinusoid of unknown frequency: the residual is first whitened by an autoregressive
   filter (Yule-Walker, order by AIC up to ``MAX_AR_ORDER``) fitted to the autocovariance of
   the periodogram with its lines cut out (ordinates over ``LINE_RATIO`` times the running
-  median replaced by it), so the filter follows the noise's colour and not a line; then the largest periodogram ordinate over
-  the mean of the others is Exp(1) under the null at each Fourier frequency, and the
-  family-wise p-value over the M searched frequencies is 1 - (1 - e^{-ratio})^M (Fisher's
-  max-periodogram argument). A local noise level from a running median was tried first:
+  median replaced by it), so the filter follows the noise's colour and not a line; then
+  the largest periodogram ordinate over the mean of the others is Exp(1) under the null
+  at each Fourier frequency, and the family-wise p-value over the M searched frequencies
+  is 1 - (1 - e^{-ratio})^M (Fisher's max-periodogram argument). A local noise level from a running median was tried first:
   its own scatter fattens the tail, 15 % false alarms at p < 0.001 on pure coloured noise.
 """
 from __future__ import annotations
