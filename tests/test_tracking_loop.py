@@ -98,6 +98,20 @@ def test_generator_and_fast_loop_agree(friction_run):
     assert np.max(np.abs(fast_mm - position_mm)) < 1e-6  # mm: 1 nm against ~30 µm of error
 
 
+def test_npid_case_runs_the_nonlinear_loop(tmp_path):
+    """An NPID [servo] table: the fit's loop against the generator's NPID (seed 002 Eq. 8)."""
+    npid = {"controller": "npid", "ko_per_mm": 6.0, "e_max_mm": 0.3}
+    run = step_loop(sine(10.0, 0.7), 2.0, plant=PLANT, servo=npid, damping_N_s_per_mm=0.02)
+    case = read_case(write_tracking_case(tmp_path / "c", run, 6,
+                                         axis={**AXIS, "servo": {**AXIS["servo"], **npid}}))
+    model = Model((CATALOG["servo_plant"], CATALOG["viscous_friction"]),
+                  {"servo_plant": PLANT, "viscous_friction": {"damping_N_s_per_mm": 0.02}})
+    assert servo_params(case.axis, model).nonlinear
+    predicted_mm = case.tracking.reference_mm + Record.of(case).predicted_um(
+        servo_params(case.axis, model)) * 1e-3
+    assert np.max(np.abs(predicted_mm - run[2])) < 1e-6
+
+
 def test_fmu_and_fit_agree(loaded_fmus):
     """NpidServo FMU (plain-Python kernel) and the fit's compiled simulation, same inputs."""
     h, n = 1e-3, 3000
