@@ -83,7 +83,8 @@ def test_effects_command_lists_the_catalog(capsys):
     assert main(["effects", "--json"]) == 0
     catalog = json.loads(capsys.readouterr().out)
     assert list(catalog) == ["lead_error", "gravity_sag", "assembly_eccentricity",
-                             "motor_step_error", "backlash", "thermal_screw", "ambient_expansion"]
+                             "motor_step_error", "backlash", "thermal_screw", "ambient_expansion",
+                             "servo_plant", "coulomb_friction", "viscous_friction"]
     assert catalog["backlash"]["parameters"]["backlash_um"]["unit"] == "um"
 
 

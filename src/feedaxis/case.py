@@ -1,4 +1,4 @@
-"""Reading, checking and writing a measurement case, format version 1 (../shared/data-format.md).
+"""Reading, checking and writing a measurement case, format version 1.1 (../shared/data-format.md).
 
 A case is one folder: ``axis.toml`` (required), ``positioning.csv`` and/or ``tracking.csv``,
 optionally ``duty.csv``. Every rule of the format is checked; a broken file raises one
@@ -39,7 +39,17 @@ SCREW_KEYS = {
     "fixed_end_mm": "finite",
 }
 MOTOR_KEYS = {"step_angle_deg": "positive", "error_period_steps": "positive_integer"}
-TABLES = {"screw": SCREW_KEYS, "motor": MOTOR_KEYS}
+SERVO_KEYS = {
+    "controller": "controller", "kp_V_per_mm": "positive", "ki_V_per_mm_s": "non_negative",
+    "kd_V_s_per_mm": "non_negative", "ko_per_mm": "non_negative", "e_max_mm": "positive",
+    "force_constant_N_per_V": "positive", "loop_step_s": "positive",
+}
+SERVO_REQUIRED = ("controller", "kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm",
+                  "force_constant_N_per_V")
+NPID_REQUIRED = ("ko_per_mm", "e_max_mm")
+CONTROLLERS = ("pid", "npid")
+DEFAULT_LOOP_STEP_S = 1e-4
+TABLES = {"screw": SCREW_KEYS, "motor": MOTOR_KEYS, "servo": SERVO_KEYS}
 # Beyond these no machine axis goes: a value outside is a typing or unit slip, refused
 # rather than fitted (a 1e-300 Pa screw or 1e300 um deviations overflow the numerics).
 PHYSICAL_RANGE = {
@@ -53,6 +63,9 @@ PHYSICAL_RANGE = {
     "ambient_C": (-100.0, 200.0), "start_s": (0.0, 1e9), "duration_s": (0.0, 1e9),
     "feed_mm_min": (0.0, 1e6), "from_mm": (-1e5, 1e5), "to_mm": (-1e5, 1e5),
     "reference_mm": (-1e5, 1e5), "actual_mm": (-1e5, 1e5), "disturbance_N": (-1e7, 1e7),
+    "kp_V_per_mm": (1e-9, 1e6), "ki_V_per_mm_s": (0.0, 1e6), "kd_V_s_per_mm": (0.0, 1e6),
+    "ko_per_mm": (0.0, 1e3), "e_max_mm": (1e-6, 1e3), "force_constant_N_per_V": (1e-6, 1e7),
+    "loop_step_s": (1e-7, 0.01),
 }
 
 POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
@@ -72,11 +85,13 @@ class CaseError(InputError, ValueError):
 
 @dataclass(frozen=True)
 class Axis:
-    """The axis of ``axis.toml``: free-text name, ``[screw]`` and ``[motor]`` values."""
+    """The axis of ``axis.toml``: free-text name, ``[screw]``, ``[motor]`` and ``[servo]``
+    values (``servo`` is empty when the table is absent; ``loop_step_s`` is filled in)."""
 
     name: str
     screw: dict
     motor: dict = field(default_factory=dict)
+    servo: dict = field(default_factory=dict)
 
     @property
     def lead_mm(self):
@@ -84,7 +99,7 @@ class Axis:
 
     def missing(self, table, keys):
         """The ``[table] key`` names among ``keys`` that this axis lacks."""
-        values = self.screw if table == "screw" else self.motor
+        values = {"screw": self.screw, "motor": self.motor, "servo": self.servo}[table]
         return [f"[{table}] {key}" for key in keys if key not in values]
 
 
@@ -195,12 +210,24 @@ def read_axis(path):
         elif key in TABLES and isinstance(value, dict):
             tables[key] = _check_table(path, text, key, value)
         else:
-            raise CaseError(path, _unknown_key_message(key, ["name", "[screw]", "[motor]"]),
+            raise CaseError(path, _unknown_key_message(key, ["name", "[screw]", "[motor]",
+                                                             "[servo]"]),
                             _key_line(text, key), key)
     if "screw" not in tables or "lead_mm" not in tables["screw"]:
         raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
                         column="screw.lead_mm")
-    return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}))
+    servo = _check_servo(path, text, tables["servo"]) if "servo" in tables else {}
+    return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}), servo)
+
+
+def _check_servo(path, text, servo):
+    """The keys ``[servo]`` needs for its controller; ``loop_step_s`` defaulted."""
+    required = SERVO_REQUIRED + (NPID_REQUIRED if servo.get("controller") == "npid" else ())
+    for key in required:
+        if key not in servo:
+            raise CaseError(path, f"[servo] {key} is required for a {servo.get('controller')} "
+                                  "controller", _key_line(text, "servo"), f"servo.{key}")
+    return {"loop_step_s": DEFAULT_LOOP_STEP_S, **servo}
 
 
 def _read_text(path):
@@ -231,12 +258,16 @@ def _unknown_key_message(key, known):
 def _value_problem(rule, key, value):
     if rule == "support":
         return None if value in SUPPORTS else f"must be one of {', '.join(SUPPORTS)}"
+    if rule == "controller":
+        return None if value in CONTROLLERS else f"must be one of {', '.join(CONTROLLERS)}"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return "must be a number"
     if not math.isfinite(value):
         return "must be finite"
     if rule == "positive" and value <= 0:
         return "must be > 0"
+    if rule == "non_negative" and value < 0:
+        return "must be >= 0"
     if rule == "positive_integer" and (not isinstance(value, int) or value < 1):
         return "must be a whole number >= 1"
     return _range_problem(key, value)
@@ -440,7 +471,7 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None):
     folder : path
         The case folder to create; it must not exist yet.
     axis_values : dict
-        The content of axis.toml (``name``, ``screw``, ``motor``).
+        The content of axis.toml (``name``, ``screw``, ``motor``, optionally ``servo``).
     positioning, duty, tracking : dict of {column: array}, optional
         Columns of each CSV, written in the given order.
     """

@@ -24,7 +24,8 @@ from .output import write_atomically
 
 COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
 DEFAULT_THERMAL_STEP_S = 0.1
-CASE_HELP = "case folder: axis.toml + positioning.csv (+ duty.csv), see data-format.md"
+CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
+             "+ tracking.csv; see data-format.md")
 
 
 @contextmanager
@@ -87,35 +88,47 @@ def _cmd_fit(args):
     _emit(args, payload, text.fit_lines(result, before.rms_um, args.out))
 
 
-def _cmd_diagnose(args):
-    from .diagnose import diagnose
+def _case_and_model(args):
+    """(effects, case, starting model, tracking): ``tracking`` when the case is compared as
+    a tracking case (tracking.csv), which the tracking package handles."""
+    from .tracking.model import is_tracking
 
     effects = _effects(args)
     case = read_case(args.case)
     model = _starting_model(args, effects)
+    return effects, case, model, is_tracking(case, model)
+
+
+def _cmd_diagnose(args):
+    from .diagnose import diagnose
+    from .tracking import diagnose as tracking, text as tracking_text
+
+    effects, case, model, is_tracking = _case_and_model(args)
     with _progress("diagnosing", "fits") as tick:
-        diagnosis = diagnose(case, model, effects, progress=tick)
-    _emit(args, diagnosis.to_json(), text.diagnosis_lines(diagnosis))
+        diagnosis = (tracking.diagnose if is_tracking else diagnose)(case, model, effects,
+                                                                      progress=tick)
+    _emit(args, diagnosis.to_json(),
+          (tracking_text if is_tracking else text).diagnosis_lines(diagnosis))
 
 
 def _cmd_compare(args):
     from .iso230 import compare
+    from .tracking import compare as tracking, text as tracking_text
 
-    effects = _effects(args)
-    case = read_case(args.case)
-    comparison = compare(case, _starting_model(args, effects))
-    _emit(args, comparison, text.comparison_lines(comparison))
+    _, case, model, is_tracking = _case_and_model(args)
+    comparison = (tracking.compare if is_tracking else compare)(case, model)
+    _emit(args, comparison,
+          (tracking_text if is_tracking else text).comparison_lines(comparison))
 
 
 def _cmd_report(args):
     from .report import write_report
+    from .tracking import report as tracking
 
-    effects = _effects(args)
-    case = read_case(args.case)
-    model = _starting_model(args, effects)
+    effects, case, model, is_tracking = _case_and_model(args)
     out = Path(args.out or f"{Path(args.case).resolve().name}-report.html")
     check_writable_target(out)
-    write_report(case, model, effects, out)
+    (tracking.write_report if is_tracking else write_report)(case, model, effects, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
 
@@ -579,7 +592,9 @@ def build_parser():
         description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
                     "after the first second. --spindle-rpm adds a milling force at the "
                     "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, seed 002 "
-                    "publishes none).")
+                    "publishes none). axis.toml gets the [servo] table (the controller), not "
+                    "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
+                    "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).")
     scenario.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
     scenario.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
     scenario.add_argument("--duration-s", type=float, default=10.0, help="default 10")

@@ -122,9 +122,22 @@ def too_few_samples(model, cases):
     return None
 
 
+def _tracking(model, cases):
+    """The tracking fit module when every case is compared as a tracking case, else None."""
+    from .tracking.model import is_tracking
+
+    if all(is_tracking(case, model) for case in cases):
+        from .tracking import fit as tracking_fit
+        return tracking_fit
+    return None
+
+
 def evaluate(model, cases):
     """Statistics and residual of ``model`` as it stands (no fitting)."""
     cases = _as_list(cases)
+    tracking = _tracking(model, cases)
+    if tracking:
+        return tracking.evaluate(model, cases)
     check_available(model, cases)
     measured = measured_um(cases)
     residual = measured - np.concatenate([model.predict_um(c) for c in cases])
@@ -141,6 +154,9 @@ def fit(model, cases, progress=None):
     one thread: the matrices are small, and threads competing with other work on the machine
     made fits up to 30x slower.
 
+    Tracking cases (tracking.csv, no positioning.csv or a model with tracking effects) go to
+    :func:`feedaxis.tracking.fit.fit`.
+
     Parameters
     ----------
     model : Model
@@ -153,6 +169,9 @@ def fit(model, cases, progress=None):
     -------
     FitResult
     """
+    tracking = _tracking(model, _as_list(cases))
+    if tracking:
+        return tracking.fit(model, _as_list(cases), progress)
     with threadpool_limits(limits=1, user_api="blas"):
         return _fit(model, _as_list(cases), progress)
 

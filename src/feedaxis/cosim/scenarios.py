@@ -387,7 +387,7 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
         raise ScenarioInterrupted("interrupted before the first step; nothing written")
     name = "simulated tracking test" + ("" if completed else
                                         f" (interrupted at t = {rows['time'][-1]:g} s)")
-    write_case(out, axis_values(master, overrides, name), tracking=tracking)
+    write_case(out, axis_values(master, overrides, name, with_servo=True), tracking=tracking)
     settled = rows["time"] > SETTLE_S
     error_mm = np.abs(rows["NpidServo.tracking_error_mm"][settled])
     summary = {"case": str(out), "controller": controller, "frequency_hz": frequency_hz,
@@ -402,6 +402,12 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     return summary
 
 
+SERVO_FROM = {"controller": "nonlinear", "kp_V_per_mm": "kp_V_per_mm",
+              "ki_V_per_mm_s": "ki_V_per_mm_s", "kd_V_s_per_mm": "kd_V_s_per_mm",
+              "ko_per_mm": "ko_per_mm", "e_max_mm": "e_max_mm",
+              "force_constant_N_per_V": "force_constant_N_per_V", "loop_step_s": "time_step_s"}
+
+
 def _positioning_parameters(parameters):
     """:data:`POSITIONING_SERVO` under the caller's values (theirs win)."""
     parameters = dict(parameters or {})
@@ -410,8 +416,10 @@ def _positioning_parameters(parameters):
     return parameters
 
 
-def axis_values(master, parameters, name):
-    """axis.toml content from the co-simulated axis's effective parameter values."""
+def axis_values(master, parameters, name, with_servo=False):
+    """axis.toml content from the co-simulated axis's effective parameter values; with
+    ``with_servo`` the ``[servo]`` table too (the controller as set in NpidServo, not its
+    plant or friction: those are what a fit of the tracking case identifies)."""
     system = master.system.with_parameters(parameters or {})
 
     def values(component, keys):
@@ -426,7 +434,13 @@ def axis_values(master, parameters, name):
         raise ParameterError(f"GeometricError and ThermalScrew disagree on "
                              f"{', '.join(differ)}: one axis has one screw", "--set")
     motor = {k: v for c, keys in MOTOR_FROM.items() for k, v in values(c, keys).items()}
-    return {"name": name, "screw": screw, "motor": motor}
+    axis = {"name": name, "screw": screw, "motor": motor}
+    if with_servo:
+        servo = values("NpidServo", SERVO_FROM.values())
+        axis["servo"] = {"controller": "npid" if servo["nonlinear"] else "pid",
+                         **{key: servo[name] for key, name in SERVO_FROM.items()
+                            if name != "nonlinear"}}
+    return axis
 
 
 def _positioning_columns(samples, rows, with_time=False):

@@ -1,8 +1,9 @@
 """The catalog of built-in effects, each a thin wrapper over ``feedaxis.physics``.
 
 Names are fixed (tests and other tools use them): lead_error, gravity_sag,
-assembly_eccentricity, motor_step_error, backlash, thermal_screw, ambient_expansion.
-Each evaluates with the same physics function its FMU calls.
+assembly_eccentricity, motor_step_error, backlash, thermal_screw, ambient_expansion; and
+the tracking effects of ``feedaxis.tracking.effects``: servo_plant, coulomb_friction,
+viscous_friction. Each evaluates with the same physics function its FMU calls.
 """
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from ..physics import geometry, motor, thermal
 from ..physics.mounting import screw_coordinate_m
+from ..tracking.effects import TRACKING_EFFECTS
 from .base import Effect, Needs, Parameter
 
 ISO_REFERENCE_TEMPERATURE_C = 20.0
@@ -280,7 +282,7 @@ class AmbientExpansion(Effect):
 
 CATALOG = {effect.name: effect for effect in (
     LeadError(), GravitySag(), AssemblyEccentricity(), MotorStepError(), Backlash(),
-    ThermalScrew(), AmbientExpansion())}
+    ThermalScrew(), AmbientExpansion(), *TRACKING_EFFECTS)}
 
 GEOMETRY_FMU_KEYS = ("length_m", "diameter_m", "density_kg_m3", "youngs_modulus_Pa", "support",
                      "fixed_end_mm")

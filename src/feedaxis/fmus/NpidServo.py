@@ -10,7 +10,8 @@ from feedaxis_slave import AxisSlave
 UNITS = {"plant_gain_mm_per_Vs2": "mm/(V.s2)", "plant_damping_per_s": "1/s",
          "plant_stiffness_per_s2": "1/s2", "delay_s": "s", "kp_V_per_mm": "V/mm",
          "ki_V_per_mm_s": "V/(mm.s)", "kd_V_s_per_mm": "V.s/mm", "ko_per_mm": "1/mm",
-         "e_max_mm": "mm", "nonlinear": None, "force_constant_N_per_V": "N/V", "time_step_s": "s"}
+         "e_max_mm": "mm", "nonlinear": None, "force_constant_N_per_V": "N/V", "time_step_s": "s",
+         "friction_N": "N", "damping_N_s_per_mm": "N.s/mm"}
 DESCRIPTIONS = {
     "plant_gain_mm_per_Vs2": "Plant numerator b of G(s) = b / (s2 + a1 s + a0) (Eq. 1)",
     "plant_damping_per_s": "Plant a1 (Eq. 1)", "plant_stiffness_per_s2": "Plant a0 (Eq. 1)",
@@ -20,7 +21,9 @@ DESCRIPTIONS = {
     "e_max_mm": "NPID error beyond which K(e) is held (Eq. 8)",
     "nonlinear": "true: NPID (nonlinear gain in front of the PID), false: PID",
     "force_constant_N_per_V": "Axial force per volt of command (assumed; not in seed 002)",
-    "time_step_s": "Internal loop step"}
+    "time_step_s": "Internal loop step",
+    "friction_N": "Coulomb friction opposing the velocity (smoothed over |v| < 0.1 mm/s)",
+    "damping_N_s_per_mm": "Viscous friction force per unit velocity"}
 
 
 class NpidServo(AxisSlave):

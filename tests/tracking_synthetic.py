@@ -1,0 +1,114 @@
+"""Tracking cases generated from known parameters by a straightforward stepping of the loop.
+
+Independent of ``feedaxis.physics.servo``: the plant ẋ = [[0, 1], [-a0, -a1]] x + [0, b] u
+(seed 002 Eq. 1) is integrated by classical Runge-Kutta over each 0.1 ms loop step with
+the command held, the delayed command switching inside the step where the delay is not a
+whole number of steps; the PID (Eq. 6) or NPID (Eq. 8) acts on the reference sampled at
+the start of each step; friction and the force from the velocity at the step's start.
+Noise: white plus a coloured AR(1) part, as encoder traces show.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from feedaxis.case import write_case
+
+SEED002 = {"plant_gain_mm_per_Vs2": 78020.0, "plant_damping_per_s": 163.0,
+           "plant_stiffness_per_s2": 193.3, "delay_s": 0.0012}
+SERVO = {"controller": "pid", "kp_V_per_mm": 0.8998, "ki_V_per_mm_s": 0.0006077,
+         "kd_V_s_per_mm": 0.005155, "force_constant_N_per_V": 100.0, "loop_step_s": 1e-4}
+AXIS = {"name": "synthetic servo", "screw": {"lead_mm": 10.0}, "servo": SERVO}
+WHITE_NOISE_UM = 0.1
+COLOURED_NOISE_UM = 0.3
+COLOURED_POLE = 0.95  # AR(1) coefficient per 1 ms sample
+
+
+def _plant_rk4(x1, x2, u, a0, a1, b, duration_s):
+    """One classical Runge-Kutta step of the plant with the input held."""
+    def slope(p, v):
+        return v, -a0 * p - a1 * v + b * u
+    k1 = slope(x1, x2)
+    k2 = slope(x1 + 0.5 * duration_s * k1[0], x2 + 0.5 * duration_s * k1[1])
+    k3 = slope(x1 + 0.5 * duration_s * k2[0], x2 + 0.5 * duration_s * k2[1])
+    k4 = slope(x1 + duration_s * k3[0], x2 + duration_s * k3[1])
+    return (x1 + duration_s / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]),
+            x2 + duration_s / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1]))
+
+
+def step_loop(reference, duration_s, sample_s=1e-3, plant=None, servo=None, friction_N=0.0,
+              damping_N_s_per_mm=0.0, force_N=None):
+    """Noise-free (time_s, reference_mm, position_mm) sampled every ``sample_s``.
+
+    ``reference`` and ``force_N`` are functions of time (s). The drive receives the
+    reference as set-points every ``sample_s`` and interpolates them linearly, sampling
+    the result at the start of each loop step; the loop starts at rest on ``reference(0)``.
+    """
+    plant = {**SEED002, **(plant or {})}
+    servo = {**SERVO, **(servo or {})}
+    h = servo["loop_step_s"]
+    a0, a1, b = (plant["plant_stiffness_per_s2"], plant["plant_damping_per_s"],
+                 plant["plant_gain_mm_per_Vs2"])
+    whole = int(math.floor(plant["delay_s"] / h + 1e-9))
+    early_s = (plant["delay_s"] / h - whole) * h
+    per_sample = int(round(sample_s / h))
+    n_samples = int(round(duration_s / sample_s)) + 1
+    commands = [0.0] * (whole + 2)
+    set_points = [reference(i * sample_s) for i in range(n_samples)]
+    x1, x2, integral, previous = set_points[0], 0.0, 0.0, 0.0
+    positions = [x1]
+    for k in range((n_samples - 1) * per_sample):
+        t = k * h
+        sample, within = divmod(k, per_sample)
+        error = (set_points[sample] + (set_points[min(sample + 1, n_samples - 1)]
+                                       - set_points[sample]) * within / per_sample - x1)
+        if servo["controller"] == "npid":
+            error *= math.cosh(servo["ko_per_mm"] * min(abs(error), servo["e_max_mm"]))
+        integral += 0.5 * (error + previous) * h
+        output = (servo["kp_V_per_mm"] * error + servo["ki_V_per_mm_s"] * integral
+                  + servo["kd_V_s_per_mm"] * (error - previous) / h)
+        previous = error
+        commands = commands[1:] + [output]
+        force = (force_N(t) if force_N else 0.0) - damping_N_s_per_mm * x2
+        if x2 != 0.0:
+            force -= friction_N * max(-1.0, min(1.0, x2 / 0.1))
+        force_V = force / servo["force_constant_N_per_V"]
+        if early_s > 0.0:
+            x1, x2 = _plant_rk4(x1, x2, commands[-whole - 2] + force_V, a0, a1, b, early_s)
+        x1, x2 = _plant_rk4(x1, x2, commands[-whole - 1] + force_V, a0, a1, b, h - early_s)
+        if (k + 1) % per_sample == 0:
+            positions.append(x1)
+    time_s = np.arange(n_samples) * sample_s
+    return time_s, np.array(set_points), np.array(positions)
+
+
+def noise_um(size, seed):
+    """White plus AR(1) coloured noise (µm), seeded."""
+    rng = np.random.default_rng(seed)
+    innovations = rng.normal(0.0, COLOURED_NOISE_UM * math.sqrt(1 - COLOURED_POLE**2), size)
+    coloured = np.empty(size)
+    coloured[0] = rng.normal(0.0, COLOURED_NOISE_UM)
+    for i in range(1, size):
+        coloured[i] = COLOURED_POLE * coloured[i - 1] + innovations[i]
+    return coloured + rng.normal(0.0, WHITE_NOISE_UM, size)
+
+
+def write_tracking_case(folder, trajectory, seed, force_N=None, axis=AXIS):
+    """Write (time, reference, position) plus seeded noise as a case; ``force_N`` (array)
+    is written as the known disturbance_N column."""
+    time_s, reference_mm, position_mm = trajectory
+    columns = {"time_s": time_s, "reference_mm": reference_mm,
+               "actual_mm": position_mm + noise_um(time_s.size, seed) * 1e-3}
+    if force_N is not None:
+        columns["disturbance_N"] = force_N
+    return write_case(folder, axis, tracking=columns)
+
+
+def sine(amplitude_mm, frequency_hz):
+    return lambda t: amplitude_mm * math.sin(2 * math.pi * frequency_hz * t)
+
+
+def two_sines(t):
+    """A reference exciting the plant: 10 mm at 0.5 Hz plus 0.3 mm at 7 Hz."""
+    return 10.0 * math.sin(math.pi * t) + 0.3 * math.sin(2 * math.pi * 7.0 * t)
