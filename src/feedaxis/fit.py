@@ -85,6 +85,9 @@ def check_available(model, cases):
     """Raise :class:`InputError` when an effect of ``model`` cannot be used on a case, when
     cases fitted jointly describe different axes, or when the data are too few to fit."""
     cases = _as_list(cases)
+    tracking = _tracking(model, cases)
+    if tracking:
+        return tracking.check_available(model, cases)
     for case in cases[1:]:
         if (case.axis.screw, case.axis.motor) != (cases[0].axis.screw, cases[0].axis.motor):
             raise InputError(f"axis.toml differs from {cases[0].folder}; cases fitted "

@@ -18,7 +18,8 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from ..case import AXIS_FILE, CaseError
-from ..fit import FitResult, Statistics, _Layout, _uncertainties
+from ..errors import InputError
+from ..fit import NOISE_DOF, FitResult, Statistics, _Layout, _uncertainties
 from .model import Record, servo_params
 from .tests import autocorrelation_time
 
@@ -26,11 +27,12 @@ LOOSE_SHARE = 0.5
 
 
 def check_available(model, cases):
-    """Raise ValueError when an effect cannot be used on a case or the cases' axes differ."""
+    """Raise :class:`InputError` when an effect cannot be used on a case, the cases' axes
+    differ, or the samples are too few for the model's parameters and the noise."""
     for case in cases[1:]:
         if case.axis != cases[0].axis:
-            raise ValueError(f"{case.folder}: axis.toml differs from {cases[0].folder}; cases "
-                             "fitted together must describe the same axis")
+            raise InputError(f"axis.toml differs from {cases[0].folder}; cases fitted together "
+                             "must describe the same axis", path=case.folder)
     for case in cases:
         if not case.axis.servo:
             raise CaseError(Path(case.folder) / AXIS_FILE, "a tracking case needs the [servo] "
@@ -38,7 +40,14 @@ def check_available(model, cases):
         for effect in model.effects:
             reason = effect.unavailable(case)
             if reason:
-                raise ValueError(f"{case.folder}: effect {effect.name} {reason}")
+                raise InputError(f"effect {effect.name} {reason}", path=case.folder)
+    n_samples = sum(case.tracking.time_s.size for case in cases)
+    n_parameters = sum(len(effect.parameters) for effect in model.effects)
+    if n_samples < n_parameters + NOISE_DOF:
+        named = " + ".join(model.names) or "the empty model"
+        raise InputError(f"{n_samples} samples; a fit of {named} needs at least "
+                         f"{n_parameters + NOISE_DOF}",
+                         path=Path(cases[0].folder) / "tracking.csv")
 
 
 class Problem:
