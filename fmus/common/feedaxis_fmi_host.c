@@ -80,6 +80,11 @@ static const char *setting(const char *name, const char *built_in)
     return value && *value ? value : built_in;
 }
 
+static void *real(const char *symbol)
+{
+    return real_library ? dlsym(real_library, symbol) : NULL;
+}
+
 static int start_python(void)
 {
     int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
@@ -122,6 +127,19 @@ static int start_python(void)
     return 0;
 }
 
+/* pythonfmu's library keeps its interpreter state in a static shared_ptr, destroyed at exit
+ * by a C++ static destructor, and then assigns nullptr to that destroyed shared_ptr in its
+ * ELF destructor finalizePythonInterpreter: a write into the freed control block, which is
+ * the exit-time heap corruption (valgrind: "Invalid read ... finalizePythonInterpreter",
+ * then free() aborts in libgfortran's close_units). Calling it first, from an exit handler
+ * registered after pythonfmu's, releases the state while it is alive; its later calls then
+ * see an empty pointer. */
+static void release_pythonfmu_state(void)
+{
+    void (*release)(void) = (void (*)(void))real("finalizePythonInterpreter");
+    if (release) release();
+}
+
 static void load(void)
 {
     Dl_info self;
@@ -136,13 +154,14 @@ static void load(void)
     snprintf(slash ? slash + 1 : path, sizeof path - (slash ? (size_t)(slash + 1 - path) : 0),
              "libpythonfmu-export.so");
     real_library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!real_library)
+    if (!real_library) {
         snprintf(load_error, sizeof load_error, "cannot load %s: %s", path, dlerror());
-}
-
-static void *real(const char *symbol)
-{
-    return real_library ? dlsym(real_library, symbol) : NULL;
+        return;
+    }
+    /* Stay loaded to the end (the exit handler below lives here), then register the handler
+     * after pythonfmu's static destructors, so that it runs before them. */
+    dlopen(self.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
+    atexit(release_pythonfmu_state);
 }
 
 /* ---- logging ---------------------------------------------------------------------- */
