@@ -12,8 +12,8 @@
  *      a call made after fmi2Fatal is refused without reaching pythonfmu (whose instance
  *      then holds freed Python objects), an error logged by the slave during a call turns
  *      that call's status into fmi2Error;
- *   3. passes every message to the host's logger with a category (pythonfmu passes NULL)
- *      and the text as a "%s" argument, never as a format.
+ *   3. passes every message to the host's logger with a category (pythonfmu passes NULL),
+ *      never text containing '%' as the format.
  *
  * Build-time constants (-D): FEEDAXIS_PYTHON (the interpreter to start) and
  * FEEDAXIS_LIBPYTHON (its shared library); the environment variables of the same names
@@ -176,8 +176,11 @@ static const char *category_of(fmi2Status status)
 static void tell_host(Guard *g, fmi2Status status, const char *category, const char *message)
 {
     if (!g->host.logger || (status < fmi2Warning && !g->host_logging)) return;
+    /* Plain text is its own format (hosts that ignore the arguments still read it); text
+     * with a '%' goes as the argument of "%s". */
     g->host.logger(g->host.componentEnvironment, g->name, status,
-                   category && *category ? category : category_of(status), "%s", message);
+                   category && *category ? category : category_of(status),
+                   strchr(message, '%') ? "%s" : message, message);
 }
 
 /* pythonfmu passes each message as the format with no arguments: treat it as text. */

@@ -1,0 +1,250 @@
+"""The FMUs in hosts that are not Python processes, and never crashing any host.
+
+fmuCheck (FMI Compliance Checker, a plain C program) loads each FMU, simulates its
+cross-check input and must match the cross-check reference; a bad parameter, a fixed
+parameter set late, calls after a failure, tiny and huge steps all end in a status and a
+message with a category, never a crash. Tests needing a tool from ../shared/tools/fmi skip
+with the reason outside CI and fail in CI (CI=true).
+"""
+import os
+import subprocess
+import sys
+import time
+import zipfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+from fmpy.util import read_csv
+
+from feedaxis.fmu_build import FMU_NAMES
+from feedaxis.physics import thermal
+
+ROOT = Path(__file__).resolve().parents[1]
+FMU_SOURCES = ROOT / "fmus"
+FMU_CHECK = ROOT.parent / "shared" / "tools" / "fmi" / "fmuCheck.linux64"
+ERROR = 3
+
+
+def require_tool(path):
+    """Skip outside CI when ``path`` is missing; fail in CI."""
+    if not Path(path).exists():
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"{path} is missing in CI")
+        pytest.skip(f"{path} is missing (the FMI tools of ../shared/tools/fmi)")
+
+
+def cross_check_options(name):
+    text = (FMU_SOURCES / name / f"{name}_ref.opt").read_text()
+    return {key: float(value) for key, value in (line.split(", ") for line in text.splitlines())}
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_check_simulates_cross_check_input_in_a_c_host(fmu_paths, tmp_path, name):
+    require_tool(FMU_CHECK)
+    options = cross_check_options(name)
+    folder = FMU_SOURCES / name
+    result_csv = tmp_path / "out.csv"
+    run = subprocess.run(
+        [str(FMU_CHECK), "-k", "cs", "-s", repr(options["StopTime"]), "-h",
+         repr(options["StepSize"]), "-l", "3", "-i", str(folder / f"{name}_in.csv"),
+         "-o", str(result_csv), str(fmu_paths[name])],
+        capture_output=True, text=True, timeout=300)
+    report = run.stdout + run.stderr
+    assert run.returncode == 0, report[-2000:]
+    assert "[FATAL]" not in report and "[ERROR]" not in report, report[-2000:]
+    assert "0 Error(s)" in report and "0 Warning(s)" in report
+    result, reference = read_csv(result_csv), read_csv(folder / f"{name}_ref.csv")
+    steps = result["time"] / options["StepSize"]
+    on_step = np.abs(steps - np.rint(steps)) < 1e-6
+    assert on_step.sum() >= 100
+    rows = np.rint(steps[on_step]).astype(int)
+    for output in reference.dtype.names[1:]:
+        expected = reference[output][rows]
+        np.testing.assert_allclose(result[output][on_step], expected, rtol=1e-9,
+                                   atol=1e-9 * np.max(np.abs(reference[output])))
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_check_accepts_model_description(fmu_paths, name):
+    require_tool(FMU_CHECK)
+    run = subprocess.run([str(FMU_CHECK), "-k", "xml", str(fmu_paths[name])],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and "0 Warning(s)" in run.stdout + run.stderr
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_model_description_for_strict_importers(fmu_paths, name):
+    with zipfile.ZipFile(fmu_paths[name]) as archive:
+        root = ET.fromstring(archive.read("modelDescription.xml"))
+    options = cross_check_options(name)
+    experiment = root.find("DefaultExperiment")
+    assert float(experiment.get("stopTime")) == options["StopTime"]
+    assert float(experiment.get("stepSize")) == options["StepSize"]
+    variables = list(root.iter("ScalarVariable"))
+    outputs = [i for i, v in enumerate(variables, 1) if v.get("causality") == "output"]
+    for index in outputs:
+        assert variables[index - 1].get("initial") == "calculated"
+        assert variables[index - 1][0].get("start") is None
+    structure = root.find("ModelStructure")
+    assert [int(u.get("index")) for u in structure.find("Outputs")] == outputs
+    assert all(u.get("dependencies") == "" for u in structure.find("Outputs"))
+    assert [int(u.get("index")) for u in structure.find("InitialUnknowns")] == outputs
+    declared = {u.get("name") for u in root.iter("Unit")}
+    used = {v[0].get("unit") for v in variables if v[0].get("unit")}
+    assert used <= declared
+
+
+class Messages:
+    """An fmi2 logger recording (status, category, message) for a low-level fmpy slave."""
+
+    def __init__(self):
+        self.records = []
+        self.callback = fmi2CallbackLoggerTYPE(self._log)
+
+    def _log(self, environment, instance, status, category, message):
+        self.records.append((status, category, message))
+
+    def callbacks(self):
+        functions = fmi2CallbackFunctions()
+        functions.logger = self.callback
+        return functions
+
+
+def fresh(loaded):
+    """The FMU's slave object with no instance yet (LoadedFmu keeps one per FMU)."""
+    from fmpy.fmi2 import FMU2Slave
+    return FMU2Slave(guid=loaded.description.guid, unzipDirectory=loaded.unzip_dir,
+                     modelIdentifier=loaded.description.coSimulation.modelIdentifier,
+                     instanceName="guarded")
+
+
+def vr(loaded, name):
+    return loaded.variables[name].valueReference
+
+
+def test_bad_parameter_is_an_error_with_category_and_the_instance_stays_safe(loaded_fmus):
+    loaded, messages = loaded_fmus["GeometricError"], Messages()
+    slave = fresh(loaded)
+    slave.instantiate(callbacks=messages.callbacks())
+    slave.setReal([vr(loaded, "diameter_m")], [-1.0])
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    with pytest.raises(FMICallException) as failure:
+        slave.exitInitializationMode()
+    assert failure.value.status == ERROR
+    status, category, message = messages.records[-1]
+    assert status == ERROR and category == b"logStatusError" and b"diameter_m" in message
+    with pytest.raises(FMICallException) as again:
+        slave.doStep(0.0, 0.01)
+    assert again.value.status == ERROR
+    assert messages.records[-1][1] == b"logStatusError"
+    slave.terminate()
+    slave.freeInstance()
+    slave.freeLibrary()
+
+
+def test_fixed_parameter_set_after_initialisation_is_refused(loaded_fmus):
+    loaded, messages = loaded_fmus["StepperError"], Messages()
+    slave = fresh(loaded)
+    slave.instantiate(callbacks=messages.callbacks())
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    slave.setReal([vr(loaded, "position_mm")], [0.37])
+    slave.doStep(0.0, 0.01)
+    before = slave.getReal([vr(loaded, "error_um")])
+    with pytest.raises(FMICallException) as failure:
+        slave.setReal([vr(loaded, "harmonic1_cos_um")], [0.5])
+    assert failure.value.status == ERROR
+    assert b"harmonic1_cos_um is a fixed parameter" in messages.records[-1][2]
+    slave.doStep(0.01, 0.01)
+    assert slave.getReal([vr(loaded, "error_um")]) == before
+    slave.terminate()
+    slave.freeInstance()
+    slave.freeLibrary()
+
+
+def run_one_step(loaded, parameters, step_s, messages):
+    slave = fresh(loaded)
+    slave.instantiate(callbacks=messages.callbacks())
+    loaded.set_values(slave, parameters)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    try:
+        slave.exitInitializationMode()
+        slave.doStep(0.0, step_s)
+        return slave.getReal([loaded.variables[n].valueReference
+                              for n in loaded.variables if loaded.variables[n].causality == "output"])
+    finally:
+        slave.terminate()
+        slave.freeInstance()
+        slave.freeLibrary()
+
+
+def test_thermal_screw_takes_a_tiny_and_a_huge_step(loaded_fmus):
+    loaded = loaded_fmus["ThermalScrew"]
+    assert np.isfinite(run_one_step(loaded, {"velocity_mm_s": 100.0}, 1e-13, Messages())).all()
+    start = time.perf_counter()
+    outputs = run_one_step(loaded, {"velocity_mm_s": 100.0}, 1e6, Messages())
+    assert time.perf_counter() - start < 5.0  # 1e7 sub-steps one by one would take minutes
+    assert np.isfinite(outputs).all()
+
+
+def test_euler_by_powers_equals_the_loop():
+    params = thermal.ThermalScrewParams()
+    rates = thermal.rate_matrix(params, 6000.0, thermal.nut_cells(params, 0.3))
+    sources = thermal.source_rate(params, 6000.0, thermal.nut_cells(params, 0.3))
+    rise_K = np.linspace(0.0, 2.0, params.n_cells)
+    looped = rise_K.copy()
+    for _ in range(500):
+        looped = looped + 0.05 * (rates @ looped + sources)
+    powered = thermal._euler_steps_by_powers(rates, sources, rise_K, 0.05, 500)
+    np.testing.assert_allclose(powered, looped, rtol=1e-10, atol=1e-12)
+
+
+def test_servo_refuses_unbounded_steps_with_a_message(loaded_fmus):
+    loaded, messages = loaded_fmus["NpidServo"], Messages()
+    with pytest.raises(FMICallException) as failure:
+        run_one_step(loaded, {}, 1000.0, messages)
+    assert failure.value.status == ERROR
+    assert b"internal steps" in messages.records[-1][2]
+    with pytest.raises(FMICallException):
+        run_one_step(loaded, {"time_step_s": 1e300}, 1e-3, messages)
+    assert b"time_step_s must be <=" in messages.records[-1][2]
+
+
+HOST_SCRIPT = """
+import sys
+from fmpy import simulate_fmu
+for path in sys.argv[1:]:
+    simulate_fmu(path, stop_time=0.05, step_size=0.01)
+print("done")
+"""
+
+
+def test_no_exit_time_abort_with_all_fmus_in_one_process(fmu_paths):
+    """The full count (200 processes) is benchmarks/stress_fmu_hosts.py; here 10."""
+    paths = [str(fmu_paths[name]) for name in FMU_NAMES]
+    for _ in range(10):
+        run = subprocess.run([sys.executable, "-c", HOST_SCRIPT, *paths], capture_output=True,
+                             text=True, timeout=120)
+        assert run.returncode == 0 and "done" in run.stdout, run.stderr[-2000:]
+
+
+def test_instantiate_free_cycles_do_not_grow_python_objects(loaded_fmus):
+    import gc
+    loaded = loaded_fmus["StepperError"]
+    for _ in range(20):
+        loaded.instantiate("cycle").freeInstance()
+    gc.collect()
+    objects, path_length = len(gc.get_objects()), len(sys.path)
+    for _ in range(300):
+        loaded.instantiate("cycle").freeInstance()
+    gc.collect()
+    # pythonfmu's findClass leaks one MRO list per instantiate (fmus/README.md); nothing else
+    assert len(gc.get_objects()) - objects <= 300 + 10
+    assert len(sys.path) == path_length
