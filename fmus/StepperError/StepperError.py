@@ -32,7 +32,6 @@ class StepperError(AxisSlave):
         return motor.motor_error_period_mm(self.lead_mm, self.step_angle_deg, self.error_period_steps)
 
     def step(self, step_size_s):
-        self.error_um = float(motor.motor_step_error_um(
-            self.position_mm, self.lead_mm, self.step_angle_deg, self.error_period_steps,
-            (self.harmonic1_cos_um, self.harmonic2_cos_um),
+        self.error_um = float(motor.motor_error_um(
+            self.position_mm, self.model, (self.harmonic1_cos_um, self.harmonic2_cos_um),
             (self.harmonic1_sin_um, self.harmonic2_sin_um)))

@@ -90,12 +90,21 @@ static int start_python(void)
     int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
     if (!is_initialized) {
         const char *libpython = setting("FEEDAXIS_LIBPYTHON", FEEDAXIS_LIBPYTHON);
+        if (!*libpython) {
+            snprintf(load_error, sizeof load_error, "the Python that built this FMU has no shared "
+                     "libpython: set FEEDAXIS_LIBPYTHON to one (and FEEDAXIS_PYTHON)");
+            return -1;
+        }
         if (!dlopen(libpython, RTLD_NOW | RTLD_GLOBAL)) {
             snprintf(load_error, sizeof load_error,
                      "cannot load libpython (set FEEDAXIS_LIBPYTHON): %s", dlerror());
             return -1;
         }
         is_initialized = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+        if (!is_initialized) {
+            snprintf(load_error, sizeof load_error, "%s is not a libpython", libpython);
+            return -1;
+        }
     }
     if (is_initialized()) return 0;
 
@@ -316,7 +325,8 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
     Guard *g = c;                                                                              \
     if (!g) return fmi2Error;                                                                  \
     if (!usable(g, #function, when_failed)) return fmi2Error;                                  \
-    fmi2Status(*call) signature = (fmi2Status(*) signature)real(#function);                    \
+    static fmi2Status(*call) signature; /* resolved once: dlsym costs a microsecond */     \
+    if (!call) call = (fmi2Status(*) signature)real(#function);                                \
     begin(g);                                                                                  \
     fmi2Status status = finish(g, call(g->real, ##__VA_ARGS__))
 
