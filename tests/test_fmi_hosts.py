@@ -320,3 +320,11 @@ def test_omsimulator_python_api_and_ecospy_run_the_ssp_alike(portable_ssp, fmu_p
         simulation.terminate()
     assert oms == pytest.approx(ecos, rel=1e-12)
     assert oms[0] == pytest.approx(servo_position_from_master(system, fmu_paths, 200), rel=1e-9)
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_readme_tables_every_variable(loaded_fmus, name):
+    readme = (FMU_SOURCES / name / "README.md").read_text()
+    for variable in loaded_fmus[name].description.modelVariables:
+        row = f"| `{variable.name}` | {variable.causality} | {variable.type} | {variable.unit or ''} |"
+        assert row in readme, row
