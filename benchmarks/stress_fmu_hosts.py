@@ -9,7 +9,7 @@ the four FMUs, then
 - runs the same number of fmuCheck processes (a C host) on ThermalScrew when
   ../shared/tools/fmi/fmuCheck.linux64 exists;
 - instantiates and frees StepperError ``--cycles`` times in this process and prints the
-  resident memory growth (after 100 warm-up cycles).
+  resident memory growth (after as many warm-up cycles).
 """
 import argparse
 import subprocess
@@ -61,7 +61,7 @@ def main():
             failed = count_failures(command for _ in range(args.processes))
             print(f"fmuCheck, ThermalScrew: {failed} of {args.processes} processes failed")
         loaded = LoadedFmu(paths["StepperError"])
-        for _ in range(100):
+        for _ in range(args.cycles):  # warm-up: the allocator's arenas settle
             loaded.instantiate("cycle").freeInstance()
         before = resident_kB()
         for _ in range(args.cycles):

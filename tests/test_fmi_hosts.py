@@ -245,8 +245,9 @@ def test_instantiate_free_cycles_do_not_grow_python_objects(loaded_fmus):
     for _ in range(300):
         loaded.instantiate("cycle").freeInstance()
     gc.collect()
-    # pythonfmu's findClass leaks one MRO list per instantiate (fmus/README.md); nothing else
-    assert len(gc.get_objects()) - objects <= 300 + 10
+    # pythonfmu's findClass leaks an MRO list per fmi2Instantiate; the host layer reuses
+    # freed instances through fmi2Reset instead (fmus/README.md)
+    assert len(gc.get_objects()) - objects < 10
     assert len(sys.path) == path_length
 
 

@@ -137,7 +137,7 @@ def test_nan_input_gives_fmi_error_with_message(loaded_fmus, capsys, name):
     with pytest.raises(FMICallException) as failure:
         run_fmu(loaded_fmus[name], STEP_SIZE_S[name], 5, inputs, {}, OUTPUTS[name])
     assert failure.value.status == ERROR
-    assert f"[ERROR] feedaxis at t = {2 * STEP_SIZE_S[name]} s: input {first_input} must be finite" \
+    assert f"[ERROR] feedaxis: at t = {2 * STEP_SIZE_S[name]} s: input {first_input} must be finite" \
         in capsys.readouterr().out
 
 

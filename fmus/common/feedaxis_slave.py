@@ -71,14 +71,14 @@ class AxisSlave(Fmi2Slave):
         """Restore what :meth:`model_state` returned."""
 
     def exit_initialization_mode(self):
-        self._guarded(self.instance_name, self._initialise)
+        self._guarded("initialisation", self._initialise)
 
     def _initialise(self):
         self.model = self.build()
         self.step(0.0)
 
     def do_step(self, current_time, step_size):
-        return self._guarded(f"{self.instance_name} at t = {current_time} s", self._step_checked,
+        return self._guarded(f"at t = {current_time} s", self._step_checked,
                              step_size)
 
     def _step_checked(self, step_size):
