@@ -68,6 +68,16 @@ def test_fmu_check_simulates_cross_check_input_in_a_c_host(fmu_paths, tmp_path, 
                                    atol=1e-9 * np.max(np.abs(reference[output])))
 
 
+def test_c_host_without_python_gets_a_message_not_a_crash(fmu_paths):
+    require_tool(FMU_CHECK)
+    environment = dict(os.environ, FEEDAXIS_LIBPYTHON="/nonexistent/libpython3.so")
+    run = subprocess.run([str(FMU_CHECK), "-k", "cs", "-l", "3", str(fmu_paths["StepperError"])],
+                         capture_output=True, text=True, timeout=60, env=environment)
+    assert run.returncode == 1  # fmuCheck's "could not instantiate", not a signal
+    assert "[logStatusFatal]" in run.stdout + run.stderr
+    assert "cannot load libpython (set FEEDAXIS_LIBPYTHON)" in run.stdout + run.stderr
+
+
 @pytest.mark.parametrize("name", FMU_NAMES)
 def test_fmu_check_accepts_model_description(fmu_paths, name):
     require_tool(FMU_CHECK)
