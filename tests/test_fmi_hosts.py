@@ -359,6 +359,7 @@ def test_ecos_program_runs_the_ssp(portable_ssp, tmp_path):
     lines = next(tmp_path.glob("*.csv")).read_text().splitlines()
     names = [name.strip() for name in lines[0].split(",")]
     last = [field.strip() for field in lines[-1].split(",")]
-    assert float(last[names.index("time")]) == pytest.approx(0.2)
+    assert float(last[names.index("time")]) == pytest.approx(0.2, abs=1.5e-3)  # rows may be
+    # stamped with a step's start time
     geometric = names.index("GeometricError::error_um[REAL]")
     assert float(last[geometric]) == pytest.approx(0.45107, abs=1e-6)  # printed to 6 decimals
