@@ -363,3 +363,18 @@ def test_ecos_program_runs_the_ssp(portable_ssp, tmp_path):
     # stamped with a step's start time
     geometric = names.index("GeometricError::error_um[REAL]")
     assert float(last[geometric]) == pytest.approx(0.45107, abs=1e-6)  # printed to 6 decimals
+
+
+def test_container_fmu_runs_in_fmu_check(portable_ssp, fmu_paths, tmp_path):
+    """fmpy's container (its own native binary loading the four FMUs) inside a C host."""
+    require_tool(FMU_CHECK)
+    from feedaxis.cosim.container import export_container_fmu
+    container = export_container_fmu(tmp_path / "axis.fmu", portable_ssp[0], fmu_paths)
+    run = subprocess.run([str(FMU_CHECK), "-k", "cs", "-s", "0.2", "-h", "0.001", "-l", "3",
+                          "-o", str(tmp_path / "out.csv"), str(container)],
+                         capture_output=True, text=True, timeout=300)
+    report = run.stdout + run.stderr
+    assert run.returncode == 0 and "0 Error(s)" in report, report[-3000:]
+    assert "[ERROR]" not in report and "[FATAL]" not in report
+    result = read_csv(tmp_path / "out.csv")
+    assert result["GeometricError.error_um"][-1] == pytest.approx(0.45106988665543396, rel=1e-12)
