@@ -378,3 +378,18 @@ def test_container_fmu_runs_in_fmu_check(portable_ssp, fmu_paths, tmp_path):
     assert "[ERROR]" not in report and "[FATAL]" not in report
     result = read_csv(tmp_path / "out.csv")
     assert result["GeometricError.error_um"][-1] == pytest.approx(0.45106988665543396, rel=1e-12)
+
+
+def test_omsimulator_program_survives_a_bad_parameter(fmu_paths, tmp_path):
+    """pythonfmu's NULL log category used to end the OMSimulator process here."""
+    program = OMS_DIR / "bin" / "OMSimulator"
+    require_tool(program)
+    from feedaxis.cosim.ssp import export_ssp
+    from feedaxis.cosim.system import default_axis
+    ssp_path = export_ssp(tmp_path / "bad.ssp", default_axis().with_parameters(
+        {"GeometricError": {"diameter_m": -1.0}}), fmu_paths)
+    run = subprocess.run([str(program), "--stopTime=0.05", str(ssp_path)], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    report = run.stdout + run.stderr
+    assert run.returncode >= 0, report[-3000:]  # not killed by a signal
+    assert "logStatusError: GeometricError: initialisation: diameter_m must be > 0" in report
