@@ -71,15 +71,18 @@ class AxisSlave(Fmi2Slave):
         """Restore what :meth:`model_state` returned."""
 
     def exit_initialization_mode(self):
-        self._guarded("initialisation", self._initialise)
-
-    def _initialise(self):
-        self.model = self.build()
-        self.step(0.0)
+        try:
+            self.model = self.build()
+            self.step(0.0)
+        except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+            self._report("initialisation", error)
 
     def do_step(self, current_time, step_size):
-        return self._guarded(f"at t = {current_time} s", self._step_checked,
-                             step_size)
+        try:
+            self._step_checked(step_size)
+        except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+            return self._report(f"at t = {current_time} s", error)
+        return True
 
     def _step_checked(self, step_size):
         if self.model is None:
@@ -91,18 +94,15 @@ class AxisSlave(Fmi2Slave):
                 raise ValueError(f"input {name} must be finite, got {getattr(self, name)!r}")
         self.step(step_size)
 
-    def _guarded(self, where, function, *args):
-        """Run ``function``; log any exception instead of raising it; return success."""
-        try:
-            function(*args)
-        except ValueError as error:
+    def _report(self, where, error):
+        """Log ``error``: a ValueError (bad input) as an error, anything else (a bug) as
+        fatal with its traceback. Returns False (the step failed)."""
+        if isinstance(error, ValueError):
             self.log(f"{where}: {error}", Fmi2Status.error, "logStatusError")
-            return False
-        except Exception:  # a bug: reported as fatal, never raised into pythonfmu
+        else:
             self.log(f"{where}: internal error\n{traceback.format_exc()}", Fmi2Status.fatal,
                      "logStatusFatal")
-            return False
-        return True
+        return False
 
     def _get_fmu_state(self):
         state = super()._get_fmu_state()
