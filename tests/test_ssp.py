@@ -5,6 +5,7 @@ the master steps in dependency order. The differences are therefore exact shifts
 the tests assert to 1e-9: see each test.
 """
 import zipfile
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from libcosim_driver import simulate_ssp_with_libcosim
 PARAMETERS = {"NpidServo": {"nonlinear": True}, "GeometricError": {"backlash_um": 2.0},
               "StepperError": {"error_period_steps": 4}}
 ERRORS = ("StepperError.error_um", "GeometricError.error_um")
+SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +30,8 @@ def system():
 
 @pytest.fixture(scope="module")
 def ssp_path(system, fmu_paths, tmp_path_factory):
-    return export_ssp(tmp_path_factory.mktemp("ssp") / "axis.ssp", system, fmu_paths)
+    return export_ssp(tmp_path_factory.mktemp("ssp") / "axis.ssp", system, fmu_paths,
+                      step_size_hints=True)
 
 
 def assert_same(actual, expected, name):
@@ -48,6 +51,20 @@ def test_ssp_holds_structure_parameter_values_and_fmus(ssp_path, system):
     assert '<osp:FixedStepAlgorithm baseStepSize="0.001"' in ssd
     assert '<osp:StepSizeHint value="0.1"' in ssd
     assert '<ssv:Boolean value="true"' in servo_values
+    assert f'name="{system.name}"' in servo_values  # one ParameterSet name for all
+    assert '<ssd:DefaultExperiment startTime="0.0" stopTime="1.0"' in ssd
+    root = ET.fromstring(ssd)
+    declared = {u.get("name") for u in root.iter(f"{{{SSC}}}Unit")}
+    used = {r.get("unit") for r in root.iter(f"{{{SSC}}}Real") if r.get("unit")}
+    assert used and used <= declared
+
+
+def test_ssv_value_types_follow_the_fmu(fmu_paths, tmp_path):
+    path = export_ssp(tmp_path / "typed.ssp", default_axis().with_parameters(
+        {"NpidServo": {"plant_stiffness_per_s2": 0}}), fmu_paths)
+    with zipfile.ZipFile(path) as archive:
+        values = archive.read("resources/NpidServo.ssv").decode()
+    assert '<ssv:Real value="0.0"' in values and "ssv:Integer" not in values
 
 
 def test_fmpy_simulate_ssp_agrees_with_the_master(ssp_path, system, fmu_paths):

@@ -364,7 +364,7 @@ def _cmd_export_ssp(args):
     from .cosim.ssp import export_ssp
 
     check_writable_target(args.out)
-    path = export_ssp(args.out, *_checked_axis(args))
+    path = export_ssp(args.out, *_checked_axis(args), args.stop_time, args.osp_step_hints)
     _emit(args, {"ssp": str(path)}, f"{path}: SystemStructure.ssd, a parameter-values file "
                                     "(.ssv) per component and the four FMUs")
 
@@ -615,8 +615,14 @@ def build_parser():
         "export-ssp", help="the axis as an SSP file for other FMI system simulators",
         description="Write OUT.ssp: SystemStructure.ssd (components, connections, step "
                     "sizes), resources/<Component>.ssv (parameter values) and the four FMUs. "
-                    "Runs in fmpy.ssp.simulate_ssp and OSP libcosim (libcosimpy); see README.")
+                    "Runs in fmpy.ssp.simulate_ssp, OSP libcosim (libcosimpy), OMSimulator and "
+                    "ecos; see README.")
     sub.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
+    sub.add_argument("--stop-time", type=float, default=1.0, metavar="S",
+                     help="DefaultExperiment stopTime in s (default 1)")
+    sub.add_argument("--osp-step-hints", action="store_true",
+                     help="add OSP's per-component step sizes (libcosim runs the thermal screw "
+                          "at its own step); OMSimulator 3.0 refuses such a file")
     _add_axis_options(sub)
     sub.set_defaults(handler=_cmd_export_ssp)
 

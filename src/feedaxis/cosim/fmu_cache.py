@@ -2,7 +2,8 @@
 
 Building takes seconds per FMU (pythonfmu), so ``feedaxis simulate`` and ``export-ssp``
 reuse ``<cache>/feedaxis/fmus-<version>-<hash>/``, where the hash covers every file that
-goes into an FMU (the slave scripts, the adapter, the physics package, the build script):
+goes into an FMU (the slave scripts, the adapter, the host layer, the physics package, the
+build script):
 a changed source builds a new folder, never a stale FMU. The folder is built in a staging
 folder and renamed into place, so a crash or Ctrl-C never leaves half a cache.
 """
@@ -15,14 +16,15 @@ import tempfile
 from pathlib import Path
 
 from .. import __version__
-from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus
+from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources
 
 
 def source_hash():
     """SHA-256 (first 12 hex digits) of every source file that goes into the FMUs."""
     digest = hashlib.sha256()
-    files = sorted([*(SOURCE_DIR / "fmus").glob("*.py"), *(SOURCE_DIR / "physics").glob("*.py"),
-                    SOURCE_DIR / "fmu_build.py"])
+    sources = fmu_sources()
+    files = sorted([*sources.glob("*/*.py"), *sources.glob("common/*.c"),
+                    *(SOURCE_DIR / "physics").glob("*.py"), SOURCE_DIR / "fmu_build.py"])
     for path in files:
         digest.update(path.name.encode())
         digest.update(path.read_bytes())

@@ -21,22 +21,26 @@ Two importers shape it (both found by trying):
 from __future__ import annotations
 
 import io
+import math
 import zipfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from ..errors import InputError
+from ..fmu_build import SI_UNITS
 from ..output import write_atomically
 from .fmu_runner import LoadedFmu
-from ..errors import InputError
-from .system import FMI_TYPES, check_parameter_values, fmi_text
+from .system import check_parameter_values, fmi_text
 
 NAMESPACES = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
     "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
     "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+    "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
 }
 OSP_ANNOTATION = "com.opensimulationplatform"
+OMS_ANNOTATION = "org.openmodelica"
 
 for _prefix, _uri in NAMESPACES.items():
     ET.register_namespace(_prefix, _uri)
@@ -51,12 +55,19 @@ def _element(parent, qualified, **attributes):
     return ET.SubElement(parent, _tag(qualified), {k: str(v) for k, v in attributes.items()})
 
 
-def export_ssp(out, system, fmu_paths):
+def export_ssp(out, system, fmu_paths, stop_time_s=1.0, step_size_hints=False):
     """Write ``out`` (.ssp): SystemStructure.ssd, resources/<Component>.ssv and <FMU>.fmu.
 
     Parameter names are checked against the FMUs' model descriptions first, so a bad
-    ``--set`` is refused before anything is written. Returns the path.
+    ``--set`` is refused before anything is written. The DefaultExperiment runs from 0 to
+    ``stop_time_s`` (s). ``step_size_hints`` adds an ``osp:StepSizeHint`` per component, the
+    multi-rate schedule for libcosim, which OMSimulator refuses ("Unexpected tag
+    ssd:Annotations" in a Component); without them every importer steps every component at
+    the macro step. Returns the path.
     """
+    if not (math.isfinite(stop_time_s) and stop_time_s > 0):
+        raise InputError(f"the stop time must be finite and > 0 s, got {stop_time_s!r}",
+                         parameter="--stop-time")
     out = Path(out)
     if out.suffix != ".ssp":
         raise InputError("the SSP file name must end in .ssp", path=out)
@@ -68,10 +79,13 @@ def export_ssp(out, system, fmu_paths):
         check_parameter_values(component, loaded.variables)
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
-        archive.writestr("SystemStructure.ssd", _xml(system_structure(system, descriptions)))
+        archive.writestr("SystemStructure.ssd",
+                         _xml(system_structure(system, descriptions, stop_time_s,
+                                               step_size_hints)))
         for component in system.components:
             archive.writestr(f"resources/{component.name}.ssv",
-                             _xml(parameter_values(component)))
+                             _xml(parameter_values(component, system.name,
+                                                   descriptions[component.fmu])))
         for fmu in sorted({c.fmu for c in system.components}):
             archive.write(fmu_paths[fmu], f"resources/{fmu}.fmu")
     return write_atomically(out, buffer.getvalue())
@@ -82,10 +96,11 @@ def _xml(root):
     return ET.tostring(root, encoding="utf-8", xml_declaration=True)
 
 
-def system_structure(system, variables):
+def system_structure(system, variables, stop_time_s=1.0, step_size_hints=False):
     """The SystemStructure.ssd element tree of ``system``.
 
-    ``variables`` maps each FMU name to its model variables by name (units, causality).
+    ``variables`` maps each FMU name to its model variables by name (units, causality);
+    every connector unit is defined in ``ssd:Units`` (as the SSP schema requires).
     """
     root = ET.Element(_tag("ssd:SystemStructureDescription"),
                       {"version": "1.0", "name": system.name})
@@ -93,7 +108,7 @@ def system_structure(system, variables):
                           description="feedaxis: ball-screw feed axis from four FMUs")
     elements = _element(ssd_system, "ssd:Elements")
     for component in system.components:
-        _component(elements, component, system, variables[component.fmu])
+        _component(elements, component, system, variables[component.fmu], step_size_hints)
     connections = _element(ssd_system, "ssd:Connections")
     for connection in system.connections:
         if connection.source_component is None:
@@ -103,14 +118,22 @@ def system_structure(system, variables):
         _element(connections, "ssd:Connection", startElement=start_element,
                  startConnector=start_connector, endElement=end_element,
                  endConnector=end_connector)
-    experiment = _element(root, "ssd:DefaultExperiment", startTime=0.0)
+    _oms_master(ssd_system, system.macro_step_s)
+    units = _element(root, "ssd:Units")
+    for unit_name in sorted({u.get("unit") for u in root.iter(_tag("ssc:Real")) if u.get("unit")}):
+        factor, exponents = SI_UNITS[unit_name]
+        base = _element(_element(units, "ssc:Unit", name=unit_name), "ssc:BaseUnit",
+                        **exponents)
+        if factor != 1.0:
+            base.set("factor", repr(factor))
+    experiment = _element(root, "ssd:DefaultExperiment", startTime=0.0, stopTime=stop_time_s)
     annotation = _osp_annotation(experiment)
     _element(_element(annotation, "osp:Algorithm"), "osp:FixedStepAlgorithm",
              baseStepSize=repr(system.macro_step_s))
     return root
 
 
-def _component(elements, component, system, variables):
+def _component(elements, component, system, variables, step_size_hint):
     element = _element(elements, "ssd:Component", name=component.name,
                        type="application/x-fmu-sharedlibrary",
                        source=f"resources/{component.fmu}.fmu")
@@ -126,7 +149,18 @@ def _component(elements, component, system, variables):
             real.set("unit", variable.unit)
     bindings = _element(element, "ssd:ParameterBindings")
     _element(bindings, "ssd:ParameterBinding", source=f"resources/{component.name}.ssv")
-    _element(_osp_annotation(element), "osp:StepSizeHint", value=repr(component.step_s))
+    if step_size_hint:
+        _element(_osp_annotation(element), "osp:StepSizeHint", value=repr(component.step_s))
+
+
+def _oms_master(ssd_system, macro_step_s):
+    """OMSimulator's system type: a fixed-step co-simulation master at the macro step
+    (without it OMSimulator cannot create the system: "[NewSystem] internal error")."""
+    annotation = _element(_element(ssd_system, "ssd:Annotations"), "ssc:Annotation",
+                          type=OMS_ANNOTATION)
+    information = _element(_element(annotation, "oms:Annotations"), "oms:SimulationInformation")
+    _element(information, "oms:FixedStepMaster", description="oms-ma",
+             stepSize=repr(macro_step_s), absoluteTolerance=1e-4, relativeTolerance=1e-4)
 
 
 def _osp_annotation(parent):
@@ -134,13 +168,19 @@ def _osp_annotation(parent):
     return _element(annotations, "ssc:Annotation", type=OSP_ANNOTATION)
 
 
-def parameter_values(component):
-    """The component's .ssv ParameterSet: every parameter value the system sets."""
-    root = ET.Element(_tag("ssv:ParameterSet"), {"version": "1.0", "name": component.name})
+def parameter_values(component, set_name, variables):
+    """The component's .ssv ParameterSet ``set_name``: every parameter value the system sets.
+
+    All components' sets share one name (an importer such as ecos applies one set name);
+    each value's type is the FMU's declared type (``variables``: name -> model variable),
+    so an integer literal for a Real parameter is written as an ``ssv:Real``.
+    """
+    root = ET.Element(_tag("ssv:ParameterSet"), {"version": "1.0", "name": set_name})
     parameters = _element(root, "ssv:Parameters")
     for name, value in component.parameters.items():
-        _element(_element(parameters, "ssv:Parameter", name=name),
-                 f"ssv:{FMI_TYPES[type(value)]}", value=fmi_text(value))
+        kind = variables[name].type
+        _element(_element(parameters, "ssv:Parameter", name=name), f"ssv:{kind}",
+                 value=fmi_text(float(value) if kind == "Real" else value))
     return root
 
 

@@ -6,6 +6,8 @@ exit 2); inside an FMU without feedaxis, a plain ``ValueError`` subclass of the 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 try:
@@ -21,6 +23,8 @@ except ImportError:  # inside an FMU on a host without feedaxis
 
 def require_finite(name, value):
     """Raise :class:`ParameterError` naming ``name`` unless ``value`` is all finite numbers."""
+    if type(value) is float and math.isfinite(value):  # the common case, without NumPy
+        return
     try:
         numbers = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -31,6 +35,8 @@ def require_finite(name, value):
 
 def require_positive(name, value):
     """Raise :class:`ParameterError` naming ``name`` unless ``value`` is finite and > 0."""
+    if type(value) is float and 0.0 < value < math.inf:  # the common case, without NumPy
+        return
     require_finite(name, value)
     if not np.all(np.asarray(value, dtype=float) > 0):
         raise ParameterError(f"must be > 0, got {value!r}", name)

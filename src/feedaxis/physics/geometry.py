@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .checks import ParameterError, require_positive
+from .scalar import array_module, clip, sign, values
 
 GRAVITY_M_S2 = 9.80665
 SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
@@ -26,7 +27,7 @@ def lead_error_um(position_mm, offset_um, slope_um_per_mm):
     slope_um_per_mm : float
         a1, cumulative lead deviation per mm of travel (µm/mm).
     """
-    return offset_um + slope_um_per_mm * np.asarray(position_mm, dtype=float)
+    return offset_um + slope_um_per_mm * values(position_mm)
 
 
 def eccentricity_amplitude_um(offset_um, tilt_rad):
@@ -58,8 +59,9 @@ def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
         a2 and b2 (µm).
     """
     require_positive("lead_mm", lead_mm)
-    phase_rad = 2.0 * np.pi * np.asarray(position_mm, dtype=float) / lead_mm
-    return cos_um * np.cos(phase_rad) + sin_um * np.sin(phase_rad)
+    xp = array_module(position_mm)
+    phase_rad = 2.0 * xp.pi * values(position_mm) / lead_mm
+    return cos_um * xp.cos(phase_rad) + sin_um * xp.sin(phase_rad)
 
 
 def screw_line_load_N_per_m(diameter_m, density_kg_m3):
@@ -143,7 +145,7 @@ def gravity_sag_table(length_m, diameter_m, density_kg_m3, youngs_modulus_Pa, su
 def gravity_sag_error_um(screw_coord_m, sag_table):
     """Gravity-sag error (µm) at distances from the fixed end, from :func:`gravity_sag_table`."""
     grid_m, error_um = sag_table
-    return np.interp(np.clip(screw_coord_m, 0.0, grid_m[-1]), grid_m, error_um)
+    return np.interp(clip(screw_coord_m, 0.0, grid_m[-1]), grid_m, error_um)
 
 
 def backlash_error_um(direction, backlash_um):
@@ -156,7 +158,7 @@ def backlash_error_um(direction, backlash_um):
     backlash_um : float
         Reversal value B (µm).
     """
-    return 0.5 * backlash_um * np.sign(np.asarray(direction, dtype=float))
+    return 0.5 * backlash_um * sign(direction)
 
 
 def transmission_error_um(position_mm, direction, lead_mm, offset_um, slope_um_per_mm,

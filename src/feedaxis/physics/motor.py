@@ -7,9 +7,12 @@ f3 = a3·cos(ωy) + b3·sin(ωy) + c3, ω = 2π / period.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .checks import require_positive
+from .scalar import array_module, values
 
 
 def motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps):
@@ -42,8 +45,15 @@ def motor_step_error_um(position_mm, lead_mm, step_angle_deg, error_period_steps
         Harmonic k = 1, 2, ... cosine and sine amplitudes of the axial error (µm).
     """
     period_mm = motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps)
-    phase_rad = 2.0 * np.pi * np.asarray(position_mm, dtype=float) / period_mm
-    error_um = np.zeros_like(phase_rad)
+    return motor_error_um(position_mm, period_mm, cos_um, sin_um)
+
+
+def motor_error_um(position_mm, period_mm, cos_um, sin_um):
+    """The Fourier series of :func:`motor_step_error_um` over a known period (mm), unchecked:
+    f = Σ_k a_k cos(k ω y) + b_k sin(k ω y), ω = 2π / period (seed 000 Eq. 10)."""
+    xp = array_module(position_mm)
+    phase_rad = 2.0 * math.pi * values(position_mm) / period_mm
+    error_um = 0.0 * phase_rad
     for k, (a_um, b_um) in enumerate(zip(cos_um, sin_um), start=1):
-        error_um = error_um + a_um * np.cos(k * phase_rad) + b_um * np.sin(k * phase_rad)
+        error_um = error_um + a_um * xp.cos(k * phase_rad) + b_um * xp.sin(k * phase_rad)
     return error_um

@@ -6,7 +6,7 @@ for P_f > 0 it shrinks and errors change sign (Eq. 15).
 """
 from __future__ import annotations
 
-import numpy as np
+from .scalar import values
 
 
 def axis_sign(fixed_end_mm):
@@ -19,5 +19,5 @@ def screw_coordinate_m(position_mm, fixed_end_mm):
 
     Eq. 16: s = P_x - P_f for P_f < 0; Eq. 15: s = P_f - P_x for P_f > 0.
     """
-    offset_mm = np.asarray(position_mm, dtype=float) - fixed_end_mm
+    offset_mm = values(position_mm) - fixed_end_mm
     return axis_sign(fixed_end_mm) * offset_mm * 1e-3

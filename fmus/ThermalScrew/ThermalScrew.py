@@ -7,6 +7,7 @@ of Table 3. The temperature field is advanced in stable sub-steps of at most
 from dataclasses import fields
 
 import numpy as np
+from pythonfmu import DefaultExperiment
 
 from feedaxis_fmu_physics import thermal
 from feedaxis_slave import AxisSlave
@@ -14,7 +15,7 @@ from feedaxis_slave import AxisSlave
 UNITS = {"length_m": "m", "diameter_m": "m", "density_kg_m3": "kg/m3",
          "specific_heat_J_kgK": "J/(kg.K)", "expansion_per_K": "1/K", "nut_length_m": "m",
          "bearing_length_m": "m", "cell_length_m": "m", "time_step_s": "s",
-         "conductivity_W_mK": "W/(m.K)", "k1_W_m2K_per_mm_min": "W.min/(m3.K)",
+         "conductivity_W_mK": "W/(m.K)", "k1_W_m2K_per_mm_min": "W.min/(m2.K.mm)",
          "k2_W_m2K": "W/(m2.K)", "k3_W_per_mm_min": "W.min/mm", "k4_W_per_mm_min": "W.min/mm",
          "fixed_end_mm": "mm"}
 DESCRIPTIONS = {"length_m": "Screw length L", "diameter_m": "Screw diameter D",
@@ -33,6 +34,8 @@ DESCRIPTIONS = {"length_m": "Screw length L", "diameter_m": "Screw diameter D",
 class ThermalScrew(AxisSlave):
     """Temperature field of the screw driven by the nut's motion; thermal positioning error."""
 
+    # the cross-check run ThermalScrew_ref.opt: start, stop and step
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=900.0, step_size=1.0)
     description = "Ball-screw thermal error from a 1-D finite-difference model (Rong et al. 2023)"
 
     def __init__(self, **kwargs):

@@ -1,12 +1,16 @@
 """Common pythonfmu adapter for the feedaxis FMUs: variables, checks, errors and state.
 
-Travels inside every FMU next to ``feedaxis_fmu_physics`` (a copy of feedaxis.physics).
+Travels inside every FMU next to ``physics`` (a copy of feedaxis.physics).
 A slave declares its variables with :meth:`AxisSlave.parameter`, :meth:`AxisSlave.input`
 and :meth:`AxisSlave.output`, builds its physics object in :meth:`AxisSlave.build` and
-advances it in :meth:`AxisSlave.step`. Any ValueError raised there (a bad parameter, a NaN
-input) is logged with the variable's name and returned to the importer as fmi2Error.
+advances it in :meth:`AxisSlave.step`. Nothing raises into pythonfmu (which would turn any
+exception into fmi2Fatal and leave its instance holding freed objects): a ValueError (a bad
+parameter, a NaN input, a refused step) is logged with category ``logStatusError`` naming
+the variable, any other exception (a bug) with ``logStatusFatal`` and its traceback; the
+FMU's host layer (fmus/common/feedaxis_fmi_host.c) returns that status for the call.
 """
 import math
+import traceback
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu import Integer, Real, String
@@ -47,9 +51,9 @@ class AxisSlave(Fmi2Slave):
         self._declare(name, float(value), description, unit, None, causality=Fmi2Causality.input)
 
     def output(self, name, description, unit=None):
-        """Declare a Real output, exact initial value 0."""
+        """Declare a Real output, calculated at initialisation from parameters and inputs."""
         self._declare(name, 0.0, description, unit, None,
-                      causality=Fmi2Causality.output, initial=Fmi2Initial.exact)
+                      causality=Fmi2Causality.output, initial=Fmi2Initial.calculated)
 
     def build(self):
         """Return the physics object from the parameters (raise ValueError if one is bad)."""
@@ -70,22 +74,35 @@ class AxisSlave(Fmi2Slave):
         try:
             self.model = self.build()
             self.step(0.0)
-        except ValueError as error:
-            self.log(f"{self.instance_name}: {error}", Fmi2Status.error)
-            raise
+        except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+            self._report("initialisation", error)
 
     def do_step(self, current_time, step_size):
         try:
-            if not step_size > 0:
-                raise ValueError(f"communication step size must be > 0, got {step_size!r}")
-            for name in self._input_names:
-                if not math.isfinite(getattr(self, name)):
-                    raise ValueError(f"input {name} must be finite, got {getattr(self, name)!r}")
-            self.step(step_size)
-        except ValueError as error:
-            self.log(f"{self.instance_name} at t = {current_time} s: {error}", Fmi2Status.error)
-            return False
+            self._step_checked(step_size)
+        except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+            return self._report(f"at t = {current_time} s", error)
         return True
+
+    def _step_checked(self, step_size):
+        if self.model is None:
+            raise ValueError("doStep after a failed initialisation")
+        if not (step_size > 0 and math.isfinite(step_size)):
+            raise ValueError(f"communication step size must be finite and > 0, got {step_size!r}")
+        for name in self._input_names:
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"input {name} must be finite, got {getattr(self, name)!r}")
+        self.step(step_size)
+
+    def _report(self, where, error):
+        """Log ``error``: a ValueError (bad input) as an error, anything else (a bug) as
+        fatal with its traceback. Returns False (the step failed)."""
+        if isinstance(error, ValueError):
+            self.log(f"{where}: {error}", Fmi2Status.error, "logStatusError")
+        else:
+            self.log(f"{where}: internal error\n{traceback.format_exc()}", Fmi2Status.fatal,
+                     "logStatusFatal")
+        return False
 
     def _get_fmu_state(self):
         state = super()._get_fmu_state()

@@ -4,8 +4,17 @@ Thin adapter over feedaxis.physics.servo; defaults are the Googol XY table x axi
 """
 from dataclasses import fields
 
+from pythonfmu import DefaultExperiment
+
 from feedaxis_fmu_physics import servo
 from feedaxis_slave import AxisSlave
+
+# doStep's cost grows with h / time_step_s (one loop iteration per internal step, about
+# 2 µs each): a step needing more is refused, so one call stays under a second.
+MAX_INTERNAL_STEPS = 200_000
+# Largest internal step: 1 ms, ten times seed 002's 0.1 ms and under its 1.2 ms delay, which
+# the loop represents in whole internal steps.
+MAX_TIME_STEP_S = 1e-3
 
 UNITS = {"plant_gain_mm_per_Vs2": "mm/(V.s2)", "plant_damping_per_s": "1/s",
          "plant_stiffness_per_s2": "1/s2", "delay_s": "s", "kp_V_per_mm": "V/mm",
@@ -29,6 +38,8 @@ DESCRIPTIONS = {
 class NpidServo(AxisSlave):
     """Closed position loop: reference in, axial position, velocity and tracking error out."""
 
+    # the cross-check run NpidServo_ref.opt: start, stop and step
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=1.5, step_size=0.001)
     description = "Ball-screw position servo, PID or NPID (Anang et al. 2017)"
 
     def __init__(self, **kwargs):
@@ -39,16 +50,23 @@ class NpidServo(AxisSlave):
         self.output("velocity_mm_s", "Axial velocity", "mm/s")
         self.output("tracking_error_mm", "Reference minus position", "mm")
         for field in fields(servo.ServoParams):
-            limits = None if field.name == "nonlinear" else (0, None)
+            limits = {"nonlinear": None, "time_step_s": (0, MAX_TIME_STEP_S)}.get(field.name, (0, None))
             self.parameter(field.name, field.default, DESCRIPTIONS[field.name], UNITS[field.name],
                            limits)
 
     def build(self):
+        if not self.time_step_s <= MAX_TIME_STEP_S:
+            raise ValueError(f"time_step_s must be <= {MAX_TIME_STEP_S} s, got {self.time_step_s!r}")
         params = servo.ServoParams(
             **{field.name: getattr(self, field.name) for field in fields(servo.ServoParams)})
         return servo.Servo(params, initial_reference_mm=self.position_ref_mm)
 
     def step(self, step_size_s):
+        internal_steps = step_size_s / self.time_step_s
+        if internal_steps > MAX_INTERNAL_STEPS:
+            raise ValueError(f"a communication step of {step_size_s} s needs {internal_steps:.3g} "
+                             f"internal steps of time_step_s = {self.time_step_s} s; at most "
+                             f"{MAX_INTERNAL_STEPS} are taken in one doStep (split the step)")
         self.model.advance(step_size_s, self.position_ref_mm, self.disturbance_N)
         self.position_mm = self.model.position_mm
         self.velocity_mm_s = self.model.velocity_mm_s

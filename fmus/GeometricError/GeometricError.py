@@ -2,6 +2,8 @@
 
 Thin adapter over feedaxis.physics.geometry; defaults are the seed 001 case-study fit.
 """
+from pythonfmu import DefaultExperiment
+
 from feedaxis_fmu_physics import geometry, mounting
 from feedaxis_slave import AxisSlave
 
@@ -9,6 +11,8 @@ from feedaxis_slave import AxisSlave
 class GeometricError(AxisSlave):
     """Lead error + assembly eccentricity + backlash + gravity sag at the nut position."""
 
+    # the cross-check run GeometricError_ref.opt: start, stop and step
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=6.0, step_size=0.01)
     description = ("Ball-screw transmission error: cumulative lead error, assembly eccentricity "
                    "(wavelength = lead), backlash by direction of motion, gravity sag")
 

@@ -3,6 +3,8 @@
 Thin adapter over feedaxis.physics.motor. Seed 001 does not publish its motor coefficients;
 the default first harmonic (0.1 µm amplitude) is illustrative.
 """
+from pythonfmu import DefaultExperiment
+
 from feedaxis_fmu_physics import motor
 from feedaxis_slave import AxisSlave
 
@@ -10,6 +12,8 @@ from feedaxis_slave import AxisSlave
 class StepperError(AxisSlave):
     """Periodic motor error over ``error_period_steps`` full steps, through the lead."""
 
+    # the cross-check run StepperError_ref.opt: start, stop and step
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=6.0, step_size=0.01)
     description = "Stepper-motor angular error mapped to axial displacement through the screw lead"
 
     def __init__(self, **kwargs):
@@ -28,7 +32,6 @@ class StepperError(AxisSlave):
         return motor.motor_error_period_mm(self.lead_mm, self.step_angle_deg, self.error_period_steps)
 
     def step(self, step_size_s):
-        self.error_um = float(motor.motor_step_error_um(
-            self.position_mm, self.lead_mm, self.step_angle_deg, self.error_period_steps,
-            (self.harmonic1_cos_um, self.harmonic2_cos_um),
+        self.error_um = float(motor.motor_error_um(
+            self.position_mm, self.model, (self.harmonic1_cos_um, self.harmonic2_cos_um),
             (self.harmonic1_sin_um, self.harmonic2_sin_um)))

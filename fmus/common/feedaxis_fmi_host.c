@@ -1,0 +1,578 @@
+/* feedaxis FMI host layer: the model-identifier library of every feedaxis FMU.
+ *
+ * pythonfmu's platform library (shipped next to this one as libpythonfmu-export.so) expects
+ * the host to have loaded libpython, which only Python hosts do. This layer
+ *   1. loads libpython RTLD_GLOBAL when the host has not (a plain C host such as
+ *      fmuCheck or OMSimulator) and starts the interpreter that built the FMU (its
+ *      program name finds the virtual environment, so numpy and scipy import), never
+ *      finalising it: finalisation runs libgfortran's close_units on a heap pythonfmu has
+ *      already damaged, and the process is ending anyway;
+ *   2. forwards every fmi2 function to pythonfmu's library, guarding the FMI state machine:
+ *      a fixed parameter or an output set after initialisation is refused with fmi2Error,
+ *      a call made after fmi2Fatal is refused without reaching pythonfmu (whose instance
+ *      then holds freed Python objects), an error logged by the slave during a call turns
+ *      that call's status into fmi2Error;
+ *   3. passes every message to the host's logger with a category (pythonfmu passes NULL),
+ *      the instance name in front, never text containing '%' as the format;
+ *   4. reuses freed instances through pythonfmu's fmi2Reset (its fmi2Instantiate leaks).
+ *
+ * Build-time constants (-D): FEEDAXIS_PYTHON (the interpreter to start) and
+ * FEEDAXIS_LIBPYTHON (its shared library); the environment variables of the same names
+ * override them on the host. The per-FMU variable table comes from feedaxis_fmi_vars.h.
+ */
+#define _GNU_SOURCE
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <dlfcn.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "feedaxis_fmi_vars.h"
+
+typedef void *fmi2Component;
+typedef void *fmi2ComponentEnvironment;
+typedef void *fmi2FMUstate;
+typedef unsigned int fmi2ValueReference;
+typedef double fmi2Real;
+typedef int fmi2Integer;
+typedef int fmi2Boolean;
+typedef char fmi2Char;
+typedef const fmi2Char *fmi2String;
+typedef char fmi2Byte;
+typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
+typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
+typedef int fmi2StatusKind;
+typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String,
+                                   fmi2String, ...);
+typedef struct {
+    fmi2CallbackLogger logger;
+    void *(*allocateMemory)(size_t, size_t);
+    void (*freeMemory)(void *);
+    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
+    fmi2ComponentEnvironment componentEnvironment;
+} fmi2CallbackFunctions;
+
+#define EXPORT __attribute__((visibility("default")))
+
+enum mode { INSTANTIATED, INITIALISING, STEPPING, TERMINATED, FAILED, DEAD };
+
+typedef struct {
+    void *real;                        /* pythonfmu's component */
+    fmi2CallbackFunctions host;        /* the host's callbacks */
+    fmi2CallbackFunctions mine;        /* what pythonfmu calls */
+    char *name;
+    char *guid;
+    char *resources;
+    enum mode mode;
+    int host_logging;
+    fmi2Status worst_logged;           /* worst status logged during the current call */
+} Guard;
+
+static void *real_library;
+static char load_error[1024];
+static pthread_once_t load_once = PTHREAD_ONCE_INIT;
+
+/* ---- loading Python and pythonfmu's library ---------------------------------------- */
+
+static const char *setting(const char *name, const char *built_in)
+{
+    const char *value = getenv(name);
+    return value && *value ? value : built_in;
+}
+
+static void *real(const char *symbol)
+{
+    return real_library ? dlsym(real_library, symbol) : NULL;
+}
+
+static int start_python(void)
+{
+    int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (!is_initialized) {
+        const char *libpython = setting("FEEDAXIS_LIBPYTHON", FEEDAXIS_LIBPYTHON);
+        if (!*libpython) {
+            snprintf(load_error, sizeof load_error, "the Python that built this FMU has no shared "
+                     "libpython: set FEEDAXIS_LIBPYTHON to one (and FEEDAXIS_PYTHON)");
+            return -1;
+        }
+        if (!dlopen(libpython, RTLD_NOW | RTLD_GLOBAL)) {
+            snprintf(load_error, sizeof load_error,
+                     "cannot load libpython (set FEEDAXIS_LIBPYTHON): %s", dlerror());
+            return -1;
+        }
+        is_initialized = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+        if (!is_initialized) {
+            snprintf(load_error, sizeof load_error, "%s is not a libpython", libpython);
+            return -1;
+        }
+    }
+    if (is_initialized()) return 0;
+
+    void (*init_config)(PyConfig *) = dlsym(RTLD_DEFAULT, "PyConfig_InitPythonConfig");
+    PyStatus (*set_string)(PyConfig *, wchar_t **, const char *) =
+        dlsym(RTLD_DEFAULT, "PyConfig_SetBytesString");
+    PyStatus (*initialize)(const PyConfig *) = dlsym(RTLD_DEFAULT, "Py_InitializeFromConfig");
+    void (*clear)(PyConfig *) = dlsym(RTLD_DEFAULT, "PyConfig_Clear");
+    int (*is_exception)(PyStatus) = dlsym(RTLD_DEFAULT, "PyStatus_Exception");
+    PyThreadState *(*save_thread)(void) = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
+    if (!init_config || !set_string || !initialize || !clear || !is_exception || !save_thread) {
+        snprintf(load_error, sizeof load_error, "libpython lacks the PyConfig API (3.8 or newer)");
+        return -1;
+    }
+    PyConfig config;
+    init_config(&config);
+    config.install_signal_handlers = 0;  /* the host owns SIGINT */
+    config.parse_argv = 0;
+    PyStatus status = set_string(&config, &config.program_name,
+                                 setting("FEEDAXIS_PYTHON", FEEDAXIS_PYTHON));
+    if (!is_exception(status)) status = initialize(&config);
+    clear(&config);
+    if (is_exception(status)) {
+        snprintf(load_error, sizeof load_error, "cannot start Python (set FEEDAXIS_PYTHON): %s",
+                 status.err_msg ? status.err_msg : "unknown error");
+        return -1;
+    }
+    save_thread();  /* pythonfmu takes the GIL with PyGILState_Ensure */
+    return 0;
+}
+
+/* pythonfmu's library keeps its interpreter state in a static shared_ptr, destroyed at exit
+ * by a C++ static destructor, and then assigns nullptr to that destroyed shared_ptr in its
+ * ELF destructor finalizePythonInterpreter: a write into the freed control block, which is
+ * the exit-time heap corruption (valgrind: "Invalid read ... finalizePythonInterpreter",
+ * then free() aborts in libgfortran's close_units). Calling it first, from an exit handler
+ * registered after pythonfmu's, releases the state while it is alive; its later calls then
+ * see an empty pointer. */
+static void release_pythonfmu_state(void)
+{
+    void (*release)(void) = (void (*)(void))real("finalizePythonInterpreter");
+    if (release) release();
+}
+
+static void load(void)
+{
+    Dl_info self;
+    if (start_python() != 0) return;
+    if (!dladdr((void *)&load, &self) || !self.dli_fname) {
+        snprintf(load_error, sizeof load_error, "cannot locate the FMU's binary folder");
+        return;
+    }
+    char path[4096];
+    snprintf(path, sizeof path, "%s", self.dli_fname);
+    char *slash = strrchr(path, '/');
+    snprintf(slash ? slash + 1 : path, sizeof path - (slash ? (size_t)(slash + 1 - path) : 0),
+             "libpythonfmu-export.so");
+    real_library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (!real_library) {
+        snprintf(load_error, sizeof load_error, "cannot load %s: %s", path, dlerror());
+        return;
+    }
+    /* Stay loaded to the end (the exit handler below lives here), then register the handler
+     * after pythonfmu's static destructors, so that it runs before them. */
+    dlopen(self.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
+    atexit(release_pythonfmu_state);
+}
+
+/* ---- logging ---------------------------------------------------------------------- */
+
+static const char *category_of(fmi2Status status)
+{
+    static const char *names[] = {"logAll", "logStatusWarning", "logStatusDiscard",
+                                  "logStatusError", "logStatusFatal", "logAll"};
+    return names[status <= fmi2Pending ? status : fmi2Error];
+}
+
+/* Every message starts with the instance name (the Python slave of a reused instance does
+ * not know its new name). */
+static void tell_host(Guard *g, fmi2Status status, const char *category, const char *message)
+{
+    if (!g->host.logger || (status < fmi2Warning && !g->host_logging)) return;
+    size_t size = strlen(g->name) + strlen(message) + 3;
+    char *text = malloc(size);
+    if (!text) return;
+    snprintf(text, size, "%s: %s", g->name, message);
+    /* Plain text is its own format (hosts that ignore the arguments still read it); text
+     * with a '%' goes as the argument of "%s". */
+    g->host.logger(g->host.componentEnvironment, g->name, status,
+                   category && *category ? category : category_of(status),
+                   strchr(text, '%') ? "%s" : text, text);
+    free(text);
+}
+
+/* pythonfmu passes each message as the format with no arguments: treat it as text. */
+static void guard_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status,
+                         fmi2String category, fmi2String message, ...)
+{
+    Guard *g = env;
+    (void)name;
+    if (status > g->worst_logged && status <= fmi2Fatal) g->worst_logged = status;
+    tell_host(g, status, category, message ? message : "");
+}
+
+static fmi2Status refuse(Guard *g, const char *format, ...)
+{
+    char message[512];
+    va_list args;
+    va_start(args, format);
+    vsnprintf(message, sizeof message, format, args);
+    va_end(args);
+    tell_host(g, fmi2Error, NULL, message);
+    return fmi2Error;
+}
+
+/* ---- the state machine ------------------------------------------------------------ */
+
+static const char *const MODE_NAMES[] = {"instantiated", "initialisation mode", "step mode",
+                                         "terminated", "failed", "dead after fmi2Fatal"};
+
+/* Whether a call may reach pythonfmu; refuses it with a message otherwise. */
+static int usable(Guard *g, const char *function, int allowed_when_failed)
+{
+    if (g->mode == DEAD || (g->mode == FAILED && !allowed_when_failed)) {
+        refuse(g, "%s refused: the instance is %s; only fmi2FreeInstance%s is allowed", function,
+               MODE_NAMES[g->mode], g->mode == FAILED ? ", fmi2Terminate, fmi2Reset, fmi2Get*" : "");
+        return 0;
+    }
+    return 1;
+}
+
+static void begin(Guard *g)
+{
+    g->worst_logged = fmi2OK;
+}
+
+/* The call's status: pythonfmu's, made worse by any error the slave logged meanwhile. */
+static fmi2Status finish(Guard *g, fmi2Status status)
+{
+    if (g->worst_logged >= fmi2Error && status < g->worst_logged) status = g->worst_logged;
+    if (status == fmi2Fatal) g->mode = DEAD;
+    else if (status == fmi2Error) g->mode = FAILED;
+    return status;
+}
+
+static int settable(Guard *g, const fmi2ValueReference vr[], size_t nvr)
+{
+    for (size_t i = 0; i < nvr; ++i) {
+        for (size_t k = 0; k < FEEDAXIS_N_VARS; ++k) {
+            if (FEEDAXIS_VARS[k].vr != vr[i]) continue;
+            if (FEEDAXIS_VARS[k].kind == 'o') {
+                refuse(g, "%s is an output and cannot be set", FEEDAXIS_VARS[k].name);
+                return 0;
+            }
+            if (FEEDAXIS_VARS[k].kind == 'f' && g->mode != INSTANTIATED && g->mode != INITIALISING) {
+                refuse(g, "%s is a fixed parameter and cannot be set in %s", FEEDAXIS_VARS[k].name,
+                       MODE_NAMES[g->mode]);
+                return 0;
+            }
+        }
+    }
+    return 1;
+}
+
+/* ---- the fmi2 functions ------------------------------------------------------------ */
+
+EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
+EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
+
+/* Freed instances are kept (up to POOL_SIZE) and reused through pythonfmu's fmi2Reset, which
+ * creates a fresh Python slave: pythonfmu's fmi2Instantiate leaks about 1.4 kB in findClass
+ * (an MRO list and class-name strings) every time, its fmi2Reset nothing. */
+#define POOL_SIZE 16
+static Guard *pool[POOL_SIZE];
+static size_t pooled;
+static pthread_mutex_t pool_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static Guard *take_pooled(fmi2String guid, fmi2String resources)
+{
+    Guard *found = NULL;
+    pthread_mutex_lock(&pool_lock);
+    for (size_t i = 0; i < pooled; ++i) {
+        if (strcmp(pool[i]->guid, guid) == 0 && strcmp(pool[i]->resources, resources) == 0) {
+            found = pool[i];
+            pool[i] = pool[--pooled];
+            break;
+        }
+    }
+    pthread_mutex_unlock(&pool_lock);
+    return found;
+}
+
+static int put_pooled(Guard *g)
+{
+    int kept = 0;
+    pthread_mutex_lock(&pool_lock);
+    if (pooled < POOL_SIZE) {
+        pool[pooled++] = g;
+        kept = 1;
+    }
+    pthread_mutex_unlock(&pool_lock);
+    return kept;
+}
+
+static void release(Guard *g)
+{
+    free(g->name);
+    free(g->guid);
+    free(g->resources);
+    free(g);
+}
+
+/* The host's callbacks and name on guard ``g`` (pythonfmu keeps a pointer to g->mine). */
+static void attach(Guard *g, fmi2String name, const fmi2CallbackFunctions *functions,
+                   fmi2Boolean loggingOn)
+{
+    g->host = *functions;
+    g->mine = *functions;
+    g->mine.logger = guard_logger;
+    g->mine.componentEnvironment = g;
+    free(g->name);
+    g->name = strdup(name ? name : "");
+    g->host_logging = loggingOn;
+    g->mode = INSTANTIATED;
+}
+
+static Guard *reuse(fmi2String name, fmi2String guid, fmi2String resources,
+                    const fmi2CallbackFunctions *functions, fmi2Boolean loggingOn)
+{
+    Guard *g = take_pooled(guid, resources);
+    if (!g) return NULL;
+    attach(g, name, functions, loggingOn);
+    static fmi2Status (*reset)(fmi2Component);
+    if (!reset) reset = (fmi2Status(*)(fmi2Component))real("fmi2Reset");
+    begin(g);
+    if (finish(g, reset(g->real)) <= fmi2Warning) return g;
+    if (g->mode != DEAD) {
+        void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
+        free_instance(g->real);
+    }
+    release(g);
+    return NULL;
+}
+
+EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String guid,
+                                     fmi2String resources, const fmi2CallbackFunctions *functions,
+                                     fmi2Boolean visible, fmi2Boolean loggingOn)
+{
+    if (!functions || !functions->logger || !guid || !resources) return NULL;
+    pthread_once(&load_once, load);
+    Guard *g = fmuType == fmi2CoSimulation && real_library
+                   ? reuse(instanceName, guid, resources, functions, loggingOn) : NULL;
+    if (g) return g;
+    g = calloc(1, sizeof *g);
+    if (!g) return NULL;
+    attach(g, instanceName, functions, loggingOn);
+    g->guid = strdup(guid);
+    g->resources = strdup(resources);
+    fmi2Component (*instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
+                                 const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean) =
+        real("fmi2Instantiate");
+    if (!instantiate) {
+        tell_host(g, fmi2Fatal, NULL, *load_error ? load_error : "pythonfmu library incomplete");
+    } else if (fmuType != fmi2CoSimulation) {
+        tell_host(g, fmi2Error, NULL, "this FMU supports co-simulation only");
+    } else {
+        begin(g);
+        g->real = instantiate(instanceName, fmuType, guid, resources, &g->mine, visible, 1);
+        if (g->real && g->worst_logged < fmi2Error) return g;
+    }
+    release(g);  /* a component pythonfmu returned with an error is leaked, never touched */
+    return NULL;
+}
+
+EXPORT void fmi2FreeInstance(fmi2Component c)
+{
+    Guard *g = c;
+    if (!g) return;
+    if (g->mode == DEAD) {
+        release(g);
+        return;
+    }
+    g->host.logger = NULL;  /* the host's callbacks end here */
+    if (put_pooled(g)) return;
+    void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
+    free_instance(g->real);
+    release(g);
+}
+
+EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t n,
+                                      const fmi2String categories[])
+{
+    Guard *g = c;
+    (void)n;
+    (void)categories;
+    if (!g) return fmi2Error;
+    g->host_logging = loggingOn;
+    return fmi2OK;
+}
+
+#define FORWARD(function, when_failed, signature, ...)                                          \
+    Guard *g = c;                                                                              \
+    if (!g) return fmi2Error;                                                                  \
+    if (!usable(g, #function, when_failed)) return fmi2Error;                                  \
+    static fmi2Status(*call) signature; /* resolved once: dlsym costs a microsecond */     \
+    if (!call) call = (fmi2Status(*) signature)real(#function);                                \
+    begin(g);                                                                                  \
+    fmi2Status status = finish(g, call(g->real, ##__VA_ARGS__))
+
+EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol,
+                                      fmi2Real start, fmi2Boolean stopDefined, fmi2Real stop)
+{
+    FORWARD(fmi2SetupExperiment, 0, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean,
+                                     fmi2Real), tolDefined, tol, start, stopDefined, stop);
+    return status;
+}
+
+EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
+{
+    FORWARD(fmi2EnterInitializationMode, 0, (fmi2Component));
+    if (status <= fmi2Warning) g->mode = INITIALISING;
+    return status;
+}
+
+EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
+{
+    FORWARD(fmi2ExitInitializationMode, 0, (fmi2Component));
+    if (status <= fmi2Warning) g->mode = STEPPING;
+    return status;
+}
+
+EXPORT fmi2Status fmi2Terminate(fmi2Component c)
+{
+    FORWARD(fmi2Terminate, 1, (fmi2Component));
+    if (status <= fmi2Warning) g->mode = TERMINATED;
+    return status;
+}
+
+EXPORT fmi2Status fmi2Reset(fmi2Component c)
+{
+    FORWARD(fmi2Reset, 1, (fmi2Component));
+    if (status <= fmi2Warning) g->mode = INSTANTIATED;
+    return status;
+}
+
+#define GETTER(function, type)                                                                   \
+    EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
+                               type value[])                                                    \
+    {                                                                                           \
+        FORWARD(function, 1, (fmi2Component, const fmi2ValueReference *, size_t, type *), vr,   \
+                nvr, value);                                                                    \
+        return status;                                                                          \
+    }
+
+GETTER(fmi2GetReal, fmi2Real)
+GETTER(fmi2GetInteger, fmi2Integer)
+GETTER(fmi2GetBoolean, fmi2Boolean)
+GETTER(fmi2GetString, fmi2String)
+
+#define SETTER(function, type)                                                                   \
+    EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
+                               const type value[])                                              \
+    {                                                                                           \
+        Guard *guard = c;                                                                       \
+        if (guard && guard->mode != DEAD && !settable(guard, vr, nvr)) return fmi2Error;        \
+        FORWARD(function, 0, (fmi2Component, const fmi2ValueReference *, size_t, const type *), \
+                vr, nvr, value);                                                                \
+        return status;                                                                          \
+    }
+
+SETTER(fmi2SetReal, fmi2Real)
+SETTER(fmi2SetInteger, fmi2Integer)
+SETTER(fmi2SetBoolean, fmi2Boolean)
+SETTER(fmi2SetString, fmi2String)
+
+EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    FORWARD(fmi2GetFMUstate, 0, (fmi2Component, fmi2FMUstate *), state);
+    return status;
+}
+
+EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
+{
+    FORWARD(fmi2SetFMUstate, 0, (fmi2Component, fmi2FMUstate), state);
+    return status;
+}
+
+EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
+{
+    FORWARD(fmi2FreeFMUstate, 1, (fmi2Component, fmi2FMUstate *), state);
+    return status;
+}
+
+EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
+{
+    FORWARD(fmi2SerializedFMUstateSize, 0, (fmi2Component, fmi2FMUstate, size_t *), state, size);
+    return status;
+}
+
+EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[],
+                                        size_t size)
+{
+    FORWARD(fmi2SerializeFMUstate, 0, (fmi2Component, fmi2FMUstate, fmi2Byte *, size_t), state,
+            bytes, size);
+    return status;
+}
+
+EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
+                                          fmi2FMUstate *state)
+{
+    FORWARD(fmi2DeSerializeFMUstate, 0, (fmi2Component, const fmi2Byte *, size_t, fmi2FMUstate *),
+            bytes, size, state);
+    return status;
+}
+
+EXPORT fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[],
+                                               size_t nu, const fmi2ValueReference z[], size_t nz,
+                                               const fmi2Real dv[], fmi2Real dz[])
+{
+    (void)u, (void)nu, (void)z, (void)nz, (void)dv, (void)dz;
+    return c ? refuse(c, "fmi2GetDirectionalDerivative is not provided") : fmi2Error;
+}
+
+EXPORT fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
+                                              size_t nvr, const fmi2Integer order[],
+                                              const fmi2Real value[])
+{
+    (void)vr, (void)nvr, (void)order, (void)value;
+    return c ? refuse(c, "fmi2SetRealInputDerivatives is not provided (canInterpolateInputs "
+                         "is false)") : fmi2Error;
+}
+
+EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
+                                               size_t nvr, const fmi2Integer order[],
+                                               fmi2Real value[])
+{
+    (void)vr, (void)nvr, (void)order, (void)value;
+    return c ? refuse(c, "fmi2GetRealOutputDerivatives is not provided "
+                         "(maxOutputDerivativeOrder is 0)") : fmi2Error;
+}
+
+EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_set_prior)
+{
+    Guard *guard = c;
+    if (guard && guard->mode != STEPPING && guard->mode != DEAD && guard->mode != FAILED)
+        return refuse(guard, "fmi2DoStep refused in %s", MODE_NAMES[guard->mode]);
+    FORWARD(fmi2DoStep, 0, (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean), t, h, no_set_prior);
+    if (status == fmi2Discard) g->mode = FAILED;
+    return status;
+}
+
+EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    return c ? refuse(c, "fmi2CancelStep: fmi2DoStep never returns fmi2Pending") : fmi2Error;
+}
+
+#define STATUS_GETTER(function, type)                                                            \
+    EXPORT fmi2Status function(fmi2Component c, const fmi2StatusKind kind, type *value)         \
+    {                                                                                           \
+        FORWARD(function, 1, (fmi2Component, fmi2StatusKind, type *), kind, value);             \
+        return status;                                                                          \
+    }
+
+STATUS_GETTER(fmi2GetStatus, fmi2Status)
+STATUS_GETTER(fmi2GetRealStatus, fmi2Real)
+STATUS_GETTER(fmi2GetIntegerStatus, fmi2Integer)
+STATUS_GETTER(fmi2GetBooleanStatus, fmi2Boolean)
+STATUS_GETTER(fmi2GetStringStatus, fmi2String)

@@ -1,0 +1,395 @@
+"""The FMUs in hosts that are not Python processes, and never crashing any host.
+
+fmuCheck (FMI Compliance Checker, a plain C program) loads each FMU, simulates its
+cross-check input and must match the cross-check reference; a bad parameter, a fixed
+parameter set late, calls after a failure, tiny and huge steps all end in a status and a
+message with a category, never a crash. Tests needing a tool from ../shared/tools/fmi skip
+with the reason outside CI and fail in CI (CI=true).
+"""
+import os
+import subprocess
+import sys
+import time
+import zipfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+from fmpy.util import read_csv
+
+from feedaxis.fmu_build import FMU_NAMES
+from feedaxis.physics import thermal
+
+ROOT = Path(__file__).resolve().parents[1]
+FMU_SOURCES = ROOT / "fmus"
+FMU_CHECK = ROOT.parent / "shared" / "tools" / "fmi" / "fmuCheck.linux64"
+ERROR = 3
+
+
+def require_tool(path):
+    """Skip outside CI when ``path`` is missing; fail in CI."""
+    if not Path(path).exists():
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"{path} is missing in CI")
+        pytest.skip(f"{path} is missing (the FMI tools of ../shared/tools/fmi)")
+
+
+def cross_check_options(name):
+    text = (FMU_SOURCES / name / f"{name}_ref.opt").read_text()
+    return {key: float(value) for key, value in (line.split(", ") for line in text.splitlines())}
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_check_simulates_cross_check_input_in_a_c_host(fmu_paths, tmp_path, name):
+    require_tool(FMU_CHECK)
+    options = cross_check_options(name)
+    folder = FMU_SOURCES / name
+    result_csv = tmp_path / "out.csv"
+    run = subprocess.run(
+        [str(FMU_CHECK), "-k", "cs", "-s", repr(options["StopTime"]), "-h",
+         repr(options["StepSize"]), "-l", "3", "-i", str(folder / f"{name}_in.csv"),
+         "-o", str(result_csv), str(fmu_paths[name])],
+        capture_output=True, text=True, timeout=300)
+    report = run.stdout + run.stderr
+    assert run.returncode == 0, report[-2000:]
+    assert "[FATAL]" not in report and "[ERROR]" not in report, report[-2000:]
+    assert "0 Error(s)" in report and "0 Warning(s)" in report
+    result, reference = read_csv(result_csv), read_csv(folder / f"{name}_ref.csv")
+    steps = result["time"] / options["StepSize"]
+    on_step = np.abs(steps - np.rint(steps)) < 1e-6
+    assert on_step.sum() >= 100
+    rows = np.rint(steps[on_step]).astype(int)
+    for output in reference.dtype.names[1:]:
+        expected = reference[output][rows]
+        np.testing.assert_allclose(result[output][on_step], expected, rtol=1e-9,
+                                   atol=1e-9 * np.max(np.abs(reference[output])))
+
+
+def test_c_host_without_python_gets_a_message_not_a_crash(fmu_paths):
+    require_tool(FMU_CHECK)
+    environment = dict(os.environ, FEEDAXIS_LIBPYTHON="/nonexistent/libpython3.so")
+    run = subprocess.run([str(FMU_CHECK), "-k", "cs", "-l", "3", str(fmu_paths["StepperError"])],
+                         capture_output=True, text=True, timeout=60, env=environment)
+    assert run.returncode == 1  # fmuCheck's "could not instantiate", not a signal
+    assert "[logStatusFatal]" in run.stdout + run.stderr
+    assert "cannot load libpython (set FEEDAXIS_LIBPYTHON)" in run.stdout + run.stderr
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_check_accepts_model_description(fmu_paths, name):
+    require_tool(FMU_CHECK)
+    run = subprocess.run([str(FMU_CHECK), "-k", "xml", str(fmu_paths[name])],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and "0 Warning(s)" in run.stdout + run.stderr
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_model_description_for_strict_importers(fmu_paths, name):
+    with zipfile.ZipFile(fmu_paths[name]) as archive:
+        root = ET.fromstring(archive.read("modelDescription.xml"))
+    options = cross_check_options(name)
+    experiment = root.find("DefaultExperiment")
+    assert float(experiment.get("stopTime")) == options["StopTime"]
+    assert float(experiment.get("stepSize")) == options["StepSize"]
+    variables = list(root.iter("ScalarVariable"))
+    outputs = [i for i, v in enumerate(variables, 1) if v.get("causality") == "output"]
+    for index in outputs:
+        assert variables[index - 1].get("initial") == "calculated"
+        assert variables[index - 1][0].get("start") is None
+    structure = root.find("ModelStructure")
+    assert [int(u.get("index")) for u in structure.find("Outputs")] == outputs
+    assert all(u.get("dependencies") == "" for u in structure.find("Outputs"))
+    assert [int(u.get("index")) for u in structure.find("InitialUnknowns")] == outputs
+    declared = {u.get("name") for u in root.iter("Unit")}
+    used = {v[0].get("unit") for v in variables if v[0].get("unit")}
+    assert used <= declared
+
+
+class Messages:
+    """An fmi2 logger recording (status, category, message) for a low-level fmpy slave."""
+
+    def __init__(self):
+        self.records = []
+        self.callback = fmi2CallbackLoggerTYPE(self._log)
+
+    def _log(self, environment, instance, status, category, message):
+        self.records.append((status, category, message))
+
+    def callbacks(self):
+        functions = fmi2CallbackFunctions()
+        functions.logger = self.callback
+        return functions
+
+
+def fresh(loaded):
+    """The FMU's slave object with no instance yet (LoadedFmu keeps one per FMU)."""
+    from fmpy.fmi2 import FMU2Slave
+    return FMU2Slave(guid=loaded.description.guid, unzipDirectory=loaded.unzip_dir,
+                     modelIdentifier=loaded.description.coSimulation.modelIdentifier,
+                     instanceName="guarded")
+
+
+def vr(loaded, name):
+    return loaded.variables[name].valueReference
+
+
+def test_bad_parameter_is_an_error_with_category_and_the_instance_stays_safe(loaded_fmus):
+    loaded, messages = loaded_fmus["GeometricError"], Messages()
+    slave = fresh(loaded)
+    slave.instantiate(callbacks=messages.callbacks())
+    slave.setReal([vr(loaded, "diameter_m")], [-1.0])
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    with pytest.raises(FMICallException) as failure:
+        slave.exitInitializationMode()
+    assert failure.value.status == ERROR
+    status, category, message = messages.records[-1]
+    assert status == ERROR and category == b"logStatusError" and b"diameter_m" in message
+    with pytest.raises(FMICallException) as again:
+        slave.doStep(0.0, 0.01)
+    assert again.value.status == ERROR
+    assert messages.records[-1][1] == b"logStatusError"
+    slave.terminate()
+    slave.freeInstance()
+    slave.freeLibrary()
+
+
+def test_fixed_parameter_set_after_initialisation_is_refused(loaded_fmus):
+    loaded, messages = loaded_fmus["StepperError"], Messages()
+    slave = fresh(loaded)
+    slave.instantiate(callbacks=messages.callbacks())
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    slave.setReal([vr(loaded, "position_mm")], [0.37])
+    slave.doStep(0.0, 0.01)
+    before = slave.getReal([vr(loaded, "error_um")])
+    with pytest.raises(FMICallException) as failure:
+        slave.setReal([vr(loaded, "harmonic1_cos_um")], [0.5])
+    assert failure.value.status == ERROR
+    assert b"harmonic1_cos_um is a fixed parameter" in messages.records[-1][2]
+    slave.doStep(0.01, 0.01)
+    assert slave.getReal([vr(loaded, "error_um")]) == before
+    slave.terminate()
+    slave.freeInstance()
+    slave.freeLibrary()
+
+
+def run_one_step(loaded, parameters, step_s, messages):
+    slave = fresh(loaded)
+    slave.instantiate(callbacks=messages.callbacks())
+    loaded.set_values(slave, parameters)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    try:
+        slave.exitInitializationMode()
+        slave.doStep(0.0, step_s)
+        return slave.getReal([loaded.variables[n].valueReference
+                              for n in loaded.variables if loaded.variables[n].causality == "output"])
+    finally:
+        slave.terminate()
+        slave.freeInstance()
+        slave.freeLibrary()
+
+
+def test_thermal_screw_takes_a_tiny_and_a_huge_step(loaded_fmus):
+    loaded = loaded_fmus["ThermalScrew"]
+    assert np.isfinite(run_one_step(loaded, {"velocity_mm_s": 100.0}, 1e-13, Messages())).all()
+    start = time.perf_counter()
+    outputs = run_one_step(loaded, {"velocity_mm_s": 100.0}, 1e6, Messages())
+    assert time.perf_counter() - start < 5.0  # 1e7 sub-steps one by one would take minutes
+    assert np.isfinite(outputs).all()
+
+
+def test_euler_by_powers_equals_the_loop():
+    params = thermal.ThermalScrewParams()
+    rates = thermal.rate_matrix(params, 6000.0, thermal.nut_cells(params, 0.3))
+    sources = thermal.source_rate(params, 6000.0, thermal.nut_cells(params, 0.3))
+    rise_K = np.linspace(0.0, 2.0, params.n_cells)
+    looped = rise_K.copy()
+    for _ in range(500):
+        looped = looped + 0.05 * (rates @ looped + sources)
+    powered = thermal._euler_steps_by_powers(rates, sources, rise_K, 0.05, 500)
+    np.testing.assert_allclose(powered, looped, rtol=1e-10, atol=1e-12)
+
+
+def test_servo_refuses_unbounded_steps_with_a_message(loaded_fmus):
+    loaded, messages = loaded_fmus["NpidServo"], Messages()
+    with pytest.raises(FMICallException) as failure:
+        run_one_step(loaded, {}, 1000.0, messages)
+    assert failure.value.status == ERROR
+    assert b"internal steps" in messages.records[-1][2]
+    with pytest.raises(FMICallException):
+        run_one_step(loaded, {"time_step_s": 1e300}, 1e-3, messages)
+    assert b"time_step_s must be <=" in messages.records[-1][2]
+
+
+HOST_SCRIPT = """
+import sys
+from fmpy import simulate_fmu
+for path in sys.argv[1:]:
+    simulate_fmu(path, stop_time=0.05, step_size=0.01)
+print("done")
+"""
+
+
+def test_no_exit_time_abort_with_all_fmus_in_one_process(fmu_paths):
+    """The full count (200 processes) is benchmarks/stress_fmu_hosts.py; here 10."""
+    paths = [str(fmu_paths[name]) for name in FMU_NAMES]
+    for _ in range(10):
+        run = subprocess.run([sys.executable, "-c", HOST_SCRIPT, *paths], capture_output=True,
+                             text=True, timeout=120)
+        assert run.returncode == 0 and "done" in run.stdout, run.stderr[-2000:]
+
+
+def test_instantiate_free_cycles_do_not_grow_python_objects(loaded_fmus):
+    import gc
+    loaded = loaded_fmus["StepperError"]
+    for _ in range(20):
+        loaded.instantiate("cycle").freeInstance()
+    gc.collect()
+    objects, path_length = len(gc.get_objects()), len(sys.path)
+    for _ in range(300):
+        loaded.instantiate("cycle").freeInstance()
+    gc.collect()
+    # pythonfmu's findClass leaks an MRO list per fmi2Instantiate; the host layer reuses
+    # freed instances through fmi2Reset instead (fmus/README.md)
+    assert len(gc.get_objects()) - objects < 10
+    assert len(sys.path) == path_length
+
+
+OMS_DIR = ROOT.parent / "shared" / "tools" / "fmi" / "omsimulator"
+
+
+@pytest.fixture(scope="module")
+def portable_ssp(fmu_paths, tmp_path_factory):
+    from feedaxis.cosim.ssp import export_ssp
+    from feedaxis.cosim.system import default_axis
+    system = default_axis().with_steps(ThermalScrew=1e-3)
+    return system, export_ssp(tmp_path_factory.mktemp("ssp") / "axis.ssp", system, fmu_paths)
+
+
+def servo_position_from_master(system, fmu_paths, n_steps):
+    from feedaxis.cosim.master import Master
+    with Master(system, fmu_paths) as master:
+        return master.run(n_steps * 1e-3, {"disturbance_N": 300.0})["NpidServo.position_mm"][-1]
+
+
+def test_omsimulator_program_runs_the_ssp(portable_ssp, tmp_path):
+    program = OMS_DIR / "bin" / "OMSimulator"
+    require_tool(program)
+    run = subprocess.run([str(program), "--stopTime=0.2", "--resultFile=result.csv",
+                          str(portable_ssp[1])], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=300)
+    errors = [line for line in (run.stdout + run.stderr).splitlines() if line.startswith("error")]
+    assert run.returncode == 0 and not errors, (run.stdout + run.stderr)[-3000:]
+    lines = (tmp_path / "result.csv").read_text().splitlines()
+    names = [name.strip().strip('"') for name in lines[0].split(",")]
+    table = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+    assert table[-1, 0] == pytest.approx(0.2)
+    geometric = next(i for i, n in enumerate(names) if n.endswith("GeometricError.error_um"))
+    assert table[-1, geometric] == pytest.approx(0.45106988665543396, rel=1e-12)
+
+
+def test_omsimulator_python_api_and_ecospy_run_the_ssp_alike(portable_ssp, fmu_paths):
+    """Two in-process hosts (OMSimulator's Python API, ecospy) against the feedaxis master:
+    the servo has no input from the other FMUs, so its position agrees exactly."""
+    require_tool(OMS_DIR / "lib")
+    sys.path.insert(0, str(OMS_DIR / "lib" / "x86_64-linux-gnu"))
+    try:
+        from OMSimulator import SSP, CRef
+    finally:
+        sys.path.pop(0)
+    system, ssp_path = portable_ssp
+    instance = SSP(str(ssp_path)).instantiate()
+    instance.setResultFile("")
+    instance.setValue(CRef("FeedAxis", "NpidServo", "disturbance_N"), 300.0)
+    instance.initialize()
+    time_s = 0.0
+    for _ in range(200):
+        time_s += 1e-3  # cumulative targets (tools README)
+        instance.stepUntil(time_s)
+    oms = [instance.getValue(CRef("FeedAxis", name, output)) for name, output in
+           (("NpidServo", "position_mm"), ("GeometricError", "error_um"))]
+    instance.terminate()
+    instance.delete()
+    try:
+        from ecospy import EcosSimulation
+    except OSError as error:  # libtbb.so.12 missing
+        if os.environ.get("CI") == "true":
+            raise
+        pytest.skip(f"ecospy cannot load ({error}): apt-get install libtbb12")
+    with EcosSimulation(step_size=1e-3, ssp_path=str(ssp_path)) as simulation:
+        simulation.init(parameter_set=system.name)
+        simulation.set_real("NpidServo::disturbance_N", 300.0)
+        simulation.step(200)
+        ecos = [simulation.get_real("NpidServo::position_mm"),
+                simulation.get_real("GeometricError::error_um")]
+        simulation.terminate()
+    assert oms == pytest.approx(ecos, rel=1e-12)
+    assert oms[0] == pytest.approx(servo_position_from_master(system, fmu_paths, 200), rel=1e-9)
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_readme_tables_every_variable(loaded_fmus, name):
+    readme = (FMU_SOURCES / name / "README.md").read_text()
+    for variable in loaded_fmus[name].description.modelVariables:
+        row = f"| `{variable.name}` | {variable.causality} | {variable.type} | {variable.unit or ''} |"
+        assert row in readme, row
+
+
+def test_ecos_program_runs_the_ssp(portable_ssp, tmp_path):
+    """ecos (ecospy's own C++ program, multi-threaded): a host that is not a Python process."""
+    import importlib.util
+    import shutil
+    spec = importlib.util.find_spec("ecospy")
+    if spec is None:
+        require_tool(tmp_path / "ecospy")  # skips, or fails in CI
+    program = tmp_path / "ecos"
+    shutil.copy(Path(spec.origin).parent / "binaries" / "ecos", program)  # shipped without +x
+    program.chmod(0o755)
+    run = subprocess.run([str(program), "simulate", "--path", str(portable_ssp[1]),
+                          "--stopTime", "0.2", "--stepSize", "0.001", "--parameterSet",
+                          portable_ssp[0].name], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, (run.stdout + run.stderr)[-3000:]
+    lines = next(tmp_path.glob("*.csv")).read_text().splitlines()
+    names = [name.strip() for name in lines[0].split(",")]
+    last = [field.strip() for field in lines[-1].split(",")]
+    assert float(last[names.index("time")]) == pytest.approx(0.2, abs=1.5e-3)  # rows may be
+    # stamped with a step's start time
+    geometric = names.index("GeometricError::error_um[REAL]")
+    assert float(last[geometric]) == pytest.approx(0.45107, abs=1e-6)  # printed to 6 decimals
+
+
+def test_container_fmu_runs_in_fmu_check(portable_ssp, fmu_paths, tmp_path):
+    """fmpy's container (its own native binary loading the four FMUs) inside a C host."""
+    require_tool(FMU_CHECK)
+    from feedaxis.cosim.container import export_container_fmu
+    container = export_container_fmu(tmp_path / "axis.fmu", portable_ssp[0], fmu_paths)
+    run = subprocess.run([str(FMU_CHECK), "-k", "cs", "-s", "0.2", "-h", "0.001", "-l", "3",
+                          "-o", str(tmp_path / "out.csv"), str(container)],
+                         capture_output=True, text=True, timeout=300)
+    report = run.stdout + run.stderr
+    assert run.returncode == 0 and "0 Error(s)" in report, report[-3000:]
+    assert "[ERROR]" not in report and "[FATAL]" not in report
+    result = read_csv(tmp_path / "out.csv")
+    assert result["GeometricError.error_um"][-1] == pytest.approx(0.45106988665543396, rel=1e-12)
+
+
+def test_omsimulator_program_survives_a_bad_parameter(fmu_paths, tmp_path):
+    """pythonfmu's NULL log category used to end the OMSimulator process here."""
+    program = OMS_DIR / "bin" / "OMSimulator"
+    require_tool(program)
+    from feedaxis.cosim.ssp import export_ssp
+    from feedaxis.cosim.system import default_axis
+    ssp_path = export_ssp(tmp_path / "bad.ssp", default_axis().with_parameters(
+        {"GeometricError": {"diameter_m": -1.0}}), fmu_paths)
+    run = subprocess.run([str(program), "--stopTime=0.05", str(ssp_path)], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    report = run.stdout + run.stderr
+    assert run.returncode >= 0, report[-3000:]  # not killed by a signal
+    assert "logStatusError: GeometricError: initialisation: diameter_m must be > 0" in report

@@ -1,0 +1,17 @@
+"""The installed package carries every subpackage of src/ and the FMU sources of fmus/."""
+from pathlib import Path
+
+from setuptools import find_packages
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_pyproject_lists_every_package():
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert sorted(setuptools["packages"]) == sorted(find_packages(ROOT / "src") + ["feedaxis.fmus"])
+    assert setuptools["package-dir"]["feedaxis.fmus"] == "fmus"
