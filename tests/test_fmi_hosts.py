@@ -387,9 +387,9 @@ def test_omsimulator_program_survives_a_bad_parameter(fmu_paths, tmp_path):
     from feedaxis.cosim.ssp import export_ssp
     from feedaxis.cosim.system import default_axis
     ssp_path = export_ssp(tmp_path / "bad.ssp", default_axis().with_parameters(
-        {"GeometricError": {"diameter_m": -1.0}}), fmu_paths)
+        {"GeometricError": {"diameter_m": 0.0}}), fmu_paths)
     run = subprocess.run([str(program), "--stopTime=0.05", str(ssp_path)], cwd=tmp_path,
                          capture_output=True, text=True, timeout=300)
     report = run.stdout + run.stderr
     assert run.returncode >= 0, report[-3000:]  # not killed by a signal
-    assert "logStatusError: GeometricError: initialisation: diameter_m must be > 0" in report
+    assert "logStatusError: GeometricError: initialisation: diameter_m: must be > 0" in report
