@@ -251,7 +251,7 @@ def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s
     parameters = _positioning_parameters(parameters)
     motion = iso230_motion(targets_mm, runs, feed_mm_min, dwell_s, overrun_mm)
     rows, completed = run_motion(master, motion, parameters, progress=progress)
-    positioning = _positioning_columns(motion.samples[:rows.size], rows)
+    positioning = _positioning_columns(motion.samples[:rows.size], rows, with_time=True)
     write_case(out, axis_values(master, parameters, "simulated ISO 230-2 test"),
                positioning=positioning)
     return _finish(out, positioning, completed, motion.samples)

@@ -1,0 +1,228 @@
+"""The tests the diagnosis decides by: pure error, extra-sum-of-squares F, outliers, clock.
+
+- Repeat groups are samples at one target (:func:`~.spectrum.clusters`) and one approach
+  direction. Their within-group scatter is the *pure error*; when it has at least
+  ``MIN_PURE_DOF`` degrees of freedom a term is judged by the extra-sum-of-squares F test
+  against it (Draper & Smith, Applied Regression Analysis, 3rd ed., §2.1 and §6.1): the
+  sum of squares the term removes per parameter, over the pure-error mean square. A large
+  effect is then named however much unmodelled per-target shape is left. Without repeats
+  the denominator is the larger model's residual mean square (the partial F test).
+- ``FAMILY_ALPHA`` is the family-wise error rate of each selection step: the best of the m
+  terms tried is accepted when p < FAMILY_ALPHA / m (Bonferroni), so under the complete null
+  nothing is named with probability >= 1 - FAMILY_ALPHA.
+- The clock is ``time_s`` (hours) when present, else run number plus the sample's place in
+  its run: a drift across the test is tested even without time stamps.
+- Outliers: each sample against the others of its group (leave-one-out mean, after a drift
+  along the clock is taken out), else against its four neighbours along the travel, scaled
+  by the median absolute deviation; flagged beyond the two-sided Gaussian quantile at
+  OUTLIER_ALPHA / n (Bonferroni over the samples).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+from scipy.optimize import least_squares
+
+from .spectrum import clusters
+
+FAMILY_ALPHA = 0.001
+OUTLIER_ALPHA = 0.001
+MIN_PURE_DOF = 10
+MAD_TO_SIGMA = 1.4826
+PURE_ERROR = "F test against the pure error of repeated samples"
+RESIDUAL_MEAN_SQUARE = "partial F test against the residual mean square (no repeats)"
+
+
+@dataclass(frozen=True)
+class Layout:
+    """How a case was sampled: repeat groups, the clock, the first data row."""
+
+    groups: np.ndarray
+    n_groups: int
+    clock: np.ndarray | None
+    clock_unit: str | None
+
+    @classmethod
+    def of(cls, positioning):
+        _, cluster = clusters(positioning.target_mm)
+        keys = cluster * 2 + (positioning.direction > 0)
+        _, groups = np.unique(keys, return_inverse=True)
+        clock, unit = test_clock(positioning)
+        return cls(groups.ravel(), int(groups.max()) + 1, clock, unit)
+
+    @property
+    def sizes(self):
+        return np.bincount(self.groups, minlength=self.n_groups)
+
+    @property
+    def pure_dof(self):
+        return int(self.groups.size - self.n_groups)
+
+    @property
+    def has_repeats(self):
+        return self.pure_dof >= MIN_PURE_DOF
+
+    def group_means(self, values):
+        """Mean of ``values`` in each sample's group, per sample."""
+        return (np.bincount(self.groups, values, self.n_groups) / self.sizes)[self.groups]
+
+    def pure_error_ss(self, residual_um):
+        """Sum of squares of the residual within the repeat groups (µm²)."""
+        within = residual_um - self.group_means(residual_um)
+        return float(within @ within)
+
+    def subset(self, keep):
+        """The layout of the samples ``keep`` (boolean mask), groups renumbered."""
+        _, groups = np.unique(self.groups[keep], return_inverse=True)
+        clock = None if self.clock is None else self.clock[keep]
+        return Layout(groups.ravel(), int(groups.max()) + 1, clock, self.clock_unit)
+
+    @property
+    def clock_varies_within_groups(self):
+        if self.clock is None or not self.has_repeats:
+            return False
+        return bool(np.ptp(self.clock - self.group_means(self.clock)) > 0)
+
+
+def test_clock(positioning):
+    """(clock per sample, unit): hours from ``time_s``, else run + place in the run."""
+    if positioning.time_s is not None and np.ptp(positioning.time_s) > 0:
+        return positioning.time_s / 3600.0, "h"
+    if positioning.run is None or np.ptp(positioning.run) == 0:
+        return None, None
+    run = positioning.run.astype(float)
+    clock = np.empty(run.size)
+    for value in np.unique(run):
+        members = np.flatnonzero(run == value)
+        clock[members] = value + np.arange(members.size) / members.size
+    return clock, "run"
+
+
+@dataclass(frozen=True)
+class Test:
+    """One F test: statistic, degrees of freedom, p-value and which denominator was used."""
+
+    statistic: float
+    dof: tuple
+    p_value: float
+    name: str
+
+    def to_json(self):
+        return {"test": self.name, "F": self.statistic, "dof": list(self.dof),
+                "p_value": self.p_value}
+
+    def describe(self):
+        return f"F({self.dof[0]}, {self.dof[1]}) = {self.statistic:.3g}, p = {self.p_value:.2g}"
+
+
+def extra_ss_test(layout, residual_before_um, residual_after_um, extra, n_free_after):
+    """F test of ``extra`` parameters that took the residual from before to after.
+
+    With repeats the denominator is the pure error of the larger model, its degrees of
+    freedom reduced by that model's parameters (some may vary within a group); otherwise
+    the larger model's residual mean square.
+    """
+    rss_before = float(residual_before_um @ residual_before_um)
+    rss_after = float(residual_after_um @ residual_after_um)
+    extra = max(int(extra), 1)
+    if layout.has_repeats:
+        dof = max(layout.pure_dof - n_free_after, 1)
+        denominator, name = layout.pure_error_ss(residual_after_um) / dof, PURE_ERROR
+    else:
+        dof = max(residual_after_um.size - n_free_after, 1)
+        denominator, name = rss_after / dof, RESIDUAL_MEAN_SQUARE
+    statistic = max(rss_before - rss_after, 0.0) / extra / max(denominator, 1e-300)
+    return Test(float(statistic), (extra, dof), float(stats.f.sf(statistic, extra, dof)), name)
+
+
+def lack_of_fit_test(layout, residual_um, n_free):
+    """Lack-of-fit F test: the group means of the residual against the pure error."""
+    means = layout.group_means(residual_um)
+    lof_dof = max(layout.n_groups - n_free, 1)
+    pure_dof = layout.pure_dof
+    statistic = (float(means @ means) / lof_dof) / max(layout.pure_error_ss(residual_um) / pure_dof,
+                                                       1e-300)
+    return Test(statistic, (lof_dof, pure_dof), float(stats.f.sf(statistic, lof_dof, pure_dof)),
+                "lack-of-fit F test against the pure error")
+
+
+def serial_correlation_test(position_mm, residual_um):
+    """Von Neumann ratio test along the travel (no repeats): smooth structure left in the
+    residual makes successive differences small against its variance.
+
+    The ratio η = Σ(Δr)² / Σ(r - r̄)² is 2 for white noise with variance 4/n asymptotically
+    (von Neumann 1941, Ann. Math. Stat. 12:367); reported as a z statistic.
+    """
+    residual = residual_um[np.argsort(position_mm, kind="stable")]
+    centred = residual - residual.mean()
+    ratio = float(np.sum(np.diff(residual) ** 2) / max(centred @ centred, 1e-300))
+    z = (2.0 - ratio) / (2.0 / np.sqrt(residual.size))
+    return Test(float(z), (1, residual.size), float(stats.norm.sf(z)),
+                "von Neumann ratio test along the travel (no repeats)")
+
+
+def accepts(p_value, tried, alpha=FAMILY_ALPHA):
+    """Bonferroni at one selection step: the best of ``tried`` terms is accepted."""
+    return p_value < alpha / max(tried, 1)
+
+
+def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
+    """Indices (0-based) of isolated samples far outside the scatter of their neighbours."""
+    n = residual_um.size
+    if n < 8:
+        return np.array([], dtype=int)
+    if layout.has_repeats:
+        deviation, variance_factor = _against_group(layout, residual_um)
+    else:
+        deviation, variance_factor = _against_neighbours(position_mm, residual_um)
+    scale = MAD_TO_SIGMA * np.median(np.abs(deviation)) * np.sqrt(variance_factor)
+    if scale <= 0:
+        return np.array([], dtype=int)
+    limit = stats.norm.isf(alpha / (2 * n))
+    return np.flatnonzero(np.abs(deviation) > limit * scale)
+
+
+def _against_group(layout, residual_um):
+    """Deviation of each sample from the mean of the others in its group, drift removed;
+    and, per sample, variance of that deviation over the noise variance (1 + 1/(m-1))."""
+    residual_um = residual_um - _robust_drift(layout, residual_um)
+    sizes = layout.sizes[layout.groups].astype(float)
+    totals = np.bincount(layout.groups, residual_um, layout.n_groups)[layout.groups]
+    single = sizes < 2
+    others = np.where(single, 1.0, sizes - 1)
+    deviation = np.where(single, 0.0, residual_um - (totals - residual_um) / others)
+    factor = np.where(single, 1.0, 1.0 + 1.0 / others)
+    deviation = deviation / np.sqrt(factor)
+    return deviation, 1.0
+
+
+def _robust_drift(layout, residual_um):
+    """A quadratic drift along the clock, fitted within the groups with a soft-L1 loss."""
+    if not layout.clock_varies_within_groups:
+        return np.zeros_like(residual_um)
+    basis = drift_basis(layout.clock)
+    within = basis - np.column_stack([layout.group_means(c) for c in basis.T])
+    target = residual_um - layout.group_means(residual_um)
+    scale = MAD_TO_SIGMA * np.median(np.abs(target)) or 1.0
+    solution = least_squares(lambda c: within @ c - target, np.zeros(basis.shape[1]),
+                             loss="soft_l1", f_scale=scale)
+    return within @ solution.x
+
+
+def _against_neighbours(position_mm, residual_um):
+    """Deviation from the mean of the two neighbours on each side along the travel."""
+    order = np.argsort(position_mm, kind="stable")
+    padded = np.pad(residual_um[order], 2, mode="reflect")
+    neighbours = (padded[:-4] + padded[1:-3] + padded[3:-1] + padded[4:]) / 4.0
+    deviation = np.empty_like(residual_um)
+    deviation[order] = residual_um[order] - neighbours
+    return deviation, 1.25
+
+
+def drift_basis(clock):
+    """Linear and quadratic drift along the clock (columns centred and scaled to ±1)."""
+    span = np.ptp(clock) or 1.0
+    scaled = 2.0 * (clock - clock.min()) / span - 1.0
+    return np.column_stack((scaled, scaled**2 - np.mean(scaled**2)))
