@@ -108,13 +108,17 @@ class Test:
     dof: tuple
     p_value: float
     name: str
+    symbol: str = "F"
 
     def to_json(self):
-        return {"test": self.name, "F": self.statistic, "dof": list(self.dof),
-                "p_value": self.p_value}
+        return {"test": self.name, "statistic": self.symbol, self.symbol: self.statistic,
+                "dof": list(self.dof), "p_value": self.p_value}
 
     def describe(self):
-        return f"F({self.dof[0]}, {self.dof[1]}) = {self.statistic:.3g}, p = {self.p_value:.2g}"
+        p_value = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
+        if self.symbol == "F":
+            return f"F({self.dof[0]}, {self.dof[1]}) = {self.statistic:.3g}, {p_value}"
+        return f"{self.symbol} = {self.statistic:.3g} over {self.dof[1]} samples, {p_value}"
 
 
 def extra_ss_test(layout, residual_before_um, residual_after_um, extra, n_free_after):
@@ -160,7 +164,7 @@ def serial_correlation_test(position_mm, residual_um):
     ratio = float(np.sum(np.diff(residual) ** 2) / max(centred @ centred, 1e-300))
     z = (2.0 - ratio) / (2.0 / np.sqrt(residual.size))
     return Test(float(z), (1, residual.size), float(stats.norm.sf(z)),
-                "von Neumann ratio test along the travel (no repeats)")
+                "von Neumann ratio test along the travel (no repeats)", "z")
 
 
 def accepts(p_value, tried, alpha=FAMILY_ALPHA):
