@@ -165,3 +165,27 @@ def paired_t_p_value(case):
     key_up = np.lexsort((p.target_mm[up], p.run[up]))
     key_down = np.lexsort((p.target_mm[down], p.run[down]))
     return float(stats.ttest_rel(p.error_um[up][key_up], p.error_um[down][key_down]).pvalue)
+
+
+NULL_LAYOUTS = {
+    "ISO 230-2 repeats": lambda rng: iso_trial(rng, drift_um_per_run=0.05, outliers=2),
+    "dense single-pass scan": lambda rng: scan_trial(rng, drift_um=1.0, outliers=2),
+}
+
+
+def false_alarm(diagnosis, spikes):
+    """True when a null diagnosis names an effect or a structure (a drift is really there)
+    or misses or invents an outlier (rows are 1-based, header = row 1)."""
+    return (bool(diagnosis.candidates) or any(s.kind != "drift" for s in diagnosis.unexplained)
+            or diagnosis.outlier_rows != [int(i) + 2 for i in spikes])
+
+
+def backlash_power(diagnose, model, backlash_um, trials, seed):
+    """(share of trials naming backlash, share with a paired t-test p < 0.001)."""
+    rng = np.random.default_rng(seed)
+    named = t_test = 0
+    for _ in range(trials):
+        case, _ = iso_trial(rng, backlash_um=backlash_um)
+        named += [c.effect for c in diagnose(case, model).candidates][:1] == ["backlash"]
+        t_test += paired_t_p_value(case) < 1e-3
+    return named / trials, t_test / trials

@@ -43,14 +43,16 @@ class Candidate:
     evidence: str
     meaning: str
     result: FitResult = field(repr=False)
+    error_scale: float = 1.0
 
     def sizes(self):
-        """{parameter: (value, standard error, unit)} of the named effect."""
+        """{parameter: (value, standard error, unit)} of the named effect; the standard
+        errors rest on the pure error where there are repeats (``error_scale``)."""
         effect = self.result.model.effects[-1]
         values = self.result.model.values[self.effect]
         sigma = self.result.uncertainties.get(self.effect, {})
-        return {p.name: (values[p.name], sigma.get(p.name, float("nan")), p.unit)
-                for p in effect.parameters}
+        return {p.name: (values[p.name], self.error_scale * sigma.get(p.name, float("nan")),
+                         p.unit) for p in effect.parameters}
 
     def to_json(self):
         sizes = {name: {"value": value, "standard_error": None if np.isnan(error) else error,
@@ -160,14 +162,14 @@ def _unresolvable(case, effect):
     centres_mm, _ = clusters(case.positioning.target_mm)
     if centres_mm.size < 3:
         return f"its {wavelength_mm:.4g} mm wavelength needs at least 3 targets"
-    spacing_mm = float(np.median(np.diff(centres_mm)))
-    if wavelength_mm < 2 * spacing_mm:
-        return (f"its {wavelength_mm:.4g} mm wavelength is shorter than twice the median "
-                f"target spacing ({spacing_mm:.4g} mm): the targets alias it")
     concentration = abs(np.mean(np.exp(2j * np.pi * centres_mm / wavelength_mm)))
     if concentration > MAX_PHASE_CONCENTRATION:
         return (f"all targets sit at nearly the same phase of its {wavelength_mm:.4g} mm "
                 f"wavelength (phase concentration {concentration:.2f})")
+    spacing_mm = float(np.median(np.diff(centres_mm)))
+    if wavelength_mm < 2 * spacing_mm:
+        return (f"its {wavelength_mm:.4g} mm wavelength is shorter than twice the median "
+                f"target spacing ({spacing_mm:.4g} mm): the targets alias it")
     return None
 
 
@@ -198,14 +200,15 @@ def _select(case, layout, context, first, pending, notify):
                                        fitted, drift.basis(context, None)))
             drift = None
         else:
-            candidates.append(_candidate(case, first, left, term, result, test))
+            candidates.append(_candidate(case, layout, left, term, result, test))
             del pending[term.name]
         left = result
     return candidates, nuisances, left
 
 
-def _candidate(case, first, left, effect, result, test):
-    """The named effect; its result is refitted without nuisances, so it can be used as is."""
+def _candidate(case, layout, left, effect, result, test):
+    """The named effect, its result's model without nuisances (so it can be used as is)."""
+    scale = _pure_error_scale(layout, result)
     if any(isinstance(e, StructureEffect) for e in result.model.effects):
         clean = [e for e in result.model.effects if not isinstance(e, StructureEffect)]
         values = {e.name: result.model.values[e.name] for e in clean}
@@ -214,7 +217,20 @@ def _candidate(case, first, left, effect, result, test):
     evidence = effect.evidence(case, result.model.values[effect.name], contribution)
     return Candidate(effect.name, result.rms_um,
                      float(result.statistics.bic - left.statistics.bic), test,
-                     f"{evidence} ({test.describe()})", effect.meaning, result)
+                     f"{evidence} ({test.describe()})", effect.meaning, result, scale)
+
+
+def _pure_error_scale(layout, result):
+    """√(pure-error variance / residual variance): turns the fit's standard errors (from
+    its residual, unmodelled shape included) into ones resting on the repeatability."""
+    if not layout.has_repeats:
+        return 1.0
+    statistics = result.statistics
+    residual_variance = (statistics.rms_um**2 * statistics.n_points
+                         / max(statistics.n_points - statistics.n_free, 1))
+    pure_variance = (layout.pure_error_ss(result.residual_um)
+                     / max(layout.pure_dof - statistics.n_free, 1))
+    return float(np.sqrt(pure_variance / residual_variance)) if residual_variance > 0 else 1.0
 
 
 def estimate_noise_um(case, residual_um, layout=None):

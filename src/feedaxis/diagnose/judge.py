@@ -15,7 +15,8 @@
 - Outliers: each sample against the others of its group (leave-one-out mean, after a drift
   along the clock is taken out), else against its four neighbours along the travel, scaled
   by the median absolute deviation; flagged beyond the two-sided Gaussian quantile at
-  OUTLIER_ALPHA / n (Bonferroni over the samples).
+  OUTLIER_ALPHA / n (Bonferroni over the samples). Repeated with the flagged samples left
+  out of the means, so a spike does not drag its neighbours over the limit.
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ from .spectrum import clusters
 FAMILY_ALPHA = 0.001
 OUTLIER_ALPHA = 0.001
 MIN_PURE_DOF = 10
+MAX_OUTLIER_PASSES = 5
 MAD_TO_SIGMA = 1.4826
 PURE_ERROR = "F test against the pure error of repeated samples"
 RESIDUAL_MEAN_SQUARE = "partial F test against the residual mean square (no repeats)"
@@ -175,31 +177,35 @@ def accepts(p_value, tried, alpha=FAMILY_ALPHA):
 def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
     """Indices (0-based) of isolated samples far outside the scatter of their neighbours."""
     n = residual_um.size
+    flagged = np.zeros(n, dtype=bool)
     if n < 8:
-        return np.array([], dtype=int)
-    if layout.has_repeats:
-        deviation, variance_factor = _against_group(layout, residual_um)
-    else:
-        deviation, variance_factor = _against_neighbours(position_mm, residual_um)
-    scale = MAD_TO_SIGMA * np.median(np.abs(deviation)) * np.sqrt(variance_factor)
-    if scale <= 0:
-        return np.array([], dtype=int)
+        return np.flatnonzero(flagged)
     limit = stats.norm.isf(alpha / (2 * n))
-    return np.flatnonzero(np.abs(deviation) > limit * scale)
+    for _ in range(MAX_OUTLIER_PASSES):
+        if layout.has_repeats:
+            deviation = _against_group(layout, residual_um, ~flagged)
+        else:
+            deviation = _against_neighbours(position_mm, residual_um, ~flagged)
+        scale = MAD_TO_SIGMA * np.median(np.abs(deviation[~flagged]))
+        now = np.abs(deviation) > limit * scale if scale > 0 else flagged
+        if np.array_equal(now, flagged):
+            break
+        flagged = now
+    return np.flatnonzero(flagged)
 
 
-def _against_group(layout, residual_um):
-    """Deviation of each sample from the mean of the others in its group, drift removed;
-    and, per sample, variance of that deviation over the noise variance (1 + 1/(m-1))."""
+def _against_group(layout, residual_um, valid):
+    """Deviation of each sample from the mean of the other valid samples of its group,
+    drift removed, over its standard deviation in noise units (√(1 + 1/(m - 1)))."""
     residual_um = residual_um - _robust_drift(layout, residual_um)
-    sizes = layout.sizes[layout.groups].astype(float)
-    totals = np.bincount(layout.groups, residual_um, layout.n_groups)[layout.groups]
-    single = sizes < 2
-    others = np.where(single, 1.0, sizes - 1)
-    deviation = np.where(single, 0.0, residual_um - (totals - residual_um) / others)
-    factor = np.where(single, 1.0, 1.0 + 1.0 / others)
-    deviation = deviation / np.sqrt(factor)
-    return deviation, 1.0
+    weights = valid.astype(float)
+    sizes = np.bincount(layout.groups, weights, layout.n_groups)[layout.groups]
+    totals = np.bincount(layout.groups, residual_um * weights, layout.n_groups)[layout.groups]
+    others = sizes - weights
+    single = others < 1
+    others = np.where(single, 1.0, others)
+    deviation = np.where(single, 0.0, residual_um - (totals - residual_um * weights) / others)
+    return deviation / np.sqrt(1.0 + 1.0 / others)
 
 
 def _robust_drift(layout, residual_um):
@@ -215,14 +221,19 @@ def _robust_drift(layout, residual_um):
     return within @ solution.x
 
 
-def _against_neighbours(position_mm, residual_um):
-    """Deviation from the mean of the two neighbours on each side along the travel."""
+def _against_neighbours(position_mm, residual_um, valid):
+    """Deviation from the mean of the two valid neighbours on each side along the travel,
+    over its standard deviation in noise units (√(1 + 1/4))."""
     order = np.argsort(position_mm, kind="stable")
-    padded = np.pad(residual_um[order], 2, mode="reflect")
+    kept = order[valid[order]]
+    padded = np.pad(residual_um[kept], 2, mode="reflect")
     neighbours = (padded[:-4] + padded[1:-3] + padded[3:-1] + padded[4:]) / 4.0
+    # every sample (valid or not) against the neighbours of the nearest valid sample
+    nearest = np.clip(np.searchsorted(position_mm[kept], position_mm[order]), 0, kept.size - 1)
     deviation = np.empty_like(residual_um)
-    deviation[order] = residual_um[order] - neighbours
-    return deviation, 1.25
+    deviation[order] = residual_um[order] - neighbours[nearest]
+    deviation[kept] = residual_um[kept] - neighbours
+    return deviation / np.sqrt(1.25)
 
 
 def drift_basis(clock):
