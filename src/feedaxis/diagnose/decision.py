@@ -2,13 +2,15 @@
 
 1. The model is fitted; isolated outliers are found (:func:`~.judge.outlier_rows`),
    reported by row and kept out of everything that follows.
-2. Stepwise selection: every available effect not yet in the model, and a drift along the
-   test's clock, is fitted on top; each is judged by the extra-sum-of-squares F test against
-   the pure error (or, without repeats, the residual mean square). The best is accepted at
-   a family-wise error rate ``FAMILY_ALPHA`` (Bonferroni over the terms tried), added, and
-   the others re-tested on top of it; repeated until none passes. A drift that wins is
-   reported as a drift and kept in the model as a nuisance, so it is never named as backlash.
-3. Periodic catalog effects whose wavelength the targets cannot resolve are passed over.
+2. Where repeats can tell a drift along the test's clock from the targets, the drift is
+   added as a nuisance (so it never aliases into backlash or another effect) and reported
+   when its F test passes.
+3. Stepwise selection: every available effect not yet in the model is fitted on top; each
+   is judged by the extra-sum-of-squares F test against the pure error (or, without
+   repeats, the residual mean square). The best is accepted at a family-wise error rate
+   ``FAMILY_ALPHA`` (Bonferroni over the effects tried), added, and the others re-tested on
+   top of it; repeated until none passes.
+   Periodic catalog effects whose wavelength the targets cannot resolve are passed over.
 4. What is left is searched for structure no effect explains (:mod:`.structures`), with the
    same test; then a lack-of-fit test (repeats) or a serial-correlation test (no repeats).
 5. Verdict: ``missing_effect`` when a candidate is named, ``unexplained`` when structure
@@ -119,11 +121,10 @@ def diagnose(case, model, effects=None, progress=None):
                       marked_wavelengths(case.axis, effects))
     candidates, nuisances, left = _select(case, layout, context, first, pending, notify)
     noise_um, noise_source = estimate_noise_um(case, left.residual_um, layout)
-    unexplained = nuisances + find_structures(case, layout, context, left,
-                                              exclude={s.kind for s in nuisances})
+    unexplained = nuisances + find_structures(case, layout, context, left)
     verdict = "missing_effect" if candidates else "unexplained" if unexplained else "adequate"
     test_used = (f"{judge.PURE_ERROR if layout.has_repeats else judge.RESIDUAL_MEAN_SQUARE}, "
-                 f"family-wise error rate {FAMILY_ALPHA:g} (Bonferroni over the terms tried)")
+                 f"family-wise error rate {FAMILY_ALPHA:g} over the diagnosis (Bonferroni)")
     return Diagnosis(first, noise_um, noise_source, verdict, candidates, unexplained, skipped,
                      residual_spectrum(case, first.residual_um, effects),
                      [int(i) + FIRST_DATA_ROW for i in outliers], test_used)
@@ -175,35 +176,43 @@ def _unresolvable(case, effect):
 
 def _select(case, layout, context, first, pending, notify):
     """Stepwise: (candidates, nuisance structures, final fit) at ``FAMILY_ALPHA``."""
-    candidates, nuisances, left = [], [], first
-    drift = Drift() if Drift().trials(context) else None
-    while pending or drift:
-        trials = []
+    left, nuisances = _with_drift(case, layout, context, first, notify)
+    candidates = []
+    while pending:
+        tested = []
         for effect in pending.values():
             notify(effect.name)
             result = fit(left.model + effect, case)
-            trials.append((effect, result, len(effect.parameters)))
-        if drift:
-            notify("drift")
-            result = fit(left.model + StructureEffect("drift", drift.basis(context, None)), case)
-            trials.append((drift, result, drift.extra))
-        tested = [(judge.extra_ss_test(layout, left.residual_um, result.residual_um, extra,
-                                       result.statistics.n_free), term, result)
-                  for term, result, extra in trials]
-        test, term, result = min(tested, key=lambda item: item[0].p_value)
+            tested.append((judge.extra_ss_test(layout, left.residual_um, result.residual_um,
+                                               len(effect.parameters), result.statistics.n_free),
+                           effect, result))
+        test, effect, result = min(tested, key=lambda item: item[0].p_value)
         if not judge.accepts(test.p_value, len(tested)):
             break
-        if term is drift:
-            fitted = left.residual_um - result.residual_um
-            nuisances.append(Structure("drift", None, float(np.ptp(fitted) / 2), test,
-                                       f"{drift.describe(context, fitted)} ({test.describe()})",
-                                       fitted, drift.basis(context, None)))
-            drift = None
-        else:
-            candidates.append(_candidate(case, layout, left, term, result, test))
-            del pending[term.name]
+        candidates.append(_candidate(case, layout, left, effect, result, test))
+        del pending[effect.name]
         left = result
     return candidates, nuisances, left
+
+
+def _with_drift(case, layout, context, first, notify):
+    """The model with a drift along the clock as a nuisance, whenever repeats show one can
+    be told from the targets: in a bidirectional test + and - runs alternate, so an
+    unmodelled drift would alias into the reversal. Reported when its F test passes."""
+    drift = Drift()
+    if not drift.trials(context):
+        return first, []
+    notify("drift")
+    basis = drift.basis(context)
+    result = fit(first.model + StructureEffect("drift", basis), case)
+    test = judge.extra_ss_test(layout, first.residual_um, result.residual_um, drift.extra,
+                               result.statistics.n_free)
+    if not judge.accepts(test.p_value, 1):
+        return result, []
+    fitted = first.residual_um - result.residual_um
+    return result, [Structure("drift", None, float(np.ptp(fitted) / 2), test,
+                              f"{drift.describe(context, fitted)} ({test.describe()})", fitted,
+                              basis)]
 
 
 def _candidate(case, layout, left, effect, result, test):
@@ -257,7 +266,7 @@ def _run_or_time(positioning):
     return positioning.run if positioning.run is not None else np.zeros(positioning.size)
 
 
-def find_structures(case, layout, context, left, exclude=()):
+def find_structures(case, layout, context, left):
     """Structure in the residual of ``left`` that no effect explains, strongest first.
 
     At each step every shape is fitted to the residual and F-tested; the best is accepted at
@@ -267,7 +276,7 @@ def find_structures(case, layout, context, left, exclude=()):
     irregular error along the travel.
     """
     structures, current = [], left
-    shapes = [shape() for shape in SHAPES if shape.kind not in exclude]
+    shapes = [shape() for shape in SHAPES]
     for _ in range(MAX_STRUCTURES):
         residual = current.residual_um
         options, tried = [], 0
@@ -298,8 +307,10 @@ def find_structures(case, layout, context, left, exclude=()):
 def _irregular(case, layout, current):
     """An irregular error along the travel: lack of fit beyond the noise, no shape found."""
     residual = current.residual_um
-    if layout.has_repeats and layout.n_groups > current.statistics.n_free + 1:
-        test = judge.lack_of_fit_test(layout, residual, current.statistics.n_free)
+    n_within = sum(len(e.parameters) for e in current.model.effects if e.name == "drift")
+    n_between = current.statistics.n_free - n_within
+    if layout.has_repeats and layout.n_groups > n_between + 1:
+        test = judge.lack_of_fit_test(layout, residual, n_between, n_within)
         means = layout.group_means(residual)
         what = (f"the mean error at each target scatters {np.std(means):.3g} µm beyond the "
                 f"repeatability")

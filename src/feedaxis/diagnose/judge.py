@@ -7,9 +7,11 @@
   sum of squares the term removes per parameter, over the pure-error mean square. A large
   effect is then named however much unmodelled per-target shape is left. Without repeats
   the denominator is the larger model's residual mean square (the partial F test).
-- ``FAMILY_ALPHA`` is the family-wise error rate of each selection step: the best of the m
-  terms tried is accepted when p < FAMILY_ALPHA / m (Bonferroni), so under the complete null
-  nothing is named with probability >= 1 - FAMILY_ALPHA.
+- ``FAMILY_ALPHA`` is the family-wise error rate of a whole diagnosis under the complete
+  null. It is split equally over its ``STAGES`` (drift, effects, structures, lack of fit);
+  at each selection step the best of the m terms tried is accepted when
+  p < FAMILY_ALPHA / STAGES / m (Bonferroni). Later steps only run once an earlier one has
+  passed, so they add nothing to the error under the complete null.
 - The clock is ``time_s`` (hours) when present, else run number plus the sample's place in
   its run: a drift across the test is tested even without time stamps.
 - Outliers: each sample against the others of its group (leave-one-out mean, after a drift
@@ -29,6 +31,7 @@ from scipy.optimize import least_squares
 from .spectrum import clusters
 
 FAMILY_ALPHA = 0.001
+STAGES = 4
 OUTLIER_ALPHA = 0.001
 MIN_PURE_DOF = 10
 MAX_OUTLIER_PASSES = 5
@@ -143,11 +146,12 @@ def extra_ss_test(layout, residual_before_um, residual_after_um, extra, n_free_a
     return Test(float(statistic), (extra, dof), float(stats.f.sf(statistic, extra, dof)), name)
 
 
-def lack_of_fit_test(layout, residual_um, n_free):
-    """Lack-of-fit F test: the group means of the residual against the pure error."""
+def lack_of_fit_test(layout, residual_um, n_between, n_within):
+    """Lack-of-fit F test: the group means of the residual against the pure error, with
+    ``n_between`` parameters fitted to the group means and ``n_within`` (a drift) within."""
     means = layout.group_means(residual_um)
-    lof_dof = max(layout.n_groups - n_free, 1)
-    pure_dof = layout.pure_dof
+    lof_dof = max(layout.n_groups - n_between, 1)
+    pure_dof = max(layout.pure_dof - n_within, 1)
     statistic = (float(means @ means) / lof_dof) / max(layout.pure_error_ss(residual_um) / pure_dof,
                                                        1e-300)
     return Test(statistic, (lof_dof, pure_dof), float(stats.f.sf(statistic, lof_dof, pure_dof)),
@@ -170,8 +174,8 @@ def serial_correlation_test(position_mm, residual_um):
 
 
 def accepts(p_value, tried, alpha=FAMILY_ALPHA):
-    """Bonferroni at one selection step: the best of ``tried`` terms is accepted."""
-    return p_value < alpha / max(tried, 1)
+    """Bonferroni at one selection step of one stage: the best of ``tried`` terms passes."""
+    return p_value < alpha / STAGES / max(tried, 1)
 
 
 def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):

@@ -132,7 +132,7 @@ class Drift:
     def trials(self, context):
         return 1 if context.layout.clock_varies_within_groups else 0
 
-    def basis(self, context, residual_um):
+    def basis(self, context, residual_um=None):
         return drift_basis(context.layout.clock)
 
     def describe(self, context, fitted_um):
@@ -165,7 +165,7 @@ class Trend:
                 f"the travel, {np.ptp(fitted_um):.3g} µm peak to valley")
 
 
-SHAPES = (Drift, Periodic, Direction, Trend)
+SHAPES = (Periodic, Direction, Trend)  # a drift is a nuisance of the decision
 
 
 def sinusoid(position_mm, frequency_per_mm):
