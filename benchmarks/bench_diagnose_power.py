@@ -56,7 +56,7 @@ def main():
                         "per backlash (default 200)")
     args = parser.parse_args()
     start = time.perf_counter()
-    print(f"family-wise error rate of each selection step: {FAMILY_ALPHA:g}")
+    print(f"family-wise error rate of a whole diagnosis: {FAMILY_ALPHA:g}")
     for seed, layout in enumerate(syn.NULL_LAYOUTS):
         rate = false_alarm_rate(layout, args.trials, seed)
         print(f"nulls, {layout}: false alarms {rate * args.trials:.0f} of {args.trials} "
