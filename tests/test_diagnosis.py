@@ -206,3 +206,18 @@ def _model_file(tmp_path):
     path.write_text(LEAD.with_values({"lead_error": {"offset_um": 0.0, "slope_um_per_mm": 0.0}})
                     .to_toml())
     return str(path)
+
+
+def test_floating_mean_periodogram_matches_scipy_lombscargle():
+    from scipy.signal import lombscargle
+
+    from feedaxis.diagnose.spectrum import floating_mean_amplitude
+    rng = np.random.default_rng(21)
+    position_mm = np.sort(rng.uniform(0.0, 100.0, 300))
+    values_um = 0.3 * np.cos(2 * np.pi * position_mm / 7.0) + 1.0 + rng.normal(0, 0.1, 300)
+    frequency = np.linspace(0.01, 1.0, 500)
+    ours = floating_mean_amplitude(position_mm, values_um, frequency, chunk_elements=10_000)
+    theirs = np.abs(lombscargle(position_mm, values_um, 2 * np.pi * frequency,
+                                floating_mean=True, normalize="amplitude"))
+    np.testing.assert_allclose(ours, theirs, atol=1e-9)
+    assert frequency[np.argmax(ours)] == pytest.approx(1 / 7.0, abs=0.002)
