@@ -11,6 +11,7 @@ Wall time: median of ``--repeats`` runs; memory: peak of NumPy and Python alloca
 Run: ``python benchmarks/bench_diagnose_scale.py [--repeats 3]``.
 """
 import argparse
+import resource
 import statistics
 import sys
 import tempfile
@@ -85,7 +86,9 @@ def main():
                 print(f"{label:36s} {job_name:9s} {seconds:9.2f} {seconds / TIME_TARGET_S:6.2f} "
                       f"{peak_mb:8.0f} {peak_mb / MEMORY_TARGET_MB:8.2f}")
     print(f"({cases['ISO-like, ±1 nm jitter'].positioning.size} samples each; verdict on the "
-          f"first: {diagnose(cases['ISO-like, ±1 nm jitter'], LEAD).verdict})")
+          f"first: {diagnose(cases['ISO-like, ±1 nm jitter'], LEAD).verdict}; peak resident "
+          f"memory of this whole process, imports and all cases included: "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB)")
 
 
 if __name__ == "__main__":
