@@ -221,3 +221,37 @@ def test_floating_mean_periodogram_matches_scipy_lombscargle():
                                 floating_mean=True, normalize="amplitude"))
     np.testing.assert_allclose(ours, theirs, atol=1e-9)
     assert frequency[np.argmax(ours)] == pytest.approx(1 / 7.0, abs=0.002)
+
+
+@pytest.mark.parametrize("fixed_end_mm", [-141.0, 151.0])
+def test_thermal_fmu_reproduces_the_fitted_ambient_expansion(loaded_fmus, fixed_end_mm):
+    """The FMU with ``Model.fmu_parameters`` (offset 37 mm, no heating) gives the effect's
+    error at each target and ambient: both call physics.thermal.ambient_error_um."""
+    axis = {"name": "z", "screw": {"lead_mm": 10.0, "expansion_per_K": 11.7e-6,
+                                   "fixed_end_mm": fixed_end_mm}}
+    target_mm = np.linspace(0.0, 500.0, 11)
+    ambient_C = np.linspace(19.0, 23.0, 11)
+    case = syn.in_memory_case(axis, target_mm=target_mm, error_um=0 * target_mm,
+                              ambient_C=ambient_C)
+    model = Model([CATALOG["ambient_expansion"]],
+                  {"ambient_expansion": {"reference_offset_mm": 37.0}})
+    parameters = {**model.fmu_parameters(case.axis)["ThermalScrew"], "k3_W_per_mm_min": 0.0,
+                  "k4_W_per_mm_min": 0.0, "fixed_end_mm": fixed_end_mm}
+    fmu = loaded_fmus["ThermalScrew"]
+    slave = fmu.instantiate("ambient")
+    got_um = []
+    try:
+        fmu.set_values(slave, parameters)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        for k, (x, ambient) in enumerate(zip(target_mm, ambient_C)):
+            fmu.set_values(slave, {"position_mm": float(x), "ambient_C": float(ambient)})
+            slave.doStep(float(k), 1.0)
+            got_um.append(fmu.get_reals(slave, ["error_um"])[0])
+        slave.terminate()
+    finally:
+        slave.freeInstance()
+    expected_um = 11.7e-6 * (ambient_C - 20.0) * (target_mm - fixed_end_mm - 37.0) * 1e3
+    np.testing.assert_allclose(model.predict_um(case), expected_um, atol=1e-12)
+    np.testing.assert_allclose(got_um, expected_um, atol=1e-9)
