@@ -190,8 +190,9 @@ def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
             deviation = _against_group(layout, residual_um, ~flagged)
         else:
             deviation = _against_neighbours(position_mm, residual_um, ~flagged)
-        scale = MAD_TO_SIGMA * np.median(np.abs(deviation[~flagged]))
-        now = np.abs(deviation) > limit * scale if scale > 0 else flagged
+        scale = MAD_TO_SIGMA * np.nanmedian(np.abs(deviation[~flagged]))
+        with np.errstate(invalid="ignore"):
+            now = np.abs(deviation) > limit * scale if scale > 0 else flagged
         if np.array_equal(now, flagged):
             break
         flagged = now
@@ -200,7 +201,8 @@ def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
 
 def _against_group(layout, residual_um, valid):
     """Deviation of each sample from the mean of the other valid samples of its group,
-    drift removed, over its standard deviation in noise units (√(1 + 1/(m - 1)))."""
+    drift removed, over its standard deviation in noise units (√(1 + 1/(m - 1))); NaN
+    where the group has no other valid sample."""
     residual_um = residual_um - _robust_drift(layout, residual_um)
     weights = valid.astype(float)
     sizes = np.bincount(layout.groups, weights, layout.n_groups)[layout.groups]
@@ -208,7 +210,7 @@ def _against_group(layout, residual_um, valid):
     others = sizes - weights
     single = others < 1
     others = np.where(single, 1.0, others)
-    deviation = np.where(single, 0.0, residual_um - (totals - residual_um * weights) / others)
+    deviation = np.where(single, np.nan, residual_um - (totals - residual_um * weights) / others)
     return deviation / np.sqrt(1.0 + 1.0 / others)
 
 
