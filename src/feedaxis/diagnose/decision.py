@@ -176,7 +176,7 @@ def _unresolvable(case, effect):
 
 def _select(case, layout, context, first, pending, notify):
     """Stepwise: (candidates, nuisance structures, final fit) at ``FAMILY_ALPHA``."""
-    left, nuisances = _with_drift(case, layout, context, first, notify)
+    left = _with_drift(case, context, first, notify)
     candidates = []
     while pending:
         tested = []
@@ -192,27 +192,35 @@ def _select(case, layout, context, first, pending, notify):
         candidates.append(_candidate(case, layout, left, effect, result, test))
         del pending[effect.name]
         left = result
-    return candidates, nuisances, left
+    return candidates, _drift_finding(case, layout, context, left, notify), left
 
 
-def _with_drift(case, layout, context, first, notify):
+def _with_drift(case, context, first, notify):
     """The model with a drift along the clock as a nuisance, whenever repeats show one can
     be told from the targets: in a bidirectional test + and - runs alternate, so an
-    unmodelled drift would alias into the reversal. Reported when its F test passes."""
-    drift = Drift()
-    if not drift.trials(context):
-        return first, []
+    unmodelled drift would alias into the reversal."""
+    if not Drift().trials(context):
+        return first
     notify("drift")
-    basis = drift.basis(context)
-    result = fit(first.model + StructureEffect("drift", basis), case)
-    test = judge.extra_ss_test(layout, first.residual_um, result.residual_um, drift.extra,
-                               result.statistics.n_free)
+    return fit(first.model + StructureEffect("drift", Drift().basis(context)), case)
+
+
+def _drift_finding(case, layout, context, left, notify):
+    """The drift in the final model (effects named), reported when its F test passes."""
+    if "drift" not in left.model:
+        return []
+    notify("drift")
+    drift = left.model.effects[left.model.names.index("drift")]
+    others = [e for e in left.model.effects if e is not drift]
+    without = fit(type(left.model)(others, left.model.values), case)
+    test = judge.extra_ss_test(layout, without.residual_um, left.residual_um, Drift.extra,
+                               left.statistics.n_free)
     if not judge.accepts(test.p_value, 1):
-        return result, []
-    fitted = first.residual_um - result.residual_um
-    return result, [Structure("drift", None, float(np.ptp(fitted) / 2), test,
-                              f"{drift.describe(context, fitted)} ({test.describe()})", fitted,
-                              basis)]
+        return []
+    fitted = drift.prepare(case)(left.model.values["drift"])
+    return [Structure("drift", None, float(np.ptp(fitted) / 2), test,
+                      f"{Drift().describe(context, fitted)} ({test.describe()})", fitted,
+                      drift.basis)]
 
 
 def _candidate(case, layout, left, effect, result, test):
