@@ -255,3 +255,15 @@ def test_thermal_fmu_reproduces_the_fitted_ambient_expansion(loaded_fmus, fixed_
     expected_um = 11.7e-6 * (ambient_C - 20.0) * (target_mm - fixed_end_mm - 37.0) * 1e3
     np.testing.assert_allclose(model.predict_um(case), expected_um, atol=1e-12)
     np.testing.assert_allclose(got_um, expected_um, atol=1e-9)
+
+
+def test_drift_is_sized_after_the_reversal_and_shape():
+    """Drift 0.3 µm per run under a -2 µm reversal and a 5 µm per-target shape: backlash
+    named, the drift sized from the final model."""
+    case, _ = syn.iso_trial(np.random.default_rng(22), backlash_um=-2.0, drift_um_per_run=0.3,
+                            shape_um=5.0)
+    result = diagnose(case, LEAD)
+    assert "backlash" in [c.effect for c in result.candidates]
+    drift = next(s for s in result.unexplained if s.kind == "drift")
+    per_run = float(drift.evidence.split(", ")[1].split(" µm")[0])
+    assert per_run == pytest.approx(0.3, rel=0.15)
