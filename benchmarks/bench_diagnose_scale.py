@@ -71,10 +71,12 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per job (default 3)")
     args = parser.parse_args()
-    cases = {"ISO-like, ±1 nm jitter": iso_like(1e-6), "ISO-like, ±0.01 µm jitter": iso_like(1e-5),
+    cases = {"ISO-like, ±1 nm jitter": iso_like(1e-6),
+             "ISO-like, ±0.01 µm jitter": iso_like(1e-5),
              "single pass, 10^5 uneven positions": single_pass()}
     diagnose(cases["ISO-like, ±1 nm jitter"], LEAD)  # warm imports
-    print(f"{'case':36s} {'job':9s} {'time (s)':>9s} {'/ 5 s':>6s} {'peak MB':>8s} {'/ 500 MB':>8s}")
+    print(f"{'case':36s} {'job':9s} {'time (s)':>9s} {'/ 5 s':>6s} {'peak MB':>8s} "
+          f"{'/ 500 MB':>8s}")
     with tempfile.TemporaryDirectory() as folder:
         for label, case in cases.items():
             model = fit(LEAD, case).model

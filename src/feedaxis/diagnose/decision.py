@@ -202,7 +202,7 @@ def _with_drift(case, context, first, notify):
     if not Drift().trials(context):
         return first
     notify("drift")
-    return fit(first.model + StructureEffect("drift", Drift().basis(context)), case)
+    return fit(first.model + StructureEffect("drift", Drift().basis(context)[0]), case)
 
 
 def _drift_finding(case, layout, context, left, notify):
@@ -290,22 +290,22 @@ def find_structures(case, layout, context, left):
         options, tried = [], 0
         for shape in shapes:
             trials = shape.trials(context)
-            basis = shape.basis(context, residual) if trials else None
+            basis, wavelength_mm = shape.basis(context, residual) if trials else (None, None)
             if basis is None:
                 continue
             tried += trials
             fitted = least_squares_fit(residual, basis)
             options.append((judge.extra_ss_test(layout, residual, residual - fitted, shape.extra,
                                                 current.statistics.n_free + shape.extra),
-                            shape, basis, fitted))
+                            shape, basis, wavelength_mm, fitted))
         if not options:
             break
-        test, shape, basis, fitted = min(options, key=lambda option: option[0].p_value)
+        test, shape, basis, wavelength_mm, fitted = min(options, key=lambda o: o[0].p_value)
         if not judge.accepts(test.p_value, tried):
             break
-        structures.append(Structure(shape.kind, shape.wavelength_mm, float(np.ptp(fitted) / 2),
-                                    test, f"{shape.describe(context, fitted)} ({test.describe()})",
-                                    fitted, basis))
+        evidence = shape.describe(context, fitted, wavelength_mm)
+        structures.append(Structure(shape.kind, wavelength_mm, float(np.ptp(fitted) / 2), test,
+                                    f"{evidence} ({test.describe()})", fitted, basis))
         shapes.remove(shape)
         current = fit(current.model + StructureEffect(f"structure_{len(structures)}", basis), case)
     irregular = _irregular(case, layout, current)

@@ -1,9 +1,9 @@
 """Residual structure no effect explains: one small class per shape.
 
-Each shape has a ``kind``, ``trials`` (how many distinct shapes its search tries, counted in
-the Bonferroni correction), a :meth:`basis` of extra linear columns (None when the case
-cannot show it) with the number of extra parameters, and :meth:`describe`, the evidence
-line saying what varies and by how much.
+Each shape has a ``kind``, ``extra`` parameters, ``trials`` (how many distinct shapes its
+search tries, counted in the Bonferroni correction), :meth:`basis` giving its extra linear
+columns and wavelength (None when the case cannot show it), and :meth:`describe`, the
+evidence line saying what varies and by how much.
 """
 from __future__ import annotations
 
@@ -76,7 +76,7 @@ class Periodic:
     def basis(self, context, residual_um):
         spectrum = amplitude_spectrum(context.position_mm, residual_um)
         if spectrum is None or spectrum.amplitude_um.size == 0:
-            return None
+            return None, None
         position_mm = context.position_mm
         peak = 1.0 / spectrum.wavelength_mm[int(np.argmax(spectrum.amplitude_um))]
         centres, _ = clusters(position_mm)
@@ -85,13 +85,12 @@ class Periodic:
             lambda f: _rss(residual_um - least_squares_fit(residual_um, sinusoid(position_mm, f))),
             bounds=(max(peak - step, step / 2), peak + step), method="bounded",
             options={"xatol": step * 1e-4})
-        self.wavelength_mm = float(1.0 / best.x)
-        return sinusoid(position_mm, best.x)
+        return sinusoid(position_mm, best.x), float(1.0 / best.x)
 
-    def describe(self, context, fitted_um):
+    def describe(self, context, fitted_um, wavelength_mm):
         amplitude = np.ptp(fitted_um) / 2
-        return (f"peak at {self.wavelength_mm:.4g} mm, amplitude {amplitude:.3g} µm; "
-                f"{_compare_to_marks(self.wavelength_mm, context.marks)}")
+        return (f"peak at {wavelength_mm:.4g} mm, amplitude {amplitude:.3g} µm; "
+                f"{_compare_to_marks(wavelength_mm, context.marks)}")
 
 
 class Direction:
@@ -99,16 +98,15 @@ class Direction:
 
     kind = "direction"
     extra = 2
-    wavelength_mm = None
 
     def trials(self, context):
         return 1 if context.bidirectional else 0
 
     def basis(self, context, residual_um):
         scaled = _normalised(context.position_mm)
-        return np.column_stack((context.direction, context.direction * scaled))
+        return np.column_stack((context.direction, context.direction * scaled)), None
 
-    def describe(self, context, fitted_um):
+    def describe(self, context, fitted_um, wavelength_mm=None):
         position_mm, direction = context.position_mm, context.direction
         ends = [position_mm.min(), position_mm.max()]
         reversal = []
@@ -127,15 +125,14 @@ class Drift:
 
     kind = "drift"
     extra = 2
-    wavelength_mm = None
 
     def trials(self, context):
         return 1 if context.layout.clock_varies_within_groups else 0
 
     def basis(self, context, residual_um=None):
-        return drift_basis(context.layout.clock)
+        return drift_basis(context.layout.clock), None
 
-    def describe(self, context, fitted_um):
+    def describe(self, context, fitted_um, wavelength_mm=None):
         clock, unit = context.layout.clock, context.layout.clock_unit
         first, last = np.argmin(clock), np.argmax(clock)
         change = float(fitted_um[last] - fitted_um[first])
@@ -151,16 +148,14 @@ class Trend:
 
     kind = "trend"
     extra = MAX_TREND_DEGREE
-    wavelength_mm = None
-    shapes = {1: "a straight line", 2: "a bow", 3: "an S-shape"}
 
     def trials(self, context):
         return MAX_TREND_DEGREE if clusters(context.position_mm)[0].size >= 4 else 0
 
     def basis(self, context, residual_um):
-        return np.vander(_normalised(context.position_mm), MAX_TREND_DEGREE + 1)
+        return np.vander(_normalised(context.position_mm), MAX_TREND_DEGREE + 1), None
 
-    def describe(self, context, fitted_um):
+    def describe(self, context, fitted_um, wavelength_mm=None):
         return (f"the residual follows a polynomial of degree up to {MAX_TREND_DEGREE} along "
                 f"the travel, {np.ptp(fitted_um):.3g} µm peak to valley")
 
