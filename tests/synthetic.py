@@ -101,3 +101,91 @@ def iso_case(folder, seed, backlash_um=0.0, ambient_rise_K=0.0):
 def thermal_case(folder, seed, feed_mm_min=6000.0, params=None):
     """Seed 003 Table 2 test with a lead error, from feedaxis.examples (physics + noise)."""
     return write_table2_case(folder, feed_mm_min, params, noise_um=THERMAL_NOISE_UM, seed=seed)
+
+
+def in_memory_case(axis_values, **columns):
+    """A Case held in memory (no folder written), for the many generated trials."""
+    from pathlib import Path
+
+    from feedaxis.case import Axis, Case, Positioning
+
+    has_direction = "direction" in columns
+    direction = columns.pop("direction", np.ones_like(columns["target_mm"]))
+    axis = Axis(axis_values["name"], axis_values["screw"], axis_values.get("motor", {}))
+    return Case(Path("generated"), axis, Positioning(direction=direction,
+                                                     has_direction=has_direction, **columns))
+
+
+def run_clock(run):
+    """Run number plus the sample's place in its run (the order of the rows)."""
+    clock = np.empty(run.size)
+    for value in np.unique(run):
+        members = np.flatnonzero(run == value)
+        clock[members] = value + np.arange(members.size) / members.size
+    return clock
+
+
+def iso_trial(rng, backlash_um=0.0, noise_um=ISO_NOISE_UM, drift_um_per_run=0.0, outliers=0,
+              shape_um=0.0, outlier_um=3.0):
+    """An ISO 230-2 case (21 targets x 5 bidirectional runs): lead error, an optional
+    per-target shape (random, standard deviation ``shape_um``), backlash, a drift linear in
+    the run order, white noise and ``outliers`` isolated spikes; (case, outlier indices)."""
+    target_mm, direction, run = iso_layout()
+    _, target_index = np.unique(target_mm, return_inverse=True)
+    error_um = (geometry.lead_error_um(target_mm, 1.5, -0.012)
+                + rng.normal(0.0, shape_um, target_index.max() + 1)[target_index]
+                + geometry.backlash_error_um(direction, backlash_um)
+                + drift_um_per_run * (run_clock(run) - 1.0)
+                + rng.normal(0.0, noise_um, target_mm.size))
+    spikes = rng.choice(target_mm.size, outliers, replace=False)
+    error_um[spikes] += outlier_um * rng.choice((-1.0, 1.0), outliers)
+    return in_memory_case(ISO_AXIS, target_mm=target_mm, error_um=error_um, direction=direction,
+                          run=run), np.sort(spikes)
+
+
+def scan_trial(rng, noise_um=ISO_NOISE_UM, drift_um=0.0, outliers=0, outlier_um=3.0):
+    """A dense single-pass scan, 0-500 mm every 1 mm: lead error, a slow drift over the pass
+    (linear in time, which a single pass cannot tell from a lead error), white noise and
+    ``outliers`` spikes; (case, outlier indices)."""
+    target_mm = np.arange(0.0, 501.0, 1.0)
+    error_um = (geometry.lead_error_um(target_mm, 1.5, -0.012)
+                + drift_um * target_mm / target_mm[-1]
+                + rng.normal(0.0, noise_um, target_mm.size))
+    spikes = rng.choice(target_mm.size, outliers, replace=False)
+    error_um[spikes] += outlier_um * rng.choice((-1.0, 1.0), outliers)
+    return in_memory_case(ISO_AXIS, target_mm=target_mm, error_um=error_um), np.sort(spikes)
+
+
+def paired_t_p_value(case):
+    """Two-sided p-value of a plain paired t-test of x(+) - x(-) at each target and run."""
+    from scipy import stats
+
+    p = case.positioning
+    up, down = p.direction > 0, p.direction < 0
+    key_up = np.lexsort((p.target_mm[up], p.run[up]))
+    key_down = np.lexsort((p.target_mm[down], p.run[down]))
+    return float(stats.ttest_rel(p.error_um[up][key_up], p.error_um[down][key_down]).pvalue)
+
+
+NULL_LAYOUTS = {
+    "ISO 230-2 repeats": lambda rng: iso_trial(rng, drift_um_per_run=0.05, outliers=2),
+    "dense single-pass scan": lambda rng: scan_trial(rng, drift_um=1.0, outliers=2),
+}
+
+
+def false_alarm(diagnosis, spikes):
+    """True when a null diagnosis names an effect or a structure (a drift is really there)
+    or misses or invents an outlier (rows are 1-based, header = row 1)."""
+    return (bool(diagnosis.candidates) or any(s.kind != "drift" for s in diagnosis.unexplained)
+            or diagnosis.outlier_rows != [int(i) + 2 for i in spikes])
+
+
+def backlash_power(diagnose, model, backlash_um, trials, seed):
+    """(share of trials naming backlash, share with a paired t-test p < 0.001)."""
+    rng = np.random.default_rng(seed)
+    named = t_test = 0
+    for _ in range(trials):
+        case, _ = iso_trial(rng, backlash_um=backlash_um)
+        named += [c.effect for c in diagnose(case, model).candidates][:1] == ["backlash"]
+        t_test += paired_t_p_value(case) < 1e-3
+    return named / trials, t_test / trials

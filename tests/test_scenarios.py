@@ -45,6 +45,7 @@ def test_iso230_case_loads_back_with_the_iso_layout(tmp_path, fmu_dir):
     case = read_case(out)
     p = case.positioning
     assert case.axis.lead_mm == 1.0 and case.axis.motor["error_period_steps"] == 10
+    assert p.time_s is not None and np.all(np.diff(p.time_s) > 0)  # the clock of the drift
     targets = iso230_targets(3, 2.0)
     np.testing.assert_allclose(np.unique(p.target_mm), targets)
     for target in targets:

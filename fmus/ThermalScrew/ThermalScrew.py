@@ -17,7 +17,7 @@ UNITS = {"length_m": "m", "diameter_m": "m", "density_kg_m3": "kg/m3",
          "bearing_length_m": "m", "cell_length_m": "m", "time_step_s": "s",
          "conductivity_W_mK": "W/(m.K)", "k1_W_m2K_per_mm_min": "W.min/(m2.K.mm)",
          "k2_W_m2K": "W/(m2.K)", "k3_W_per_mm_min": "W.min/mm", "k4_W_per_mm_min": "W.min/mm",
-         "fixed_end_mm": "mm"}
+         "fixed_end_mm": "mm", "ambient_reference_offset_mm": "mm"}
 DESCRIPTIONS = {"length_m": "Screw length L", "diameter_m": "Screw diameter D",
                 "density_kg_m3": "Density rho", "specific_heat_J_kgK": "Specific heat c",
                 "expansion_per_K": "Expansion coefficient alpha", "nut_length_m": "Nut length L_N",
@@ -28,7 +28,8 @@ DESCRIPTIONS = {"length_m": "Screw length L", "diameter_m": "Screw diameter D",
                 "k1_W_m2K_per_mm_min": "h = k1 v + k2 (Eq. 17)", "k2_W_m2K": "h = k1 v + k2 (Eq. 17)",
                 "k3_W_per_mm_min": "Bearing heat Q_B = k3 v (Eq. 18)",
                 "k4_W_per_mm_min": "Nut heat Q_N = k4 v (Eq. 19)",
-                "fixed_end_mm": "Axis coordinate P_f of the fixed end (Eq. 15-16)"}
+                "fixed_end_mm": "Axis coordinate P_f of the fixed end (Eq. 15-16)",
+                "ambient_reference_offset_mm": "TE_a = alpha dT_a (X - P_f - offset) (Eq. 1)"}
 
 
 class ThermalScrew(AxisSlave):
@@ -48,7 +49,7 @@ class ThermalScrew(AxisSlave):
         self.output("peak_rise_K", "Largest temperature rise of the screw above ambient", "K")
         self.parameter("reference_ambient_C", 20.0, "Ambient at which TE_a = 0 (Eq. 1)", "degC")
         for field in fields(thermal.ThermalScrewParams):
-            limits = None if field.name == "fixed_end_mm" else (0, None)
+            limits = None if field.name.endswith("_mm") else (0, None)
             self.parameter(field.name, float(field.default), DESCRIPTIONS[field.name],
                            UNITS[field.name], limits)
         self.rise_K = None

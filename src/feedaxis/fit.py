@@ -238,7 +238,7 @@ def _variable_projection(model, cases, layout, measured, progress=None):
         scale[scale == 0.0] = 1.0
         solution = lsq_linear(columns_um / scale, target_um, method="bvls",
                               bounds=(lower[linear] * scale, upper[linear] * scale))
-        x[linear] = solution.x / scale
+        x[linear] = np.clip(solution.x / scale, lower[linear], upper[linear])
         return target_um - columns_um @ x[linear]
 
     def residual(x_nonlinear):

@@ -34,14 +34,20 @@ def diagnosis_lines(diagnosis):
              f"({diagnosis.noise_source})", f"verdict: {diagnosis.verdict}"]
     for candidate in diagnosis.candidates:
         lines.append(f"  missing: {candidate.effect:22s} RMS after {candidate.rms_after_um:.4g} um"
-                     f"   dBIC {candidate.delta_bic:.1f}")
+                     f"   p {candidate.test.p_value:.2g}")
         lines.append(f"           {candidate.meaning}")
         lines.append(f"           evidence: {candidate.evidence}")
+        lines += [f"           {name} = {_number(value, 4)} ± {_number(error, 2)} {unit}"
+                  for name, (value, error, unit) in candidate.sizes().items()]
     for structure in diagnosis.unexplained:
         wavelength = "" if structure.wavelength_mm is None else \
             f" at {structure.wavelength_mm:.4g} mm"
         lines.append(f"  unexplained {structure.kind}{wavelength}, amplitude "
                      f"{structure.amplitude_um:.3g} um: {structure.evidence}")
+    if diagnosis.outlier_rows:
+        lines.append(f"  outliers kept out of the fit, rows of positioning.csv: "
+                     f"{', '.join(map(str, diagnosis.outlier_rows))}")
+    lines.append(f"  test: {diagnosis.test_used}")
     for name, reason in diagnosis.skipped.items():
         lines.append(f"  passed over {name}: {reason}")
     return "\n".join(lines)

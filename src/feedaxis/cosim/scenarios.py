@@ -273,7 +273,7 @@ def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s
                                       "written")
         rows = rows[:complete_runs * 2 * len(targets_mm)]
         name += f" (interrupted: {complete_runs} of {runs} runs)"
-    positioning = _positioning_columns(motion.samples[:rows.size], rows)
+    positioning = _positioning_columns(motion.samples[:rows.size], rows, with_time=True)
     write_case(out, axis_values(master, parameters, name), positioning=positioning)
     return _finish(out, positioning, completed, motion.samples)
 

@@ -254,30 +254,42 @@ class ThermalScrew(Effect):
 
 
 class AmbientExpansion(Effect):
-    """TE_a = α·(T_a - 20 °C)·X (seed 003 Eq. 1), α from axis.toml, nothing fitted."""
+    """TE_a = α·(T_a - 20 °C)·(X - X_ref), X_ref = P_f + offset (seed 003 Eq. 1 from the
+    fixed end, :func:`~feedaxis.physics.thermal.ambient_error_um`); α and P_f from
+    axis.toml, the offset fitted (linear, starting at 0: the screw grows from its fixed end).
+    """
 
     name = "ambient_expansion"
-    meaning = ("the whole screw expands with the ambient air temperature, away from "
-               "the ISO reference of 20 °C")
+    meaning = ("the whole screw expands from its fixed end with the ambient air temperature, "
+               "away from the ISO reference of 20 °C")
+    parameters = (Parameter("reference_offset_mm", "mm", -1e4, 1e4,
+                            "X_ref - P_f: where the expansion starts, from the fixed end"),)
+    linear = ("reference_offset_mm",)
     needs = Needs(columns=("ambient_C",), screw_keys=("expansion_per_K", "fixed_end_mm"))
     fmu = "ThermalScrew"
 
     def prepare(self, case):
-        params = thermal.ThermalScrewParams(expansion_per_K=case.axis.screw["expansion_per_K"],
-                                            fixed_end_mm=case.axis.screw["fixed_end_mm"])
-        error_um = thermal.thermal_error_um(
-            params, np.zeros(params.n_cells), _targets(case),
-            case.positioning.ambient_C - ISO_REFERENCE_TEMPERATURE_C)
-        return lambda v: error_um
+        screw, position_mm = case.axis.screw, _targets(case)
+        delta_K = case.positioning.ambient_C - ISO_REFERENCE_TEMPERATURE_C
+        return lambda v: thermal.ambient_error_um(
+            thermal.ThermalScrewParams(expansion_per_K=screw["expansion_per_K"],
+                                       fixed_end_mm=screw["fixed_end_mm"],
+                                       ambient_reference_offset_mm=v["reference_offset_mm"]),
+            position_mm, delta_K)
+
+    def guess(self, case, residual_um):
+        return {"reference_offset_mm": 0.0}
 
     def fmu_parameters(self, axis, values):
-        return {self.fmu: {"reference_ambient_C": ISO_REFERENCE_TEMPERATURE_C}}
+        return {self.fmu: {"reference_ambient_C": ISO_REFERENCE_TEMPERATURE_C,
+                           "ambient_reference_offset_mm": values["reference_offset_mm"]}}
 
     def evidence(self, case, values, contribution_um):
         ambient = case.positioning.ambient_C
+        reference_mm = case.axis.screw["fixed_end_mm"] + values["reference_offset_mm"]
         return (f"ambient {ambient.min():.2f}-{ambient.max():.2f} °C; α = "
-                f"{case.axis.screw['expansion_per_K'] * 1e6:g} µm/(m·K) gives up to "
-                f"{np.max(np.abs(contribution_um)):.2f} µm")
+                f"{case.axis.screw['expansion_per_K'] * 1e6:g} µm/(m·K) from X_ref = "
+                f"{reference_mm:.4g} mm gives up to {np.max(np.abs(contribution_um)):.2f} µm")
 
 
 CATALOG = {effect.name: effect for effect in (

@@ -48,11 +48,12 @@ class ThermalScrewParams:
     k3_W_per_mm_min: float = 0.904e-3
     k4_W_per_mm_min: float = 0.911e-3
     fixed_end_mm: float = -141.0
+    ambient_reference_offset_mm: float = 0.0
 
     def __post_init__(self):
         for field in fields(self):
             value = getattr(self, field.name)
-            if field.name.startswith("k") or field.name == "fixed_end_mm":
+            if field.name.startswith("k") or field.name.endswith("_mm"):
                 require_finite(field.name, value)
             else:
                 require_positive(field.name, value)
@@ -267,12 +268,22 @@ def sample_elongation_um(params, rise_K, screw_coord_m):
 
 
 def ambient_error_um(params, position_mm, ambient_delta_K):
-    """TE_a = α·ΔT_a·X_N (seed 003 Eq. 1), X_N the axis position, in µm."""
-    return params.expansion_per_K * np.asarray(ambient_delta_K) * np.asarray(position_mm) * 1e3
+    """TE_a = α·ΔT_a·(X - X_ref) in axis coordinates (µm), X_ref = P_f + offset.
+
+    Seed 003 Eq. 1 writes TE_a = α·ΔT_a·X_N with X_N the axis position: a machine whose
+    zero is the screw's fixed end. A screw held in its fixed bearing grows from there, so
+    the nut moves by α·ΔT_a·(X - P_f) on either side of it (P_f of either sign, the same
+    s = ±(X - P_f) of Eq. 15-16); ``ambient_reference_offset_mm`` moves the reference
+    (a scale or a mount that grows too).
+    """
+    reference_mm = params.fixed_end_mm + params.ambient_reference_offset_mm
+    return (params.expansion_per_K * np.asarray(ambient_delta_K)
+            * (np.asarray(position_mm) - reference_mm) * 1e3)
 
 
 def thermal_error_um(params, rise_K, position_mm, ambient_delta_K=0.0):
-    """Positioning thermal error TE(P_x) = ±(TE_m + TE_a) (seed 003 Eq. 2, 15, 16), in µm.
+    """Positioning thermal error TE(P_x) = ±TE_m + TE_a (seed 003 Eq. 2, 15, 16), in µm;
+    TE_a (:func:`ambient_error_um`) is already in axis coordinates.
 
     With a 1-D ``rise_K`` (one field) the error at every position; with a 2-D ``rise_K``
     holding one field per sample, the error of sample k at ``position_mm[k]``.
@@ -281,8 +292,8 @@ def thermal_error_um(params, rise_K, position_mm, ambient_delta_K=0.0):
     screw_m = screw_coordinate_m(position_mm, params.fixed_end_mm)
     rise_K = np.asarray(rise_K, dtype=float)
     elongation = (screw_elongation_um if rise_K.ndim == 1 else sample_elongation_um)
-    return sign * (elongation(params, rise_K, screw_m)
-                   + ambient_error_um(params, position_mm, ambient_delta_K))
+    return (sign * elongation(params, rise_K, screw_m)
+            + ambient_error_um(params, position_mm, ambient_delta_K))
 
 
 @dataclass(frozen=True)

@@ -53,13 +53,17 @@ def _diagnosis_html(diagnosis):
              f"<p>residual RMS {diagnosis.rms_um:.4g} µm; noise {diagnosis.noise_um:.3g} µm "
              f"({html.escape(diagnosis.noise_source)})</p>"]
     if diagnosis.candidates:
-        parts.append(_table(("missing effect", "RMS after (µm)", "ΔBIC", "meaning", "evidence"),
-                            [(c.effect, f"{c.rms_after_um:.4g}", f"{c.delta_bic:.1f}", c.meaning,
+        parts.append(_table(("missing effect", "RMS after (µm)", "p-value", "meaning", "evidence"),
+                            [(c.effect, f"{c.rms_after_um:.4g}", f"{c.test.p_value:.2g}", c.meaning,
                               c.evidence) for c in diagnosis.candidates]))
     if diagnosis.unexplained:
         parts.append(_table(("unexplained", "wavelength (mm)", "amplitude (µm)", "evidence"),
                             [(s.kind, "" if s.wavelength_mm is None else f"{s.wavelength_mm:.4g}",
                               f"{s.amplitude_um:.3g}", s.evidence) for s in diagnosis.unexplained]))
+    if diagnosis.outlier_rows:
+        parts.append(f"<p>outliers kept out of the fit, rows of positioning.csv: "
+                     f"{', '.join(map(str, diagnosis.outlier_rows))}</p>")
+    parts.append(f"<p>{html.escape(diagnosis.test_used)}</p>")
     if diagnosis.skipped:
         parts.append(_table(("passed over", "why"), diagnosis.skipped.items()))
     return "".join(parts)

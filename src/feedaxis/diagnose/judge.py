@@ -1,0 +1,249 @@
+"""The tests the diagnosis decides by: pure error, extra-sum-of-squares F, outliers, clock.
+
+- Repeat groups are samples at one target (:func:`~.spectrum.clusters`) and one approach
+  direction. Their within-group scatter is the *pure error*; when it has at least
+  ``MIN_PURE_DOF`` degrees of freedom a term is judged by the extra-sum-of-squares F test
+  against it (Draper & Smith, Applied Regression Analysis, 3rd ed., §2.1 and §6.1): the
+  sum of squares the term removes per parameter, over the pure-error mean square. A large
+  effect is then named however much unmodelled per-target shape is left. Without repeats
+  the denominator is the larger model's residual mean square (the partial F test).
+- ``FAMILY_ALPHA`` is the family-wise error rate of a whole diagnosis under the complete
+  null. It is split equally over its ``STAGES`` (drift, effects, structures, lack of fit);
+  at each selection step the best of the m terms tried is accepted when
+  p < FAMILY_ALPHA / STAGES / m (Bonferroni). Later steps only run once an earlier one has
+  passed, so they add nothing to the error under the complete null.
+- The clock is ``time_s`` (hours) when present, else run number plus the sample's place in
+  its run: a drift across the test is tested even without time stamps.
+- Outliers: each sample against the others of its group (leave-one-out mean, after a drift
+  along the clock is taken out), else against its four neighbours along the travel, scaled
+  by the median absolute deviation; flagged beyond the two-sided Gaussian quantile at
+  OUTLIER_ALPHA / n (Bonferroni over the samples). Repeated with the flagged samples left
+  out of the means, so a spike does not drag its neighbours over the limit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+from scipy.optimize import least_squares
+
+from .spectrum import clusters
+
+FAMILY_ALPHA = 0.001
+STAGES = 4
+OUTLIER_ALPHA = 0.001
+MIN_PURE_DOF = 10
+MAX_OUTLIER_PASSES = 5
+MAD_TO_SIGMA = 1.4826
+PURE_ERROR = "F test against the pure error of repeated samples"
+RESIDUAL_MEAN_SQUARE = "partial F test against the residual mean square (no repeats)"
+
+
+@dataclass(frozen=True)
+class Layout:
+    """How a case was sampled: repeat groups, the clock, the first data row."""
+
+    groups: np.ndarray
+    n_groups: int
+    clock: np.ndarray | None
+    clock_unit: str | None
+
+    @classmethod
+    def of(cls, positioning):
+        _, cluster = clusters(positioning.target_mm)
+        keys = cluster * 2 + (positioning.direction > 0)
+        _, groups = np.unique(keys, return_inverse=True)
+        clock, unit = test_clock(positioning)
+        return cls(groups.ravel(), int(groups.max()) + 1, clock, unit)
+
+    @property
+    def sizes(self):
+        return np.bincount(self.groups, minlength=self.n_groups)
+
+    @property
+    def pure_dof(self):
+        return int(self.groups.size - self.n_groups)
+
+    @property
+    def has_repeats(self):
+        return self.pure_dof >= MIN_PURE_DOF
+
+    def group_means(self, values):
+        """Mean of ``values`` in each sample's group, per sample."""
+        return (np.bincount(self.groups, values, self.n_groups) / self.sizes)[self.groups]
+
+    def pure_error_ss(self, residual_um):
+        """Sum of squares of the residual within the repeat groups (µm²)."""
+        within = residual_um - self.group_means(residual_um)
+        return float(within @ within)
+
+    def subset(self, keep):
+        """The layout of the samples ``keep`` (boolean mask), groups renumbered."""
+        _, groups = np.unique(self.groups[keep], return_inverse=True)
+        clock = None if self.clock is None else self.clock[keep]
+        return Layout(groups.ravel(), int(groups.max()) + 1, clock, self.clock_unit)
+
+    @property
+    def clock_varies_within_groups(self):
+        if self.clock is None or not self.has_repeats:
+            return False
+        return bool(np.ptp(self.clock - self.group_means(self.clock)) > 0)
+
+
+def test_clock(positioning):
+    """(clock per sample, unit): hours from ``time_s``, else run + place in the run."""
+    if positioning.time_s is not None and np.ptp(positioning.time_s) > 0:
+        return positioning.time_s / 3600.0, "h"
+    if positioning.run is None or np.ptp(positioning.run) == 0:
+        return None, None
+    run = positioning.run.astype(float)
+    clock = np.empty(run.size)
+    for value in np.unique(run):
+        members = np.flatnonzero(run == value)
+        clock[members] = value + np.arange(members.size) / members.size
+    return clock, "run"
+
+
+@dataclass(frozen=True)
+class Test:
+    """One F test: statistic, degrees of freedom, p-value and which denominator was used."""
+
+    statistic: float
+    dof: tuple
+    p_value: float
+    name: str
+    symbol: str = "F"
+
+    def to_json(self):
+        return {"test": self.name, "statistic": self.symbol, self.symbol: self.statistic,
+                "dof": list(self.dof), "p_value": self.p_value}
+
+    def describe(self):
+        p_value = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
+        if self.symbol == "F":
+            return f"F({self.dof[0]}, {self.dof[1]}) = {self.statistic:.3g}, {p_value}"
+        return f"{self.symbol} = {self.statistic:.3g} over {self.dof[1]} samples, {p_value}"
+
+
+def extra_ss_test(layout, residual_before_um, residual_after_um, extra, n_free_after):
+    """F test of ``extra`` parameters that took the residual from before to after.
+
+    With repeats the denominator is the pure error of the larger model, its degrees of
+    freedom reduced by that model's parameters (some may vary within a group); otherwise
+    the larger model's residual mean square.
+    """
+    rss_before = float(residual_before_um @ residual_before_um)
+    rss_after = float(residual_after_um @ residual_after_um)
+    extra = max(int(extra), 1)
+    if layout.has_repeats:
+        dof = max(layout.pure_dof - n_free_after, 1)
+        denominator, name = layout.pure_error_ss(residual_after_um) / dof, PURE_ERROR
+    else:
+        dof = max(residual_after_um.size - n_free_after, 1)
+        denominator, name = rss_after / dof, RESIDUAL_MEAN_SQUARE
+    statistic = max(rss_before - rss_after, 0.0) / extra / max(denominator, 1e-300)
+    return Test(float(statistic), (extra, dof), float(stats.f.sf(statistic, extra, dof)), name)
+
+
+def lack_of_fit_test(layout, residual_um, n_between, n_within):
+    """Lack-of-fit F test: the group means of the residual against the pure error, with
+    ``n_between`` parameters fitted to the group means and ``n_within`` (a drift) within."""
+    means = layout.group_means(residual_um)
+    lof_dof = max(layout.n_groups - n_between, 1)
+    pure_dof = max(layout.pure_dof - n_within, 1)
+    statistic = (float(means @ means) / lof_dof) / max(layout.pure_error_ss(residual_um) / pure_dof,
+                                                       1e-300)
+    return Test(statistic, (lof_dof, pure_dof), float(stats.f.sf(statistic, lof_dof, pure_dof)),
+                "lack-of-fit F test against the pure error")
+
+
+def serial_correlation_test(position_mm, residual_um):
+    """Von Neumann ratio test along the travel (no repeats): smooth structure left in the
+    residual makes successive differences small against its variance.
+
+    The ratio η = Σ(Δr)² / Σ(r - r̄)² is 2 for white noise with variance 4/n asymptotically
+    (von Neumann 1941, Ann. Math. Stat. 12:367); reported as a z statistic.
+    """
+    residual = residual_um[np.argsort(position_mm, kind="stable")]
+    centred = residual - residual.mean()
+    ratio = float(np.sum(np.diff(residual) ** 2) / max(centred @ centred, 1e-300))
+    z = (2.0 - ratio) / (2.0 / np.sqrt(residual.size))
+    return Test(float(z), (1, residual.size), float(stats.norm.sf(z)),
+                "von Neumann ratio test along the travel (no repeats)", "z")
+
+
+def accepts(p_value, tried, alpha=FAMILY_ALPHA):
+    """Bonferroni at one selection step of one stage: the best of ``tried`` terms passes."""
+    return p_value < alpha / STAGES / max(tried, 1)
+
+
+def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
+    """Indices (0-based) of isolated samples far outside the scatter of their neighbours."""
+    n = residual_um.size
+    flagged = np.zeros(n, dtype=bool)
+    if n < 8:
+        return np.flatnonzero(flagged)
+    limit = stats.norm.isf(alpha / (2 * n))
+    for _ in range(MAX_OUTLIER_PASSES):
+        if layout.has_repeats:
+            deviation = _against_group(layout, residual_um, ~flagged)
+        else:
+            deviation = _against_neighbours(position_mm, residual_um, ~flagged)
+        scale = MAD_TO_SIGMA * np.nanmedian(np.abs(deviation[~flagged]))
+        with np.errstate(invalid="ignore"):
+            now = np.abs(deviation) > limit * scale if scale > 0 else flagged
+        if np.array_equal(now, flagged):
+            break
+        flagged = now
+    return np.flatnonzero(flagged)
+
+
+def _against_group(layout, residual_um, valid):
+    """Deviation of each sample from the mean of the other valid samples of its group,
+    drift removed, over its standard deviation in noise units (√(1 + 1/(m - 1))); NaN
+    where the group has no other valid sample."""
+    residual_um = residual_um - _robust_drift(layout, residual_um)
+    weights = valid.astype(float)
+    sizes = np.bincount(layout.groups, weights, layout.n_groups)[layout.groups]
+    totals = np.bincount(layout.groups, residual_um * weights, layout.n_groups)[layout.groups]
+    others = sizes - weights
+    single = others < 1
+    others = np.where(single, 1.0, others)
+    deviation = np.where(single, np.nan, residual_um - (totals - residual_um * weights) / others)
+    return deviation / np.sqrt(1.0 + 1.0 / others)
+
+
+def _robust_drift(layout, residual_um):
+    """A quadratic drift along the clock, fitted within the groups with a soft-L1 loss."""
+    if not layout.clock_varies_within_groups:
+        return np.zeros_like(residual_um)
+    basis = drift_basis(layout.clock)
+    within = basis - np.column_stack([layout.group_means(c) for c in basis.T])
+    target = residual_um - layout.group_means(residual_um)
+    scale = MAD_TO_SIGMA * np.median(np.abs(target)) or 1.0
+    solution = least_squares(lambda c: within @ c - target, np.zeros(basis.shape[1]),
+                             loss="soft_l1", f_scale=scale)
+    return within @ solution.x
+
+
+def _against_neighbours(position_mm, residual_um, valid):
+    """Deviation from the mean of the two valid neighbours on each side along the travel,
+    over its standard deviation in noise units (√(1 + 1/4))."""
+    order = np.argsort(position_mm, kind="stable")
+    kept = order[valid[order]]
+    padded = np.pad(residual_um[kept], 2, mode="reflect")
+    neighbours = (padded[:-4] + padded[1:-3] + padded[3:-1] + padded[4:]) / 4.0
+    # every sample (valid or not) against the neighbours of the nearest valid sample
+    nearest = np.clip(np.searchsorted(position_mm[kept], position_mm[order]), 0, kept.size - 1)
+    deviation = np.empty_like(residual_um)
+    deviation[order] = residual_um[order] - neighbours[nearest]
+    deviation[kept] = residual_um[kept] - neighbours
+    return deviation / np.sqrt(1.25)
+
+
+def drift_basis(clock):
+    """Linear and quadratic drift along the clock (columns centred and scaled to ±1)."""
+    span = np.ptp(clock) or 1.0
+    scaled = 2.0 * (clock - clock.min()) / span - 1.0
+    return np.column_stack((scaled, scaled**2 - np.mean(scaled**2)))
