@@ -1,4 +1,5 @@
 """The four FMUs as products: valid, faithful to the physics, robust, restorable."""
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -146,3 +147,30 @@ def test_zero_communication_step_is_refused(loaded_fmus, capsys):
         run_fmu(loaded_fmus["StepperError"], 0.0, 2, {"position_mm": [0.0, 0.1]}, {}, ("error_um",))
     assert failure.value.status == ERROR
     assert "communication step size must be finite and > 0" in capsys.readouterr().out
+
+
+def test_without_a_compiler_the_fmus_still_run_in_python_hosts(tmp_path, monkeypatch,
+                                                                loaded_fmus):
+    """A bare pip machine (no cc, no Python headers): pythonfmu's own library, a warning,
+    and the same results in fmpy as the FMU with the host layer; under CI it is an error."""
+    from feedaxis import fmu_build
+
+    monkeypatch.setattr(fmu_build, "host_layer_missing", lambda: "no C compiler (test)")
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(fmu_build.HostLayerUnavailable, match="CI requires"):
+        fmu_build.build_fmu("StepperError", tmp_path / "ci")
+    monkeypatch.delenv("CI")
+    with pytest.warns(UserWarning, match="Python hosts only"):
+        path = fmu_build.build_fmu("StepperError", tmp_path)
+    with zipfile.ZipFile(path) as archive:
+        assert "binaries/linux64/libpythonfmu-export.so" not in archive.namelist()
+    from feedaxis.cosim.fmu_runner import LoadedFmu
+
+    python_only = LoadedFmu(path)
+    try:
+        expected = run_scripted(loaded_fmus["StepperError"], "StepperError")
+        got = run_scripted(python_only, "StepperError")
+        for output in OUTPUTS["StepperError"]:
+            np.testing.assert_array_equal(got[output], expected[output])
+    finally:
+        python_only.close()

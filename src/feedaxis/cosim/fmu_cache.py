@@ -4,7 +4,8 @@ Building takes seconds per FMU (pythonfmu), so ``feedaxis simulate`` and ``expor
 reuse ``<cache>/feedaxis/fmus-<version>-<hash>/``, where the hash covers every file that
 goes into an FMU (the slave scripts, the adapter, the host layer, the physics package, the
 build script):
-a changed source builds a new folder, never a stale FMU. The folder is built in a staging
+a changed source builds a new folder, never a stale FMU. FMUs built without the C host
+layer (no compiler here) go to a folder of their own, so installing a compiler rebuilds. The folder is built in a staging
 folder and renamed into place, so a crash or Ctrl-C never leaves half a cache.
 """
 from __future__ import annotations
@@ -16,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 from .. import __version__
-from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources
+from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
 
 
 def source_hash():
@@ -39,7 +40,8 @@ def cache_root():
 
 def cached_fmus(root=None):
     """{FMU name: path} of the four FMUs, built into the cache on first use."""
-    folder = Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}"
+    python_only = "-python-hosts" if host_layer_missing() else ""
+    folder = Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{python_only}"
     if not all((folder / f"{name}.fmu").exists() for name in FMU_NAMES):
         folder.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
