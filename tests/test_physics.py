@@ -125,3 +125,25 @@ def test_averaged_nut_heat_is_the_exact_path_mean():
     np.testing.assert_allclose(thermal.averaged_nut_cells(params, 0.141, 0.641), mean, atol=1e-6)
     assert thermal.averaged_nut_cells(params, 0.641, 0.141).sum() * params.cell_length_m \
         == pytest.approx(params.nut_length_m)
+
+
+@pytest.mark.parametrize("settings", [{}, {"damping_N_s_per_mm": 0.3, "delay_s": 0.00125},
+                                      {"friction_N": 1.0}, {"nonlinear": True}])
+def test_servo_over_a_communication_step_equals_the_loop_stepped(settings):
+    """A linear loop (PID, no Coulomb friction) advances by one propagator matrix per
+    communication step; it equals the kernel stepped 0.1 ms at a time, with the delay line,
+    a force, irregular intervals and a remainder carried. Nonlinear loops keep stepping."""
+    params = servo.ServoParams(**settings)
+    fast, stepped = servo.Servo(params, 1.0), servo.Servo(params, 1.0)
+    stepped._propagators = None
+    assert (fast._propagators is not None) == (not settings.get("nonlinear")
+                                               and not settings.get("friction_N"))
+    rng = np.random.default_rng(7)
+    time_s = np.cumsum(rng.choice([1e-3, 1e-3, 2.5e-3, 0.4e-3], size=2000))
+    reference_mm = 10.0 * np.sin(2 * np.pi * 0.7 * time_s)
+    force_N = 50.0 * np.sin(2 * np.pi * 40.0 * time_s)
+    duration_s = np.diff(time_s, prepend=0.0)
+    for dt, ref, force in zip(duration_s, reference_mm, force_N):
+        assert fast.advance(dt, ref, force) == pytest.approx(stepped.advance(dt, ref, force),
+                                                            abs=1e-11)
+    assert fast.velocity_mm_s == pytest.approx(stepped.velocity_mm_s, abs=1e-8)

@@ -44,6 +44,8 @@ def require_positive(name, value):
 
 def require_non_negative(name, value):
     """Raise :class:`ParameterError` naming ``name`` unless ``value`` is finite and >= 0."""
+    if type(value) is float and 0.0 <= value < math.inf:  # the common case, without NumPy
+        return
     require_finite(name, value)
     if not np.all(np.asarray(value, dtype=float) >= 0):
         raise ParameterError(f"must be >= 0, got {value!r}", name)

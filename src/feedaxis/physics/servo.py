@@ -17,7 +17,9 @@ friction of the guideways and the nut, a Coulomb force ``friction_N`` opposing t
 
 One kernel, :func:`run_loop`, advances the loop for the FMU (:class:`Servo`, plain Python)
 and for the fit (:func:`simulate`, the same function compiled by numba): the two agree to
-rounding.
+rounding. A PID loop without Coulomb friction is linear, so :class:`Servo` advances it over
+a whole communication step with one matrix (:func:`loop_propagator`, built by running the
+kernel on unit vectors): the FMU's cost no longer grows with the steps in the interval.
 """
 from __future__ import annotations
 
@@ -184,6 +186,30 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
         x1, x2, integral, previous, start_mm, float(head))
 
 
+def is_linear(coefficients):
+    """Whether :func:`run_loop` is linear in its state and inputs: PID, no Coulomb friction."""
+    return coefficients[13] == 0.0 and coefficients[14] == 0.0
+
+
+def loop_propagator(coefficients, n_steps, buffer_size):
+    """P with z' = P·(z, reference_mm, force_V) for ``n_steps`` of a linear loop.
+
+    z = (position_mm, velocity_mm_s, integral_V, previous_error_mm, reference start_mm,
+    the delay line read from its head). Column j is :func:`run_loop` applied to the j-th
+    unit vector, so the propagator is the kernel itself, composed over the interval.
+    """
+    size = 5 + buffer_size
+    columns = []
+    for j in range(size + 2):
+        unit = [0.0] * (size + 2)
+        unit[j] = 1.0
+        state, buffer = unit[:5] + [0.0], unit[5:size]
+        run_loop(coefficients, [n_steps], [unit[size]], [unit[size + 1]], state, buffer, [0.0])
+        head = int(state[5])
+        columns.append(state[:5] + buffer[head:] + buffer[:head])
+    return np.array(columns).T
+
+
 @lru_cache(maxsize=1)
 def compiled_loop():
     """:func:`run_loop` compiled by numba (cached on disk): the same code object, its call
@@ -249,6 +275,7 @@ class Servo:
                        0.0]
         self._buffer = [0.0] * params.buffer_size
         self.pending_s = 0.0
+        self._propagators = {} if is_linear(self._coefficients) else None
 
     @property
     def position_mm(self):
@@ -288,7 +315,22 @@ class Servo:
         require_finite("reference_mm", reference_mm)
         require_finite("disturbance_N", disturbance_N)
         n_steps, self.pending_s = whole_steps(self.pending_s, duration_s, self.params.time_step_s)
-        run_loop(self._coefficients, [n_steps], [float(reference_mm)],
-                 [disturbance_N / self.params.force_constant_N_per_V], self._state,
-                 self._buffer, [0.0])
+        force_V = disturbance_N / self.params.force_constant_N_per_V
+        if self._propagators is None or n_steps == 0:
+            run_loop(self._coefficients, [n_steps], [float(reference_mm)], [force_V],
+                     self._state, self._buffer, [0.0])
+        else:
+            self._propagate(n_steps, float(reference_mm), force_V)
         return self.position_mm
+
+    def _propagate(self, n_steps, reference_mm, force_V):
+        """The linear loop over ``n_steps`` in one matrix product (delay line re-headed)."""
+        if n_steps not in self._propagators:
+            self._propagators[n_steps] = loop_propagator(self._coefficients, n_steps,
+                                                         len(self._buffer))
+        head = int(self._state[5])
+        values = (self._propagators[n_steps] @ (self._state[:5] + self._buffer[head:]
+                                                 + self._buffer[:head] + [reference_mm, force_V])
+                  ).tolist()
+        self._state = values[:5] + [0.0]
+        self._buffer = values[5:]
