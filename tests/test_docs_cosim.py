@@ -1,4 +1,4 @@
-"""The README's "One axis" section: the system table is current and every snippet runs."""
+"""docs/cosim.md and docs/fmus.md: the system table is current and every FMU snippet runs."""
 import re
 import shutil
 from pathlib import Path
@@ -10,13 +10,15 @@ from feedaxis.cli import main
 from feedaxis.cosim.fmu_cache import source_hash
 from feedaxis.cosim.system import default_axis, markdown_tables
 
-README = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
-SNIPPETS = dict(re.findall(r"<!-- snippet: ([\w-]+) -->\n```python\n(.*?)```", README, re.S))
+DOCS = Path(__file__).resolve().parent.parent / "docs"
+COSIM = (DOCS / "cosim.md").read_text(encoding="utf-8")
+SNIPPETS = dict(re.findall(r"<!-- snippet: ([\w-]+) -->\n```python\n(.*?)```",
+                           COSIM + (DOCS / "fmus.md").read_text(encoding="utf-8"), re.S))
 
 
-def test_readme_system_table_is_generated_from_the_system_description():
+def test_docs_system_table_is_generated_from_the_system_description():
     table = re.search(r"<!-- system table:[^\n]*-->\n(.*?)\n<!-- end of system table -->",
-                      README, re.S).group(1)
+                      COSIM, re.S).group(1)
     assert table == markdown_tables(default_axis()), \
         "regenerate it with: python -m feedaxis.cosim.system"
 
@@ -32,12 +34,14 @@ def user_folder(fmu_paths, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["export-ssp", "axis.ssp"]) == 0
     assert main(["export-fmu", "axis.fmu"]) == 0
+    shutil.copytree(cache, tmp_path / "build" / "fmus")   # docs/fmus.md: build/fmus/<Name>.fmu
     return tmp_path
 
 
-@pytest.mark.parametrize("name", ["master", "fmpy-ssp", "libcosim-ssp", "container"])
-def test_readme_snippet_runs(user_folder, capsys, name):
+@pytest.mark.parametrize("name", ["master", "fmpy-ssp", "libcosim-ssp", "container",
+                                  "fmpy-servo"])
+def test_docs_snippet_runs(user_folder, capsys, name):
     capsys.readouterr()
-    exec(compile(SNIPPETS[name], f"README snippet {name}", "exec"), {})
+    exec(compile(SNIPPETS[name], f"docs snippet {name}", "exec"), {})
     printed = capsys.readouterr().out
     assert re.search(r"\d", printed), printed
