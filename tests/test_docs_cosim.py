@@ -5,9 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from feedaxis import __version__
 from feedaxis.cli import main
-from feedaxis.cosim.fmu_cache import source_hash
 from feedaxis.cosim.system import default_axis, markdown_tables
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
@@ -24,22 +22,17 @@ def test_docs_system_table_is_generated_from_the_system_description():
 
 
 @pytest.fixture
-def user_folder(fmu_paths, tmp_path, monkeypatch):
-    """A working folder with axis.ssp and axis.fmu, and a user cache holding the FMUs."""
-    cache = tmp_path / "cache" / "feedaxis" / f"fmus-{__version__}-{source_hash()}"
-    cache.mkdir(parents=True)
-    for path in fmu_paths.values():
-        shutil.copy2(path, cache / path.name)
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+def user_folder(user_fmu_cache, tmp_path, monkeypatch):
+    """A working folder with axis.ssp, axis.fmu and build/fmus/, and a user cache holding
+    the FMUs."""
     monkeypatch.chdir(tmp_path)
     assert main(["export-ssp", "axis.ssp"]) == 0
     assert main(["export-fmu", "axis.fmu"]) == 0
-    shutil.copytree(cache, tmp_path / "build" / "fmus")   # docs/fmus.md: build/fmus/<Name>.fmu
+    shutil.copytree(user_fmu_cache, tmp_path / "build" / "fmus")   # docs/fmus.md: build/fmus/<Name>.fmu
     return tmp_path
 
 
-@pytest.mark.parametrize("name", ["master", "fmpy-ssp", "libcosim-ssp", "container",
-                                  "fmpy-servo"])
+@pytest.mark.parametrize("name", ["fmpy-ssp", "container", "fmpy-servo"])
 def test_docs_snippet_runs(user_folder, capsys, name):
     capsys.readouterr()
     exec(compile(SNIPPETS[name], f"docs snippet {name}", "exec"), {})
