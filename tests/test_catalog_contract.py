@@ -3,19 +3,26 @@
 1. ``linear`` columns reproduce ``prepare``: the fit's variable projection splits the error
    into ``base_um + columns_um @ linear values``; that split must give what ``prepare``
    gives, for every positioning effect, at values drawn inside the bounds.
-2. Every FMU parameter an effect writes (and every neutral value of the model's FMU map)
+2. One map of FMU names (``feedaxis.fmu_map``) used both ways: axis.toml -> FMU -> axis.toml
+   gives the axis back, and effects/ imports without a cycle.
+3. Every FMU parameter an effect writes (and every neutral value of the model's FMU map)
    exists in the built FMU, and each effect parameter reaches its FMU variable as the same
    physical quantity: the units, converted to SI by the FMU's own ``BaseUnit`` on one side
    and by :func:`si` on the other, agree in dimension, and a change of the effect parameter
    changes the FMU variable by the same amount in SI.
 """
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from fmpy import read_model_description
 
+from feedaxis.case import Axis
+from feedaxis.cosim.scenarios import axis_table
 from feedaxis.effects import CATALOG, Model
+from feedaxis.fmu_map import AXIS_KEYS, servo_from_fmu, servo_to_fmu
 from synthetic import ISO_AXIS, LONG_AXIS, MICRO_AXIS, in_memory_case, iso_layout, thermal_case
 
 # SI dimension exponents (kg, m, s, A, K) and factor of each unit name the catalog uses
@@ -176,3 +183,38 @@ def test_neutral_fmu_values_exist_in_the_fmus(fmu_variables, tmp_path):
         for fmu, parameters in Model().fmu_parameters(axis).items():
             missing = set(parameters) - set(fmu_variables[fmu])
             assert not missing, f"{fmu} lacks {sorted(missing)}"
+
+
+FULL_AXIS = Axis("full", {"lead_mm": 5.0, "length_m": 0.8, "diameter_m": 0.025,
+                          "density_kg_m3": 7850.0, "youngs_modulus_Pa": 2.1e11,
+                          "support": "fixed-free", "fixed_end_mm": -120.0,
+                          "specific_heat_J_kgK": 460.0, "expansion_per_K": 11.7e-6,
+                          "nut_length_m": 0.06, "bearing_length_m": 0.03},
+                 {"step_angle_deg": 1.8, "error_period_steps": 4},
+                 {"controller": "npid", "kp_V_per_mm": 0.9, "ki_V_per_mm_s": 6e-4,
+                  "kd_V_s_per_mm": 0.0, "ko_per_mm": 6.0, "e_max_mm": 0.3,
+                  "force_constant_N_per_V": 100.0, "loop_step_s": 1e-4})
+
+
+def test_the_fmu_map_gives_the_axis_back():
+    """axis.toml -> FMU parameters (the model's direction) -> axis.toml (the scenarios')."""
+    parameters = Model().fmu_parameters(FULL_AXIS)
+    tables = {table: axis_table(table, lambda fmu, keys: {k: parameters[fmu][k] for k in keys})
+              for table in AXIS_KEYS}
+    assert tables == {"screw": FULL_AXIS.screw, "motor": FULL_AXIS.motor}
+    assert servo_from_fmu(servo_to_fmu(FULL_AXIS.servo)) == FULL_AXIS.servo
+
+
+def test_the_fmu_map_refuses_two_screws():
+    parameters = Model().fmu_parameters(FULL_AXIS)
+    parameters["StepperError"]["lead_mm"] = 4.0
+    with pytest.raises(Exception, match="GeometricError and StepperError disagree on lead_mm"):
+        axis_table("screw", lambda fmu, keys: {k: parameters[fmu][k] for k in keys})
+
+
+@pytest.mark.parametrize("module", ["feedaxis.effects.base", "feedaxis.effects.catalog",
+                                    "feedaxis.fmu_map", "feedaxis.tracking.model"])
+def test_modules_import_first_without_a_cycle(module):
+    done = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr
