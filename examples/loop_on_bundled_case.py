@@ -10,10 +10,10 @@ from feedaxis.examples import BUNDLED_CASE
 from feedaxis.fit import fit
 
 case = read_case(BUNDLED_CASE)
-model, rounds = improve(case, Model())          # prints one block per round
+model, rounds, diagnosis = improve(case, Model())   # prints one block per round
 result = fit(model, case)
 for effect, values in result.params().items():
     for name, value in values.items():
         sigma = result.uncertainties[effect][name]
         print(f"{effect + '.' + name:44s} {value:+.4f} +/- {sigma:.4f}")
-print(f"{len(rounds)} rounds, verdict {rounds[-1]['verdict']}, RMS {result.rms_um:.4f} um")
+print(f"{len(rounds)} rounds, verdict {diagnosis.verdict}, RMS {result.rms_um:.4f} um")

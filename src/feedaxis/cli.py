@@ -122,13 +122,17 @@ def _cmd_compare(args):
 
 
 def _cmd_report(args):
+    from .analysis import analyse
     from .report import write_report
     from .tracking import report as tracking
 
     effects, case, model, is_tracking = _case_and_model(args)
     out = Path(args.out or f"{Path(args.case).resolve().name}-report.html")
     check_writable_target(out)
-    (tracking.write_report if is_tracking else write_report)(case, model, effects, out)
+    if is_tracking:
+        tracking.write_report(case, model, effects, out)
+    else:
+        write_report(analyse(case, model, effects), out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
 

@@ -5,13 +5,6 @@ import base64
 import html
 from pathlib import Path
 
-import numpy as np
-
-from ..compensate import THERMAL_EFFECTS, compensate
-from ..diagnose import diagnose, residual_spectrum
-from ..effects import Model
-from ..fit import evaluate, fit
-from ..iso230 import compare
 from ..output import write_atomically
 from . import plots
 from .compensation_table import compensation_table_html
@@ -20,15 +13,6 @@ STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#2
 table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;
 text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
 img{max-width:100%}.verdict{font-size:1.2em;font-weight:bold}"""
-
-
-def error_ladder(case, model):
-    """[(label, residual RMS µm)]: nothing, then each effect of ``model`` added in turn, refitted."""
-    steps = [("measured", evaluate(Model(), case).rms_um)]
-    for count in range(1, len(model.effects) + 1):
-        partial = Model(model.effects[:count])
-        steps.append((f"+ {model.effects[count - 1].name}", fit(partial, case).rms_um))
-    return steps
 
 
 def _image(png, alt):
@@ -78,13 +62,6 @@ def _comparison_html(comparison):
     return _table(("ISO 230-2 figure", "measured (µm)", "residual (µm)", "explained"), rows)
 
 
-def _detrended_spectrum(case, measured_um, effects):
-    position_mm = case.positioning.target_mm
-    trend_um = np.polyval(np.polyfit(position_mm, measured_um, 1), position_mm)
-    spectrum = residual_spectrum(case, measured_um - trend_um, effects)
-    return spectrum.wavelength_mm, spectrum.amplitude_um
-
-
 def _residual_panels(case, residual_um):
     positioning = case.positioning
     panels = []
@@ -97,11 +74,10 @@ def _residual_panels(case, residual_um):
     return panels
 
 
-def _compensation_html(case, model):
+def _compensation_html(result):
     """Seed 003 Fig. 13 and the before/after figures, for a thermal model on a thermal case."""
-    if not (case.is_thermal and any(name in model for name in THERMAL_EFFECTS)):
+    if result is None:
         return []
-    result = compensate(case, model)
     summary = result.summary()
     return [
         "<h2>Thermal compensation (seed 003 Fig. 13)</h2>",
@@ -120,12 +96,12 @@ def _compensation_html(case, model):
     ]
 
 
-def write_report(case, model, effects, out_path):
-    """Write the report of ``model`` (as fitted) on ``case`` to ``out_path``; returns the path."""
-    result = evaluate(model, case)
-    diagnosis = diagnose(case, model, effects)
+def write_report(analysis, out_path):
+    """Write the page of an :class:`~feedaxis.analysis.Analysis` to ``out_path``; returns
+    the path. Only formats: every number comes from ``analysis``."""
+    case, model = analysis.case, analysis.model
+    result, diagnosis, steps = analysis.result, analysis.diagnosis, analysis.ladder
     positioning = case.positioning
-    steps = error_ladder(case, model)
     sections = [
         f"<h1>feedaxis report: {html.escape(case.name)}</h1>",
         f"<p>case <code>{html.escape(str(case.folder))}</code>, {positioning.size} samples; "
@@ -141,22 +117,22 @@ def write_report(case, model, effects, out_path):
         _image(plots.residual_vs_position(positioning.target_mm, result.residual_um,
                                           diagnosis.spectrum.marks), "residual against position"),
         _image(plots.spectrum((diagnosis.spectrum.wavelength_mm, diagnosis.spectrum.amplitude_um),
-                              _detrended_spectrum(case, result.measured_um, effects),
+                              analysis.measured_spectrum,
                               diagnosis.spectrum.marks, diagnosis.unexplained), "spectrum"),
     ]
     panels = _residual_panels(case, result.residual_um)
     if panels:
         sections.append(_image(plots.residual_against(panels), "residual against time, "
                                                                "direction, ambient"))
-    sections += _compensation_html(case, model)
-    sections += compensation_table_html(case, model, _image, _table)
+    sections += _compensation_html(analysis.compensation)
+    sections += compensation_table_html(analysis, _image, _table)
     sections += [
         "<h2>Each effect's contribution</h2>",
-        _image(plots.contributions(positioning.target_mm, model.components(case)),
+        _image(plots.contributions(positioning.target_mm, analysis.components),
                "contributions") if model.effects else "<p>(empty model)</p>",
         "<h2>Error ladder</h2>", _image(plots.ladder(steps, diagnosis.noise_um), "error ladder"),
         _table(("step", "residual RMS (µm)"), [(label, f"{v:.4g}") for label, v in steps]),
-        "<h2>ISO 230-2 figures</h2>", _comparison_html(compare(case, model)),
+        "<h2>ISO 230-2 figures</h2>", _comparison_html(analysis.comparison),
         "<h2>Model parameters</h2>",
         _table(("parameter", "value", "unit", "meaning"), _parameter_rows(model)),
     ]
