@@ -218,3 +218,4 @@ def test_modules_import_first_without_a_cycle(module):
     done = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True,
                           text=True)
     assert done.returncode == 0, done.stderr
+
