@@ -63,7 +63,7 @@ def _json_text(payload):
 
 
 def _emit(args, payload, lines):
-    print(_json_text(payload) if args.json else lines)
+    print(_json_text(payload) if _wants_json(args) else lines)
 
 
 def _cmd_fit(args):
@@ -195,8 +195,8 @@ def _cmd_demo(args):
     from . import demo
 
     check_writable_target(args.out, "folder")
-    summary = demo.run_demo(args.out, echo=(lambda line: None) if args.json else print)
-    if args.json:
+    summary = demo.run_demo(args.out, echo=(lambda line: None) if _wants_json(args) else print)
+    if _wants_json(args):
         print(_json_text(summary))
 
 
@@ -611,9 +611,7 @@ def build_parser():
     for scenario in scenarios.choices.values():
         scenario.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
         _add_axis_options(scenario)
-        scenario.add_argument("--json", action="store_true", help="print machine-readable JSON")
-        scenario.add_argument("--debug", action="store_true",
-                              help="on an internal error, show the Python traceback")
+        _add_common_options(scenario)
 
     sub = commands.add_parser(
         "export-ssp", help="the axis as an SSP file for other FMI system simulators",
@@ -642,11 +640,22 @@ def build_parser():
     sub.set_defaults(handler=_cmd_export_fmu)
 
     for sub in commands.choices.values():
-        sub.add_argument("--json", action="store_true",
-                         help="print strict JSON on stdout (errors too: error, file, row, column)")
-        sub.add_argument("--debug", action="store_true",
-                         help="on an internal error, show the Python traceback")
+        _add_common_options(sub)
     return parser
+
+
+def _add_common_options(parser):
+    """--json and --debug, the one definition for every command and scenario. Left unset
+    by default, so ``simulate --json iso230 OUT`` and ``simulate iso230 OUT --json`` agree
+    (a subcommand's default would overwrite the option given before it)."""
+    parser.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                        help="print strict JSON on stdout (errors too: error, file, row, column)")
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                        help="on an internal error, show the Python traceback")
+
+
+def _wants_json(args):
+    return getattr(args, "json", False)
 
 
 def main(argv=None):
