@@ -11,13 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compensate import THERMAL_EFFECTS, Compensation, compensate
+from .compensate import THERMAL_EFFECTS, Compensation, compensate, visits
 from .comptable import default_spacing_mm, from_model, grid_mm, verify
 from .comptable.table import CompTable
 from .diagnose import Diagnosis, diagnose, residual_spectrum
 from .effects import CATALOG, Model
 from .fit import FitResult, evaluate, fit
-from .iso230 import compare
+from .iso230 import compare, per_target
 
 
 @dataclass
@@ -29,7 +29,9 @@ class Analysis:
     ``comp_table`` (the table from the model) and ``comp_check`` (its expected ISO 230-2
     figures) are None when no effect of the model goes into a table. ``components`` is
     {effect: error_um} per sample; ``measured_spectrum`` (wavelength_mm, amplitude_um) of
-    the measurement less its straight line.
+    the measurement less its straight line; ``iso_deviation`` {"+"/"-": (target_mm, mean_um,
+    std_um)} of the measurement per approach direction (ISO 230-2); ``run_of_sample`` the
+    visit number of each sample at its target (its run) in a time-dependent case, else None.
     """
 
     case: object
@@ -45,6 +47,8 @@ class Analysis:
     comp_spacing_mm: float
     components: dict
     measured_spectrum: tuple
+    iso_deviation: dict
+    run_of_sample: object
 
 
 def error_ladder(case, model):
@@ -94,4 +98,15 @@ def analyse(case, model, effects=None, diagnosis=None, ladder=None):
         compare(case, model), compensate(case, model) if thermal else None,
         table if table.included else None, verify(case, table) if table.included else None,
         spacing_mm, model.components(case),
-        detrended_spectrum(case, result.measured_um, effects))
+        detrended_spectrum(case, result.measured_um, effects), iso_deviation(case.positioning),
+        visits(case.positioning)[0] if case.positioning.time_s is not None else None)
+
+
+def iso_deviation(positioning):
+    """{"+"/"-": (target_mm, mean_um, std_um)} of the measured runs, each direction present."""
+    found = {}
+    for sign, label in ((1.0, "+"), (-1.0, "-")):
+        if (positioning.direction == sign).any():
+            found[label] = per_target(positioning.target_mm, positioning.error_um,
+                                      positioning.direction, sign)[:3]
+    return found

@@ -3,7 +3,11 @@ from __future__ import annotations
 
 import base64
 import html
+import re
+from datetime import datetime, timezone
 from pathlib import Path
+
+from .. import __version__
 
 from ..output import write_atomically
 from . import plots
@@ -27,9 +31,29 @@ def _table(header, rows):
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def _parameter_rows(model):
-    return [(f"{e.name}.{p.name}", f"{model.values[e.name][p.name]:.6g}", p.unit, p.meaning)
-            for e in model.effects for p in e.parameters]
+def micro(unit):
+    """A unit as the page writes it: µm, not um."""
+    return re.sub(r"\bum\b", "µm", unit)
+
+
+def _parameter_rows(model, uncertainties, undetermined):
+    """(parameter, value, standard uncertainty, unit, meaning) per fitted parameter."""
+    rows = []
+    for e in model.effects:
+        for p in e.parameters:
+            sigma = uncertainties.get(e.name, {}).get(p.name)
+            note = undetermined.get(f"{e.name}.{p.name}", "")
+            rows.append((f"{e.name}.{p.name}", f"{model.values[e.name][p.name]:.6g}",
+                         note or ("" if sigma is None else f"{sigma:.2g}"), micro(p.unit),
+                         p.meaning))
+    return rows
+
+
+def _parameter_table(model, refit):
+    """The model's parameters with the standard uncertainties of ``refit`` (its refit on
+    the case: the diagnosis's base)."""
+    return _table(("parameter", "value", "standard uncertainty", "unit", "meaning"),
+                  _parameter_rows(model, refit.uncertainties, refit.undetermined))
 
 
 def _diagnosis_html(diagnosis):
@@ -104,6 +128,7 @@ def write_report(analysis, out_path):
     positioning = case.positioning
     sections = [
         f"<h1>feedaxis report: {html.escape(case.name)}</h1>",
+        f"<p>{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, feedaxis {__version__}</p>",
         f"<p>case <code>{html.escape(str(case.folder))}</code>, {positioning.size} samples; "
         f"model: {html.escape(' + '.join(model.names) or '(empty)')}; residual RMS "
         f"{result.rms_um:.4g} µm of {result.statistics.rms_before_um:.4g} µm measured "
@@ -112,7 +137,8 @@ def write_report(analysis, out_path):
         "<h2>Measurement against model</h2>",
         _image(plots.measurement_vs_model(positioning.target_mm, result.measured_um,
                                           result.measured_um - result.residual_um,
-                                          positioning.direction), "measurement against model"),
+                                          positioning.direction, analysis.run_of_sample),
+               "measurement against model"),
         "<h2>Residual</h2>",
         _image(plots.residual_vs_position(positioning.target_mm, result.residual_um,
                                           diagnosis.spectrum.marks), "residual against position"),
@@ -132,9 +158,11 @@ def write_report(analysis, out_path):
                "contributions") if model.effects else "<p>(empty model)</p>",
         "<h2>Error ladder</h2>", _image(plots.ladder(steps, diagnosis.noise_um), "error ladder"),
         _table(("step", "residual RMS (µm)"), [(label, f"{v:.4g}") for label, v in steps]),
-        "<h2>ISO 230-2 figures</h2>", _comparison_html(analysis.comparison),
+        "<h2>ISO 230-2 figures</h2>",
+        _image(plots.iso230_deviation(analysis.iso_deviation), "ISO 230-2 deviation"),
+        _comparison_html(analysis.comparison),
         "<h2>Model parameters</h2>",
-        _table(("parameter", "value", "unit", "meaning"), _parameter_rows(model)),
+        _parameter_table(model, diagnosis.base),
     ]
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>feedaxis report: "
             f"{html.escape(case.name)}</title><style>{STYLE}</style></head><body>"
