@@ -303,7 +303,9 @@ def test_ctrl_c_is_reported_once(tmp_path, capsys, monkeypatch):
     def interrupted(args):
         raise ScenarioInterrupted("interrupted: 12 of 30 samples written to out")
 
-    monkeypatch.setattr(cli, "_cmd_effects", interrupted)
+    monkeypatch.setattr(cli, "COMMANDS", [(name, kwargs, options, interrupted if name == "effects"
+                                            else handler)
+                                           for name, kwargs, options, handler in cli.COMMANDS])
     code, _, err = run(capsys, "effects")
     assert code == 130 and err == "feedaxis: interrupted: 12 of 30 samples written to out\n"
 
