@@ -48,3 +48,23 @@ def test_the_report_computes_nothing(loop, tmp_path, monkeypatch):
         monkeypatch.setattr(module, name, refuse)
     page = write_report(analysis, tmp_path / "r.html").read_text(encoding="utf-8")
     assert "123.5" in page
+
+
+def test_a_thermal_case_is_drawn_run_by_run(tmp_path):
+    """In a time-dependent case each sample's run is its visit number at its target, so the
+    model lines of the report join only samples of one run."""
+    import numpy as np
+
+    from feedaxis.effects import CATALOG
+    from feedaxis.examples import write_table2_case
+
+    case = read_case(write_table2_case(tmp_path / "t", 9000.0))
+    from feedaxis.fit import fit
+
+    analysis = analyse(case, fit(Model([CATALOG["lead_error"]]), case).model)
+    runs, target_mm = analysis.run_of_sample, case.positioning.target_mm
+    for number in np.unique(runs):
+        chosen = runs == number
+        assert np.unique(target_mm[chosen]).size == chosen.sum()   # each target once a run
+    assert runs.max() >= 20                     # the 28 passes of the Table 2 test
+    assert analyse(read_case(BUNDLED_CASE), Model()).run_of_sample is None
