@@ -303,7 +303,9 @@ def test_ctrl_c_is_reported_once(tmp_path, capsys, monkeypatch):
     def interrupted(args):
         raise ScenarioInterrupted("interrupted: 12 of 30 samples written to out")
 
-    monkeypatch.setattr(cli, "_cmd_effects", interrupted)
+    monkeypatch.setattr(cli, "COMMANDS", [(name, kwargs, options, interrupted if name == "effects"
+                                            else handler)
+                                           for name, kwargs, options, handler in cli.COMMANDS])
     code, _, err = run(capsys, "effects")
     assert code == 130 and err == "feedaxis: interrupted: 12 of 30 samples written to out\n"
 
@@ -387,3 +389,12 @@ def test_set_is_checked_against_the_fmus_before_writing(tmp_path, capsys, fmu_pa
     assert_refused(capsys, [*command, tmp_path / out, "--set", setting, "--fmus", fmus],
                    *words)
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("argv", [["simulate", "--json", "iso230", "out"],
+                                  ["simulate", "iso230", "out", "--json"],
+                                  ["fit", "case", "--json"]])
+def test_json_is_one_option_wherever_it_stands(argv):
+    from feedaxis.cli import _wants_json, build_parser
+    assert _wants_json(build_parser().parse_args(argv))
+    assert not _wants_json(build_parser().parse_args([a for a in argv if a != "--json"]))

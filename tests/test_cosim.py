@@ -155,3 +155,15 @@ def test_markdown_tables_list_every_component_and_connection():
     for connection in system.connections:
         assert f"| `{connection.source}` | `{connection.target}` |" in tables
     assert "100 ms (every 100 macro steps)" in tables
+
+
+def test_the_master_loop_unpacks_its_plan_by_the_plan_entry_fields():
+    """The macro-step loop unpacks each PlanEntry by position (the fastest access); the
+    names it unpacks must be the fields, in order."""
+    import inspect
+    import re
+
+    from feedaxis.cosim.master import Master, PlanEntry
+
+    unpacked = re.search(r"for \(([^)]*)\) in plan:", inspect.getsource(Master._loop)).group(1)
+    assert tuple(n.strip() for n in unpacked.split(",")) == PlanEntry._fields

@@ -72,11 +72,38 @@ def test_report_is_one_self_contained_html_page(tmp_path, capsys):
     out = tmp_path / "r" / "report.html"
     assert main(["report", str(folder), "--model", str(model), "--out", str(out)]) == 0
     page = out.read_text()
-    assert page.count("data:image/png;base64,") == 7
+    assert page.count("data:image/png;base64,") == 8   # with the ISO 230-2 deviation plot
     for heading in ("Measurement against model", "Residual", "Each effect's contribution",
-                    "Error ladder", "ISO 230-2 figures", "verdict: adequate", "Compensation table"):
+                    "Error ladder", "ISO 230-2 figures", "verdict: adequate", "Compensation table",
+                    'alt="ISO 230-2 deviation"'):
         assert heading in page
     assert 'src="http' not in page
+
+
+def test_report_names_what_a_metrologist_signs(tmp_path):
+    """Date, version, case and model on the page; uncertainties in the parameter table,
+    which are the fit's own; µm, never um."""
+    import re
+
+    from feedaxis import __version__
+    from feedaxis.case import read_case
+    from feedaxis.effects import CATALOG, Model
+    from feedaxis.fit import fit
+
+    folder = syn.iso_case(tmp_path / "case", seed=32, backlash_um=-4.0)
+    fitted = fit(Model([CATALOG["lead_error"], CATALOG["backlash"]]), read_case(folder))
+    model = tmp_path / "m.toml"
+    model.write_text(fitted.model.to_toml())
+    out = tmp_path / "r.html"
+    assert main(["report", str(folder), "--model", str(model), "--out", str(out)]) == 0
+    page = out.read_text()
+    assert f"feedaxis {__version__}" in page and re.search(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC", page)
+    assert str(folder) in page and "lead_error + backlash" in page
+    sigma = fitted.uncertainties["backlash"]["backlash_um"]
+    row = re.search(r"<td>backlash.backlash_um</td><td>[^<]*</td><td>([^<]*)</td><td>([^<]*)</td>",
+                    page)
+    assert float(row.group(1)) == pytest.approx(sigma, rel=0.05) and row.group(2) == "µm"
+    assert ">um<" not in page and " um " not in page
 
 
 def test_effects_command_lists_the_catalog(capsys):

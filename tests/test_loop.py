@@ -86,7 +86,7 @@ def test_fit_recovers_the_known_parameters(tmp_path):
 def test_chain_from_lead_error_needs_assembly_then_motor(tmp_path):
     case = read_case(syn.micro_case(tmp_path / "case", MICRO_ALL, seed=5))
     model = fit(Model([CATALOG["lead_error"]]), case).model
-    final, rounds = improve(case, model, echo=lambda line: None)
+    final, rounds, _ = improve(case, model, echo=lambda line: None)
     assert [r.get("added") for r in rounds] == ["assembly_eccentricity", "motor_step_error", None]
     assert rounds[-1]["verdict"] == "adequate"
     assert final.names == ("lead_error",) + MICRO_ALL[1:]

@@ -27,6 +27,27 @@ DEFAULT_THERMAL_STEP_S = 0.1
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
              "+ tracking.csv; see data-format.md")
 
+# Each command is registered beside its handler: @command(NAME, add_parser arguments,
+# options=FUNCTION adding its arguments); build_parser adds them in this file's order.
+COMMANDS = []
+SCENARIOS = []
+
+
+def command(name, options=None, **parser_kwargs):
+    """Register the decorated handler as ``feedaxis NAME``."""
+    def register(handler):
+        COMMANDS.append((name, parser_kwargs, options, handler))
+        return handler
+    return register
+
+
+def scenario(name, options=None, **parser_kwargs):
+    """Register the decorated handler as ``feedaxis simulate NAME``."""
+    def register(handler):
+        SCENARIOS.append((name, parser_kwargs, options, handler))
+        return handler
+    return register
+
 
 @contextmanager
 def _progress(label, unit):
@@ -63,9 +84,39 @@ def _json_text(payload):
 
 
 def _emit(args, payload, lines):
-    print(_json_text(payload) if args.json else lines)
+    print(_json_text(payload) if _wants_json(args) else lines)
 
 
+def _demo_options(parser):
+    parser.add_argument("--out", default="feedaxis-demo", help="output folder (default: feedaxis-demo)")
+
+
+@command("demo", help="the whole loop on the bundled seed 001 case, then the FMUs",
+         description="Diagnose, add the missing effect, refit, until the verdict is adequate, "
+                     "on the bundled seed 001 micro ball screw; write the model, the report "
+                     "and the FMUs into --out and check the FMUs reproduce the fitted model.",
+         options=_demo_options)
+def _cmd_demo(args):
+    from . import demo
+
+    check_writable_target(args.out, "folder")
+    summary = demo.run_demo(args.out, echo=(lambda line: None) if _wants_json(args) else print)
+    if _wants_json(args):
+        print(_json_text(summary))
+
+
+def _fit_options(parser):
+    parser.add_argument("cases", nargs="+", metavar="CASE", help=CASE_HELP)
+    _add_model_options(parser)
+    parser.add_argument("--add", metavar="EFFECT", action="append",
+                        help="add an effect by name (repeatable); see `feedaxis effects`")
+    parser.add_argument("--out", metavar="M2.toml", help="write the fitted model here")
+
+
+@command("fit", help="fit a model's effects to one or several cases",
+         description="Bounded least squares over every parameter of the model's effects "
+                     "(and of --add EFFECT), jointly over all CASE folders.",
+         options=_fit_options)
 def _cmd_fit(args):
     from .fit import check_available, evaluate, fit
 
@@ -99,6 +150,16 @@ def _case_and_model(args):
     return effects, case, model, is_tracking(case, model)
 
 
+def _diagnose_options(parser):
+    parser.add_argument("case", metavar="CASE", help=CASE_HELP)
+    _add_model_options(parser)
+
+
+@command("diagnose", help="where the model fails and which effect is missing",
+         description="Refit the model, fit each missing effect on top and rank them by BIC, "
+                     "describe structure no effect explains, and give a verdict: adequate, "
+                     "missing_effect or unexplained.",
+         options=_diagnose_options)
 def _cmd_diagnose(args):
     from .diagnose import diagnose
     from .tracking import diagnose as tracking, text as tracking_text
@@ -111,6 +172,15 @@ def _cmd_diagnose(args):
           (tracking_text if is_tracking else text).diagnosis_lines(diagnosis))
 
 
+def _compare_options(parser):
+    parser.add_argument("case", metavar="CASE", help=CASE_HELP)
+    _add_model_options(parser, "model (TOML) as fitted; without it the model is empty")
+
+
+@command("compare", help="ISO 230-2 figures of the measurement and of the residual",
+         description="ISO 230-2 accuracy, repeatability, reversal and systematic deviation of "
+                     "the measured runs and of what is left after the model, side by side.",
+         options=_compare_options)
 def _cmd_compare(args):
     from .iso230 import compare
     from .tracking import compare as tracking, text as tracking_text
@@ -121,17 +191,45 @@ def _cmd_compare(args):
           (tracking_text if is_tracking else text).comparison_lines(comparison))
 
 
+def _report_options(parser):
+    parser.add_argument("case", metavar="CASE", help=CASE_HELP)
+    _add_model_options(parser, "fitted model (TOML)", required=True)
+    parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
+
+
+@command("report", help="self-contained HTML page with the plots",
+         description="Measurement against model, residual with the marked wavelengths, "
+                     "spectrum, each effect's contribution, the error ladder, the diagnosis.",
+         options=_report_options)
 def _cmd_report(args):
+    from .analysis import analyse
     from .report import write_report
     from .tracking import report as tracking
 
     effects, case, model, is_tracking = _case_and_model(args)
     out = Path(args.out or f"{Path(args.case).resolve().name}-report.html")
     check_writable_target(out)
-    (tracking.write_report if is_tracking else write_report)(case, model, effects, out)
+    if is_tracking:
+        tracking.write_report(case, model, effects, out)
+    else:
+        write_report(analyse(case, model, effects), out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
 
+def _compensate_options(parser):
+    parser.add_argument("case", metavar="CASE", help=CASE_HELP)
+    _add_model_options(parser, "fitted model with thermal_screw (TOML)", required=True)
+    parser.add_argument("--out", metavar="COMPENSATION.csv",
+                        help="write per sample: time_s, target_mm, direction, measured_um, "
+                             "thermal_error_um, correction_um, left_um")
+
+
+@command("compensate", help="thermal correction at each sample and the error it leaves",
+         description="Apply the model's thermal effects (thermal_screw, ambient_expansion) as "
+                     "a compensation to a thermal case, as seed 003 §5.2: the thermal error is "
+                     "each target's drift from its first visit; print its max and RMS before "
+                     "and after, per target and over time.",
+         options=_compensate_options)
 def _cmd_compensate(args):
     from .case import csv_text
     from .compensate import compensate
@@ -145,6 +243,30 @@ def _cmd_compensate(args):
     _emit(args, result.to_json(), text.compensation_lines(result, args.out))
 
 
+def _import_options(parser):
+    parser.add_argument("file", metavar="FILE", help="the export: .rtl or .csv")
+    parser.add_argument("--axis", required=True, metavar="AXIS.toml",
+                        help="axis.toml (or a case folder holding one) describing the axis")
+    parser.add_argument("--out", required=True, metavar="CASE", help="case folder to create")
+
+
+@command("import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
+         formatter_class=argparse.RawDescriptionHelpFormatter,
+         description="Read a laser-interferometer export and write a case folder (data-format "
+                     "1.1: AXIS.toml + positioning.csv), all files or none. Says which metadata "
+                     "the case format cannot hold.",
+         epilog="Formats, by extension:\n"
+                "  .rtl  Renishaw linear data file (sections HEADER::, TARGET DATA::, RUNS::,\n"
+                "        DEVIATIONS::, ...): odd runs approach in +, even runs in -.\n"
+                "  .csv  wide spreadsheet layout, one row per target:\n"
+                "          target_mm,run1+,run1-,run2+,run2-\n"
+                "          0.000,1.2,3.4,1.1,3.6\n"
+                "          50.012,0.8,2.9,,3.0\n"
+                "        target_mm first (mm); then one column per run and direction,\n"
+                "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
+                "        measured - target in um; an empty cell = not measured; '#' comment\n"
+                "        lines; ';'- or tab-separated files may use a decimal comma.",
+         options=_import_options)
 def _cmd_import(args):
     from .importers import import_case
 
@@ -161,6 +283,33 @@ def _cmd_import(args):
     _emit(args, payload, "\n".join(lines))
 
 
+def _comp_table_options(parser):
+    parser.add_argument("case", metavar="CASE", help=CASE_HELP)
+    _add_model_options(parser, "fitted model (TOML); needed unless --from-measurement")
+    parser.add_argument("--controller", required=True, choices=COMP_TABLE_CONTROLLERS,
+                        help="the controller whose file, unit and sign convention to write")
+    parser.add_argument("--out", required=True, metavar="FILE",
+                        help="the file to write (heidenhain: the .COM; its .CMA goes beside it)")
+    parser.add_argument("--spacing-mm", type=float, metavar="S",
+                        help="distance between table points (default: lead / 8, widened to the "
+                             "controller's point limit; with --from-measurement the targets)")
+    parser.add_argument("--from-measurement", action="store_true",
+                        help="the table from the measured means at the targets, not the model")
+    parser.add_argument("--axis-id", metavar="ID",
+                        help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
+                             "axis number 1, fanuc axis 1: the defaults)")
+
+
+@command("comp-table", help="pitch-error compensation table for a CNC controller",
+         description="Write the table a controller loads (linuxcnc, siemens, fanuc, "
+                     "heidenhain, beckhoff, mach4) from the fitted model: lead, eccentricity, "
+                     "motor and sag in both directions, backlash as a direction-dependent "
+                     "table, thermal effects never (a fixed table cannot follow them). With "
+                     "--from-measurement: the classical table of the measured means. Then "
+                     "read the file back as the controller does and print the ISO 230-2 "
+                     "figures expected after it on the measured case, next to those before, "
+                     "with a warning when a table cannot help. See docs/compensation-tables.md.",
+         options=_comp_table_options)
 def _cmd_comp_table(args):
     from .comptable import comp_table, summary_lines
 
@@ -178,6 +327,13 @@ def _cmd_comp_table(args):
     _emit(args, report, summary_lines(report))
 
 
+def _effects_options(parser):
+    parser.add_argument("--effects", metavar="F.py", action="append", help="your own effects file")
+
+
+@command("effects", help="list the effect catalog (and your own)",
+         description="Each effect's meaning, parameters and FMU.",
+         options=_effects_options)
 def _cmd_effects(args):
     effects = _effects(args)
     payload = {name: {"meaning": e.meaning, "fmu": e.fmu,
@@ -187,15 +343,13 @@ def _cmd_effects(args):
     _emit(args, payload, text.effect_lines(effects))
 
 
-def _cmd_demo(args):
-    from . import demo
-
-    check_writable_target(args.out, "folder")
-    summary = demo.run_demo(args.out, echo=(lambda line: None) if args.json else print)
-    if args.json:
-        print(_json_text(summary))
+def _build_fmus_options(parser):
+    parser.add_argument("--out", default="build/fmus", help="FMU folder (default: build/fmus)")
 
 
+@command("build-fmus", help="build the four FMUs",
+         description="Build NpidServo, StepperError, GeometricError and ThermalScrew into --out.",
+         options=_build_fmus_options)
 def _cmd_build_fmus(args):
     from . import fmu_build
 
@@ -287,7 +441,7 @@ def _step_progress():
         yield update
 
 
-def _simulate(args, scenario):
+def _simulate(args, run):
     """Run one scenario into a new case folder; Ctrl-C keeps what was computed."""
     from .cosim.master import Master
 
@@ -297,9 +451,46 @@ def _simulate(args, scenario):
     system = _axis_system(args)
     with Master(system, _fmu_paths(args)) as master:
         with _step_progress() as progress:
-            return scenario(master, progress)
+            return run(master, progress)
 
 
+def _simulate_options(parser):
+    scenarios = parser.add_subparsers(dest="scenario", required=True, metavar="SCENARIO")
+    for name, parser_kwargs, options, handler in SCENARIOS:
+        sub = scenarios.add_parser(name, **parser_kwargs)
+        options(sub)
+        sub.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
+        _add_axis_options(sub)
+        _add_common_options(sub)
+        sub.set_defaults(handler=handler)
+
+
+# the scenarios below carry the handlers
+command("simulate", help="run a scenario on the co-simulated axis, write a case folder",
+        description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
+                    "scenario and write the result as a measurement case (data-format.md), "
+                    "ready for fit, diagnose and compare. iso230 and thermal run the servo "
+                    "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: seed 002's "
+                    "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
+                    "stops and keeps what was computed.",
+        options=_simulate_options)(None)
+
+
+def _simulate_iso230_options(parser):
+    parser.add_argument("--targets", type=int, default=11, help="number of targets (default 11)")
+    parser.add_argument("--spacing-mm", type=float, default=50.0,
+                        help="target spacing p (default 50)")
+    parser.add_argument("--first-mm", type=float, default=0.0, help="P_1 before offset (default 0)")
+    parser.add_argument("--runs", type=int, default=5, help="runs each direction (default 5)")
+    parser.add_argument("--overrun-mm", type=float, default=2.0, help="default 2")
+    _add_motion_options(parser)
+
+
+@scenario("iso230", help="ISO 230-2 positioning test -> axis.toml + positioning.csv",
+          description="Targets P_i = (i-1) p + r_i (r_i a different small offset at each), "
+                      "RUNS runs approaching every target in + and in -, overrun beyond the "
+                      "end targets, dwell, then the deviation table position - target.",
+          options=_simulate_iso230_options)
 def _cmd_simulate_iso230(args):
     from .cosim.scenarios import iso230_targets, simulate_iso230
 
@@ -312,6 +503,21 @@ def _cmd_simulate_iso230(args):
                          f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} um")
 
 
+def _simulate_thermal_options(parser):
+    parser.add_argument("--duty", required=True, metavar="duty.csv", help="the heating duty")
+    parser.add_argument("--targets", required=True, metavar="X1,X2,...",
+                        help="targets of each measurement pass (mm), visited in this order")
+    parser.add_argument("--every-s", type=float, default=600.0,
+                        help="duty time between measurement passes (default 600 s)")
+    _add_motion_options(parser)
+
+
+@scenario("thermal", help="duty cycle with measurement passes -> + duty.csv",
+          description="Drive the axis through DUTY (duty.csv format) with a measurement pass "
+                      "over --targets at t = 0, every --every-s of duty time and at the end; "
+                      "write the motion as duty.csv and the samples (with time_s) as "
+                      "positioning.csv.",
+          options=_simulate_thermal_options)
 def _cmd_simulate_thermal(args):
     from .case import read_duty
     from .cosim.scenarios import simulate_thermal
@@ -326,6 +532,25 @@ def _cmd_simulate_thermal(args):
                          f"{summary['error_max_um']:.3f} um")
 
 
+def _simulate_tracking_options(parser):
+    parser.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
+    parser.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
+    parser.add_argument("--duration-s", type=float, default=10.0, help="default 10")
+    parser.add_argument("--controller", choices=("pid", "npid"), default="pid")
+    parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
+    parser.add_argument("--force-N", type=float,
+                        help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
+                             "row of seed 002 Table 2)")
+
+
+@scenario("tracking", help="sinusoidal tracking, PID or NPID (seed 002) -> tracking.csv",
+          description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
+                      "after the first second. --spindle-rpm adds a milling force at the "
+                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, seed 002 "
+                      "publishes none). axis.toml gets the [servo] table (the controller), not "
+                      "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
+                      "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).",
+          options=_simulate_tracking_options)
 def _cmd_simulate_tracking(args):
     from .cosim.scenarios import simulate_tracking
 
@@ -360,6 +585,22 @@ def _checked_axis(args):
     return system, paths
 
 
+def _export_ssp_options(parser):
+    parser.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
+    parser.add_argument("--stop-time", type=float, default=1.0, metavar="S",
+                        help="DefaultExperiment stopTime in s (default 1)")
+    parser.add_argument("--osp-step-hints", action="store_true",
+                        help="add OSP's per-component step sizes (libcosim runs the thermal screw "
+                             "at its own step); OMSimulator 3.0 refuses such a file")
+    _add_axis_options(parser)
+
+
+@command("export-ssp", help="the axis as an SSP file for other FMI system simulators",
+         description="Write OUT.ssp: SystemStructure.ssd (components, connections, step "
+                     "sizes), resources/<Component>.ssv (parameter values) and the four FMUs. "
+                     "Runs in fmpy.ssp.simulate_ssp, OSP libcosim (libcosimpy), OMSimulator and "
+                     "ecos; see README.",
+         options=_export_ssp_options)
 def _cmd_export_ssp(args):
     from .cosim.ssp import export_ssp
 
@@ -370,6 +611,18 @@ def _cmd_export_ssp(args):
 
 
 
+def _export_fmu_options(parser):
+    parser.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
+    _add_axis_options(parser, thermal_step=False)
+
+
+@command("export-fmu", help="the axis as one FMU (fmpy container FMU)",
+         description="Wrap the four FMUs in one FMI 2.0 co-simulation FMU with fmpy's container "
+                     "FMU: inputs position_ref_mm, disturbance_N, ambient_C; every component "
+                     "output; the parameter values as fixed parameters. All four FMUs step at "
+                     "the container's one step (--step-ms), "
+                     "Jacobi: the error FMUs see the servo one step late.",
+         options=_export_fmu_options)
 def _cmd_export_fmu(args):
     from .cosim.container import export_container_fmu
 
@@ -431,218 +684,27 @@ def build_parser():
                "--debug for the traceback), 130 interrupted.")
     parser.add_argument("--version", action="version", version=f"feedaxis {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    sub = commands.add_parser(
-        "demo", help="the whole loop on the bundled seed 001 case, then the FMUs",
-        description="Diagnose, add the missing effect, refit, until the verdict is adequate, "
-                    "on the bundled seed 001 micro ball screw; write the model, the report "
-                    "and the FMUs into --out and check the FMUs reproduce the fitted model.")
-    sub.add_argument("--out", default="feedaxis-demo", help="output folder (default: feedaxis-demo)")
-    sub.set_defaults(handler=_cmd_demo)
-
-    sub = commands.add_parser(
-        "fit", help="fit a model's effects to one or several cases",
-        description="Bounded least squares over every parameter of the model's effects "
-                    "(and of --add EFFECT), jointly over all CASE folders.")
-    sub.add_argument("cases", nargs="+", metavar="CASE", help=CASE_HELP)
-    _add_model_options(sub)
-    sub.add_argument("--add", metavar="EFFECT", action="append",
-                     help="add an effect by name (repeatable); see `feedaxis effects`")
-    sub.add_argument("--out", metavar="M2.toml", help="write the fitted model here")
-    sub.set_defaults(handler=_cmd_fit)
-
-    sub = commands.add_parser(
-        "diagnose", help="where the model fails and which effect is missing",
-        description="Refit the model, fit each missing effect on top and rank them by BIC, "
-                    "describe structure no effect explains, and give a verdict: adequate, "
-                    "missing_effect or unexplained.")
-    sub.add_argument("case", metavar="CASE", help=CASE_HELP)
-    _add_model_options(sub)
-    sub.set_defaults(handler=_cmd_diagnose)
-
-    sub = commands.add_parser(
-        "compare", help="ISO 230-2 figures of the measurement and of the residual",
-        description="ISO 230-2 accuracy, repeatability, reversal and systematic deviation of "
-                    "the measured runs and of what is left after the model, side by side.")
-    sub.add_argument("case", metavar="CASE", help=CASE_HELP)
-    _add_model_options(sub, "model (TOML) as fitted; without it the model is empty")
-    sub.set_defaults(handler=_cmd_compare)
-
-    sub = commands.add_parser(
-        "report", help="self-contained HTML page with the plots",
-        description="Measurement against model, residual with the marked wavelengths, "
-                    "spectrum, each effect's contribution, the error ladder, the diagnosis.")
-    sub.add_argument("case", metavar="CASE", help=CASE_HELP)
-    _add_model_options(sub, "fitted model (TOML)", required=True)
-    sub.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
-    sub.set_defaults(handler=_cmd_report)
-
-    sub = commands.add_parser(
-        "compensate", help="thermal correction at each sample and the error it leaves",
-        description="Apply the model's thermal effects (thermal_screw, ambient_expansion) as "
-                    "a compensation to a thermal case, as seed 003 §5.2: the thermal error is "
-                    "each target's drift from its first visit; print its max and RMS before "
-                    "and after, per target and over time.")
-    sub.add_argument("case", metavar="CASE", help=CASE_HELP)
-    _add_model_options(sub, "fitted model with thermal_screw (TOML)", required=True)
-    sub.add_argument("--out", metavar="COMPENSATION.csv",
-                     help="write per sample: time_s, target_mm, direction, measured_um, "
-                          "thermal_error_um, correction_um, left_um")
-    sub.set_defaults(handler=_cmd_compensate)
-
-    sub = commands.add_parser(
-        "import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Read a laser-interferometer export and write a case folder (data-format "
-                    "1.1: AXIS.toml + positioning.csv), all files or none. Says which metadata "
-                    "the case format cannot hold.",
-        epilog="Formats, by extension:\n"
-               "  .rtl  Renishaw linear data file (sections HEADER::, TARGET DATA::, RUNS::,\n"
-               "        DEVIATIONS::, ...): odd runs approach in +, even runs in -.\n"
-               "  .csv  wide spreadsheet layout, one row per target:\n"
-               "          target_mm,run1+,run1-,run2+,run2-\n"
-               "          0.000,1.2,3.4,1.1,3.6\n"
-               "          50.012,0.8,2.9,,3.0\n"
-               "        target_mm first (mm); then one column per run and direction,\n"
-               "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
-               "        measured - target in um; an empty cell = not measured; '#' comment\n"
-               "        lines; ';'- or tab-separated files may use a decimal comma.")
-    sub.add_argument("file", metavar="FILE", help="the export: .rtl or .csv")
-    sub.add_argument("--axis", required=True, metavar="AXIS.toml",
-                     help="axis.toml (or a case folder holding one) describing the axis")
-    sub.add_argument("--out", required=True, metavar="CASE", help="case folder to create")
-    sub.set_defaults(handler=_cmd_import)
-
-    sub = commands.add_parser(
-        "comp-table", help="pitch-error compensation table for a CNC controller",
-        description="Write the table a controller loads (linuxcnc, siemens, fanuc, "
-                    "heidenhain, beckhoff, mach4) from the fitted model: lead, eccentricity, "
-                    "motor and sag in both directions, backlash as a direction-dependent "
-                    "table, thermal effects never (a fixed table cannot follow them). With "
-                    "--from-measurement: the classical table of the measured means. Then "
-                    "read the file back as the controller does and print the ISO 230-2 "
-                    "figures expected after it on the measured case, next to those before, "
-                    "with a warning when a table cannot help. See docs/compensation-tables.md.")
-    sub.add_argument("case", metavar="CASE", help=CASE_HELP)
-    _add_model_options(sub, "fitted model (TOML); needed unless --from-measurement")
-    sub.add_argument("--controller", required=True, choices=COMP_TABLE_CONTROLLERS,
-                     help="the controller whose file, unit and sign convention to write")
-    sub.add_argument("--out", required=True, metavar="FILE",
-                     help="the file to write (heidenhain: the .COM; its .CMA goes beside it)")
-    sub.add_argument("--spacing-mm", type=float, metavar="S",
-                     help="distance between table points (default: lead / 8, widened to the "
-                          "controller's point limit; with --from-measurement the targets)")
-    sub.add_argument("--from-measurement", action="store_true",
-                     help="the table from the measured means at the targets, not the model")
-    sub.add_argument("--axis-id", metavar="ID",
-                     help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
-                          "axis number 1, fanuc axis 1: the defaults)")
-    sub.set_defaults(handler=_cmd_comp_table)
-
-    sub = commands.add_parser("effects", help="list the effect catalog (and your own)",
-                              description="Each effect's meaning, parameters and FMU.")
-    sub.add_argument("--effects", metavar="F.py", action="append", help="your own effects file")
-    sub.set_defaults(handler=_cmd_effects)
-
-    sub = commands.add_parser(
-        "build-fmus", help="build the four FMUs",
-        description="Build NpidServo, StepperError, GeometricError and ThermalScrew into --out.")
-    sub.add_argument("--out", default="build/fmus", help="FMU folder (default: build/fmus)")
-    sub.set_defaults(handler=_cmd_build_fmus)
-
-    sub = commands.add_parser(
-        "simulate", help="run a scenario on the co-simulated axis, write a case folder",
-        description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
-                    "scenario and write the result as a measurement case (data-format.md), "
-                    "ready for fit, diagnose and compare. iso230 and thermal run the servo "
-                    "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: seed 002's "
-                    "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
-                    "stops and keeps what was computed.")
-    scenarios = sub.add_subparsers(dest="scenario", required=True, metavar="SCENARIO")
-    scenario = scenarios.add_parser(
-        "iso230", help="ISO 230-2 positioning test -> axis.toml + positioning.csv",
-        description="Targets P_i = (i-1) p + r_i (r_i a different small offset at each), "
-                    "RUNS runs approaching every target in + and in -, overrun beyond the "
-                    "end targets, dwell, then the deviation table position - target.")
-    scenario.add_argument("--targets", type=int, default=11, help="number of targets (default 11)")
-    scenario.add_argument("--spacing-mm", type=float, default=50.0,
-                          help="target spacing p (default 50)")
-    scenario.add_argument("--first-mm", type=float, default=0.0, help="P_1 before offset (default 0)")
-    scenario.add_argument("--runs", type=int, default=5, help="runs each direction (default 5)")
-    scenario.add_argument("--overrun-mm", type=float, default=2.0, help="default 2")
-    _add_motion_options(scenario)
-    scenario.set_defaults(handler=_cmd_simulate_iso230)
-
-    scenario = scenarios.add_parser(
-        "thermal", help="duty cycle with measurement passes -> + duty.csv",
-        description="Drive the axis through DUTY (duty.csv format) with a measurement pass "
-                    "over --targets at t = 0, every --every-s of duty time and at the end; "
-                    "write the motion as duty.csv and the samples (with time_s) as "
-                    "positioning.csv.")
-    scenario.add_argument("--duty", required=True, metavar="duty.csv", help="the heating duty")
-    scenario.add_argument("--targets", required=True, metavar="X1,X2,...",
-                          help="targets of each measurement pass (mm), visited in this order")
-    scenario.add_argument("--every-s", type=float, default=600.0,
-                          help="duty time between measurement passes (default 600 s)")
-    _add_motion_options(scenario)
-    scenario.set_defaults(handler=_cmd_simulate_thermal)
-
-    scenario = scenarios.add_parser(
-        "tracking", help="sinusoidal tracking, PID or NPID (seed 002) -> tracking.csv",
-        description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
-                    "after the first second. --spindle-rpm adds a milling force at the "
-                    "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, seed 002 "
-                    "publishes none). axis.toml gets the [servo] table (the controller), not "
-                    "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
-                    "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).")
-    scenario.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
-    scenario.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
-    scenario.add_argument("--duration-s", type=float, default=10.0, help="default 10")
-    scenario.add_argument("--controller", choices=("pid", "npid"), default="pid")
-    scenario.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
-    scenario.add_argument("--force-N", type=float,
-                          help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
-                               "row of seed 002 Table 2)")
-    scenario.set_defaults(handler=_cmd_simulate_tracking)
-    for scenario in scenarios.choices.values():
-        scenario.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
-        _add_axis_options(scenario)
-        scenario.add_argument("--json", action="store_true", help="print machine-readable JSON")
-        scenario.add_argument("--debug", action="store_true",
-                              help="on an internal error, show the Python traceback")
-
-    sub = commands.add_parser(
-        "export-ssp", help="the axis as an SSP file for other FMI system simulators",
-        description="Write OUT.ssp: SystemStructure.ssd (components, connections, step "
-                    "sizes), resources/<Component>.ssv (parameter values) and the four FMUs. "
-                    "Runs in fmpy.ssp.simulate_ssp, OSP libcosim (libcosimpy), OMSimulator and "
-                    "ecos; see README.")
-    sub.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
-    sub.add_argument("--stop-time", type=float, default=1.0, metavar="S",
-                     help="DefaultExperiment stopTime in s (default 1)")
-    sub.add_argument("--osp-step-hints", action="store_true",
-                     help="add OSP's per-component step sizes (libcosim runs the thermal screw "
-                          "at its own step); OMSimulator 3.0 refuses such a file")
-    _add_axis_options(sub)
-    sub.set_defaults(handler=_cmd_export_ssp)
-
-    sub = commands.add_parser(
-        "export-fmu", help="the axis as one FMU (fmpy container FMU)",
-        description="Wrap the four FMUs in one FMI 2.0 co-simulation FMU with fmpy's container "
-                    "FMU: inputs position_ref_mm, disturbance_N, ambient_C; every component "
-                    "output; the parameter values as fixed parameters. All four FMUs step at "
-                    "the container's one step (--step-ms), "
-                    "Jacobi: the error FMUs see the servo one step late.")
-    sub.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
-    _add_axis_options(sub, thermal_step=False)
-    sub.set_defaults(handler=_cmd_export_fmu)
-
-    for sub in commands.choices.values():
-        sub.add_argument("--json", action="store_true",
-                         help="print strict JSON on stdout (errors too: error, file, row, column)")
-        sub.add_argument("--debug", action="store_true",
-                         help="on an internal error, show the Python traceback")
+    for name, parser_kwargs, options, handler in COMMANDS:
+        sub = commands.add_parser(name, **parser_kwargs)
+        if options:
+            options(sub)
+        _add_common_options(sub)
+        if handler:
+            sub.set_defaults(handler=handler)
     return parser
+
+def _add_common_options(parser):
+    """--json and --debug, the one definition for every command and scenario. Left unset
+    by default, so ``simulate --json iso230 OUT`` and ``simulate iso230 OUT --json`` agree
+    (a subcommand's default would overwrite the option given before it)."""
+    parser.add_argument("--json", action="store_true", default=argparse.SUPPRESS,
+                           help="print strict JSON on stdout (errors too: error, file, row, column)")
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                           help="on an internal error, show the Python traceback")
+
+
+def _wants_json(args):
+    return getattr(args, "json", False)
 
 
 def main(argv=None):

@@ -106,7 +106,7 @@ def compensate(case, model):
                          parameter="--model")
     check_available(thermal, case)
     positioning = case.positioning
-    visit, reference = _visits(positioning)
+    visit, reference = visits(positioning)
     if visit.max() == 0:
         raise InputError("no target is measured twice; the thermal error is the drift of a "
                          "target from its first visit", path=case.folder)
@@ -118,7 +118,7 @@ def compensate(case, model):
                         thermal_error_um - (predicted_um - predicted_um[reference]))
 
 
-def _visits(positioning):
+def visits(positioning):
     """Visit number of each sample within its (target, direction), by time; and the index of
     each sample's first visit."""
     groups = target_groups(positioning)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .analysis import analyse
 from .case import read_case
 from .cosim.replay import POSITION_FMUS, replay_positioning
 from .diagnose import diagnose
@@ -24,7 +25,11 @@ MAX_ROUNDS = 8
 
 
 def improve(case, model, effects=None, echo=print, max_rounds=MAX_ROUNDS):
-    """Diagnose, add the best missing effect, refit; repeat. Returns (model, rounds)."""
+    """Diagnose, add the best missing effect, refit; repeat.
+
+    Returns (model, rounds, diagnosis): the final model, one JSON-ready dict per round and
+    the last round's diagnosis (of the final model).
+    """
     effects = CATALOG if effects is None else effects
     rounds = []
     for number in range(1, max_rounds + 1):
@@ -37,7 +42,7 @@ def improve(case, model, effects=None, echo=print, max_rounds=MAX_ROUNDS):
             echo(f"    unexplained {structure.kind}: {structure.evidence}")
         if diagnosis.verdict != "missing_effect":
             rounds.append(round_)
-            break
+            return model, rounds, diagnosis
         best = diagnosis.candidates[0]
         model = best.result.model
         round_.update(added=best.effect, rms_after_um=best.rms_after_um)
@@ -45,7 +50,13 @@ def improve(case, model, effects=None, echo=print, max_rounds=MAX_ROUNDS):
         echo(f"    missing: {best.effect} ({best.meaning})")
         echo(f"    evidence: {best.evidence}")
         echo(f"    add {best.effect}, refit: RMS {best.rms_after_um:.4f} um")
-    return model, rounds
+    return model, rounds, diagnose(case, model, effects)
+
+
+def ladder_of(rounds):
+    """The error ladder [(label, RMS µm)] of a loop started from the empty model."""
+    return [("measured", rounds[0]["rms_um"])] + [
+        (f"+ {r['added']}", r["rms_after_um"]) for r in rounds if "added" in r]
 
 
 def run_demo(out_dir, echo=print):
@@ -55,9 +66,10 @@ def run_demo(out_dir, echo=print):
     echo(f"case: {case.name}")
     echo(f"      {case.positioning.size} laser points, {case.positioning.target_mm.min():g} to "
          f"{case.positioning.target_mm.max():g} mm; model: empty")
-    model, rounds = improve(case, Model(), echo=echo)
+    model, rounds, diagnosis = improve(case, Model(), echo=echo)
     model_path = write_atomically(out_dir / "model.toml", model.to_toml())
-    report_path = write_report(case, model, CATALOG, out_dir / "report.html")
+    analysis = analyse(case, model, CATALOG, diagnosis=diagnosis, ladder=ladder_of(rounds))
+    report_path = write_report(analysis, out_dir / "report.html")
     echo(f"fitted model: {model_path}")
     echo(f"report:       {report_path}")
     fmu_paths = {path.stem: path for path in build_fmus(out_dir / "fmus", POSITION_FMUS)}

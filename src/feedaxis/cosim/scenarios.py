@@ -24,18 +24,13 @@ import numpy as np
 
 from ..case import PHYSICAL_RANGE, write_case
 from ..errors import ParameterError
+from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..physics.checks import require_positive
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
 from .physics_check import start_value
 
 ISO_REFERENCE_C = 20.0
-SCREW_FROM = {"GeometricError": ("lead_mm", "length_m", "diameter_m", "density_kg_m3",
-                                 "youngs_modulus_Pa", "support", "fixed_end_mm"),
-              "ThermalScrew": ("specific_heat_J_kgK", "expansion_per_K", "nut_length_m",
-                               "bearing_length_m")}
-SHARED_SCREW_KEYS = ("length_m", "diameter_m", "density_kg_m3", "fixed_end_mm")
-MOTOR_FROM = {"StepperError": ("step_angle_deg", "error_period_steps")}
 SETTLE_S = 1.0
 MAX_TRAVEL_MM = PHYSICAL_RANGE["reference_mm"][1]  # beyond any physical axis
 MAX_SAMPLES = 100_000  # samples of one simulated test (ISO 230-2: 5 runs x 2 x ~20 targets)
@@ -402,12 +397,6 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     return summary
 
 
-SERVO_FROM = {"controller": "nonlinear", "kp_V_per_mm": "kp_V_per_mm",
-              "ki_V_per_mm_s": "ki_V_per_mm_s", "kd_V_s_per_mm": "kd_V_s_per_mm",
-              "ko_per_mm": "ko_per_mm", "e_max_mm": "e_max_mm",
-              "force_constant_N_per_V": "force_constant_N_per_V", "loop_step_s": "time_step_s"}
-
-
 def _positioning_parameters(parameters):
     """:data:`POSITIONING_SERVO` under the caller's values (theirs win)."""
     parameters = dict(parameters or {})
@@ -427,20 +416,25 @@ def axis_values(master, parameters, name, with_servo=False):
         variables = master.loaded[c.fmu].variables
         return {k: c.parameters[k] if k in c.parameters else start_value(variables[k]) for k in keys}
 
-    screw = {k: v for c, keys in SCREW_FROM.items() for k, v in values(c, keys).items()}
-    thermal = values("ThermalScrew", SHARED_SCREW_KEYS)
-    differ = [k for k in SHARED_SCREW_KEYS if thermal[k] != screw[k]]
-    if differ:
-        raise ParameterError(f"GeometricError and ThermalScrew disagree on "
-                             f"{', '.join(differ)}: one axis has one screw", "--set")
-    motor = {k: v for c, keys in MOTOR_FROM.items() for k, v in values(c, keys).items()}
-    axis = {"name": name, "screw": screw, "motor": motor}
+    axis = {"name": name, **{table: axis_table(table, values) for table in AXIS_KEYS}}
     if with_servo:
-        servo = values("NpidServo", SERVO_FROM.values())
-        axis["servo"] = {"controller": "npid" if servo["nonlinear"] else "pid",
-                         **{key: servo[name] for key, name in SERVO_FROM.items()
-                            if name != "nonlinear"}}
+        axis["servo"] = servo_from_fmu(values("NpidServo", SERVO_KEYS.values()))
     return axis
+
+
+def axis_table(table, values):
+    """axis.toml ``[table]`` from the FMUs that take its keys (:data:`AXIS_KEYS`); a key
+    several FMUs take must have one value in all of them."""
+    found = {}
+    for fmu, keys in AXIS_KEYS[table].items():
+        for key, value in values(fmu, keys).items():
+            found.setdefault(key, {})[fmu] = value
+    differ = {key: by_fmu for key, by_fmu in found.items() if len(set(by_fmu.values())) > 1}
+    if differ:
+        by_fmu = next(iter(differ.values()))
+        raise ParameterError(f"{' and '.join(by_fmu)} disagree on {', '.join(differ)}: one "
+                             f"axis has one {table}", "--set")
+    return {key: next(iter(by_fmu.values())) for key, by_fmu in found.items()}
 
 
 def _positioning_columns(samples, rows, with_time=False):

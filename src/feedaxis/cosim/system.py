@@ -1,6 +1,6 @@
 """The one description of the co-simulated axis: components, connections, parameters, steps.
 
-The fmpy master (:mod:`.master`), the SSP export (:mod:`.ssp`) and the README's system
+The fmpy master (:mod:`.master`), the SSP export (:mod:`.ssp`) and docs/cosim.md's system
 table (:func:`markdown_tables`) are all generated from an :class:`AxisSystem`. The default
 axis (:func:`default_axis`) is the signal flow of issue 3::
 
@@ -264,9 +264,9 @@ def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
 
 
 def markdown_tables(system):
-    """The system as Markdown tables (components, connections, outputs) for the README.
+    """The system as Markdown tables (components, connections, outputs) for docs/cosim.md.
 
-    Regenerate the README section with ``python -m feedaxis.cosim.system``.
+    Regenerate that section with ``python -m feedaxis.cosim.system``.
     """
     lines = [f"Macro step {system.macro_step_s * 1e3:g} ms; components in dependency order.",
              "", "| component | FMU | step | parameter values | role |", "|---|---|---|---|---|"]

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import tomli_w
 
+from ..fmu_map import neutral_fmu_parameters
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -226,8 +228,6 @@ class Model:
 
     def fmu_parameters(self, axis):
         """{FMU name: {parameter: value}} for the co-simulated axis to reproduce the model."""
-        from .catalog import neutral_fmu_parameters
-
         parameters = neutral_fmu_parameters(axis)
         for e in self.effects:
             for fmu, values in e.fmu_parameters(axis, self.values[e.name]).items():

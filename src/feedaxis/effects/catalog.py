@@ -2,21 +2,20 @@
 
 Names are fixed (tests and other tools use them): lead_error, gravity_sag,
 assembly_eccentricity, motor_step_error, backlash, thermal_screw, ambient_expansion; and
-the tracking effects of ``feedaxis.tracking.effects``: servo_plant, coulomb_friction,
+the tracking effects of ``feedaxis.effects.tracking``: servo_plant, coulomb_friction,
 viscous_friction. Each evaluates with the same physics function its FMU calls.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..fmu_map import ISO_REFERENCE_TEMPERATURE_C, fmu_axis_keys
 from ..physics import geometry, motor, thermal
 from ..physics.mounting import screw_coordinate_m
-from ..tracking.effects import TRACKING_EFFECTS
+from .tracking import TRACKING_EFFECTS
 from .base import Effect, Needs, Parameter
 
-ISO_REFERENCE_TEMPERATURE_C = 20.0
-THERMAL_SCREW_KEYS = ("length_m", "diameter_m", "density_kg_m3", "specific_heat_J_kgK",
-                      "expansion_per_K", "nut_length_m", "bearing_length_m", "fixed_end_mm")
+THERMAL_SCREW_KEYS = fmu_axis_keys("screw", "ThermalScrew")  # what Eq. 1-19 need
 SAG_KEYS = ("length_m", "diameter_m", "density_kg_m3", "youngs_modulus_Pa", "support",
             "fixed_end_mm")
 
@@ -295,21 +294,3 @@ class AmbientExpansion(Effect):
 CATALOG = {effect.name: effect for effect in (
     LeadError(), GravitySag(), AssemblyEccentricity(), MotorStepError(), Backlash(),
     ThermalScrew(), AmbientExpansion(), *TRACKING_EFFECTS)}
-
-GEOMETRY_FMU_KEYS = ("length_m", "diameter_m", "density_kg_m3", "youngs_modulus_Pa", "support",
-                     "fixed_end_mm")
-
-
-def neutral_fmu_parameters(axis):
-    """FMU parameters from the axis alone, every effect switched off (error 0 µm)."""
-    screw, motor_values = axis.screw, axis.motor
-    geometric = {"lead_mm": axis.lead_mm, "offset_um": 0.0, "slope_um_per_mm": 0.0,
-                 "eccentricity_cos_um": 0.0, "eccentricity_sin_um": 0.0, "backlash_um": 0.0,
-                 "sag_enabled": False}
-    geometric.update({k: screw[k] for k in GEOMETRY_FMU_KEYS if k in screw})
-    stepper = {"lead_mm": axis.lead_mm, "harmonic1_cos_um": 0.0, "harmonic1_sin_um": 0.0,
-               "harmonic2_cos_um": 0.0, "harmonic2_sin_um": 0.0, **motor_values}
-    heating = {"k3_W_per_mm_min": 0.0, "k4_W_per_mm_min": 0.0,
-               "reference_ambient_C": ISO_REFERENCE_TEMPERATURE_C}
-    heating.update({k: screw[k] for k in THERMAL_SCREW_KEYS if k in screw})
-    return {"GeometricError": geometric, "StepperError": stepper, "ThermalScrew": heating}

@@ -1,4 +1,4 @@
-"""The HTML report: plots (matplotlib, PNG) kept apart from the calculations."""
-from .page import error_ladder, write_report
+"""The HTML report: plots (matplotlib, PNG) and a page formatting an ``Analysis``."""
+from .page import write_report
 
-__all__ = ["error_ladder", "write_report"]
+__all__ = ["write_report"]

@@ -5,23 +5,20 @@ from __future__ import annotations
 
 import html
 
-from ..comptable import NEVER_IN_TABLE, default_spacing_mm, from_model, grid_mm, verify
+from ..comptable import NEVER_IN_TABLE
 from ..comptable.table import measured_means
 from . import plots
 
 
-def compensation_table_html(case, model, image, table):
+def compensation_table_html(analysis, image, table):
     """HTML parts of the section (empty when the model has no effect a table can remove).
 
     ``image`` and ``table`` are the page's helpers for a PNG and an HTML table.
     """
-    positioning = case.positioning
-    target_mm = positioning.target_mm
-    spacing_mm = default_spacing_mm(case, None)
-    comp = from_model(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
-    if not comp.included:
+    comp, check, spacing_mm = analysis.comp_table, analysis.comp_check, analysis.comp_spacing_mm
+    if comp is None:
         return []
-    check = verify(case, comp)
+    model, positioning = analysis.model, analysis.case.positioning
     (forward_mm, forward_um), (reverse_mm, reverse_um) = measured_means(positioning)
     excluded = {**comp.excluded, **{k: v for k, v in NEVER_IN_TABLE.items() if k in model}}
     parts = [

@@ -3,15 +3,12 @@ from __future__ import annotations
 
 import base64
 import html
+import re
+from datetime import datetime, timezone
 from pathlib import Path
 
-import numpy as np
+from .. import __version__
 
-from ..compensate import THERMAL_EFFECTS, compensate
-from ..diagnose import diagnose, residual_spectrum
-from ..effects import Model
-from ..fit import evaluate, fit
-from ..iso230 import compare
 from ..output import write_atomically
 from . import plots
 from .compensation_table import compensation_table_html
@@ -20,15 +17,6 @@ STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#2
 table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;
 text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
 img{max-width:100%}.verdict{font-size:1.2em;font-weight:bold}"""
-
-
-def error_ladder(case, model):
-    """[(label, residual RMS µm)]: nothing, then each effect of ``model`` added in turn, refitted."""
-    steps = [("measured", evaluate(Model(), case).rms_um)]
-    for count in range(1, len(model.effects) + 1):
-        partial = Model(model.effects[:count])
-        steps.append((f"+ {model.effects[count - 1].name}", fit(partial, case).rms_um))
-    return steps
 
 
 def _image(png, alt):
@@ -43,9 +31,29 @@ def _table(header, rows):
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def _parameter_rows(model):
-    return [(f"{e.name}.{p.name}", f"{model.values[e.name][p.name]:.6g}", p.unit, p.meaning)
-            for e in model.effects for p in e.parameters]
+def micro(unit):
+    """A unit as the page writes it: µm, not um."""
+    return re.sub(r"\bum\b", "µm", unit)
+
+
+def _parameter_rows(model, uncertainties, undetermined):
+    """(parameter, value, standard uncertainty, unit, meaning) per fitted parameter."""
+    rows = []
+    for e in model.effects:
+        for p in e.parameters:
+            sigma = uncertainties.get(e.name, {}).get(p.name)
+            note = undetermined.get(f"{e.name}.{p.name}", "")
+            rows.append((f"{e.name}.{p.name}", f"{model.values[e.name][p.name]:.6g}",
+                         note or ("" if sigma is None else f"{sigma:.2g}"), micro(p.unit),
+                         p.meaning))
+    return rows
+
+
+def _parameter_table(model, refit):
+    """The model's parameters with the standard uncertainties of ``refit`` (its refit on
+    the case: the diagnosis's base)."""
+    return _table(("parameter", "value", "standard uncertainty", "unit", "meaning"),
+                  _parameter_rows(model, refit.uncertainties, refit.undetermined))
 
 
 def _diagnosis_html(diagnosis):
@@ -78,13 +86,6 @@ def _comparison_html(comparison):
     return _table(("ISO 230-2 figure", "measured (µm)", "residual (µm)", "explained"), rows)
 
 
-def _detrended_spectrum(case, measured_um, effects):
-    position_mm = case.positioning.target_mm
-    trend_um = np.polyval(np.polyfit(position_mm, measured_um, 1), position_mm)
-    spectrum = residual_spectrum(case, measured_um - trend_um, effects)
-    return spectrum.wavelength_mm, spectrum.amplitude_um
-
-
 def _residual_panels(case, residual_um):
     positioning = case.positioning
     panels = []
@@ -97,11 +98,10 @@ def _residual_panels(case, residual_um):
     return panels
 
 
-def _compensation_html(case, model):
+def _compensation_html(result):
     """Seed 003 Fig. 13 and the before/after figures, for a thermal model on a thermal case."""
-    if not (case.is_thermal and any(name in model for name in THERMAL_EFFECTS)):
+    if result is None:
         return []
-    result = compensate(case, model)
     summary = result.summary()
     return [
         "<h2>Thermal compensation (seed 003 Fig. 13)</h2>",
@@ -120,14 +120,15 @@ def _compensation_html(case, model):
     ]
 
 
-def write_report(case, model, effects, out_path):
-    """Write the report of ``model`` (as fitted) on ``case`` to ``out_path``; returns the path."""
-    result = evaluate(model, case)
-    diagnosis = diagnose(case, model, effects)
+def write_report(analysis, out_path):
+    """Write the page of an :class:`~feedaxis.analysis.Analysis` to ``out_path``; returns
+    the path. Only formats: every number comes from ``analysis``."""
+    case, model = analysis.case, analysis.model
+    result, diagnosis, steps = analysis.result, analysis.diagnosis, analysis.ladder
     positioning = case.positioning
-    steps = error_ladder(case, model)
     sections = [
         f"<h1>feedaxis report: {html.escape(case.name)}</h1>",
+        f"<p>{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, feedaxis {__version__}</p>",
         f"<p>case <code>{html.escape(str(case.folder))}</code>, {positioning.size} samples; "
         f"model: {html.escape(' + '.join(model.names) or '(empty)')}; residual RMS "
         f"{result.rms_um:.4g} µm of {result.statistics.rms_before_um:.4g} µm measured "
@@ -136,29 +137,32 @@ def write_report(case, model, effects, out_path):
         "<h2>Measurement against model</h2>",
         _image(plots.measurement_vs_model(positioning.target_mm, result.measured_um,
                                           result.measured_um - result.residual_um,
-                                          positioning.direction), "measurement against model"),
+                                          positioning.direction, analysis.run_of_sample),
+               "measurement against model"),
         "<h2>Residual</h2>",
         _image(plots.residual_vs_position(positioning.target_mm, result.residual_um,
                                           diagnosis.spectrum.marks), "residual against position"),
         _image(plots.spectrum((diagnosis.spectrum.wavelength_mm, diagnosis.spectrum.amplitude_um),
-                              _detrended_spectrum(case, result.measured_um, effects),
+                              analysis.measured_spectrum,
                               diagnosis.spectrum.marks, diagnosis.unexplained), "spectrum"),
     ]
     panels = _residual_panels(case, result.residual_um)
     if panels:
         sections.append(_image(plots.residual_against(panels), "residual against time, "
                                                                "direction, ambient"))
-    sections += _compensation_html(case, model)
-    sections += compensation_table_html(case, model, _image, _table)
+    sections += _compensation_html(analysis.compensation)
+    sections += compensation_table_html(analysis, _image, _table)
     sections += [
         "<h2>Each effect's contribution</h2>",
-        _image(plots.contributions(positioning.target_mm, model.components(case)),
+        _image(plots.contributions(positioning.target_mm, analysis.components),
                "contributions") if model.effects else "<p>(empty model)</p>",
         "<h2>Error ladder</h2>", _image(plots.ladder(steps, diagnosis.noise_um), "error ladder"),
         _table(("step", "residual RMS (µm)"), [(label, f"{v:.4g}") for label, v in steps]),
-        "<h2>ISO 230-2 figures</h2>", _comparison_html(compare(case, model)),
+        "<h2>ISO 230-2 figures</h2>",
+        _image(plots.iso230_deviation(analysis.iso_deviation), "ISO 230-2 deviation"),
+        _comparison_html(analysis.comparison),
         "<h2>Model parameters</h2>",
-        _table(("parameter", "value", "unit", "meaning"), _parameter_rows(model)),
+        _parameter_table(model, diagnosis.base),
     ]
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>feedaxis report: "
             f"{html.escape(case.name)}</title><style>{STYLE}</style></head><body>"

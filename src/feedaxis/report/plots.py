@@ -29,18 +29,42 @@ def _png(figure):
     return buffer.getvalue()
 
 
-def measurement_vs_model(position_mm, measured_um, predicted_um, direction):
-    """Measured deviations (dots) and the model (line) against position."""
+def measurement_vs_model(position_mm, measured_um, predicted_um, direction, run=None):
+    """Measured deviations (dots) and the model (lines) against position: one line per
+    approach direction, and per run when ``run`` is given (a time-dependent case, whose
+    runs differ), so no line joins points of different runs."""
     figure, axes = plt.subplots(figsize=(9, 3.6))
     axes.plot(position_mm, measured_um, ".", ms=2, color="0.55", label="measured")
+    runs = np.zeros_like(position_mm) if run is None else run
     order = np.argsort(position_mm, kind="stable")
     for sign, colour in ((1.0, "tab:blue"), (-1.0, "tab:orange")):
-        chosen = order[direction[order] == sign]
-        if chosen.size:
-            axes.plot(position_mm[chosen], predicted_um[chosen], "-", lw=1.2, color=colour,
-                      label=f"model ({'+' if sign > 0 else '-'} approach)")
+        label = f"model ({'+' if sign > 0 else '-'} approach{', per run' if run is not None else ''})"
+        for number in np.unique(runs):
+            chosen = order[(direction[order] == sign) & (runs[order] == number)]
+            if chosen.size:
+                axes.plot(position_mm[chosen], predicted_um[chosen], "-", lw=1.0, color=colour,
+                          alpha=0.8, label=label)
+                label = None
     return _finish(figure, axes, "target position (mm)", "error (µm)",
                    "Measurement against model")
+
+
+def iso230_deviation(per_direction):
+    """The figure of ISO 230-2: mean deviation x̄ and x̄ ± 2s at each target, per direction.
+
+    ``per_direction`` is {"+" or "-": (target_mm, mean_um, std_um)}; s is NaN with one run.
+    """
+    figure, axes = plt.subplots(figsize=(9, 3.8))
+    for (sign, (target_mm, mean_um, std_um)), colour in zip(per_direction.items(),
+                                                           ("tab:blue", "tab:orange")):
+        axes.plot(target_mm, mean_um, "o-", ms=3, lw=1.2, color=colour,
+                  label=f"x̄{'↑' if sign == '+' else '↓'} ({sign} approach)")
+        if np.any(np.isfinite(std_um)):
+            for bound_um in (mean_um + 2 * std_um, mean_um - 2 * std_um):
+                axes.plot(target_mm, bound_um, "--", lw=0.8, color=colour)
+            axes.plot([], [], "--", lw=0.8, color=colour, label=f"x̄ ± 2s ({sign})")
+    return _finish(figure, axes, "target position (mm)", "deviation (µm)",
+                   "ISO 230-2 deviation: mean ± 2s per approach direction")
 
 
 def residual_vs_position(position_mm, residual_um, marks):
@@ -61,22 +85,39 @@ def residual_vs_position(position_mm, residual_um, marks):
 
 def spectrum(residual, measured, marks, structures=()):
     """Amplitude spectra (wavelength, amplitude) of the residual and of the detrended
-    measurement against wavelength, the catalog wavelengths and unexplained peaks marked."""
+    measurement against wavelength, over the wavelengths the targets resolve only; the
+    catalog wavelengths and unexplained peaks within that band marked, the others named in
+    the title."""
     figure, axes = plt.subplots(figsize=(9, 3.4))
+    shown = [w for w, _ in (residual, measured) if w.size]
+    low = min(float(w.min()) for w in shown) if shown else 0.0
+    high = max(float(w.max()) for w in shown) if shown else 0.0
+    top = 0.0
     for (wavelength_mm, amplitude_um), style in ((measured, dict(color="0.6", lw=0.7,
                                                                   label="measured, trend removed")),
                                                  (residual, dict(color="tab:blue", lw=0.8,
                                                                  label="residual"))):
         if wavelength_mm.size:
             axes.semilogx(wavelength_mm, amplitude_um, **style)
+            top = max(top, float(np.max(amplitude_um)))
+    outside = []
     for (label, wavelength), colour in zip(marks.items(), MARK_COLOURS):
-        axes.axvline(wavelength, color=colour, ls="--", lw=1, label=f"{label} {wavelength:.4g} mm")
+        if low <= wavelength <= high:
+            axes.axvline(wavelength, color=colour, ls="--", lw=1,
+                         label=f"{label} {wavelength:.4g} mm")
+        else:
+            outside.append(f"{label} {wavelength:.4g} mm")
     for structure in structures:
-        if structure.wavelength_mm:
+        if structure.wavelength_mm and low <= structure.wavelength_mm <= high:
             axes.axvline(structure.wavelength_mm, color="k", ls=":", lw=1.2,
                          label=f"unexplained {structure.wavelength_mm:.4g} mm")
-    return _finish(figure, axes, "wavelength (mm)", "amplitude (µm)",
-                   "Spatial spectrum along the travel", grid="both")
+    if shown:
+        axes.set_xlim(low, high)
+        axes.set_ylim(0.0, 1.1 * top if top > 0 else 1.0)
+    title = "Spatial spectrum along the travel, over the wavelengths the targets resolve"
+    if outside:
+        title += "\nnot resolvable here: " + ", ".join(outside)
+    return _finish(figure, axes, "wavelength (mm)", "amplitude (µm)", title, grid="both")
 
 
 def contributions(position_mm, components):

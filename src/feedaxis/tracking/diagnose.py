@@ -31,7 +31,7 @@ from threadpoolctl import threadpool_limits
 from ..effects import CATALOG
 from ..fit import FitResult
 from ..physics.servo import simulate
-from .effects import is_tracking_effect
+from ..effects.tracking import is_tracking_effect
 from .fit import fit
 from .model import Record, servo_params
 from .tests import autocorrelation_time, nested_p_value, peak_p_value

@@ -10,11 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..fmu_map import servo_to_fmu
 from ..physics.servo import ServoParams, simulate, step_counts
-from .effects import is_tracking_effect
+from ..effects.tracking import is_tracking_effect
 
-CONTROLLER_KEYS = ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm", "e_max_mm",
-                   "force_constant_N_per_V")
 SETTLING_S = 1.0  # seed 002 measures the tracking error after the first second
 
 
@@ -27,17 +26,10 @@ def is_tracking(case, model=None):
         model is not None and any(is_tracking_effect(e) for e in model.effects))
 
 
-def controller_values(servo):
-    """``ServoParams`` fields from an axis.toml ``[servo]`` table."""
-    values = {key: servo[key] for key in CONTROLLER_KEYS if key in servo}
-    return {**values, "nonlinear": servo["controller"] == "npid",
-            "time_step_s": servo["loop_step_s"]}
-
-
 def servo_params(axis, model, values=None):
     """The loop's :class:`ServoParams` for ``model`` (with ``values``, default its own)."""
     values = model.values if values is None else values
-    merged = controller_values(axis.servo)
+    merged = servo_to_fmu(axis.servo)
     for effect in model.effects:
         if is_tracking_effect(effect):
             merged.update({**effect.neutral, **values[effect.name]})

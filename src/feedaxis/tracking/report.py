@@ -8,7 +8,7 @@ import numpy as np
 
 from ..effects import Model
 from ..output import write_atomically
-from ..report.page import STYLE, _image, _parameter_rows, _table
+from ..report.page import STYLE, _image, _parameter_table, _table
 from ..report.plots import ladder
 from . import plots
 from .compare import compare
@@ -84,7 +84,7 @@ def write_report(case, model, effects, out_path):
         "<h2>Error ladder</h2>", _image(ladder(steps, diagnosis.noise_um), "error ladder"),
         _table(("step", "residual RMS (µm)"), [(label, f"{v:.4g}") for label, v in steps]),
         "<h2>Model parameters</h2>",
-        _table(("parameter", "value", "unit", "meaning"), _parameter_rows(model)),
+        _parameter_table(model, diagnosis.base),
     ]
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>feedaxis tracking "
             f"report: {html.escape(case.name)}</title><style>{STYLE}</style></head><body>"

@@ -10,7 +10,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from ..effects.base import Effect, Parameter
+from .base import Effect, Parameter
 from ..physics.servo import ServoParams
 
 SEED002_PLANT = {f.name: f.default for f in fields(ServoParams)}
