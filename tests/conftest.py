@@ -3,8 +3,7 @@ import shutil
 
 import pytest
 
-from feedaxis import __version__
-from feedaxis.cosim.fmu_cache import source_hash
+from feedaxis.cosim.fmu_cache import cache_folder
 from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.fmu_build import FMU_NAMES, build_fmus
 
@@ -28,9 +27,9 @@ def loaded_fmus(fmu_paths):
 @pytest.fixture
 def user_fmu_cache(fmu_paths, tmp_path, monkeypatch):
     """A user cache (``XDG_CACHE_HOME``) already holding this session's FMUs; its folder."""
-    cache = tmp_path / "cache" / "feedaxis" / f"fmus-{__version__}-{source_hash()}"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    cache = cache_folder()
     cache.mkdir(parents=True)
     for path in fmu_paths.values():
         shutil.copy2(path, cache / path.name)
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     return cache

@@ -38,10 +38,15 @@ def cache_root():
     return Path(base) / "feedaxis"
 
 
+def cache_folder(root=None):
+    """The cache folder of this version's FMUs (``root`` defaults to :func:`cache_root`)."""
+    python_only = "-python-hosts" if host_layer_missing() else ""
+    return Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{python_only}"
+
+
 def cached_fmus(root=None):
     """{FMU name: path} of the four FMUs, built into the cache on first use."""
-    python_only = "-python-hosts" if host_layer_missing() else ""
-    folder = Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{python_only}"
+    folder = cache_folder(root)
     if not all((folder / f"{name}.fmu").exists() for name in FMU_NAMES):
         folder.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
