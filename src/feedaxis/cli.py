@@ -13,6 +13,7 @@ import argparse
 import json
 import math
 import sys
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -707,6 +708,17 @@ def _wants_json(args):
     return getattr(args, "json", False)
 
 
+@contextmanager
+def _one_line_warnings():
+    """Warnings as ``feedaxis: warning: ...`` lines, without Python's source line."""
+    python_format = warnings.formatwarning
+    warnings.formatwarning = lambda message, *_, **__: f"feedaxis: warning: {message}\n"
+    try:
+        yield
+    finally:
+        warnings.formatwarning = python_format
+
+
 def main(argv=None):
     """Entry point of the ``feedaxis`` console script; returns the exit code.
 
@@ -720,8 +732,8 @@ def main(argv=None):
     wants_json, debug = "--json" in argv, "--debug" in argv
     try:
         args = build_parser().parse_args(argv)
-        with threadpool_limits(limits=1, user_api="blas"):  # small matrices: threads only cost
-            args.handler(args)
+        with threadpool_limits(limits=1, user_api="blas"), _one_line_warnings():
+            args.handler(args)  # BLAS on one thread: small matrices, threads only cost
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
         message = str(stopped)
         return _fail(wants_json, message if message.startswith("interrupted") else
