@@ -19,7 +19,9 @@ def compensation_table_html(analysis, image, table):
     if comp is None:
         return []
     model, positioning = analysis.model, analysis.case.positioning
-    (forward_mm, forward_um), (reverse_mm, reverse_um) = measured_means(positioning)
+    measured = dict(zip(("+", "-"), measured_means(positioning)))
+    table_um = {"+": comp.forward_um, "-": comp.reverse_um}
+    directions = ("+", "-") if positioning.bidirectional else ("+",)
     excluded = {**comp.excluded, **{k: v for k, v in NEVER_IN_TABLE.items() if k in model}}
     parts = [
         "<h2>Compensation table</h2>",
@@ -29,9 +31,9 @@ def compensation_table_html(analysis, image, table):
         + "".join(f"Left out {html.escape(name)}: {html.escape(reason)}. "
                   for name, reason in excluded.items())
         + "Write it for a controller with <code>feedaxis comp-table</code>.</p>",
-        image(plots.compensation_table({"+": forward_mm, "-": reverse_mm},
-                                       {"+": forward_um, "-": reverse_um}, comp.position_mm,
-                                       {"+": comp.forward_um, "-": comp.reverse_um}),
+        image(plots.compensation_table({d: measured[d][0] for d in directions},
+                                       {d: measured[d][1] for d in directions},
+                                       comp.position_mm, {d: table_um[d] for d in directions}),
               "compensation table over the measured means"),
         table(("ISO 230-2 figure, expected", "before (µm)", "after (µm)"),
               [(f["name"], f"{f['before_um']:.4g}", f"{f['after_um']:.4g}")

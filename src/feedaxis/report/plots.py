@@ -201,9 +201,9 @@ def compensation_table(target_mm, means_um, table_mm, table_um):
     """
     figure, axes = plt.subplots(figsize=(9, 3.6))
     for (label, mean_um), colour in zip(means_um.items(), ("tab:blue", "tab:orange")):
-        axes.plot(target_mm[label], mean_um, "o", ms=4, color=colour,
+        axes.plot(target_mm[label], mean_um, "o", ms=4, color=colour, alpha=0.5,
                   label=f"measured mean, {label} approach")
-        axes.plot(table_mm, table_um[label], ".-", ms=2, lw=1, color=colour,
-                  label=f"table, {label} direction")
+        axes.plot(table_mm, table_um[label], ".-", ms=3, lw=1.5, color="black"
+                  if len(means_um) == 1 else colour, zorder=3, label=f"table, {label} direction")
     return _finish(figure, axes, "position (mm)", "deviation removed (µm)",
                    "Compensation table over the measured means")
