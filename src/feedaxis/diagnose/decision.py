@@ -65,8 +65,9 @@ class Candidate:
 
 
 @dataclass
-class Diagnosis:
-    """Everything :func:`diagnose` found, ready for the CLI, the report and the demo."""
+class Findings:
+    """What a diagnosis of positioning or tracking data found: the refit of the model, the
+    noise, the verdict, the missing effects, the unexplained structure, what was skipped."""
 
     base: FitResult
     noise_um: float
@@ -75,9 +76,6 @@ class Diagnosis:
     candidates: list
     unexplained: list
     skipped: dict
-    spectrum: Spectrum
-    outlier_rows: list = field(default_factory=list)
-    test_used: str = ""
 
     @property
     def rms_um(self):
@@ -87,9 +85,20 @@ class Diagnosis:
         return {"rms_um": self.rms_um, "noise_um": self.noise_um, "verdict": self.verdict,
                 "candidates": [c.to_json() for c in self.candidates],
                 "unexplained": [s.to_json() for s in self.unexplained],
-                "noise_source": self.noise_source, "skipped": self.skipped,
-                "outlier_rows": self.outlier_rows, "test": self.test_used,
-                "family_alpha": FAMILY_ALPHA}
+                "noise_source": self.noise_source, "skipped": self.skipped}
+
+
+@dataclass
+class Diagnosis(Findings):
+    """Everything :func:`diagnose` found, ready for the CLI, the report and the demo."""
+
+    spectrum: Spectrum
+    outlier_rows: list = field(default_factory=list)
+    test_used: str = ""
+
+    def to_json(self):
+        return {**super().to_json(), "outlier_rows": self.outlier_rows,
+                "test": self.test_used, "family_alpha": FAMILY_ALPHA}
 
 
 def diagnose(case, model, effects=None, progress=None):

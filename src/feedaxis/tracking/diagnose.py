@@ -28,6 +28,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from threadpoolctl import threadpool_limits
 
+from ..diagnose.decision import Findings
 from ..effects import CATALOG
 from ..fit import FitResult
 from ..physics.servo import simulate
@@ -80,27 +81,10 @@ class Structure:
 
 
 @dataclass
-class TrackingDiagnosis:
+class TrackingDiagnosis(Findings):
     """Everything :func:`diagnose` found, for the CLI and the report."""
 
-    base: FitResult
-    noise_um: float
-    noise_source: str
-    verdict: str
-    candidates: list
-    unexplained: list
-    skipped: dict
     final: FitResult = field(repr=False)
-
-    @property
-    def rms_um(self):
-        return self.base.rms_um
-
-    def to_json(self):
-        return {"rms_um": self.rms_um, "noise_um": self.noise_um, "verdict": self.verdict,
-                "candidates": [c.to_json() for c in self.candidates],
-                "unexplained": [s.to_json() for s in self.unexplained],
-                "noise_source": self.noise_source, "skipped": self.skipped}
 
 
 def diagnose(case, model, effects=None, progress=None):
