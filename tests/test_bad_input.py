@@ -216,6 +216,30 @@ def test_a_single_target_is_refused(tmp_path, capsys):
     assert_refused(capsys, ["fit", case, "--add", "lead_error"], "one target 12.5 mm")
 
 
+def test_diagnose_of_residuals_equal_to_rounding_is_not_a_crash(tmp_path, capsys):
+    """Found by the fuzz test: zero deviations but one denormal (8.6e-283 µm) gave the robust
+    drift fit a loss scale whose square underflowed to 0 (NaN inside least_squares)."""
+    targets_mm, error_um = np.zeros(26), np.zeros(26)
+    targets_mm[24], error_um[25] = 1.0, 8.581239472068811e-283
+    case = write_case(tmp_path / "c", AXIS, positioning={
+        "target_mm": targets_mm, "error_um": error_um, "direction": -np.ones(26),
+        "run": np.r_[np.ones(25), 2.0]})
+    assert main(["diagnose", str(case), "--json"]) == 0
+    json.loads(capsys.readouterr().out)
+
+
+@pytest.mark.parametrize("command", [["fit", "{case}", "--add", "lead_error"],
+                                     ["diagnose", "{case}"]])
+def test_targets_apart_by_less_than_their_resolution_are_one_target(tmp_path, capsys,
+                                                                    command):
+    """Found by the fuzz test: nine samples at 0 mm and one at 8.6e-283 mm made the
+    diagnosis's least squares fail to converge (an internal error, exit 1)."""
+    case = small_case(tmp_path / "c", targets_mm=[0.0] * 9 + [8.581239472068811e-283],
+                      error_um=np.zeros(10))
+    assert_refused(capsys, [part.format(case=case) for part in command],
+                   "one target 0 mm (within 0.1 µm)")
+
+
 @pytest.mark.parametrize("row, message", [
     ("0,60,1000,100,100", "must travel"),
     ("0,60,0,0,100", "stays at from_mm"),

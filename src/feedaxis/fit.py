@@ -19,6 +19,7 @@ SINGULAR_RATIO = 1e-6
 # estimate s has a relative standard error of about 1/sqrt(2 nu) (chi-square with nu degrees
 # of freedom), 25 % at nu = 8; with fewer, BIC and the noise-based verdicts mean nothing.
 NOISE_DOF = 8
+SAME_TARGET_MM = 1e-4  # targets closer than 0.1 µm are one target (recorded jitter)
 
 
 @dataclass(frozen=True)
@@ -118,10 +119,11 @@ def too_few_samples(model, cases):
         return (f"{n_samples} samples; a fit of {' + '.join(model.names) or 'the empty model'} "
                 f"needs at least {needed} "
                 f"({n_parameters} parameters + {NOISE_DOF} degrees of freedom for the noise)")
-    targets = np.unique(np.concatenate([case.positioning.target_mm for case in cases]))
-    if targets.size < 2 and not any(case.positioning.time_s is not None for case in cases):
-        return (f"every sample is at the one target {targets[0]:g} mm: a positioning test "
-                "needs at least two targets")
+    targets = np.concatenate([case.positioning.target_mm for case in cases])
+    if np.ptp(targets) < SAME_TARGET_MM and not any(case.positioning.time_s is not None
+                                                     for case in cases):
+        return (f"every sample is at the one target {targets[0]:g} mm (within "
+                f"{SAME_TARGET_MM * 1e3:g} µm): a positioning test needs at least two targets")
     return None
 
 

@@ -36,6 +36,7 @@ OUTLIER_ALPHA = 0.001
 MIN_PURE_DOF = 10
 MAX_OUTLIER_PASSES = 5
 MAD_TO_SIGMA = 1.4826
+TINY_UM = 1e-12  # far below any measurement (1 fm): a scale under it is rounding
 PURE_ERROR = "F test against the pure error of repeated samples"
 RESIDUAL_MEAN_SQUARE = "partial F test against the residual mean square (no repeats)"
 
@@ -221,7 +222,9 @@ def _robust_drift(layout, residual_um):
     basis = drift_basis(layout.clock)
     within = basis - np.column_stack([layout.group_means(c) for c in basis.T])
     target = residual_um - layout.group_means(residual_um)
-    scale = MAD_TO_SIGMA * np.median(np.abs(target)) or 1.0
+    scale = MAD_TO_SIGMA * np.median(np.abs(target))
+    if not scale > TINY_UM:  # the groups agree to rounding: any loss scale will do, and a
+        scale = 1.0          # tiny one would underflow (f_scale² = 0) inside least_squares
     solution = least_squares(lambda c: within @ c - target, np.zeros(basis.shape[1]),
                              loss="soft_l1", f_scale=scale)
     return within @ solution.x

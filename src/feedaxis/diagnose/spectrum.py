@@ -11,7 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-CLUSTER_TOLERANCE_MM = 1e-4
+from ..fit import SAME_TARGET_MM
+
+CLUSTER_TOLERANCE_MM = SAME_TARGET_MM
 SPECTRUM_OVERSAMPLING = 5
 MAX_FREQUENCIES = 4000
 MIN_CLUSTERS = 8
