@@ -9,6 +9,7 @@ import contextlib
 from collections import Counter
 import io
 import json
+import os
 import tracemalloc
 from pathlib import Path
 
@@ -29,7 +30,9 @@ GOOD = {
     "tracking.csv": "time_s,reference_mm,actual_mm\n0,0,0\n0.001,0.1,0.09\n",
 }
 MEMORY_LIMIT_BYTES = 300e6
-FUZZ = settings(deadline=None, database=None,
+# CI explores one fixed sample (a failure there is reproducible); elsewhere every run
+# draws anew, which is how the finds in test_bad_input.py were made.
+FUZZ = settings(deadline=None, database=None, derandomize=os.environ.get("CI") == "true",
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 
 # Text made of the format's own tokens, so the fuzzer gets past the header often.
