@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .errors import InputError, read_text
+from .errors import InputError, finite_float, read_text
 from .output import umask_mode
 from .physics.geometry import SUPPORTS
 from .physics.thermal import DutySegment
@@ -353,12 +353,9 @@ def _check_header(path, header, spec, row):
 
 def _number(path, cell, row, column):
     try:
-        value = float(cell)
-    except ValueError:
-        raise CaseError(path, f"not a number: {cell!r}", row, column) from None
-    if not math.isfinite(value):
-        raise CaseError(path, f"must be finite, got {cell!r}", row, column)
-    return value
+        return finite_float(cell)
+    except ValueError as problem:
+        raise CaseError(path, str(problem), row, column) from None
 
 
 def _first_bad(path, mask, rows, column, message):

@@ -123,3 +123,14 @@ def check_writable_target(path, kind="file"):
             if not os.access(parent, os.W_OK):
                 raise InputError(f"cannot write into {parent}: permission denied", path=path)
             break
+
+
+def finite_float(text):
+    """``text`` as a finite float; ValueError with the reason (for the caller to locate)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"must be finite, got {text!r}")
+    return value

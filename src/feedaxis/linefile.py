@@ -2,9 +2,7 @@
 naming file, line and field, and reading a number with that error."""
 from __future__ import annotations
 
-import numpy as np
-
-from .errors import InputError
+from .errors import InputError, finite_float
 
 
 class LineError(InputError):
@@ -20,9 +18,6 @@ class LineError(InputError):
 def number(text, path, line, field):
     """``text`` as a finite float, else :class:`LineError` naming line and field."""
     try:
-        value = float(text)
-    except ValueError:
-        raise LineError(path, f"not a number: {text!r}", line, field) from None
-    if not np.isfinite(value):
-        raise LineError(path, f"must be finite, got {text!r}", line, field)
-    return value
+        return finite_float(text)
+    except ValueError as problem:
+        raise LineError(path, str(problem), line, field) from None
