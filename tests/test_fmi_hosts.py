@@ -393,3 +393,57 @@ def test_omsimulator_program_survives_a_bad_parameter(fmu_paths, tmp_path):
     report = run.stdout + run.stderr
     assert run.returncode >= 0, report[-3000:]  # not killed by a signal
     assert "logStatusError: GeometricError: initialisation: diameter_m: must be > 0" in report
+
+
+def scripted_calls(loaded):
+    """Every value a host reads from NpidServo over a script that mixes partial input sets,
+    reads of inputs and outputs, steps, and a saved state taken with inputs not yet stepped
+    and restored later: the host layer keeps inputs and outputs itself while stepping, and
+    must read back exactly what pythonfmu's own library does."""
+    outputs = [vr(loaded, n) for n in ("position_mm", "velocity_mm_s", "tracking_error_mm")]
+    reference, force = vr(loaded, "position_ref_mm"), vr(loaded, "disturbance_N")
+    slave = fresh(loaded)
+    slave.instantiate()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.setReal([reference], [0.5])
+    slave.exitInitializationMode()
+    read = [slave.getReal(outputs + [reference, force])]
+    time_s, saved = 0.0, None
+    for k in range(30):
+        slave.setReal([reference], [0.5 + 0.02 * k])
+        if k % 3 == 0:
+            slave.setReal([force], [5.0 * k])
+        if k == 10:
+            saved = slave.getFMUstate()
+        slave.doStep(time_s, 0.001)
+        time_s += 0.001
+        read.append(slave.getReal(outputs) + slave.getReal([force, reference]))
+    slave.setFMUstate(saved)
+    read.append(slave.getReal([reference, force] + outputs))
+    slave.doStep(0.010, 0.001)
+    read.append(slave.getReal(outputs))
+    read.append([slave.getRealStatus(2)])
+    slave.freeFMUstate(saved)
+    slave.terminate()
+    read.append(slave.getReal(outputs + [reference]))
+    slave.freeInstance()
+    slave.freeLibrary()
+    return read
+
+
+def test_host_layer_reads_back_what_pythonfmu_does(loaded_fmus, tmp_path, monkeypatch):
+    from feedaxis import fmu_build
+    from feedaxis.cosim.fmu_runner import LoadedFmu
+
+    monkeypatch.setattr(fmu_build, "host_layer_missing", lambda: "no C compiler (test)")
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.warns(UserWarning, match="Python hosts only"):
+        python_only = LoadedFmu(fmu_build.build_fmu("NpidServo", tmp_path))
+    try:
+        expected = scripted_calls(python_only)
+        got = scripted_calls(loaded_fmus["NpidServo"])
+    finally:
+        python_only.close()
+    assert got == expected
+    assert got[-3] == got[11][:3]  # the restored state steps as the saved one did

@@ -14,11 +14,17 @@
  *      that call's status into fmi2Error;
  *   3. passes every message to the host's logger with a category (pythonfmu passes NULL),
  *      the instance name in front, never text containing '%' as the format;
- *   4. reuses freed instances through pythonfmu's fmi2Reset (its fmi2Instantiate leaks).
+ *   4. reuses freed instances through pythonfmu's fmi2Reset (its fmi2Instantiate leaks);
+ *   5. keeps the Real inputs and outputs itself while stepping: fmi2SetReal and fmi2GetReal
+ *      of them never reach Python, and fmi2DoStep is one Python call (the slave's exchange
+ *      function, feedaxis_slave.claim) that takes the inputs and returns the outputs, where
+ *      pythonfmu makes three, each building Python lists (about 6 of its 7.5 us per step).
+ *      Any other call first hands pending inputs to the slave through pythonfmu.
  *
  * Build-time constants (-D): FEEDAXIS_PYTHON (the interpreter to start) and
  * FEEDAXIS_LIBPYTHON (its shared library); the environment variables of the same names
- * override them on the host. The per-FMU variable table comes from feedaxis_fmi_vars.h.
+ * override them on the host. The per-FMU variable table comes from feedaxis_fmi_vars.h. Python is reached
+ * only through dlsym, so the library loads in a host without libpython.
  */
 #define _GNU_SOURCE
 #define PY_SSIZE_T_CLEAN
@@ -57,6 +63,9 @@ typedef struct {
 
 #define EXPORT __attribute__((visibility("default")))
 
+#define MAX_MIRRORED 16
+#define HANDOFF_MODULE "feedaxis_fmu_handoff" /* feedaxis_slave.HANDOFF_MODULE */
+
 enum mode { INSTANTIATED, INITIALISING, STEPPING, TERMINATED, FAILED, DEAD };
 
 typedef struct {
@@ -69,6 +78,14 @@ typedef struct {
     enum mode mode;
     int host_logging;
     fmi2Status worst_logged;           /* worst status logged during the current call */
+    PyObject *exchange;                /* the slave's exchange function, or NULL */
+    double inputs[MAX_MIRRORED];       /* the Real inputs, in the order of input_vr */
+    double outputs[MAX_MIRRORED];      /* the Real outputs, in the order of output_vr */
+    int inputs_current;                /* inputs[] hold the slave's inputs or newer ones */
+    int inputs_pending;                /* inputs[] hold values the slave has not been given */
+    int outputs_current;               /* outputs[] equal the slave's outputs */
+    double last_successful_time;       /* fmi2LastSuccessfulTime */
+    int wants_to_terminate;            /* fmi2Terminated: a step failed */
 } Guard;
 
 static void *real_library;
@@ -152,6 +169,8 @@ static void release_pythonfmu_state(void)
     if (release) release();
 }
 
+static void prepare_mirror(void);
+
 static void load(void)
 {
     Dl_info self;
@@ -174,6 +193,7 @@ static void load(void)
      * after pythonfmu's static destructors, so that it runs before them. */
     dlopen(self.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
     atexit(release_pythonfmu_state);
+    prepare_mirror();
 }
 
 /* ---- logging ---------------------------------------------------------------------- */
@@ -272,6 +292,291 @@ static int settable(Guard *g, const fmi2ValueReference vr[], size_t nvr)
     return 1;
 }
 
+/* ---- Real inputs and outputs kept here while stepping (item 5) ----------------------- */
+
+/* The Python C API, found with dlsym once Python runs (never linked: see the top). */
+static struct {
+    PyGILState_STATE (*gil_ensure)(void);
+    void (*gil_release)(PyGILState_STATE);
+    PyObject *(*import)(const char *);
+    PyObject *(*get_attr)(PyObject *, const char *);
+    PyObject *(*call)(PyObject *, PyObject *);
+    PyObject *(*tuple_new)(Py_ssize_t);
+    int (*tuple_set)(PyObject *, Py_ssize_t, PyObject *);
+    PyObject *(*tuple_get)(PyObject *, Py_ssize_t);
+    Py_ssize_t (*tuple_size)(PyObject *);
+    PyObject *(*list_get)(PyObject *, Py_ssize_t);
+    Py_ssize_t (*list_size)(PyObject *);
+    PyObject *(*from_double)(double);
+    double (*as_double)(PyObject *);
+    long (*as_long)(PyObject *);
+    PyObject *(*from_string)(const char *);
+    const char *(*as_utf8)(PyObject *);
+    void (*decref)(PyObject *);
+    PyObject *(*err_occurred)(void);
+    void (*err_fetch)(PyObject **, PyObject **, PyObject **);
+    void (*err_clear)(void);
+    PyObject *(*str)(PyObject *);
+    int (*is_initialized)(void);
+    PyObject *none;
+    int ready;
+} py;
+
+static fmi2ValueReference input_vr[MAX_MIRRORED], output_vr[MAX_MIRRORED];
+static size_t n_inputs, n_outputs;
+
+#define FIND(field, symbol) (py.field = dlsym(RTLD_DEFAULT, symbol)) != NULL
+
+/* Resolve the API and index the mirrored variables; py.ready stays 0 (every call then goes
+ * through pythonfmu) if a symbol is missing or an input or output is not a Real. */
+static void prepare_mirror(void)
+{
+    for (size_t k = 0; k < FEEDAXIS_N_VARS; ++k) {
+        const FeedaxisVar *v = &FEEDAXIS_VARS[k];
+        if (v->kind != 'u' && v->kind != 'o') continue;
+        if (!v->real) return;
+        if (v->kind == 'u') {
+            if (n_inputs == MAX_MIRRORED) return;
+            input_vr[n_inputs++] = v->vr;
+        } else {
+            if (n_outputs == MAX_MIRRORED) return;
+            output_vr[n_outputs++] = v->vr;
+        }
+    }
+    py.ready = FIND(gil_ensure, "PyGILState_Ensure") && FIND(gil_release, "PyGILState_Release")
+        && FIND(import, "PyImport_ImportModule") && FIND(get_attr, "PyObject_GetAttrString")
+        && FIND(call, "PyObject_CallObject") && FIND(tuple_new, "PyTuple_New")
+        && FIND(tuple_set, "PyTuple_SetItem") && FIND(tuple_get, "PyTuple_GetItem")
+        && FIND(tuple_size, "PyTuple_Size") && FIND(list_get, "PyList_GetItem")
+        && FIND(list_size, "PyList_Size") && FIND(from_double, "PyFloat_FromDouble")
+        && FIND(as_double, "PyFloat_AsDouble") && FIND(as_long, "PyLong_AsLong")
+        && FIND(from_string, "PyUnicode_FromString") && FIND(as_utf8, "PyUnicode_AsUTF8")
+        && FIND(decref, "Py_DecRef") && FIND(err_occurred, "PyErr_Occurred")
+        && FIND(err_fetch, "PyErr_Fetch") && FIND(err_clear, "PyErr_Clear")
+        && FIND(str, "PyObject_Str") && FIND(is_initialized, "Py_IsInitialized")
+        && FIND(none, "_Py_NoneStruct");
+}
+
+static int mirror_index(const fmi2ValueReference list[], size_t n, fmi2ValueReference vr)
+{
+    for (size_t i = 0; i < n; ++i)
+        if (list[i] == vr) return (int)i;
+    return -1;
+}
+
+/* A tuple of the names of ``vrs`` (a new reference, or NULL). */
+static PyObject *names_of(const fmi2ValueReference vrs[], size_t n)
+{
+    PyObject *names = py.tuple_new((Py_ssize_t)n);
+    for (size_t i = 0; names && i < n; ++i) {
+        for (size_t k = 0; k < FEEDAXIS_N_VARS; ++k) {
+            if (FEEDAXIS_VARS[k].vr != vrs[i]) continue;
+            py.tuple_set(names, (Py_ssize_t)i, py.from_string(FEEDAXIS_VARS[k].name));
+            break;
+        }
+    }
+    return names;
+}
+
+static void drop_exchange(Guard *g)
+{
+    if (!g->exchange) return;
+    if (py.is_initialized()) {
+        PyGILState_STATE gil = py.gil_ensure();
+        py.decref(g->exchange);
+        py.gil_release(gil);
+    }
+    g->exchange = NULL;
+}
+
+/* Call ``function`` of the adapter's hand-over module (feedaxis_slave._handoff) with
+ * ``args`` (stolen); a new reference, or NULL (no slave constructed yet, or an error). */
+static PyObject *call_handoff(const char *function, PyObject *args)
+{
+    PyObject *module = py.import(HANDOFF_MODULE);
+    PyObject *callable = module ? py.get_attr(module, function) : NULL;
+    PyObject *result = callable && args ? py.call(callable, args) : NULL;
+    if (args) py.decref(args);
+    if (callable) py.decref(callable);
+    if (module) py.decref(module);
+    if (py.err_occurred()) py.err_clear();
+    return result;
+}
+
+/* Before pythonfmu constructs a slave: forget any slave constructed earlier on this thread. */
+static void expect_slave(void)
+{
+    if (!py.ready) return;
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *result = call_handoff("forget", py.tuple_new(0));
+    if (result) py.decref(result);
+    py.gil_release(gil);
+}
+
+/* After: take the exchange function of the slave pythonfmu has just constructed. Without
+ * one (an adapter without it), pythonfmu serves every call. */
+static void claim_exchange(Guard *g)
+{
+    drop_exchange(g);
+    g->inputs_current = g->inputs_pending = g->outputs_current = 0;
+    if (!py.ready) return;
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *args = py.tuple_new(2);
+    if (args) {
+        py.tuple_set(args, 0, names_of(input_vr, n_inputs));
+        py.tuple_set(args, 1, names_of(output_vr, n_outputs));
+    }
+    PyObject *exchange = call_handoff("claim", args);
+    if (exchange && exchange != py.none) g->exchange = exchange;
+    else if (exchange) py.decref(exchange);
+    py.gil_release(gil);
+}
+
+static fmi2Status (*real_get_real)(fmi2Component, const fmi2ValueReference *, size_t, fmi2Real *);
+static fmi2Status (*real_set_real)(fmi2Component, const fmi2ValueReference *, size_t,
+                                   const fmi2Real *);
+
+/* Read the slave's inputs and outputs into the mirror (through pythonfmu). */
+static int load_mirror(Guard *g)
+{
+    if (!real_get_real) real_get_real = real("fmi2GetReal");
+    if (!real_get_real || real_get_real(g->real, input_vr, n_inputs, g->inputs) > fmi2Warning
+        || real_get_real(g->real, output_vr, n_outputs, g->outputs) > fmi2Warning)
+        return 0;
+    g->inputs_current = g->outputs_current = 1;
+    g->inputs_pending = 0;
+    return 1;
+}
+
+/* Give the slave the inputs set here since its last step (through pythonfmu). */
+static void hand_over_inputs(Guard *g)
+{
+    if (!g->inputs_pending) return;
+    if (!real_set_real) real_set_real = real("fmi2SetReal");
+    if (real_set_real) real_set_real(g->real, input_vr, n_inputs, g->inputs);
+    g->inputs_pending = 0;
+}
+
+/* After a call that may change the slave, the mirror is read again before it is used. */
+static void slave_changed(Guard *g)
+{
+    g->inputs_current = g->outputs_current = 0;
+}
+
+static int fast(Guard *g)
+{
+    return g->exchange && g->mode == STEPPING;
+}
+
+/* Log the (status, category, message) tuples the slave returned, as guard_logger does. */
+static void pass_messages(Guard *g, PyObject *messages)
+{
+    Py_ssize_t n = py.list_size(messages);
+    for (Py_ssize_t i = 0; i < n; ++i) {
+        PyObject *item = py.list_get(messages, i);
+        fmi2Status status = (fmi2Status)py.as_long(py.tuple_get(item, 0));
+        PyObject *category = py.tuple_get(item, 1);
+        const char *text = py.as_utf8(py.tuple_get(item, 2));
+        if (status > g->worst_logged && status <= fmi2Fatal) g->worst_logged = status;
+        tell_host(g, status, category && PyUnicode_Check(category) ? py.as_utf8(category) : NULL,
+                  text ? text : "(message not readable)");
+    }
+}
+
+static int read_outputs(Guard *g, PyObject *outputs)
+{
+    if (!outputs || !PyTuple_Check(outputs) || py.tuple_size(outputs) != (Py_ssize_t)n_outputs)
+        return 0;
+    for (size_t i = 0; i < n_outputs; ++i) {
+        double value = py.as_double(py.tuple_get(outputs, (Py_ssize_t)i));
+        if (value == -1.0 && py.err_occurred()) return 0;
+        g->outputs[i] = value;
+    }
+    return 1;
+}
+
+/* A Python exception out of the exchange function is a bug: fmi2Fatal with its text. */
+static fmi2Status exchange_failed(Guard *g)
+{
+    PyObject *type = NULL, *value = NULL, *traceback = NULL;
+    py.err_fetch(&type, &value, &traceback);
+    PyObject *text = value ? py.str(value) : NULL;
+    const char *reason = text ? py.as_utf8(text) : NULL;
+    char message[512];
+    snprintf(message, sizeof message, "doStep: internal error in the slave's exchange: %s",
+             reason ? reason : "(no message)");
+    tell_host(g, fmi2Fatal, NULL, message);
+    if (py.err_occurred()) py.err_clear();
+    if (text) py.decref(text);
+    if (type) py.decref(type);
+    if (value) py.decref(value);
+    if (traceback) py.decref(traceback);
+    return fmi2Fatal;
+}
+
+/* fmi2DoStep as one Python call: inputs in, outputs out (pythonfmu: fmi2Discard on a
+ * failed step, which finish() turns into the error the slave logged). */
+static fmi2Status exchange_step(Guard *g, fmi2Real t, fmi2Real h)
+{
+    fmi2Status status = fmi2Discard;
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *args = py.tuple_new((Py_ssize_t)(2 + n_inputs));
+    if (args) {
+        py.tuple_set(args, 0, py.from_double(t));
+        py.tuple_set(args, 1, py.from_double(h));
+        for (size_t i = 0; i < n_inputs; ++i)
+            py.tuple_set(args, (Py_ssize_t)(2 + i), py.from_double(g->inputs[i]));
+    }
+    PyObject *result = args ? py.call(g->exchange, args) : NULL;
+    if (args) py.decref(args);
+    if (!result) {
+        status = exchange_failed(g);
+    } else if (PyTuple_Check(result)) {
+        status = read_outputs(g, result) ? fmi2OK : exchange_failed(g);
+    } else if (PyList_Check(result) && py.list_size(result) == 2) {
+        pass_messages(g, py.list_get(result, 1));
+        PyObject *outputs = py.list_get(result, 0);
+        if (outputs != py.none) status = read_outputs(g, outputs) ? fmi2OK : exchange_failed(g);
+    } else {
+        tell_host(g, fmi2Fatal, NULL, "doStep: the slave's exchange returned an unexpected value");
+        status = fmi2Fatal;
+    }
+    if (result) py.decref(result);
+    if (py.err_occurred()) py.err_clear();
+    py.gil_release(gil);
+    g->inputs_pending = 0;
+    g->outputs_current = status <= fmi2Warning;
+    return status;
+}
+
+/* Whether fmi2GetReal of ``vr`` can be answered from the mirror; copies the values. */
+static int get_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+{
+    for (size_t i = 0; i < nvr; ++i) {
+        int k = mirror_index(output_vr, n_outputs, vr[i]);
+        if (k >= 0 && g->outputs_current) continue;
+        if (k < 0 && g->inputs_current && mirror_index(input_vr, n_inputs, vr[i]) >= 0) continue;
+        return 0;
+    }
+    for (size_t i = 0; i < nvr; ++i) {
+        int k = mirror_index(output_vr, n_outputs, vr[i]);
+        value[i] = k >= 0 ? g->outputs[k] : g->inputs[mirror_index(input_vr, n_inputs, vr[i])];
+    }
+    return 1;
+}
+
+/* Whether fmi2SetReal of ``vr`` (all inputs) can be kept in the mirror; stores the values. */
+static int set_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr,
+                        const fmi2Real value[])
+{
+    for (size_t i = 0; i < nvr; ++i)
+        if (mirror_index(input_vr, n_inputs, vr[i]) < 0) return 0;
+    if (!g->inputs_current && !load_mirror(g)) return 0;
+    for (size_t i = 0; i < nvr; ++i) g->inputs[mirror_index(input_vr, n_inputs, vr[i])] = value[i];
+    g->inputs_pending = 1;
+    return 1;
+}
+
 /* ---- the fmi2 functions ------------------------------------------------------------ */
 
 EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
@@ -314,6 +619,7 @@ static int put_pooled(Guard *g)
 
 static void release(Guard *g)
 {
+    drop_exchange(g);
     free(g->name);
     free(g->guid);
     free(g->resources);
@@ -343,7 +649,11 @@ static Guard *reuse(fmi2String name, fmi2String guid, fmi2String resources,
     static fmi2Status (*reset)(fmi2Component);
     if (!reset) reset = (fmi2Status(*)(fmi2Component))real("fmi2Reset");
     begin(g);
-    if (finish(g, reset(g->real)) <= fmi2Warning) return g;
+    expect_slave();
+    if (finish(g, reset(g->real)) <= fmi2Warning) {
+        claim_exchange(g);
+        return g;
+    }
     if (g->mode != DEAD) {
         void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
         free_instance(g->real);
@@ -375,8 +685,12 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
         tell_host(g, fmi2Error, NULL, "this FMU supports co-simulation only");
     } else {
         begin(g);
+        expect_slave();
         g->real = instantiate(instanceName, fmuType, guid, resources, &g->mine, visible, 1);
-        if (g->real && g->worst_logged < fmi2Error) return g;
+        if (g->real && g->worst_logged < fmi2Error) {
+            claim_exchange(g);
+            return g;
+        }
     }
     release(g);  /* a component pythonfmu returned with an error is leaked, never touched */
     return NULL;
@@ -391,6 +705,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
         return;
     }
     g->host.logger = NULL;  /* the host's callbacks end here */
+    drop_exchange(g);
     if (put_pooled(g)) return;
     void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
     free_instance(g->real);
@@ -414,6 +729,7 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
     if (!usable(g, #function, when_failed)) return fmi2Error;                                  \
     static fmi2Status(*call) signature; /* resolved once: dlsym costs a microsecond */     \
     if (!call) call = (fmi2Status(*) signature)real(#function);                                \
+    hand_over_inputs(g);                                                                       \
     begin(g);                                                                                  \
     fmi2Status status = finish(g, call(g->real, ##__VA_ARGS__))
 
@@ -422,12 +738,14 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, f
 {
     FORWARD(fmi2SetupExperiment, 0, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean,
                                      fmi2Real), tolDefined, tol, start, stopDefined, stop);
+    g->last_successful_time = start;
     return status;
 }
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
     FORWARD(fmi2EnterInitializationMode, 0, (fmi2Component));
+    slave_changed(g);
     if (status <= fmi2Warning) g->mode = INITIALISING;
     return status;
 }
@@ -435,53 +753,69 @@ EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
     FORWARD(fmi2ExitInitializationMode, 0, (fmi2Component));
+    slave_changed(g);
     if (status <= fmi2Warning) g->mode = STEPPING;
+    if (fast(g)) load_mirror(g);
     return status;
 }
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
     FORWARD(fmi2Terminate, 1, (fmi2Component));
+    slave_changed(g);
     if (status <= fmi2Warning) g->mode = TERMINATED;
     return status;
 }
 
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
+    expect_slave();
     FORWARD(fmi2Reset, 1, (fmi2Component));
-    if (status <= fmi2Warning) g->mode = INSTANTIATED;
+    slave_changed(g);
+    if (status <= fmi2Warning) {
+        g->mode = INSTANTIATED;
+        g->wants_to_terminate = 0;
+        claim_exchange(g);
+    }
     return status;
 }
 
-#define GETTER(function, type)                                                                   \
+/* ``mirrored``: a statement that may answer the call from the mirror (item 5). */
+#define GETTER(function, type, mirrored)                                                         \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                type value[])                                                    \
     {                                                                                           \
+        Guard *guard = c;                                                                       \
+        if (guard) { mirrored }                                                                 \
         FORWARD(function, 1, (fmi2Component, const fmi2ValueReference *, size_t, type *), vr,   \
                 nvr, value);                                                                    \
         return status;                                                                          \
     }
 
-GETTER(fmi2GetReal, fmi2Real)
-GETTER(fmi2GetInteger, fmi2Integer)
-GETTER(fmi2GetBoolean, fmi2Boolean)
-GETTER(fmi2GetString, fmi2String)
+GETTER(fmi2GetReal, fmi2Real,
+       if (fast(guard) && get_mirrored(guard, vr, nvr, value)) return fmi2OK;)
+GETTER(fmi2GetInteger, fmi2Integer, )
+GETTER(fmi2GetBoolean, fmi2Boolean, )
+GETTER(fmi2GetString, fmi2String, )
 
-#define SETTER(function, type)                                                                   \
+#define SETTER(function, type, mirrored)                                                         \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                const type value[])                                              \
     {                                                                                           \
         Guard *guard = c;                                                                       \
         if (guard && guard->mode != DEAD && !settable(guard, vr, nvr)) return fmi2Error;        \
+        if (guard) { mirrored }                                                                 \
         FORWARD(function, 0, (fmi2Component, const fmi2ValueReference *, size_t, const type *), \
                 vr, nvr, value);                                                                \
+        slave_changed(g);                                                                       \
         return status;                                                                          \
     }
 
-SETTER(fmi2SetReal, fmi2Real)
-SETTER(fmi2SetInteger, fmi2Integer)
-SETTER(fmi2SetBoolean, fmi2Boolean)
-SETTER(fmi2SetString, fmi2String)
+SETTER(fmi2SetReal, fmi2Real,
+       if (fast(guard) && set_mirrored(guard, vr, nvr, value)) return fmi2OK;)
+SETTER(fmi2SetInteger, fmi2Integer, )
+SETTER(fmi2SetBoolean, fmi2Boolean, )
+SETTER(fmi2SetString, fmi2String, )
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
@@ -492,6 +826,7 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     FORWARD(fmi2SetFMUstate, 0, (fmi2Component, fmi2FMUstate), state);
+    slave_changed(g);
     return status;
 }
 
@@ -549,14 +884,27 @@ EXPORT fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueR
                          "(maxOutputDerivativeOrder is 0)") : fmi2Error;
 }
 
+/* Bookkeeping after a step from ``t`` over ``h`` that ended with ``status``. */
+static fmi2Status stepped(Guard *g, fmi2Real t, fmi2Real h, fmi2Status status)
+{
+    if (status == fmi2Discard) g->mode = FAILED;
+    g->last_successful_time = status <= fmi2Warning ? t + h : t;
+    if (status > fmi2Warning) g->wants_to_terminate = 1;
+    return status;
+}
+
 EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_set_prior)
 {
     Guard *guard = c;
     if (guard && guard->mode != STEPPING && guard->mode != DEAD && guard->mode != FAILED)
         return refuse(guard, "fmi2DoStep refused in %s", MODE_NAMES[guard->mode]);
+    if (guard && fast(guard) && (guard->inputs_current || load_mirror(guard))) {
+        begin(guard);
+        return stepped(guard, t, h, finish(guard, exchange_step(guard, t, h)));
+    }
     FORWARD(fmi2DoStep, 0, (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean), t, h, no_set_prior);
-    if (status == fmi2Discard) g->mode = FAILED;
-    return status;
+    slave_changed(g);
+    return stepped(g, t, h, status);
 }
 
 EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
@@ -572,7 +920,31 @@ EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
     }
 
 STATUS_GETTER(fmi2GetStatus, fmi2Status)
-STATUS_GETTER(fmi2GetRealStatus, fmi2Real)
 STATUS_GETTER(fmi2GetIntegerStatus, fmi2Integer)
-STATUS_GETTER(fmi2GetBooleanStatus, fmi2Boolean)
 STATUS_GETTER(fmi2GetStringStatus, fmi2String)
+
+/* The two kinds pythonfmu answers are kept here: the layer may step without it. */
+enum { LAST_SUCCESSFUL_TIME = 2, TERMINATED_KIND = 3 };
+
+EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Real *value)
+{
+    Guard *guard = c;
+    if (guard && kind == LAST_SUCCESSFUL_TIME && value && guard->mode != DEAD) {
+        *value = guard->last_successful_time;
+        return fmi2OK;
+    }
+    FORWARD(fmi2GetRealStatus, 1, (fmi2Component, fmi2StatusKind, fmi2Real *), kind, value);
+    return status;
+}
+
+EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind kind,
+                                       fmi2Boolean *value)
+{
+    Guard *guard = c;
+    if (guard && kind == TERMINATED_KIND && value && guard->mode != DEAD) {
+        *value = guard->wants_to_terminate;
+        return fmi2OK;
+    }
+    FORWARD(fmi2GetBooleanStatus, 1, (fmi2Component, fmi2StatusKind, fmi2Boolean *), kind, value);
+    return status;
+}

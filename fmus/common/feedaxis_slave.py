@@ -8,15 +8,55 @@ exception into fmi2Fatal and leave its instance holding freed objects): a ValueE
 parameter, a NaN input, a refused step) is logged with category ``logStatusError`` naming
 the variable, any other exception (a bug) with ``logStatusFatal`` and its traceback; the
 FMU's host layer (fmus/common/feedaxis_fmi_host.c) returns that status for the call.
+
+While stepping, the host layer keeps the Real inputs and outputs itself and makes one call
+per doStep, to the function :func:`claim` returns (:meth:`AxisSlave.exchanger`), instead of
+pythonfmu's three (set_real, do_step, get_real, each building Python lists).
 """
 import math
+import operator
+import sys
+import threading
 import traceback
+import types
+import weakref
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability
 from pythonfmu import Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
 _TYPES = {bool: Boolean, int: Integer, float: Real, str: String}
+HANDOFF_MODULE = "feedaxis_fmu_handoff"
+
+
+def _handoff():
+    """The module all copies of this adapter in a process share with the host layer: the
+    slave constructed last on each thread (``constructed``), :func:`claim` and :func:`forget`.
+
+    Every FMU carries its own copy of this file, and a process may hold several builds;
+    one shared module makes the hand-over independent of which copy a slave came from.
+    """
+    module = sys.modules.get(HANDOFF_MODULE)
+    if module is None:
+        module = types.ModuleType(HANDOFF_MODULE, _handoff.__doc__)
+        module.constructed, module.claim, module.forget = {}, claim, forget
+        sys.modules[HANDOFF_MODULE] = module
+    return module
+
+
+def forget():
+    """Drop this thread's constructed slave; the host layer calls this right before
+    pythonfmu's fmi2Instantiate or fmi2Reset, so that :func:`claim` finds only the slave
+    that call constructs."""
+    _handoff().constructed.pop(threading.get_ident(), None)
+
+
+def claim(input_names, output_names):
+    """The exchange function (:meth:`AxisSlave.exchanger`) of the slave constructed on this
+    thread since :func:`forget`, or None; the host layer calls this right after."""
+    reference = _handoff().constructed.pop(threading.get_ident(), None)
+    slave = reference() if reference is not None else None
+    return None if slave is None else slave.exchanger(input_names, output_names)
 
 
 class AxisSlave(Fmi2Slave):
@@ -31,6 +71,7 @@ class AxisSlave(Fmi2Slave):
         self.limits = {}
         self.model = None
         self._input_names = []
+        _handoff().constructed[threading.get_ident()] = weakref.ref(self)
 
     def _declare(self, name, value, description, unit, limits, **kind):
         setattr(self, name, value)
@@ -83,6 +124,27 @@ class AxisSlave(Fmi2Slave):
         except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
             return self._report(f"at t = {current_time} s", error)
         return True
+
+    def exchanger(self, input_names, output_names):
+        """``exchange(current_time, step_size, *inputs)``: set the inputs (in the order of
+        ``input_names``), do the step as :meth:`do_step`, and return the outputs (in the
+        order of ``output_names``) as a tuple; when the step failed or logged, return
+        ``[outputs or None, [(status, category, message), ...]]`` and empty the log queue."""
+        names = tuple(output_names)
+        read = operator.attrgetter(*names) if len(names) > 1 else (
+            lambda slave: (getattr(slave, names[0]),))
+        inputs = tuple(input_names)
+
+        def exchange(current_time, step_size, *values):
+            for name, value in zip(inputs, values):
+                setattr(self, name, value)
+            outputs = read(self) if self.do_step(current_time, step_size) else None
+            if outputs is not None and not self.log_queue:
+                return outputs
+            messages = [(int(m.status), m.category, m.msg) for m in self.log_queue]
+            self.log_queue.clear()
+            return [outputs, messages]
+        return exchange
 
     def _step_checked(self, step_size):
         if self.model is None:
