@@ -145,5 +145,29 @@ def test_servo_over_a_communication_step_equals_the_loop_stepped(settings):
     duration_s = np.diff(time_s, prepend=0.0)
     for dt, ref, force in zip(duration_s, reference_mm, force_N):
         assert fast.advance(dt, ref, force) == pytest.approx(stepped.advance(dt, ref, force),
-                                                            abs=1e-11)
-    assert fast.velocity_mm_s == pytest.approx(stepped.velocity_mm_s, abs=1e-8)
+                                                            abs=1e-12)
+        assert fast.velocity_mm_s == pytest.approx(stepped.velocity_mm_s, abs=1e-10)
+
+
+@pytest.mark.parametrize("settings", [{}, {"friction_N": 1.0}])
+def test_servo_state_saved_and_restored_mid_run_continues_the_same(settings):
+    """state() of a propagated loop (vector form) restored into a new servo, and into one
+    that steps the kernel, continues as the original did (FMU get/set state)."""
+    params = servo.ServoParams(**settings)
+    rng = np.random.default_rng(11)
+    reference_mm = rng.uniform(-5.0, 5.0, 400)
+    force_N = rng.normal(0.0, 20.0, 400)
+    original = servo.Servo(params, 0.0)
+    for ref, force in zip(reference_mm[:200], force_N[:200]):
+        original.advance(1e-3, ref, force)
+    saved = original.state()
+    assert len(saved["loop"]) == servo.STATE_SIZE and len(saved["commands_V"]) == params.buffer_size
+    restored, stepped = servo.Servo(params, 0.0), servo.Servo(params, 0.0)
+    restored.restore(saved)
+    stepped.restore(saved)
+    stepped._propagators = None
+    for ref, force in zip(reference_mm[200:], force_N[200:]):
+        expected = original.advance(1e-3, ref, force)
+        assert restored.advance(1e-3, ref, force) == expected
+        assert stepped.advance(1e-3, ref, force) == pytest.approx(expected, abs=1e-12)
+    assert restored.state() == original.state()
