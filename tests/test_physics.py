@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from feedaxis.physics import geometry, motor, servo, thermal
+from feedaxis.physics import geometry, motor, mounting, scalar, servo, thermal
 
 
 def literal_eq10_step(T, Ta, p, v, nut_center_m, dt):
@@ -145,5 +145,115 @@ def test_servo_over_a_communication_step_equals_the_loop_stepped(settings):
     duration_s = np.diff(time_s, prepend=0.0)
     for dt, ref, force in zip(duration_s, reference_mm, force_N):
         assert fast.advance(dt, ref, force) == pytest.approx(stepped.advance(dt, ref, force),
-                                                            abs=1e-11)
-    assert fast.velocity_mm_s == pytest.approx(stepped.velocity_mm_s, abs=1e-8)
+                                                            abs=1e-12)
+        assert fast.velocity_mm_s == pytest.approx(stepped.velocity_mm_s, abs=1e-10)
+
+
+@pytest.mark.parametrize("settings", [{}, {"friction_N": 1.0}])
+def test_servo_state_saved_and_restored_mid_run_continues_the_same(settings):
+    """state() of a propagated loop (vector form) restored into a new servo, and into one
+    that steps the kernel, continues as the original did (FMU get/set state)."""
+    params = servo.ServoParams(**settings)
+    rng = np.random.default_rng(11)
+    reference_mm = rng.uniform(-5.0, 5.0, 400)
+    force_N = rng.normal(0.0, 20.0, 400)
+    original = servo.Servo(params, 0.0)
+    for ref, force in zip(reference_mm[:200], force_N[:200]):
+        original.advance(1e-3, ref, force)
+    saved = original.state()
+    assert len(saved["loop"]) == servo.STATE_SIZE and len(saved["commands_V"]) == params.buffer_size
+    restored, stepped = servo.Servo(params, 0.0), servo.Servo(params, 0.0)
+    restored.restore(saved)
+    stepped.restore(saved)
+    stepped._propagators = None
+    for ref, force in zip(reference_mm[200:], force_N[200:]):
+        expected = original.advance(1e-3, ref, force)
+        assert restored.advance(1e-3, ref, force) == expected
+        assert stepped.advance(1e-3, ref, force) == pytest.approx(expected, abs=1e-12)
+    assert restored.state() == original.state()
+
+
+def test_scalar_interp_equals_numpy_interp_bit_for_bit():
+    """One float through the bisection on the table's lists gives np.interp's value: inside,
+    at every node, at and beyond both ends, NaN."""
+    rng = np.random.default_rng(3)
+    grid = np.cumsum(rng.uniform(0.001, 0.01, 500))
+    samples = scalar.table(grid, rng.normal(0.0, 1.0, 500))
+    points = np.concatenate((rng.uniform(grid[0] - 0.1, grid[-1] + 0.1, 5000), grid,
+                             [grid[0], grid[-1], -np.inf, np.inf]))
+    for x in points.tolist():
+        assert scalar.interp(x, samples) == np.interp(x, grid, samples.y)
+    assert np.isnan(scalar.interp(float("nan"), samples))
+    np.testing.assert_array_equal(scalar.interp(points, samples), np.interp(points, grid, samples.y))
+
+
+def test_geometric_and_motor_errors_of_one_float_equal_the_array_path():
+    """The FMUs' scalar paths (math module, bisection) against NumPy on arrays, at seeded
+    random positions and directions: the same formula, so equal to 1e-12 µm."""
+    rng = np.random.default_rng(5)
+    position_mm = rng.uniform(-300.0, 900.0, 2000)
+    direction = rng.choice([-1.0, 1.0], 2000)
+    table = geometry.gravity_sag_table(0.8, 0.034, 7800.0, 2.1e11, "fixed-fixed")
+    screw_m = mounting.screw_coordinate_m(position_mm, -141.0)
+    sag_um = geometry.gravity_sag_error_um(screw_m, table)
+    arrays_um = geometry.transmission_error_um(position_mm, direction, 5.0, 0.25, -0.5, 0.2,
+                                               0.15, 3.0, sag_um)
+    motor_um = motor.motor_error_um(position_mm, 0.02, (0.08, 0.01), (0.06, -0.02))
+    for k, (x, d) in enumerate(zip(position_mm.tolist(), direction.tolist())):
+        one_sag_um = geometry.gravity_sag_error_um(mounting.screw_coordinate_m(x, -141.0), table)
+        assert type(one_sag_um) is float and one_sag_um == sag_um[k]
+        one_um = geometry.transmission_error_um(x, d, 5.0, 0.25, -0.5, 0.2, 0.15, 3.0, one_sag_um)
+        assert type(one_um) is float and one_um == pytest.approx(arrays_um[k], abs=1e-12)
+        assert motor.motor_error_um(x, 0.02, (0.08, 0.01), (0.06, -0.02)) == pytest.approx(
+            motor_um[k], abs=1e-12)
+
+
+def dense_advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
+    """The thermal update as it was written before the tridiagonal form: the dense rate
+    matrix, the sources as k3·s_B + k4·s_N, dt from 1/max|A_nn|, θ + dt (A θ + s)."""
+    nut = thermal.nut_cells(params, mounting.screw_coordinate_m(nut_position_mm,
+                                                                params.fixed_end_mm))
+    rates = thermal.rate_matrix(params, feed_mm_min, nut)
+    sources = np.tensordot([params.k3_W_per_mm_min, params.k4_W_per_mm_min],
+                           thermal.unit_source_rates(params, feed_mm_min, nut), axes=1)
+    stable_s = min(params.time_step_s, 1.0 / np.max(np.abs(np.diag(rates))))
+    n_sub = max(1, int(np.ceil(duration_s / stable_s - 1e-9)))
+    for _ in range(n_sub):
+        rise_K = rise_K + duration_s / n_sub * (rates @ rise_K + sources)
+    return rise_K
+
+
+@pytest.mark.parametrize("conductivity_W_mK", (566.3, 4000.0))
+def test_thermal_update_equals_the_dense_matrix_scheme(conductivity_W_mK):
+    """advance (tridiagonal, cached cell terms) against the dense scheme over seeded random
+    steps, nut positions (also off the screw) and feeds; λ = 4000 forces sub-steps. The same
+    explicit Euler recursion in another summation order: equal within 1e-9 K."""
+    params = thermal.ThermalScrewParams(conductivity_W_mK=conductivity_W_mK)
+    rng = np.random.default_rng(13)
+    ours = dense = np.zeros(params.n_cells)
+    for _ in range(1500):
+        step = (float(rng.choice([0.1, 0.05, 0.37, 1.0, 2.9])), float(rng.uniform(-300, 900)),
+                float(rng.uniform(-9000, 9000)))
+        ours = thermal.advance(params, ours, *step)
+        dense = dense_advance(params, dense, *step)
+    assert ours.max() > 1.0
+    np.testing.assert_allclose(ours, dense, rtol=0, atol=1e-9)
+
+
+def test_thermal_outputs_of_one_point_equal_the_array_path():
+    """The FMU's outputs at one float position (no arrays) against np.interp on the
+    cumulative field (the array path), in and beyond the screw, both sides of P_f."""
+    rng = np.random.default_rng(17)
+    for fixed_end_mm in (-141.0, 641.0):
+        params = thermal.ThermalScrewParams(fixed_end_mm=fixed_end_mm)
+        rise_K = rng.uniform(0.0, 30.0, params.n_cells)
+        position_mm = np.concatenate((rng.uniform(-400.0, 1100.0, 500), [fixed_end_mm]))
+        screw_m = mounting.screw_coordinate_m(position_mm, fixed_end_mm)
+        arrays_um = thermal.thermal_error_um(params, rise_K[None, :].repeat(501, axis=0),
+                                             position_mm, 1.5)
+        along_um = thermal.screw_elongation_um(params, rise_K, np.asarray(screw_m))
+        for k, x in enumerate(position_mm.tolist()):
+            assert thermal.thermal_error_um(params, rise_K, x, 1.5) == pytest.approx(
+                arrays_um[k], rel=1e-12, abs=1e-12)
+            assert thermal.screw_elongation_um(params, rise_K, float(screw_m[k])) == \
+                pytest.approx(along_um[k], rel=1e-12, abs=1e-12)

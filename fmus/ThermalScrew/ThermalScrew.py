@@ -68,7 +68,7 @@ class ThermalScrew(AxisSlave):
                                                        ambient_delta_K))
         self.elongation_um = float(thermal.screw_elongation_um(self.model, self.rise_K,
                                                                self.model.length_m))
-        self.peak_rise_K = float(np.max(self.rise_K))
+        self.peak_rise_K = float(self.rise_K.max())
 
     def model_state(self):
         return {"rise_K": self.rise_K.tolist()}

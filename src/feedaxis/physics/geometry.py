@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .checks import ParameterError, require_positive
-from .scalar import array_module, clip, sign, values
+from .scalar import array_module, interp, sign, table, values
 
 GRAVITY_M_S2 = 9.80665
 SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
@@ -127,8 +127,8 @@ def gravity_sag_table(length_m, diameter_m, density_kg_m3, youngs_modulus_Pa, su
 
     Returns
     -------
-    (grid_m, error_um) : tuple of ndarray
-        Distance from the fixed end and the error there; evaluate with
+    scalar.Table
+        Distance from the fixed end (x, m) and the error there (y, µm); evaluate with
         :func:`gravity_sag_error_um`.
     """
     require_positive("length_m", length_m)
@@ -139,13 +139,12 @@ def gravity_sag_table(length_m, diameter_m, density_kg_m3, youngs_modulus_Pa, su
     excess = np.sqrt(1.0 + slope**2) - 1.0
     cumulative_excess_m = np.concatenate(
         ([0.0], np.cumsum(0.5 * (excess[1:] + excess[:-1]) * np.diff(grid_m))))
-    return grid_m, -1e6 * cumulative_excess_m
+    return table(grid_m, -1e6 * cumulative_excess_m)
 
 
 def gravity_sag_error_um(screw_coord_m, sag_table):
     """Gravity-sag error (µm) at distances from the fixed end, from :func:`gravity_sag_table`."""
-    grid_m, error_um = sag_table
-    return np.interp(clip(screw_coord_m, 0.0, grid_m[-1]), grid_m, error_um)
+    return interp(screw_coord_m, sag_table)
 
 
 def backlash_error_um(direction, backlash_um):

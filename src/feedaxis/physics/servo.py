@@ -271,23 +271,30 @@ class Servo:
     def __init__(self, params: ServoParams, initial_reference_mm=0.0):
         self.params = params
         self._coefficients = loop_coefficients(params).tolist()
-        self._state = [float(initial_reference_mm), 0.0, 0.0, 0.0, float(initial_reference_mm),
-                       0.0]
-        self._buffer = [0.0] * params.buffer_size
-        self.pending_s = 0.0
         self._propagators = {} if is_linear(self._coefficients) else None
+        self._size = 5 + params.buffer_size
+        self._vector = self._spare = self._spare_view = None
+        self.restore({"loop": [float(initial_reference_mm), 0.0, 0.0, 0.0,
+                               float(initial_reference_mm), 0.0],
+                      "commands_V": [0.0] * params.buffer_size, "pending_s": 0.0})
+
+    # The loop state is held in one of two forms: lists for run_loop (self._state with the
+    # head, self._buffer), or one float64 vector in the propagator's order for the linear
+    # path (z, reference_mm, force_V; delay line read from its head). Both keep position,
+    # velocity, integral, previous error and reference at indices 0-4; self._loop is the
+    # form in use (the list, or a memoryview of the vector: both index to Python floats).
 
     @property
     def position_mm(self):
-        return self._state[0]
+        return self._loop[0]
 
     @property
     def velocity_mm_s(self):
-        return self._state[1]
+        return self._loop[1]
 
     @property
     def reference_mm(self):
-        return self._state[4]
+        return self._loop[4]
 
     @property
     def tracking_error_mm(self):
@@ -296,6 +303,7 @@ class Servo:
 
     def state(self):
         """All internal state as plain Python values (for FMU get/set state)."""
+        self._to_lists()
         return {"loop": list(self._state), "commands_V": list(self._buffer),
                 "pending_s": self.pending_s}
 
@@ -303,6 +311,7 @@ class Servo:
         """Restore what :meth:`state` returned."""
         self._state = [float(v) for v in state["loop"]]
         self._buffer = [float(v) for v in state["commands_V"]]
+        self._loop, self._vector = self._state, None
         self.pending_s = float(state["pending_s"])
 
     def advance(self, duration_s, reference_mm, disturbance_N=0.0):
@@ -315,22 +324,47 @@ class Servo:
         require_finite("reference_mm", reference_mm)
         require_finite("disturbance_N", disturbance_N)
         n_steps, self.pending_s = whole_steps(self.pending_s, duration_s, self.params.time_step_s)
+        if n_steps == 0:  # run_loop leaves the state as it is
+            return self.position_mm
         force_V = disturbance_N / self.params.force_constant_N_per_V
-        if self._propagators is None or n_steps == 0:
+        if self._propagators is None:
+            self._to_lists()
             run_loop(self._coefficients, [n_steps], [float(reference_mm)], [force_V],
                      self._state, self._buffer, [0.0])
         else:
             self._propagate(n_steps, float(reference_mm), force_V)
         return self.position_mm
 
+    def _to_lists(self):
+        """Put the state in list form (delay line re-headed) if it is a vector."""
+        if self._vector is not None:
+            values = self._vector[:self._size].tolist()
+            self._state, self._buffer = values[:5] + [0.0], values[5:]
+            self._loop, self._vector = self._state, None
+
+    def _to_vector(self):
+        """Put the state in vector form (propagator order) if it is in lists."""
+        if self._vector is None:
+            head = int(self._state[5])
+            self._vector = np.array(self._state[:5] + self._buffer[head:] + self._buffer[:head]
+                                    + [0.0, 0.0])
+            self._spare = np.empty_like(self._vector)
+            self._loop, self._spare_view = memoryview(self._vector), memoryview(self._spare)
+
     def _propagate(self, n_steps, reference_mm, force_V):
-        """The linear loop over ``n_steps`` in one matrix product (delay line re-headed)."""
-        if n_steps not in self._propagators:
-            self._propagators[n_steps] = loop_propagator(self._coefficients, n_steps,
-                                                         len(self._buffer))
-        head = int(self._state[5])
-        values = (self._propagators[n_steps] @ (self._state[:5] + self._buffer[head:]
-                                                 + self._buffer[:head] + [reference_mm, force_V])
-                  ).tolist()
-        self._state = values[:5] + [0.0]
-        self._buffer = values[5:]
+        """The linear loop over ``n_steps`` in one matrix product, into a preallocated vector."""
+        propagator = self._propagators.get(n_steps)
+        if propagator is None:
+            # two zero rows: the product fills the whole spare vector, whose last two slots
+            # (reference, force) are written before the next product
+            propagator = np.vstack((loop_propagator(self._coefficients, n_steps,
+                                                    self.params.buffer_size),
+                                    np.zeros((2, self._size + 2))))
+            self._propagators[n_steps] = propagator
+        self._to_vector()
+        loop = self._loop
+        loop[-2] = reference_mm
+        loop[-1] = force_V
+        np.dot(propagator, self._vector, out=self._spare)
+        self._vector, self._spare = self._spare, self._vector
+        self._loop, self._spare_view = self._spare_view, loop

@@ -17,12 +17,28 @@ axis coordinate mapped through P_f (Eq. 15-16), plus ambient expansion TE_a (Eq.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
 from .checks import ParameterError, require_finite, require_non_negative, require_positive
 from .mounting import axis_sign, screw_coordinate_m
+from .scalar import is_scalar, values
+
+
+class CellTerms(NamedTuple):
+    """What the cells of one screw keep whatever the feed and the nut (Eq. 5-10)."""
+
+    lower_m: np.ndarray  # cell start from the fixed end
+    upper_m: np.ndarray  # cell end
+    bearing_fraction: np.ndarray  # under the fixed-end bearing
+    conductance_W_K: float  # λ·A_s/dx between neighbours
+    neighbours_W_K: np.ndarray  # conduction to the neighbours per cell (one at either end)
+    exposed_area_m2: np.ndarray  # lateral surface not under the bearing (Eq. 7)
+    bearing_source_W_per_mm_min: np.ndarray  # k3·dx/L_B on the bearing's cells (Eq. 18)
 
 
 @dataclass(frozen=True)
@@ -90,16 +106,33 @@ class ThermalScrewParams:
         """Q_N = k4·v (Eq. 19)."""
         return self.k4_W_per_mm_min * abs(feed_mm_min)
 
+    @cached_property
+    def cells(self):
+        """:class:`CellTerms`, computed once per parameter set (the instance is frozen)."""
+        n = self.n_cells
+        lower_m = np.arange(n) * self.cell_length_m
+        upper_m = lower_m + self.cell_length_m
+        bearing = _overlap(lower_m, upper_m, self.cell_length_m, 0.0, self.bearing_length_m)
+        conductance_W_K = self.conductivity_W_mK * self.area_m2 / self.cell_length_m
+        neighbours_W_K = np.full(n, 2.0 * conductance_W_K)
+        neighbours_W_K[[0, -1]] = conductance_W_K
+        return CellTerms(lower_m, upper_m, bearing, conductance_W_K, neighbours_W_K,
+                         np.pi * self.diameter_m * self.cell_length_m * (1.0 - bearing),
+                         self.k3_W_per_mm_min * self.cell_length_m / self.bearing_length_m
+                         * bearing)
+
 
 def bearing_cells(params):
     """Fraction of each cell under the fixed-end bearing, 0 ≤ x ≤ L_B (Eq. 10, second case)."""
-    return _interval_overlap(params, 0.0, params.bearing_length_m)
+    return params.cells.bearing_fraction
 
 
 def nut_cells(params, nut_screw_m):
     """Fraction of each cell under the nut centred at ``nut_screw_m`` from the fixed end."""
     half_m = params.nut_length_m / 2.0
-    return _interval_overlap(params, nut_screw_m - half_m, nut_screw_m + half_m)
+    cells = params.cells
+    return _overlap(cells.lower_m, cells.upper_m, params.cell_length_m, nut_screw_m - half_m,
+                    nut_screw_m + half_m)
 
 
 def averaged_nut_cells(params, from_screw_m, to_screw_m):
@@ -113,8 +146,7 @@ def averaged_nut_cells(params, from_screw_m, to_screw_m):
     """
     if np.isclose(from_screw_m, to_screw_m):
         return nut_cells(params, from_screw_m)
-    lower_m = np.arange(params.n_cells) * params.cell_length_m
-    upper_m = lower_m + params.cell_length_m
+    lower_m, upper_m = params.cells.lower_m, params.cells.upper_m
 
     def antiderivative(z_m):
         return (np.maximum(z_m - lower_m, 0.0) ** 2 - np.maximum(z_m - upper_m, 0.0) ** 2) / 2.0
@@ -125,11 +157,10 @@ def averaged_nut_cells(params, from_screw_m, to_screw_m):
     return integral / ((to_screw_m - from_screw_m) * params.cell_length_m)
 
 
-def _interval_overlap(params, start_m, stop_m):
-    lower_m = np.arange(params.n_cells) * params.cell_length_m
-    upper_m = lower_m + params.cell_length_m
+def _overlap(lower_m, upper_m, cell_length_m, start_m, stop_m):
+    """Fraction of each cell [lower, upper] inside [start, stop]."""
     overlap_m = np.minimum(upper_m, stop_m) - np.maximum(lower_m, start_m)
-    return np.clip(overlap_m / params.cell_length_m, 0.0, 1.0)
+    return (overlap_m / cell_length_m).clip(0.0, 1.0)  # the method: half np.clip's cost
 
 
 def rate_matrix(params, feed_mm_min, nut_fraction):
@@ -138,9 +169,7 @@ def rate_matrix(params, feed_mm_min, nut_fraction):
     Conduction between neighbours and the convective loss of :func:`convective_loss_W_K`
     on the diagonal. A is symmetric.
     """
-    n = params.n_cells
-    conductance = params.conductivity_W_mK * params.area_m2 / params.cell_length_m
-    coupling = np.full(n - 1, conductance)
+    coupling = np.full(params.n_cells - 1, params.cells.conductance_W_K)
     diagonal = (-convective_loss_W_K(params, feed_mm_min, nut_fraction)
                 - np.concatenate((coupling, [0.0])) - np.concatenate(([0.0], coupling)))
     return ((np.diag(diagonal) + np.diag(coupling, 1) + np.diag(coupling, -1))
@@ -153,18 +182,21 @@ def convective_loss_W_K(params, feed_mm_min, nut_fraction):
 
     ``feed_mm_min`` may be an array of steps, ``nut_fraction`` then one row per step.
     """
-    h_W_m2K = params.convection_W_m2K(np.asarray(feed_mm_min, dtype=float)[..., None])
-    lateral_area_m2 = np.pi * params.diameter_m * params.cell_length_m
-    loss_W_K = h_W_m2K * lateral_area_m2 * (1.0 - bearing_cells(params)) * (1.0 - nut_fraction)
-    loss_W_K[..., -1] += h_W_m2K[..., 0] * params.area_m2
+    h_W_m2K = params.convection_W_m2K(values(feed_mm_min))
+    h_cells_W_m2K = h_W_m2K if is_scalar(h_W_m2K) else h_W_m2K[..., None]
+    loss_W_K = h_cells_W_m2K * params.cells.exposed_area_m2 * (1.0 - nut_fraction)
+    loss_W_K[..., -1] += h_W_m2K * params.area_m2
     return loss_W_K
 
 
 def source_rate(params, feed_mm_min, nut_fraction):
     """Source vector s (K/s): Q_B/L_B and Q_N/L_N per cell length (Eq. 7, 10, 18, 19);
     one row per step for an array of feeds."""
-    return np.tensordot([params.k3_W_per_mm_min, params.k4_W_per_mm_min],
-                        unit_source_rates(params, feed_mm_min, nut_fraction), axes=1)
+    speed_mm_min = abs(values(feed_mm_min))
+    per_feed_W = (params.cells.bearing_source_W_per_mm_min + params.k4_W_per_mm_min
+                  * params.cell_length_m / params.nut_length_m * nut_fraction)
+    per_cell_K_s = speed_mm_min / params.cell_heat_capacity_J_K
+    return (per_cell_K_s if is_scalar(per_cell_K_s) else per_cell_K_s[..., None]) * per_feed_W
 
 
 def unit_source_rates(params, feed_mm_min, nut_fraction):
@@ -176,12 +208,36 @@ def unit_source_rates(params, feed_mm_min, nut_fraction):
     return np.stack(per_unit) * (per_cell_W / params.cell_heat_capacity_J_K)
 
 
-def stable_time_step_s(params, rates):
+def stable_time_step_s(params, loss_W_K):
     """Largest explicit step keeping every update a convex combination (no overshoot).
 
-    dt ≤ 1 / max|A_nn| for the system matrix ``rates``, capped by ``params.time_step_s``.
+    dt ≤ 1 / max|A_nn| = C / max(loss + conduction to the neighbours) for the convective
+    loss ``loss_W_K`` (:func:`convective_loss_W_K`), capped by ``params.time_step_s``.
     """
-    return min(params.time_step_s, 1.0 / np.max(np.abs(np.diag(rates))))
+    return min(params.time_step_s, params.cell_heat_capacity_J_K
+               / float((loss_W_K + params.cells.neighbours_W_K).max()))
+
+
+def euler_step(params, rise_K, loss_W_K, rate_step_K_J, heat_step_K):
+    """One explicit Euler update θ + dt·(A θ + s) of Eq. 10 on the tridiagonal A.
+
+    Parameters
+    ----------
+    params : ThermalScrewParams
+    rise_K : ndarray
+        θ per cell (K).
+    loss_W_K : ndarray
+        :func:`convective_loss_W_K`.
+    rate_step_K_J : float
+        dt / C (K/J).
+    heat_step_K : ndarray
+        dt·s, the source over the step (K).
+    """
+    flow_W = params.cells.conductance_W_K * (rise_K[1:] - rise_K[:-1])
+    net_W = -loss_W_K * rise_K
+    net_W[:-1] += flow_W
+    net_W[1:] -= flow_W
+    return rise_K + rate_step_K_J * net_W + heat_step_K
 
 
 # Above this many sub-steps, advance() takes them as one matrix power (bounded cost).
@@ -191,9 +247,9 @@ EULER_LOOP_LIMIT = 64
 def advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
     """Advance the temperature rise over ``duration_s`` with the nut held at one position.
 
-    Explicit Euler updates of Eq. 10, θ ← θ + dt (A θ + s), in equal sub-steps of at most
-    :func:`stable_time_step_s`, so any communication step is stable and dt = 0.1 s at
-    Table 1 values is the paper's scheme.
+    Explicit Euler updates of Eq. 10, θ ← θ + dt (A θ + s) (:func:`euler_step`, A
+    tridiagonal), in equal sub-steps of at most :func:`stable_time_step_s`, so any
+    communication step is stable and dt = 0.1 s at Table 1 values is the paper's scheme.
 
     Parameters
     ----------
@@ -213,14 +269,16 @@ def advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
     if duration_s == 0.0:
         return rise_K
     nut_fraction = nut_cells(params, screw_coordinate_m(nut_position_mm, params.fixed_end_mm))
-    rates = rate_matrix(params, feed_mm_min, nut_fraction)
-    sources = source_rate(params, feed_mm_min, nut_fraction)
-    n_sub = max(1, int(np.ceil(duration_s / stable_time_step_s(params, rates) - 1e-9)))
+    loss_W_K = convective_loss_W_K(params, feed_mm_min, nut_fraction)
+    sources_K_s = source_rate(params, feed_mm_min, nut_fraction)
+    n_sub = max(1, math.ceil(duration_s / stable_time_step_s(params, loss_W_K) - 1e-9))
     dt_s = duration_s / n_sub
     if n_sub > EULER_LOOP_LIMIT:
-        return _euler_steps_by_powers(rates, sources, rise_K, dt_s, n_sub)
+        return _euler_steps_by_powers(rate_matrix(params, feed_mm_min, nut_fraction),
+                                      sources_K_s, rise_K, dt_s, n_sub)
+    rate_step_K_J, heat_step_K = dt_s / params.cell_heat_capacity_J_K, dt_s * sources_K_s
     for _ in range(n_sub):
-        rise_K = rise_K + dt_s * (rates @ rise_K + sources)
+        rise_K = euler_step(params, rise_K, loss_W_K, rate_step_K_J, heat_step_K)
     return rise_K
 
 
@@ -248,11 +306,22 @@ def screw_elongation_um(params, rise_K, screw_coord_m):
 
     ``rise_K`` may be 2-D (time × cells); the result then has one row per time.
     """
+    if is_scalar(screw_coord_m) and np.ndim(rise_K) == 1:
+        return _elongation_at_um(params, rise_K, screw_coord_m)
     cumulative_um = _cumulative_elongation_um(params, rise_K)
     nodes_m = np.arange(params.n_cells + 1) * params.cell_length_m
     x = np.clip(np.asarray(screw_coord_m, dtype=float), 0.0, params.length_m)
     result = np.array([np.interp(x, nodes_m, row) for row in cumulative_um])
     return result[0] if result.shape[0] == 1 else result
+
+
+def _elongation_at_um(params, rise_K, screw_m):
+    """:func:`screw_elongation_um` of one field at one point, without arrays: the cells
+    below the point in full, the one it is in by its fraction (Eq. 11-14), in µm."""
+    cells = min(max(screw_m, 0.0), params.length_m) / params.cell_length_m
+    lower = min(int(cells), params.n_cells - 1)
+    within_K = float(rise_K[:lower].sum()) + min(cells - lower, 1.0) * float(rise_K[lower])
+    return params.expansion_per_K * params.cell_length_m * 1e6 * within_K
 
 
 def sample_elongation_um(params, rise_K, screw_coord_m):
@@ -277,8 +346,8 @@ def ambient_error_um(params, position_mm, ambient_delta_K):
     (a scale or a mount that grows too).
     """
     reference_mm = params.fixed_end_mm + params.ambient_reference_offset_mm
-    return (params.expansion_per_K * np.asarray(ambient_delta_K)
-            * (np.asarray(position_mm) - reference_mm) * 1e3)
+    return (params.expansion_per_K * values(ambient_delta_K)
+            * (values(position_mm) - reference_mm) * 1e3)
 
 
 def thermal_error_um(params, rise_K, position_mm, ambient_delta_K=0.0):
@@ -391,10 +460,9 @@ def _segment_propagator(params, segment):
     feed = segment.feed_mm_min
     path_m = screw_coordinate_m(np.array([segment.from_mm, segment.to_mm]), params.fixed_end_mm)
     nut_fraction = averaged_nut_cells(params, path_m[0], path_m[1])
-    rates_matrix = rate_matrix(params, feed, nut_fraction)
-    rates, vectors = np.linalg.eigh(rates_matrix)
+    rates, vectors = np.linalg.eigh(rate_matrix(params, feed, nut_fraction))
     steady_K = -((unit_source_rates(params, feed, nut_fraction) @ vectors) / rates) @ vectors.T
-    dt_s = stable_time_step_s(params, rates_matrix)
+    dt_s = stable_time_step_s(params, convective_loss_W_K(params, feed, nut_fraction))
     growth = 1.0 + dt_s * rates
 
     def propagate(state_K, elapsed_s):
@@ -433,7 +501,8 @@ def explicit_duty(params, segments, times_s, block=4096):
     """
     times_s = np.asarray(times_s, dtype=float)
     fastest = max(abs(s.feed_mm_min) for s in segments)
-    dt_s = stable_time_step_s(params, rate_matrix(params, fastest, np.zeros(params.n_cells)))
+    dt_s = stable_time_step_s(params,
+                              convective_loss_W_K(params, fastest, np.zeros(params.n_cells)))
     step_times_s = np.arange(int(np.ceil(segments[-1].end_s / dt_s)) + 1) * dt_s
     owner = np.clip(np.searchsorted([s.end_s for s in segments], step_times_s, side="right"),
                     0, len(segments) - 1)
@@ -445,8 +514,7 @@ def explicit_duty(params, segments, times_s, block=4096):
     wanted = np.rint(times_s / dt_s).astype(int)
     samples_at = {k: np.flatnonzero(wanted == k) for k in np.unique(wanted)}
     feed = np.array([segments[i].feed_mm_min for i in owner])
-    conductance = params.conductivity_W_mK * params.area_m2 / params.cell_length_m
-    rate_step = dt_s / params.cell_heat_capacity_J_K
+    rate_step_K_J = dt_s / params.cell_heat_capacity_J_K
     rise_K = np.zeros(params.n_cells)
     fields_K = np.zeros((times_s.size, params.n_cells))
     last_step = wanted.max(initial=0)
@@ -456,11 +524,7 @@ def explicit_duty(params, segments, times_s, block=4096):
         for k, loss, heat in zip(steps, loss_W_K, heat_K_s):
             if k in samples_at:
                 fields_K[samples_at[k]] = rise_K
-            flow_W_K = conductance * (rise_K[1:] - rise_K[:-1])
-            net_W = -loss * rise_K
-            net_W[:-1] += flow_W_K
-            net_W[1:] -= flow_W_K
-            rise_K = rise_K + rate_step * net_W + dt_s * heat
+            rise_K = euler_step(params, rise_K, loss, rate_step_K_J, dt_s * heat)
     return fields_K
 
 
