@@ -8,7 +8,8 @@ with the same raw fmpy ctypes calls (``fmi2SetReal`` of the inputs, ``fmi2DoStep
 default axis schedule: servo, motor and geometric error every 1 ms macro step, the thermal
 screw every 0.1 s. Repeats are interleaved (full, empty, full, ...). It prints the median
 cost per macro step of each set and per FMU (so the servo's share can be read on its own),
-and the ratio of the medians.
+the ratio of the medians, and the spread of the ratio over the interleaved pairs (the
+machine is shared: a busy moment slows the pair it falls on).
 """
 import argparse
 import ctypes
@@ -119,7 +120,8 @@ def time_per_macro_step_us(paths, n_steps):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=7, help="interleaved repeats (default 7)")
+    parser.add_argument("--repeats", type=int, default=15,
+                        help="interleaved repeats (default 15)")
     parser.add_argument("--steps", type=int, default=2000, help="macro steps per run (default 2000)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
@@ -145,6 +147,12 @@ def main():
           f"{totals['full'] / totals['empty']:>8.2f}")
     print(f"{'axis w/o servo':<16}{without_servo['full']:>10.1f}{without_servo['empty']:>10.1f}"
           f"{without_servo['full'] / without_servo['empty']:>8.2f}")
+    pair_ratios = sorted(sum(f.values()) / sum(e.values())
+                         for f, e in zip(runs["full"], runs["empty"]))
+    low, _, high = statistics.quantiles(pair_ratios, n=4)
+    print(f"full axis ratio over the {len(pair_ratios)} interleaved pairs: median "
+          f"{statistics.median(pair_ratios):.2f}, quartiles {low:.2f}-{high:.2f}, "
+          f"range {pair_ratios[0]:.2f}-{pair_ratios[-1]:.2f}")
 
 
 if __name__ == "__main__":
