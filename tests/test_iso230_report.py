@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 import synthetic as syn
-from feedaxis.case import read_case
+from feedaxis.case import Positioning, read_case
 from feedaxis.cli import main
 from feedaxis.cosim.replay import replay_positioning
 from feedaxis.effects import CATALOG, Model
 from feedaxis.fit import fit
-from feedaxis.iso230 import iso230_figures
+from feedaxis.iso230 import iso230_figures, target_clusters, target_groups
 
 ROOT2 = math.sqrt(2.0)
 
@@ -39,6 +39,27 @@ def test_iso230_figures_match_the_hand_computed_example():
     for key, value in expected.items():
         assert figures[key] == pytest.approx(value, abs=1e-12), key
     assert figures["targets"] == 3 and figures["runs_up"] == 2 and figures["runs_down"] == 2
+
+
+def test_recorded_target_jitter_does_not_split_targets():
+    """Targets recorded with ±50 nm jitter (a laser system logging the position it reached)
+    give the figures, targets, runs and groups of the exact targets; targets 0.2 µm apart
+    stay two targets."""
+    rng = np.random.default_rng(7)
+    exact = np.tile(np.repeat(np.linspace(0.0, 100.0, 11), 5), 2)
+    direction = np.repeat([1.0, -1.0], 55)
+    error = 0.5 * direction + 0.02 * exact + rng.normal(0.0, 0.1, exact.size)
+    jittered = exact + rng.uniform(-5e-5, 5e-5, exact.size)
+    expected = iso230_figures(exact, error, direction)
+    got = iso230_figures(jittered, error, direction)
+    assert got.keys() == expected.keys() and "R_um" in got and got["targets"] == 11
+    for key, value in expected.items():
+        assert got[key] == pytest.approx(value, abs=1e-12), key
+
+    def groups(target_mm):
+        return target_groups(Positioning(target_mm, error, direction, has_direction=True))
+    np.testing.assert_array_equal(groups(jittered), groups(exact))
+    assert target_clusters([0.0, 2e-4])[0].size == 2
 
 
 def test_unidirectional_single_run_gives_only_what_it_can():
@@ -86,7 +107,7 @@ def test_report_names_what_a_metrologist_signs(tmp_path):
     import re
 
     from feedaxis import __version__
-    from feedaxis.case import read_case
+    from feedaxis.case import Positioning, read_case
     from feedaxis.effects import CATALOG, Model
     from feedaxis.fit import fit
 

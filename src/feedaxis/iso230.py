@@ -11,16 +11,29 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fit import evaluate
+from .fit import SAME_TARGET_MM, evaluate
 
-TARGET_DECIMALS = 6
+
+def target_clusters(target_mm, tolerance_mm=SAME_TARGET_MM):
+    """(target positions in mm, target index of each sample): recorded targets closer than
+    ``tolerance_mm`` to their neighbour are one target (0.1 µm: above the jitter of a
+    recorded target, below any target spacing), at the mean of its samples."""
+    target_mm = np.asarray(target_mm, dtype=float)
+    order = np.argsort(target_mm, kind="stable")
+    starts = np.concatenate(([True], np.diff(target_mm[order]) > tolerance_mm))
+    index = np.empty(target_mm.size, dtype=int)
+    index[order] = np.cumsum(starts) - 1
+    return np.bincount(index, target_mm) / np.bincount(index), index
 
 
 def per_target(target_mm, error_um, direction, sign):
-    """Targets, mean and sample standard deviation (NaN for one run) of one direction."""
+    """Targets, mean, sample standard deviation (NaN for one run) and run count of one
+    direction; the targets are :func:`target_clusters` of both directions together, so
+    the two directions share them."""
+    centres_mm, cluster = target_clusters(target_mm)
     chosen = direction == sign
-    targets = np.round(target_mm[chosen], TARGET_DECIMALS)
-    unique_mm, index = np.unique(targets, return_inverse=True)
+    used, index = np.unique(cluster[chosen], return_inverse=True)
+    unique_mm = centres_mm[used]
     counts = np.bincount(index)
     mean = np.bincount(index, error_um[chosen]) / counts
     squares = np.bincount(index, (error_um[chosen] - mean[index]) ** 2)
@@ -52,7 +65,7 @@ def iso230_figures(target_mm, error_um, direction):
             figures[f"runs_{label}"] = int(np.min(sides[label][3]))
     if len(sides) == 2 and np.array_equal(sides["up"][0], sides["down"][0]):
         figures.update(_bidirectional(sides["up"][1:3], sides["down"][1:3]))
-    figures["targets"] = int(np.unique(np.round(target_mm, TARGET_DECIMALS)).size)
+    figures["targets"] = int(target_clusters(target_mm)[0].size)
     return figures
 
 
@@ -81,10 +94,11 @@ FIGURE_NAMES = {
 
 
 def target_groups(positioning):
-    """Group index of each sample: one group per (target, approach direction)."""
-    keys = np.column_stack((np.round(positioning.target_mm, TARGET_DECIMALS),
-                            positioning.direction))
-    return np.unique(keys, axis=0, return_inverse=True)[1].ravel()
+    """Group index of each sample: one group per (target, approach direction), the targets
+    from :func:`target_clusters`."""
+    _, cluster = target_clusters(positioning.target_mm)
+    keys = cluster * 2 + (positioning.direction > 0)
+    return np.unique(keys, return_inverse=True)[1].ravel()
 
 
 def compare(case, model):

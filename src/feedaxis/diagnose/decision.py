@@ -24,9 +24,10 @@ import numpy as np
 
 from ..effects import CATALOG
 from ..fit import FitResult, fit, too_few_samples
+from ..iso230 import target_clusters
 from . import judge
 from .judge import FAMILY_ALPHA, Layout, Test
-from .spectrum import Spectrum, clusters, marked_wavelengths, residual_spectrum
+from .spectrum import Spectrum, marked_wavelengths, residual_spectrum
 from .structures import SHAPES, Context, Drift, Structure, StructureEffect, least_squares_fit
 
 MAX_STRUCTURES = 5
@@ -170,7 +171,7 @@ def _unresolvable(case, effect):
         return None
     if not wavelength_mm:
         return None
-    centres_mm, _ = clusters(case.positioning.target_mm)
+    centres_mm, _ = target_clusters(case.positioning.target_mm)
     if centres_mm.size < 3:
         return f"its {wavelength_mm:.4g} mm wavelength needs at least 3 targets"
     concentration = abs(np.mean(np.exp(2j * np.pi * centres_mm / wavelength_mm)))

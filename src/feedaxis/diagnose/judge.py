@@ -1,7 +1,7 @@
 """The tests the diagnosis decides by: pure error, extra-sum-of-squares F, outliers, clock.
 
-- Repeat groups are samples at one target (:func:`~.spectrum.clusters`) and one approach
-  direction. Their within-group scatter is the *pure error*; when it has at least
+- Repeat groups are samples at one target and one approach direction
+  (:func:`feedaxis.iso230.target_groups`). Their within-group scatter is the *pure error*; when it has at least
   ``MIN_PURE_DOF`` degrees of freedom a term is judged by the extra-sum-of-squares F test
   against it (Draper & Smith, Applied Regression Analysis, 3rd ed., §2.1 and §6.1): the
   sum of squares the term removes per parameter, over the pure-error mean square. A large
@@ -28,7 +28,8 @@ import numpy as np
 from scipy import stats
 from scipy.optimize import least_squares
 
-from .spectrum import clusters
+from ..iso230 import target_groups
+
 
 FAMILY_ALPHA = 0.001
 STAGES = 4
@@ -52,11 +53,9 @@ class Layout:
 
     @classmethod
     def of(cls, positioning):
-        _, cluster = clusters(positioning.target_mm)
-        keys = cluster * 2 + (positioning.direction > 0)
-        _, groups = np.unique(keys, return_inverse=True)
+        groups = target_groups(positioning)
         clock, unit = test_clock(positioning)
-        return cls(groups.ravel(), int(groups.max()) + 1, clock, unit)
+        return cls(groups, int(groups.max()) + 1, clock, unit)
 
     @property
     def sizes(self):

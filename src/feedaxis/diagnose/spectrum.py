@@ -1,8 +1,8 @@
 """Amplitude spectrum of a residual along the travel, bounded by what the samples resolve.
 
-Samples are first merged into target clusters (:func:`clusters`), so the recorded jitter of
-a measured target never refines the grid: the wavelengths run from the travel down to twice
-the median cluster spacing (the Nyquist limit of that spacing), with at most
+Samples are first merged into targets (:func:`feedaxis.iso230.target_clusters`), so the
+jitter of a recorded target never refines the grid: the wavelengths run from the travel down
+to twice the median target spacing (the Nyquist limit of that spacing), with at most
 ``MAX_FREQUENCIES`` of them, whatever the number of samples.
 """
 from __future__ import annotations
@@ -11,9 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..fit import SAME_TARGET_MM
-
-CLUSTER_TOLERANCE_MM = SAME_TARGET_MM
+from ..iso230 import target_clusters
 SPECTRUM_OVERSAMPLING = 5
 MAX_FREQUENCIES = 4000
 MIN_CLUSTERS = 8
@@ -27,19 +25,6 @@ class Spectrum:
     wavelength_mm: np.ndarray
     amplitude_um: np.ndarray
     marks: dict
-
-
-def clusters(position_mm, tolerance_mm=CLUSTER_TOLERANCE_MM):
-    """(cluster centres in mm, cluster index of each sample): positions closer than
-    ``tolerance_mm`` (0.1 µm, above the jitter of a recorded target, below any target
-    spacing) to their neighbour are one target."""
-    position_mm = np.asarray(position_mm, dtype=float)
-    order = np.argsort(position_mm, kind="stable")
-    starts = np.concatenate(([True], np.diff(position_mm[order]) > tolerance_mm))
-    index = np.empty(position_mm.size, dtype=int)
-    index[order] = np.cumsum(starts) - 1
-    counts = np.bincount(index)
-    return np.bincount(index, position_mm) / counts, index
 
 
 def resolvable_band_per_mm(centres_mm):
@@ -61,7 +46,7 @@ def frequency_grid(centres_mm):
 def amplitude_spectrum(position_mm, residual_um):
     """Least-squares amplitude spectrum of the cluster means; FFT on an even grid,
     a floating-mean periodogram otherwise. None with fewer than ``MIN_CLUSTERS`` targets."""
-    centres_mm, index = clusters(position_mm)
+    centres_mm, index = target_clusters(position_mm)
     if centres_mm.size < MIN_CLUSTERS:
         return None
     means_um = np.bincount(index, residual_um) / np.bincount(index)

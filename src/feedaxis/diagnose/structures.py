@@ -14,7 +14,8 @@ from scipy.optimize import minimize_scalar
 
 from ..effects import Effect, Parameter
 from .judge import Test, drift_basis
-from .spectrum import amplitude_spectrum, clusters, resolvable_band_per_mm
+from ..iso230 import target_clusters
+from .spectrum import amplitude_spectrum, resolvable_band_per_mm
 
 MAX_TREND_DEGREE = 3
 
@@ -67,7 +68,7 @@ class Periodic:
 
     def trials(self, context):
         """Independent frequencies in the resolvable band (Rayleigh spacing 1/span)."""
-        centres, _ = clusters(context.position_mm)
+        centres, _ = target_clusters(context.position_mm)
         if centres.size < 8:
             return 0
         low, high = resolvable_band_per_mm(centres)
@@ -79,7 +80,7 @@ class Periodic:
             return None, None
         position_mm = context.position_mm
         peak = 1.0 / spectrum.wavelength_mm[int(np.argmax(spectrum.amplitude_um))]
-        centres, _ = clusters(position_mm)
+        centres, _ = target_clusters(position_mm)
         step = 1.0 / (5 * np.ptp(centres))
         best = minimize_scalar(
             lambda f: _rss(residual_um - least_squares_fit(residual_um, sinusoid(position_mm, f))),
@@ -150,7 +151,7 @@ class Trend:
     extra = MAX_TREND_DEGREE
 
     def trials(self, context):
-        return MAX_TREND_DEGREE if clusters(context.position_mm)[0].size >= 4 else 0
+        return MAX_TREND_DEGREE if target_clusters(context.position_mm)[0].size >= 4 else 0
 
     def basis(self, context, residual_um):
         return np.vander(_normalised(context.position_mm), MAX_TREND_DEGREE + 1), None
