@@ -8,7 +8,8 @@ import pytest
 
 from feedaxis.case import Positioning, read_case, write_case
 from feedaxis.cli import main
-from feedaxis.comptable import CONTROLLERS, from_model, grid_mm, verify
+import synthetic as syn
+from feedaxis.comptable import CONTROLLERS, build_table, from_model, grid_mm, verify
 from feedaxis.comptable import beckhoff, fanuc, heidenhain, linuxcnc, siemens
 from feedaxis.linefile import LineError
 from feedaxis.comptable.table import CompTable
@@ -235,7 +236,7 @@ def test_fanuc_point_numbers_follow_the_manuals_example():
 
 def test_fanuc_manual_increments_survive_read_and_write():
     increments = [+2, +1, +1, -2, 0, -1, 0, -1, +2, +1, 0, -1, -1, -2, 0, +1, +2]  # No. 33-49
-    lines = ["N1240 A1 P0", "N3620 A1 P40", "N3621 A1 P33", "N3622 A1 P49", "N3623 A1 P1",
+    lines = ["N3620 A1 P40", "N3621 A1 P33", "N3622 A1 P49", "N3623 A1 P1",
              "N3624 A1 P50000"] + [f"N{10033 + i} P{v}" for i, v in enumerate(increments)]
     table = fanuc.read("\n".join(lines))
     assert table.position_mm[0] == -400.0 and table.position_mm[-1] == 450.0
@@ -244,6 +245,24 @@ def test_fanuc_manual_increments_survive_read_and_write():
     assert correction_um[9] - correction_um[8] == 2.0  # No. 41 = +2: over 0 .. 50 mm
     rewritten = fanuc.read(fanuc.write(table))
     np.testing.assert_allclose(rewritten.forward_um, table.forward_um)
+
+
+def test_fanuc_tape_never_sets_the_reference_position():
+    """Parameter 1240 is the machine's reference position: the tape leaves it alone, a table
+    without a point at 0 mm is refused, a parameter dump that has 1240 is read there, and a
+    table built for a travel of 5 .. 305 mm is laid through 0 mm."""
+    position_mm = np.arange(0.0, 301.0, 50.0)
+    table = CompTable(position_mm, -0.01 * position_mm, -0.01 * position_mm)
+    text = fanuc.write(table)
+    assert "N1240" not in text
+    with pytest.raises(InputError, match="point at 0 mm"):
+        fanuc.write(CompTable(position_mm + 5.0, table.forward_um, table.reverse_um))
+    shifted = fanuc.read("N1240 A1 P-100000\n" + text)
+    np.testing.assert_allclose(shifted.position_mm, fanuc.read(text).position_mm - 100.0)
+    target_mm = np.arange(5.0, 306.0, 50.0)
+    case = syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=0.0 * target_mm)
+    grid = build_table(case, Model((), {}), "fanuc", spacing_mm=50.0).position_mm
+    np.testing.assert_allclose(grid, np.arange(0.0, 351.0, 50.0))
 
 
 def test_fanuc_magnification_keeps_increments_in_range():

@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
+from ..iso230 import target_clusters
 from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
 from .base import reference_index
 from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
@@ -33,11 +36,31 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
     if from_measured:
         if spacing_mm is None and not module.EQUIDISTANT:
             return from_measurement(case)
-        count = len(set(target_mm.round(6)))
+        count = target_clusters(target_mm)[0].size
         spacing_mm = spacing_mm or (target_mm.max() - target_mm.min()) / max(count - 1, 1)
-        return from_measurement(case, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
-    spacing_mm = spacing_mm or default_spacing_mm(case, module.MAX_POINTS)
-    return from_model(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
+        return from_measurement(case, _grid(module, target_mm, spacing_mm))
+    first_mm, last_mm = _span_mm(module, target_mm)
+    spacing_mm = spacing_mm or default_spacing_mm(case, module.MAX_POINTS, last_mm - first_mm)
+    return from_model(case, model, _grid(module, target_mm, spacing_mm))
+
+
+def _span_mm(module, target_mm):
+    """(first, last) position the table covers: the targets, and 0 mm for a controller that
+    counts its points from the reference position there (``GRID_THROUGH_ZERO``)."""
+    first_mm, last_mm = float(target_mm.min()), float(target_mm.max())
+    if getattr(module, "GRID_THROUGH_ZERO", False):
+        return min(first_mm, 0.0), max(last_mm, 0.0)
+    return first_mm, last_mm
+
+
+def _grid(module, target_mm, spacing_mm):
+    """Table points every ``spacing_mm`` over :func:`_span_mm`, through 0 mm for a
+    ``GRID_THROUGH_ZERO`` controller."""
+    first_mm, last_mm = _span_mm(module, target_mm)
+    spacing_mm = round(float(spacing_mm), 6)
+    if getattr(module, "GRID_THROUGH_ZERO", False) and spacing_mm > 0:
+        first_mm = spacing_mm * np.floor(round(first_mm / spacing_mm, 9))
+    return grid_mm(first_mm, last_mm, spacing_mm)
 
 
 def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured=False,

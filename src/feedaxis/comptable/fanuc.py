@@ -9,6 +9,12 @@ is its absolute value at the reference position (parameter manual B-63980EN, pit
 compensation). The correction is added to the motion, so it is −(measured − target), in
 detection units of 1 µm. Written in Fanuc's parameter tape format ``N<number> A<axis> P<v>``
 with pitch data as ``N<10000 + point> P<v>``.
+
+The points are counted from the reference position, whose machine coordinate is parameter
+1240: that is the machine's home, never written here (a tape that set it would move the
+machine's reference position). The table therefore needs a point at the reference position,
+machine zero by default (``GRID_THROUGH_ZERO``: the table grid is laid through 0 mm); a
+tape that carries 1240 (a full parameter dump) is read at that coordinate.
 """
 from __future__ import annotations
 
@@ -16,6 +22,7 @@ import re
 
 import numpy as np
 
+from ..errors import InputError
 from ..linefile import LineError
 from .base import check_equidistant, check_points, quantized, reference_index
 from .table import CompTable
@@ -23,14 +30,17 @@ from .table import CompTable
 NAME = "fanuc"
 MAX_POINTS = 128  # per direction, between the extremes
 EQUIDISTANT = True
+GRID_THROUGH_ZERO = True  # the reference position (machine zero) is a table point
+REFERENCE_COORDINATE = 1240  # read when present, never written
 DEFAULT_AXIS_ID = "1"
 DETECTION_UNIT_UM = 1.0
 MAX_VALUE = 127
 PITCH_DATA = 10000
 BIDIRECTIONAL_BITS = 3605  # bit parameter, written bit 7 .. bit 0; #0 = bidirectional
 SIGN = "increment of -(measured - target) per interval, detection units (1 um) x 3623"
-LOAD = ("parameter tape (or MDI): 3605#0 = 1 for bidirectional, 3620-3627, 1240, then the "
-        "pitch data; power off and on, reference return (G28)")
+LOAD = ("parameter tape (or MDI): 3605#0 = 1 for bidirectional, 3620-3627, then the pitch "
+        "data; power off and on, reference return (G28); point 3620 is the reference position "
+        "at 0 mm (parameter 1240 = 0)")
 PATTERN = r"^N(\d+)\s*(?:A(\d+))?\s*P([-+]?\d+)\s*$"
 
 
@@ -51,6 +61,10 @@ def write(table, axis_id=DEFAULT_AXIS_ID):
     check_points(table, MAX_POINTS, NAME)
     spacing_mm = check_equidistant(table, NAME)
     j_ref = reference_index(table.position_mm)
+    if abs(table.position_mm[j_ref]) > 5e-4:
+        raise InputError(f"{NAME} counts its points from the reference position at 0 mm; the "
+                         f"nearest table point is at {table.position_mm[j_ref]:g} mm: choose a "
+                         "spacing that puts a point at 0 mm", parameter="--spacing-mm")
     forward, reverse = -table.forward_um, -table.reverse_um
     magnification = _magnification(forward, reverse)
     unit = DETECTION_UNIT_UM * magnification
@@ -58,8 +72,7 @@ def write(table, axis_id=DEFAULT_AXIS_ID):
     reference = max(j_ref, 1)
     lowest = min(reference - j_ref + 1, reference)
     highest = reference + table.size - 1 - j_ref
-    parameters = {1240: int(round(table.position_mm[j_ref] * 1e3 / DETECTION_UNIT_UM)),
-                  3620: reference, 3621: lowest, 3622: highest, 3623: magnification,
+    parameters = {3620: reference, 3621: lowest, 3622: highest, 3623: magnification,
                   3624: int(round(spacing_mm * 1e3 / DETECTION_UNIT_UM))}
     data = _point_values(lowest, reference, j_ref, _increments(forward_units, j_ref))
     if table.bidirectional:
@@ -110,7 +123,7 @@ def read(text, path="PITCH.TXT"):
         else:
             parameters[number_] = value
     bidirectional = bits.endswith("1")
-    for key in (1240, 3620, 3621, 3622, 3623, 3624) + ((3626, 3627) if bidirectional else ()):
+    for key in (3620, 3621, 3622, 3623, 3624) + ((3626, 3627) if bidirectional else ()):
         if key not in parameters:
             raise LineError(path, "missing parameter", field=str(key))
     reference, lowest, highest = parameters[3620], parameters[3621], parameters[3622]
@@ -118,9 +131,9 @@ def read(text, path="PITCH.TXT"):
         raise LineError(path, "needs 3621 <= 3620 <= 3622, 3623 >= 1 and 3624 > 0",
                         field="3620")
     unit = DETECTION_UNIT_UM * parameters[3623]
-    position_mm = (parameters[1240] + parameters[3624] * np.arange(lowest - 1 - reference,
-                                                                 highest - reference + 1)) \
-        * DETECTION_UNIT_UM / 1e3
+    position_mm = (parameters.get(REFERENCE_COORDINATE, 0)
+                   + parameters[3624] * np.arange(lowest - 1 - reference, highest - reference + 1)
+                   ) * DETECTION_UNIT_UM / 1e3
     forward = _absolute(data, lowest, highest, reference, 0.0) * unit
     reverse = forward
     if bidirectional:

@@ -78,13 +78,13 @@ def grid_mm(first_mm, last_mm, spacing_mm):
                     GRID_DECIMALS)
 
 
-def default_spacing_mm(case, max_points):
+def default_spacing_mm(case, max_points, span_mm=None):
     """Lead / 8 (a once-per-revolution error followed between points), widened to fit
-    ``max_points`` over the measured travel."""
-    target_mm = case.positioning.target_mm
+    ``max_points`` over ``span_mm`` (default: the measured travel)."""
+    span_mm = np.ptp(case.positioning.target_mm) if span_mm is None else span_mm
     spacing_mm = case.axis.lead_mm / POINTS_PER_WAVELENGTH
     if max_points:
-        spacing_mm = max(spacing_mm, np.ptp(target_mm) / (max_points - 2))
+        spacing_mm = max(spacing_mm, span_mm / (max_points - 2))
     return float(np.ceil(spacing_mm * 10**GRID_DECIMALS) / 10**GRID_DECIMALS)
 
 
