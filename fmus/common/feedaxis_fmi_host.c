@@ -780,7 +780,8 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     return status;
 }
 
-/* ``mirrored``: a statement that may answer the call from the mirror (item 5). */
+/* ``mirrored``: a statement that may answer the call from the mirror (item 5); a setter's
+ * mirror takes inputs only, which are always settable, so it may come before the check. */
 #define GETTER(function, type, mirrored)                                                         \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                type value[])                                                    \
@@ -803,8 +804,8 @@ GETTER(fmi2GetString, fmi2String, )
                                const type value[])                                              \
     {                                                                                           \
         Guard *guard = c;                                                                       \
-        if (guard && guard->mode != DEAD && !settable(guard, vr, nvr)) return fmi2Error;        \
         if (guard) { mirrored }                                                                 \
+        if (guard && guard->mode != DEAD && !settable(guard, vr, nvr)) return fmi2Error;        \
         FORWARD(function, 0, (fmi2Component, const fmi2ValueReference *, size_t, const type *), \
                 vr, nvr, value);                                                                \
         slave_changed(g);                                                                       \
