@@ -30,7 +30,12 @@ def per_target(target_mm, error_um, direction, sign):
     """Targets, mean, sample standard deviation (NaN for one run) and run count of one
     direction; the targets are :func:`target_clusters` of both directions together, so
     the two directions share them."""
-    centres_mm, cluster = target_clusters(target_mm)
+    return _per_cluster(target_clusters(target_mm), error_um, direction, sign)
+
+
+def _per_cluster(clusters, error_um, direction, sign):
+    """:func:`per_target` from the :func:`target_clusters` of all samples."""
+    centres_mm, cluster = clusters
     chosen = direction == sign
     used, index = np.unique(cluster[chosen], return_inverse=True)
     unique_mm = centres_mm[used]
@@ -55,17 +60,18 @@ def iso230_figures(target_mm, error_um, direction):
     data cannot give them (one direction only, or one run per target)."""
     target_mm, error_um = np.asarray(target_mm, float), np.asarray(error_um, float)
     direction = np.asarray(direction, float)
+    clusters = target_clusters(target_mm)
     figures = {}
     sides = {}
     for label, sign in (("up", 1.0), ("down", -1.0)):
         if np.any(direction == sign):
-            sides[label] = per_target(target_mm, error_um, direction, sign)
+            sides[label] = _per_cluster(clusters, error_um, direction, sign)
             for name, value in _unidirectional(*sides[label][1:3]).items():
                 figures[f"{name}_{label}_um"] = value
             figures[f"runs_{label}"] = int(np.min(sides[label][3]))
     if len(sides) == 2 and np.array_equal(sides["up"][0], sides["down"][0]):
         figures.update(_bidirectional(sides["up"][1:3], sides["down"][1:3]))
-    figures["targets"] = int(target_clusters(target_mm)[0].size)
+    figures["targets"] = int(clusters[0].size)
     return figures
 
 

@@ -33,15 +33,15 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
     """
     module = CONTROLLERS[controller]
     target_mm = case.positioning.target_mm
+    first_mm, last_mm = _span_mm(module, target_mm)
     if from_measured:
         if spacing_mm is None and not module.EQUIDISTANT:
             return from_measurement(case)
         count = target_clusters(target_mm)[0].size
         spacing_mm = spacing_mm or (target_mm.max() - target_mm.min()) / max(count - 1, 1)
-        return from_measurement(case, _grid(module, target_mm, spacing_mm))
-    first_mm, last_mm = _span_mm(module, target_mm)
+        return from_measurement(case, _grid(module, first_mm, last_mm, spacing_mm))
     spacing_mm = spacing_mm or default_spacing_mm(case, module.MAX_POINTS, last_mm - first_mm)
-    return from_model(case, model, _grid(module, target_mm, spacing_mm))
+    return from_model(case, model, _grid(module, first_mm, last_mm, spacing_mm))
 
 
 def _span_mm(module, target_mm):
@@ -53,10 +53,9 @@ def _span_mm(module, target_mm):
     return first_mm, last_mm
 
 
-def _grid(module, target_mm, spacing_mm):
-    """Table points every ``spacing_mm`` over :func:`_span_mm`, through 0 mm for a
-    ``GRID_THROUGH_ZERO`` controller."""
-    first_mm, last_mm = _span_mm(module, target_mm)
+def _grid(module, first_mm, last_mm, spacing_mm):
+    """Table points every ``spacing_mm`` over the span from :func:`_span_mm`, through 0 mm
+    for a ``GRID_THROUGH_ZERO`` controller."""
     spacing_mm = round(float(spacing_mm), 6)
     if getattr(module, "GRID_THROUGH_ZERO", False) and spacing_mm > 0:
         first_mm = spacing_mm * np.floor(round(first_mm / spacing_mm, 9))
