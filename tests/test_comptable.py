@@ -305,6 +305,27 @@ def _positioning(rng, systematic_um):
     return Positioning(target_mm, error_um, np.ones(target_mm.size))
 
 
+def test_the_anova_by_group_sums_equals_scipys_f_oneway():
+    """Uneven groups (targets x directions, 1 to 7 samples): the p-value and the share of
+    the variance between the groups, computed by bincount, equal scipy's f_oneway and a
+    direct sum."""
+    from scipy.stats import f_oneway
+
+    rng = np.random.default_rng(12)
+    target_mm = np.repeat(np.arange(15) * 10.0, rng.integers(1, 8, 15))
+    direction = rng.choice([-1.0, 1.0], target_mm.size)
+    error_um = 0.3 * np.sin(target_mm / 20.0) + rng.normal(0.0, 1.0, target_mm.size)
+    positioning = Positioning(target_mm, error_um, direction, has_direction=True)
+    found = systematic_test(positioning)
+    groups = [error_um[(target_mm == t) & (direction == d)]
+              for t in np.unique(target_mm) for d in (-1.0, 1.0)]
+    groups = [g for g in groups if g.size]
+    assert found["p_value"] == pytest.approx(f_oneway(*groups).pvalue, rel=1e-9)
+    between = sum(g.size * (g.mean() - error_um.mean()) ** 2 for g in groups)
+    assert found["systematic_share"] == pytest.approx(
+        between / np.sum((error_um - error_um.mean()) ** 2), rel=1e-9)
+
+
 def test_the_cannot_help_test_has_its_false_alarm_rate_and_power():
     rng = np.random.default_rng(11)
     trials = 400

@@ -14,6 +14,7 @@ uncertainty, widened where the measurement's residual is serially correlated.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
@@ -67,7 +68,9 @@ class FitResult:
     """A fitted model with its residual, statistics and parameter uncertainties.
 
     ``measured_um`` is the measured deviation, ``residual_um`` measured - predicted, both
-    at the samples of ``measurements`` concatenated.
+    at the samples of ``measurements`` concatenated; ``jacobian`` d residual / d parameters
+    at the optimum (samples x parameters in the model's order), kept where the model has
+    parameters that enter nonlinearly (for the diagnosis's linearised screening).
     """
 
     model: Model
@@ -79,6 +82,7 @@ class FitResult:
     covariance: np.ndarray | None = field(default=None, repr=False)
     measurements: list = field(default_factory=list, repr=False)
     artefacts: dict = field(default_factory=dict)
+    jacobian: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def rms_um(self):
@@ -168,7 +172,8 @@ def evaluate(model, data, kind=None):
     problem = Problem(model, found)
     residual = problem.measured_um - problem.predicted_um(model.values)
     return FitResult(model, Statistics.of(problem.measured_um, residual, 0),
-                     problem.measured_um, residual, measurements=found)
+                     problem.measured_um, residual, measurements=found,
+                     jacobian=np.zeros((residual.size, 0)))
 
 
 @one_blas_thread
@@ -202,15 +207,17 @@ def fit(model, data, progress=None, kind=None):
         return evaluate(model, found)
     problem = Problem(model, found, progress)
     start = variable_projection(problem, layout)
-    solution = least_squares(problem.residual(layout), start, jac=problem.jacobian(layout),
-                             bounds=layout.bounds(), x_scale="jac", method="trf")
+    solution = (_linear_solution(problem, layout, start) if layout.nonlinear_index.size == 0
+                else least_squares(problem.residual(layout), start, bounds=layout.bounds(),
+                                   jac=problem.jacobian(layout), x_scale="jac", method="trf"))
     sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
                                                     solution.active_mask, layout, found)
     fitted = model.with_values(layout.values(solution.x))
     if found[0].loose_share is not None:
         flag_loose(fitted, sigma, undetermined, found[0].loose_share)
     result = FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
-                       problem.measured_um, solution.fun, sigma, undetermined, covariance, found)
+                       problem.measured_um, solution.fun, sigma, undetermined, covariance, found,
+                       jacobian=solution.jac if layout.nonlinear_index.size else None)
     _check_finite(result, found)
     return result
 
@@ -267,6 +274,8 @@ class Problem:
         if self.progress:
             self.progress()
         parts = [separate(values) for separate in self.separators]
+        if len(parts) == 1:
+            return parts[0]
         return (np.concatenate([base for base, _ in parts]),
                 np.vstack([columns for _, columns in parts]))
 
@@ -357,11 +366,7 @@ def variable_projection(problem, layout):
         x[nonlinear] = x_nonlinear
         base_um, columns_um = problem.split(layout.values(x))
         target_um = problem.measured_um - base_um
-        scale = np.linalg.norm(columns_um, axis=0)
-        scale[scale == 0.0] = 1.0
-        solution = lsq_linear(columns_um / scale, target_um, method="bvls",
-                              bounds=(lower[linear] * scale, upper[linear] * scale))
-        x[linear] = np.clip(solution.x / scale, lower[linear], upper[linear])
+        x[linear] = bounded_linear_solve(columns_um, target_um, lower[linear], upper[linear])
         return target_um - columns_um @ x[linear]
 
     if nonlinear.size:
@@ -373,6 +378,32 @@ def variable_projection(problem, layout):
         project(x[nonlinear])
     margin = 1e-9 * (upper - lower)
     return np.clip(x, lower + margin, upper - margin)
+
+
+def bounded_linear_solve(columns, target, lower, upper):
+    """Least-squares coefficients of ``columns`` (samples x k) for ``target`` within the
+    bounds: the normal equations of the unit-scaled columns (a k x k solve, minimum norm
+    where the columns are dependent) when that solution is inside the bounds, else
+    bounded-variable least squares (scipy's BVLS)."""
+    scale = np.linalg.norm(columns, axis=0)
+    scale[scale == 0.0] = 1.0
+    scaled = columns / scale
+    free = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ target, rcond=None)[0] / scale
+    if np.all((free >= lower) & (free <= upper)):
+        return free
+    solution = lsq_linear(scaled, target, method="bvls", bounds=(lower * scale, upper * scale))
+    return np.clip(solution.x / scale, lower, upper)
+
+
+def _linear_solution(problem, layout, x):
+    """The optimum of a model whose parameters all enter linearly: the projection's bounded
+    linear solve is exact, so its residual, Jacobian (the columns) and active bounds stand
+    for the trust-region pass (which on 10^6 samples cost seconds per iteration)."""
+    lower, upper = layout.bounds()
+    margin = 2e-9 * (upper - lower)
+    active = np.where(x <= lower + margin, -1, np.where(x >= upper - margin, 1, 0))
+    return SimpleNamespace(x=x, fun=problem.residual(layout)(x),
+                           jac=problem.jacobian(layout)(x), active_mask=active)
 
 
 def starting_values(model, found):
@@ -429,7 +460,13 @@ def uncertainties(jacobian, residual, active_mask, layout, found):
     scale = np.linalg.norm(jacobian, axis=0)
     scale[scale == 0.0] = 1.0
     scaled = jacobian / scale
-    _, singular, vt = np.linalg.svd(scaled, full_matrices=False)
+    # the singular values and directions of the Jacobian from the eigen-decomposition of its
+    # unit-scaled Gram matrix (a parameters x parameters problem, where an SVD of samples x
+    # parameters costs seconds at 10^6; the ratio SINGULAR_RATIO squared stays far above
+    # the Gram matrix's rounding)
+    eigenvalues, vectors = np.linalg.eigh(scaled.T @ scaled)
+    order = np.argsort(eigenvalues)[::-1]
+    singular, vt = np.sqrt(np.maximum(eigenvalues[order], 0.0)), vectors[:, order].T
     strong = singular > SINGULAR_RATIO * max(singular[0], 1e-300)
     inverse = (vt[strong].T / singular[strong] ** 2) @ vt[strong]
     bounds = np.cumsum([0] + [m.size for m in found])
