@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .compensate import THERMAL_EFFECTS, Compensation, compensate, visits
-from .comptable import default_spacing_mm, from_model, grid_mm, verify
+from .comptable import default_spacing_mm, grid_mm, safe_table, verify
 from .comptable.table import CompTable
 from .diagnose import Diagnosis, diagnose, residual_spectrum
 from .effects import CATALOG, Model
@@ -88,7 +88,7 @@ def analyse(case, model, effects=None, diagnosis=None, ladder=None):
     effects = CATALOG if effects is None else effects
     target_mm = case.positioning.target_mm
     spacing_mm = default_spacing_mm(case, None)
-    table = from_model(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
+    table = safe_table(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
     thermal = case.is_thermal and any(name in model for name in THERMAL_EFFECTS)
     result = evaluate(model, case)
     return Analysis(

@@ -299,6 +299,11 @@ def _comp_table_options(parser):
     parser.add_argument("--axis-id", metavar="ID",
                         help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
                              "axis number 1, fanuc axis 1: the defaults)")
+    parser.add_argument("--force", action="store_true",
+                        help="write the table even when it is refused (it had to leave out "
+                             "effects the data cannot determine, or it is expected to raise A, "
+                             "E or the error between the targets), with warnings saying what "
+                             "it risks")
 
 
 @command("comp-table", help="pitch-error compensation table for a CNC controller",
@@ -309,7 +314,10 @@ def _comp_table_options(parser):
                      "--from-measurement: the classical table of the measured means. Then "
                      "read the file back as the controller does and print the ISO 230-2 "
                      "figures expected after it on the measured case, next to those before, "
-                     "with a warning when a table cannot help. See docs/compensation-tables.md.",
+                     "with a warning when a table cannot help. A table is refused (exit 2, "
+                     "nothing written) when it would have to use an effect the data cannot "
+                     "determine or is expected to make the axis worse; --force writes it "
+                     "anyway. See docs/compensation-tables.md.",
          options=_comp_table_options)
 def _cmd_comp_table(args):
     from .comptable import comp_table, summary_lines
@@ -322,7 +330,7 @@ def _cmd_comp_table(args):
                          parameter="--model")
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
-                               args.from_measurement, args.axis_id)
+                               args.from_measurement, args.axis_id, args.force)
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))

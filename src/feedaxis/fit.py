@@ -318,30 +318,51 @@ def _uncertainties(solution, layout, n_points):
     """(standard uncertainties, undetermined parameters, covariance) from the Jacobian at
     the optimum; the covariance is in the order of ``layout.slots``.
 
-    A parameter is undetermined when it has a share in a (nearly) singular direction of the
-    Jacobian with its columns scaled to unit length (so units do not matter), or when it
-    ends on a bound.
+    A parameter is undetermined when :func:`inseparable` finds it in a (nearly) singular
+    direction of the Jacobian, or when it ends on a bound.
     """
     variance = float(solution.fun @ solution.fun) / max(n_points - layout.size, 1)
-    scale = np.linalg.norm(solution.jac, axis=0)
-    scale[scale == 0.0] = 1.0
-    _, singular, vt = np.linalg.svd(solution.jac / scale, full_matrices=False)
-    strong = singular > SINGULAR_RATIO * max(singular[0], 1e-300)
+    scale, singular, vt, strong = _unit_column_svd(solution.jac)
     covariance = ((vt[strong].T / singular[strong] ** 2) @ vt[strong] * variance
                   / np.outer(scale, scale))
-    in_weak_direction = np.abs(vt[~strong]) > 0.1
     keys = [f"{effect_name}.{parameter_name}" for effect_name, parameter_name in layout.slots]
+    undetermined = _inseparable(vt, strong, keys)
     sigma = {name: {} for name in layout.model.names}
-    undetermined = {}
     for index, (effect_name, parameter_name) in enumerate(layout.slots):
         key = keys[index]
         sigma[effect_name][parameter_name] = float(np.sqrt(covariance[index, index]))
-        partners = {keys[j] for row in in_weak_direction if row[index]
-                    for j in np.flatnonzero(row) if j != index}
-        if in_weak_direction[:, index].any():
-            undetermined[key] = (f"the data cannot separate it from {', '.join(sorted(partners))}"
-                                 if partners else "the data do not depend on it")
+        if key in undetermined:
             sigma[effect_name][parameter_name] = float("nan")
         elif solution.active_mask[index] != 0:
             undetermined[key] = "ended on its bound"
     return sigma, undetermined, covariance
+
+
+def inseparable(jacobian, keys):
+    """{key: why} of the parameters (the columns of ``jacobian``, named by ``keys``) that
+    the data cannot determine at this point: with a share over 0.1 in a (nearly) singular
+    direction of the Jacobian with its columns scaled to unit length (singular value below
+    ``SINGULAR_RATIO`` of the largest), so units do not matter."""
+    _, _, vt, strong = _unit_column_svd(np.asarray(jacobian, dtype=float))
+    return _inseparable(vt, strong, list(keys))
+
+
+def _unit_column_svd(jacobian):
+    """(column norms, singular values, right singular vectors, strong mask) of
+    ``jacobian`` with unit columns."""
+    scale = np.linalg.norm(jacobian, axis=0)
+    scale[scale == 0.0] = 1.0
+    _, singular, vt = np.linalg.svd(jacobian / scale, full_matrices=False)
+    return scale, singular, vt, singular > SINGULAR_RATIO * max(singular[0], 1e-300)
+
+
+def _inseparable(vt, strong, keys):
+    in_weak_direction = np.abs(vt[~strong]) > 0.1
+    undetermined = {}
+    for index, key in enumerate(keys):
+        if in_weak_direction[:, index].any():
+            partners = sorted({keys[j] for row in in_weak_direction if row[index]
+                               for j in np.flatnonzero(row) if j != index})
+            undetermined[key] = (f"the data cannot separate it from {', '.join(partners)}"
+                                 if partners else "the data do not depend on it")
+    return undetermined

@@ -155,7 +155,7 @@ def _available(case, model, effects):
     for name, effect in effects.items():
         if name in model:
             continue
-        reason = effect.unavailable(case) or _unresolvable(case, effect)
+        reason = effect.unavailable(case) or unresolvable(case, effect)
         if reason:
             skipped[name] = reason
         else:
@@ -163,7 +163,7 @@ def _available(case, model, effects):
     return pending, skipped
 
 
-def _unresolvable(case, effect):
+def unresolvable(case, effect):
     """Why the targets cannot resolve a periodic effect's wavelength (None when they can)."""
     try:
         wavelength_mm = effect.wavelength_mm(case.axis)
