@@ -194,7 +194,7 @@ def _cmd_compare(args):
 
 def _report_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
-    _add_model_options(parser, "fitted model (TOML)", required=True)
+    _add_model_options(parser, "fitted model (TOML); without it the model is empty")
     parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
 
 
@@ -276,9 +276,14 @@ def _cmd_import(args):
     payload = {"case": str(folder), "samples": int(measurement.error_um.size),
                "targets": int(len(set(measurement.target_mm))),
                "runs": int(measurement.run.max()), "directions": directions,
-               "name": read_case(folder).name, "dropped": dropped}
+               "name": read_case(folder).name, "dropped": dropped,
+               "ambient_C": None if measurement.ambient_C is None else
+               [float(measurement.ambient_C.min()), float(measurement.ambient_C.max())]}
     lines = [f"{folder}: {payload['samples']} samples, {payload['targets']} targets, "
              f"{payload['runs']} runs, directions {', '.join(f'{d:+d}' for d in directions)}"]
+    if payload["ambient_C"]:
+        lines.append("  kept: the air temperature as positioning.csv ambient_C, "
+                     + " to ".join(f"{t:g}" for t in sorted(set(payload["ambient_C"]))) + " °C")
     lines += [f"  dropped (the case format has no place for it): {key} = {value}"
               for key, value in dropped.items()]
     _emit(args, payload, "\n".join(lines))
