@@ -500,10 +500,12 @@ def _simulate_iso230_options(parser):
     _add_motion_options(parser)
 
 
-@scenario("iso230", help="ISO 230-2 positioning test -> axis.toml + positioning.csv",
+@scenario("iso230", help="ISO 230-2 positioning test -> positioning.csv + duty.csv",
           description="Targets P_i = (i-1) p + r_i (r_i a different small offset at each), "
                       "RUNS runs approaching every target in + and in -, overrun beyond the "
-                      "end targets, dwell, then the deviation table position - target.",
+                      "end targets, dwell, then the deviation table position - target; "
+                      "duty.csv holds the motion simulated (it warms the screw), "
+                      "positioning.csv the samples with their time.",
           options=_simulate_iso230_options)
 def _cmd_simulate_iso230(args):
     from .cosim.scenarios import iso230_targets, simulate_iso230
