@@ -11,7 +11,7 @@ import pytest
 
 from feedaxis.case import read_case
 from feedaxis.cli import main
-from feedaxis.comptable import CONTROLLERS
+from feedaxis.comptable import CONTROLLERS, grid_mm, safe_table
 from feedaxis.comptable.safety import undetermined_on
 from feedaxis.effects import CATALOG, Model
 from feedaxis.fit import fit
@@ -171,3 +171,13 @@ def test_a_table_that_makes_the_axis_worse_is_refused(laser_case, tmp_path, caps
     assert not any("only falls" in w for w in warnings)
     assert any("written with --force although it makes the axis worse" in w for w in warnings)
     assert "left out" not in printed   # no thermal effect named that the model lacks
+
+
+def test_the_reports_table_leaves_out_the_same_effects(laser_case):
+    from feedaxis.effects import load_model
+    case = read_case(laser_case[0])
+    model = load_model(laser_case[1], CATALOG)
+    table = safe_table(case, model, grid_mm(0.0, 500.0, LEAD_MM / 8))
+    assert table.included == ("backlash",)
+    assert "assembly_eccentricity.sin_um" in table.excluded["assembly_eccentricity"]
+    assert "lead_error.offset_um" in table.excluded["lead_error"]
