@@ -51,6 +51,12 @@ def cli(capsys, *argv):
     return code, printed.out, printed.err
 
 
+def comp_table(capsys, case, model, controller, out, *options):
+    """(exit code, stdout, stderr) of ``feedaxis comp-table`` writing ``out``."""
+    return cli(capsys, "comp-table", case, "--model", model, "--controller", controller,
+               "--out", out, *options)
+
+
 @pytest.fixture(scope="module")
 def laser_case(tmp_path_factory):
     """The imported case and the model fitted with the three effects of the issue."""
@@ -83,15 +89,13 @@ def test_comp_table_refuses_names_the_parameters_and_writes_nothing(laser_case, 
                                                                     capsys, controller):
     case, model = laser_case
     out = tmp_path / f"x.{controller}"
-    code, printed, err = cli(capsys, "comp-table", case, "--model", model, "--controller",
-                             controller, "--out", out)
+    code, printed, err = comp_table(capsys, case, model, controller, out)
     assert code == 2 and not printed and not out.exists()
     assert err.startswith(f"feedaxis: refused, nothing written to {out}")
     for key in UNDETERMINED:
         assert key in err
     assert "the targets cannot resolve it" in err and "accuracy A" in err
-    code, printed, _ = cli(capsys, "comp-table", case, "--model", model, "--controller",
-                           controller, "--out", out, "--json")
+    code, printed, _ = comp_table(capsys, case, model, controller, out, "--json")
     refusal = json.loads(printed)
     assert code == 2 and not out.exists()
     assert set(refusal["report"]["excluded"]) == {"lead_error", "assembly_eccentricity"}
@@ -103,8 +107,7 @@ def test_force_writes_the_determined_part_and_says_what_it_risks(laser_case, tmp
                                                                  capsys, controller):
     case, model = laser_case
     out = tmp_path / f"x.{controller}"
-    code, printed, _ = cli(capsys, "comp-table", case, "--model", model, "--controller",
-                           controller, "--out", out, "--force", "--json")
+    code, printed, _ = comp_table(capsys, case, model, controller, out, "--force", "--json")
     report = json.loads(printed)
     assert code == 0 and out.exists()
     assert report["included"] == ["backlash"]
@@ -123,8 +126,7 @@ def test_a_model_written_by_hand_is_checked_on_the_case(laser_case, tmp_path, ca
     case, model = laser_case
     by_hand = tmp_path / "by-hand.toml"
     by_hand.write_text(model.read_text().split("[fit]")[0])
-    code, _, err = cli(capsys, "comp-table", case, "--model", by_hand, "--controller",
-                       "siemens", "--out", tmp_path / "x.ini")
+    code, _, err = comp_table(capsys, case, by_hand, "siemens", tmp_path / "x.ini")
     assert code == 2 and not (tmp_path / "x.ini").exists()
     assert "on this case the data cannot separate it" in err
     assert "assembly_eccentricity.sin_um: on this case the data do not depend on it" in err
@@ -145,8 +147,7 @@ def test_a_model_the_data_determine_gives_a_table(laser_case, tmp_path, capsys):
     assert cli(capsys, "fit", case, "--add", "lead_error", "--add", "backlash",
                "--out", model)[0] == 0
     out = tmp_path / "x.fanuc"
-    code, printed, _ = cli(capsys, "comp-table", case, "--model", model, "--controller",
-                           "fanuc", "--out", out, "--json")
+    code, printed, _ = comp_table(capsys, case, model, "fanuc", out, "--json")
     report = json.loads(printed)
     assert code == 0 and out.exists() and report["included"] == ["lead_error", "backlash"]
     assert report["figures"]["A_um"]["after_um"] < 0.5 * report["figures"]["A_um"]["before_um"]
@@ -159,12 +160,10 @@ def test_a_table_that_makes_the_axis_worse_is_refused(laser_case, tmp_path, caps
     wrong.write_text(f"[lead_error]\noffset_um = 0.0\nslope_um_per_mm = "
                      f"{-TRUTH['slope_um_per_mm']}\n")
     out = tmp_path / "x.ini"
-    code, _, err = cli(capsys, "comp-table", case, "--model", wrong, "--controller",
-                       "siemens", "--out", out)
+    code, _, err = comp_table(capsys, case, wrong, "siemens", out)
     assert code == 2 and not out.exists()
     assert "the table makes the axis worse: accuracy A rises from" in err
-    code, printed, _ = cli(capsys, "comp-table", case, "--model", wrong, "--controller",
-                           "siemens", "--out", out, "--force")
+    code, printed, _ = comp_table(capsys, case, wrong, "siemens", out, "--force")
     assert code == 0 and out.exists()
     warnings = [line for line in printed.splitlines() if line.startswith("warning:")]
     assert any("accuracy A rises from" in w for w in warnings)
