@@ -101,6 +101,15 @@ def test_report_is_one_self_contained_html_page(tmp_path, capsys):
     assert 'src="http' not in page
 
 
+def test_report_defaults_to_the_empty_model_like_fit_and_diagnose(tmp_path, capsys):
+    folder = syn.iso_case(tmp_path / "case", seed=33, backlash_um=-4.0)
+    out = tmp_path / "report.html"
+    assert main(["report", str(folder), "--out", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == {"report": str(out)}
+    page = out.read_text()
+    assert "verdict: missing_effect" in page and "lead_error" in page
+
+
 def test_report_names_what_a_metrologist_signs(tmp_path):
     """Date, version, case and model on the page; uncertainties in the parameter table,
     which are the fit's own; µm, never um."""
