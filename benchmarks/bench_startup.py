@@ -47,8 +47,8 @@ def first_simulation(*args, **kwargs):
     original(*args, **kwargs)
     os._exit(0)
 servo.simulate = first_simulation
-import feedaxis.tracking.model as model
-model.simulate = first_simulation
+import feedaxis.measurement.tracking as tracking
+tracking.simulate = first_simulation
 from feedaxis.cli import main
 sys.exit(main(sys.argv[1:]))
 """

@@ -13,7 +13,7 @@ them, and both count:
   determine is one the table's verification on this case cannot check either.
 
 Nor does it use a periodic effect the diagnosis passes over on this case as unresolvable
-(:func:`feedaxis.diagnose.decision.unresolvable`: the targets cannot resolve its
+(:meth:`feedaxis.measurement.positioning.Positioning.unresolvable`: the targets cannot resolve its
 wavelength, so a fitted value of it is an alias, and between the targets the table would add
 a ripple no measurement supports).
 
@@ -27,6 +27,7 @@ import numpy as np
 
 from ..effects import Model
 from ..fit import inseparable
+from ..measurement.positioning import Positioning
 from .table import DIRECTIONAL_EFFECTS, POSITION_TABLE_EFFECTS
 
 WORSE_FIGURES = ("A_um", "A_up_um", "A_down_um", "E_um", "E_up_um", "E_down_um")
@@ -40,18 +41,17 @@ def unsafe_effects(case, model):
     """{effect name: [why, ...]} of the table effects of ``model`` a table on ``case`` must
     not use: a parameter undetermined by the fit record or on ``case``, or a wavelength the
     case's targets cannot resolve."""
-    from ..diagnose.decision import unresolvable
-
     undetermined = dict(model.record.undetermined) if model.record is not None else {}
     for key, reason in undetermined_on(case, model).items():
         undetermined.setdefault(key, f"on this case {reason}")
+    measurement = Positioning(case)
     unsafe = {}
     for effect in model.effects:
         if effect.name not in POSITION_TABLE_EFFECTS + DIRECTIONAL_EFFECTS:
             continue
         reasons = [f"{key}: {reason}" for key, reason in undetermined.items()
                    if key.split(".", 1)[0] == effect.name]
-        aliased = effect.unavailable(case) is None and unresolvable(case, effect)
+        aliased = measurement.unavailable(effect) is None and measurement.unresolvable(effect)
         if aliased:
             reasons.append(f"the targets cannot resolve it: {aliased}")
         if reasons:
@@ -63,11 +63,13 @@ def undetermined_on(case, model):
     """{"effect.parameter": why} of the parameters of ``model`` (at its values) that the
     samples of ``case`` cannot determine: the fit's singular-direction test on the Jacobian
     at those samples (forward differences), over the effects usable on ``case``."""
-    effects = [e for e in model.effects if e.parameters and e.unavailable(case) is None]
+    measurement = Positioning(case)
+    effects = [e for e in model.effects
+               if e.parameters and measurement.unavailable(e) is None]
     if not effects:
         return {}
     usable = Model(effects, model.values)
-    predict = usable.predictor(case)
+    predict = measurement.predictor(usable)
     keys, columns = [], []
     base_um = predict(usable.values)
     for effect in effects:
