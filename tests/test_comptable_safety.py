@@ -79,9 +79,10 @@ def test_fit_names_every_undetermined_parameter_in_text_and_json(laser_case, cap
     code, out, _ = cli(capsys, "fit", case, "--add", "lead_error", "--add",
                        "assembly_eccentricity", "--add", "backlash")
     lines = {line.split()[0]: line for line in out.splitlines() if line.startswith("  ")}
-    for key in UNDETERMINED:
-        assert "+/- n/a" in lines[key] and "the data" in lines[key]
-    assert "n/a" not in lines["backlash.backlash_um"]
+    for key in UNDETERMINED:   # each with why the data cannot determine it
+        assert "the data" in lines[key], lines[key]
+    assert "the data" not in lines["backlash.backlash_um"]
+    assert "the data do not" in lines["assembly_eccentricity.sin_um"]  # not "on its bound"
 
 
 @pytest.mark.parametrize("controller", ["siemens", "fanuc"])

@@ -396,12 +396,11 @@ def uncertainties(jacobian, residual, active_mask, layout, inflation=1.0):
     for index, (effect_name, parameter_name) in enumerate(layout.slots):
         key = keys[index]
         sigma[effect_name][parameter_name] = float(np.sqrt(covariance[index, index]))
-        if key not in undetermined and (sigma[effect_name][parameter_name]
-                                        > layout.upper[index] - layout.lower[index]):
-            undetermined[key] = ("the data do not determine it: its standard uncertainty "
-                                 "exceeds the whole range of its bounds")
         if key in undetermined:
             sigma[effect_name][parameter_name] = float("nan")
+        elif sigma[effect_name][parameter_name] > layout.upper[index] - layout.lower[index]:
+            undetermined[key] = ("the data do not determine it: its standard uncertainty "
+                                 "exceeds the whole range of its bounds")
         elif active_mask[index] != 0:
             undetermined[key] = "ended on its bound"
     return sigma, undetermined, covariance
