@@ -452,43 +452,70 @@ def uncertainties(jacobian, residual, active_mask, layout, found):
     (:meth:`~feedaxis.measurement.Measurement.noise_gram`: σ² J'J for white noise, which
     gives the usual σ² (J'J)⁺).
 
-    A parameter is undetermined when it has a share in a (nearly) singular direction of the
-    Jacobian with its columns scaled to unit length (so units do not matter), or when it
-    ends on a bound.
+    A parameter is undetermined when :func:`inseparable` finds it in a (nearly) singular
+    direction of the Jacobian, when its standard uncertainty exceeds the whole range its
+    bounds allow (a column of rounding noise, as the sine of a once-per-revolution error at
+    targets that are all whole leads, escapes the singular-direction test once scaled to
+    unit length), or when it ends on a bound.
     """
     variance = float(residual @ residual) / max(residual.size - layout.size, 1)
-    scale = np.linalg.norm(jacobian, axis=0)
-    scale[scale == 0.0] = 1.0
-    scaled = jacobian / scale
-    # the singular values and directions of the Jacobian from the eigen-decomposition of its
-    # unit-scaled Gram matrix (a parameters x parameters problem, where an SVD of samples x
-    # parameters costs seconds at 10^6; the ratio SINGULAR_RATIO squared stays far above
-    # the Gram matrix's rounding)
-    eigenvalues, vectors = np.linalg.eigh(scaled.T @ scaled)
-    order = np.argsort(eigenvalues)[::-1]
-    singular, vt = np.sqrt(np.maximum(eigenvalues[order], 0.0)), vectors[:, order].T
-    strong = singular > SINGULAR_RATIO * max(singular[0], 1e-300)
+    scale, singular, vt, strong = _unit_column_svd(jacobian)
     inverse = (vt[strong].T / singular[strong] ** 2) @ vt[strong]
     bounds = np.cumsum([0] + [m.size for m in found])
+    scaled = jacobian / scale
     gram = sum(m.noise_gram(scaled[start:stop], residual[start:stop], variance)
                for m, start, stop in zip(found, bounds[:-1], bounds[1:]))
     covariance = inverse @ gram @ inverse / np.outer(scale, scale)
-    in_weak_direction = np.abs(vt[~strong]) > 0.1
     keys = [f"{effect_name}.{parameter_name}" for effect_name, parameter_name in layout.slots]
+    undetermined = _inseparable(vt, strong, keys)
     sigma = {name: {} for name in layout.model.names}
-    undetermined = {}
     for index, (effect_name, parameter_name) in enumerate(layout.slots):
         key = keys[index]
         sigma[effect_name][parameter_name] = float(np.sqrt(max(covariance[index, index], 0.0)))
-        partners = {keys[j] for row in in_weak_direction if row[index]
-                    for j in np.flatnonzero(row) if j != index}
-        if in_weak_direction[:, index].any():
-            undetermined[key] = (f"the data cannot separate it from {', '.join(sorted(partners))}"
-                                 if partners else "the data do not depend on it")
+        if key in undetermined:
             sigma[effect_name][parameter_name] = float("nan")
+        elif sigma[effect_name][parameter_name] > layout.upper[index] - layout.lower[index]:
+            undetermined[key] = ("the data do not determine it: its standard uncertainty "
+                                 "exceeds the whole range of its bounds")
         elif active_mask[index] != 0:
             undetermined[key] = "ended on its bound"
     return sigma, undetermined, covariance
+
+
+def inseparable(jacobian, keys):
+    """{key: why} of the parameters (the columns of ``jacobian``, named by ``keys``) that
+    the data cannot determine at this point: with a share over 0.1 in a (nearly) singular
+    direction of the Jacobian with its columns scaled to unit length (singular value below
+    ``SINGULAR_RATIO`` of the largest), so units do not matter."""
+    _, _, vt, strong = _unit_column_svd(np.asarray(jacobian, dtype=float))
+    return _inseparable(vt, strong, list(keys))
+
+
+def _unit_column_svd(jacobian):
+    """(column norms, singular values, right singular vectors, strong mask) of
+    ``jacobian`` with unit columns, from the eigen-decomposition of its Gram matrix (a
+    parameters x parameters problem, where an SVD of samples x parameters costs seconds at
+    10^6 samples; SINGULAR_RATIO squared stays far above the Gram matrix's rounding)."""
+    scale = np.linalg.norm(jacobian, axis=0)
+    scale[scale == 0.0] = 1.0
+    scaled = jacobian / scale
+    eigenvalues, vectors = np.linalg.eigh(scaled.T @ scaled)
+    order = np.argsort(eigenvalues)[::-1]
+    singular, vt = np.sqrt(np.maximum(eigenvalues[order], 0.0)), vectors[:, order].T
+    strong = singular > SINGULAR_RATIO * max(singular[0] if singular.size else 0.0, 1e-300)
+    return scale, singular, vt, strong
+
+
+def _inseparable(vt, strong, keys):
+    in_weak_direction = np.abs(vt[~strong]) > 0.1
+    undetermined = {}
+    for index, key in enumerate(keys):
+        if in_weak_direction[:, index].any():
+            partners = sorted({keys[j] for row in in_weak_direction if row[index]
+                               for j in np.flatnonzero(row) if j != index})
+            undetermined[key] = (f"the data cannot separate it from {', '.join(partners)}"
+                                 if partners else "the data do not depend on it")
+    return undetermined
 
 
 def flag_loose(model, sigma, undetermined, share):
