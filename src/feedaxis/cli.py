@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import warnings
 from contextlib import contextmanager
@@ -24,7 +23,6 @@ from .effects import Model, available_effects, load_model
 from .output import write_atomically
 
 COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
-DEFAULT_THERMAL_STEP_S = 0.1
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
              "+ tracking.csv; see data-format.md")
 
@@ -359,59 +357,13 @@ def _cmd_build_fmus(args):
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
 
 
-def _parameter_value(text):
-    """``--set`` value: true/false, an integer, a number, else the text."""
-    if text.lower() in ("true", "false"):
-        return text.lower() == "true"
-    for convert in (int, float):
-        try:
-            return convert(text)
-        except ValueError:
-            pass
-    return text
-
-
-def _axis_overrides(args):
-    """{component: {parameter: value}} from --model/--axis and --set, --set last."""
-    overrides = {}
-    if args.model:
-        if not args.axis:
-            raise InputError("needs --axis (the axis.toml or case folder it was fitted on): "
-                             "the FMU parameters depend on the axis", parameter="--model")
-        from .case import read_axis
-
-        axis_path = Path(args.axis)
-        axis = read_axis(axis_path / "axis.toml" if axis_path.is_dir() else axis_path)
-        overrides = load_model(args.model, _effects(args)).fmu_parameters(axis)
-    for item in args.set or ():
-        name, _, value = item.partition("=")
-        component, _, parameter = name.partition(".")
-        if not (component and parameter and value):
-            raise InputError("expected COMPONENT.PARAMETER=VALUE, e.g. NpidServo.nonlinear=true",
-                             parameter=f"--set {item}")
-        overrides.setdefault(component, {})[parameter] = _parameter_value(value)
-    return overrides
-
-
 def _axis_system(args):
-    """The default axis at ``--step-ms`` (and ``--thermal-step-s``) with the overrides.
+    """The default axis from the command's axis options (--step-ms, --thermal-step-s,
+    --model/--axis, --set): :func:`feedaxis.cosim.system.axis_from_options`."""
+    from .cosim.system import axis_from_options
 
-    Without ``--thermal-step-s`` ThermalScrew steps every 0.1 s rounded up to a whole
-    number of macro steps, so any ``--step-ms`` works.
-    """
-    from .cosim.system import default_axis, whole_ratio
-
-    thermal_step_s = getattr(args, "thermal_step_s", None)
-    for option, value in (("--step-ms", args.step_ms), ("--thermal-step-s", thermal_step_s)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise InputError(f"must be > 0, got {value:g}", parameter=option)
-    step_s = args.step_ms * 1e-3
-    if thermal_step_s is None:
-        thermal_step_s = step_s * math.ceil(DEFAULT_THERMAL_STEP_S / step_s - 1e-9)
-    elif whole_ratio(thermal_step_s, step_s) is None:
-        raise InputError(f"{thermal_step_s:g} s must be a whole multiple of the macro step "
-                         f"--step-ms {args.step_ms:g}", parameter="--thermal-step-s")
-    return default_axis(step_s, step_s, thermal_step_s).with_parameters(_axis_overrides(args))
+    return axis_from_options(args.step_ms, getattr(args, "thermal_step_s", None), args.model,
+                             args.axis, args.set, _effects(args))
 
 
 def _fmu_paths(args):
