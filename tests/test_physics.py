@@ -257,3 +257,17 @@ def test_thermal_outputs_of_one_point_equal_the_array_path():
                 arrays_um[k], rel=1e-12, abs=1e-12)
             assert thermal.screw_elongation_um(params, rise_K, float(screw_m[k])) == \
                 pytest.approx(along_um[k], rel=1e-12, abs=1e-12)
+
+
+def test_play_turns_the_direction_after_half_the_backlash_of_travel_back():
+    """The nut crosses its play of B over B of reversed travel; creep inside it changes
+    nothing (the ISO samples of a settling servo), B = 0 follows every reversal."""
+    engagement = geometry.play_engagement(1.0, -0.0049, 10.0)  # 4.9 µm back of a 10 µm play
+    assert engagement == pytest.approx(0.02)
+    assert geometry.backlash_error_um(engagement, 10.0) == 5.0
+    engagement = geometry.play_engagement(engagement, -0.0002, 10.0)
+    assert geometry.backlash_error_um(engagement, 10.0) == -5.0
+    assert geometry.play_engagement(-1.0, -1.0, 10.0) == -1.0
+    assert geometry.play_engagement(1.0, -1e-12, 10.0) == pytest.approx(1.0, abs=1e-9)
+    assert geometry.play_engagement(1.0, -1e-12, 0.0) == -1.0
+    assert geometry.play_engagement(-1.0, 0.0, 0.0) == -1.0

@@ -160,6 +160,22 @@ def backlash_error_um(direction, backlash_um):
     return 0.5 * backlash_um * sign(direction)
 
 
+def play_engagement(engagement, travel_mm, backlash_um):
+    """Where the nut sits in its play of width B after the screw travels ``travel_mm``.
+
+    ``engagement`` runs from -1 (against the flank that drives in -) to +1 (in +); a
+    reversal crosses the play over B of travel, so the approach direction of
+    :func:`backlash_error_um` (the sign of the engagement) turns once the screw has travelled
+    B/2 back, and the nanometre creep of a settling servo never turns it. With B = 0 the
+    engagement is the sign of the last travel. Scalars (the FMU's step).
+    """
+    if travel_mm == 0.0:
+        return engagement
+    if backlash_um == 0.0:
+        return 1.0 if travel_mm > 0.0 else -1.0
+    return min(1.0, max(-1.0, engagement + 2e3 * travel_mm / abs(backlash_um)))
+
+
 def transmission_error_um(position_mm, direction, lead_mm, offset_um, slope_um_per_mm,
                           cos_um, sin_um, backlash_um, sag_um=0.0):
     """Superposed transmission error f_T = f1 + f2 + backlash + sag (seed 000 Eq. 10).
