@@ -367,17 +367,9 @@ def _axis_system(args):
 
 
 def _fmu_paths(args):
-    if args.fmus:
-        from .fmu_build import FMU_NAMES
+    from .cosim.fmu_cache import fmu_paths
 
-        paths = {name: Path(args.fmus) / f"{name}.fmu" for name in FMU_NAMES}
-        missing = [str(p) for p in paths.values() if not p.exists()]
-        if missing:
-            raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {args.fmus}")
-        return paths
-    from .cosim.fmu_cache import cached_fmus
-
-    return cached_fmus()
+    return fmu_paths(args.fmus)
 
 
 @contextmanager
