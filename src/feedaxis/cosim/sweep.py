@@ -22,13 +22,14 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import logging
 import math
 import os
 import shutil
 import tempfile
 import threading
 import time
-from dataclasses import asdict, dataclass, is_dataclass
+from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 from typing import NamedTuple
 
@@ -299,10 +300,10 @@ def _check_within(name, low, high, variables, option, what):
                        if v.causality == "parameter" and v.type == "Real")
         raise InputError(f"{component} has no Real parameter {parameter}; its Real "
                          f"parameters: {', '.join(known)}", parameter=option)
-    if declared.min is not None and low < float(declared.min):
+    if declared.min is not None and -math.inf < low < float(declared.min):
         raise InputError(f"{what} reach {low:g}, below {name}'s minimum {declared.min} "
                          "(the FMU's bound)", parameter=option)
-    if declared.max is not None and high > float(declared.max):
+    if declared.max is not None and math.inf > high > float(declared.max):
         raise InputError(f"{what} reach {high:g}, above {name}'s maximum {declared.max} "
                          "(the FMU's bound)", parameter=option)
 
@@ -415,30 +416,42 @@ def sweep(scenario, vary=(), trials=None, seed=0, out=None, *, from_model=None, 
     files, digest = fmu_files(plan.fmu_paths)
     identity = plan.identity(digest)
     store = Store(out, identity, resume) if out is not None else None
-    results = store.load() if store else {}
-    remaining = [k for k in range(plan.trials) if k not in results]
+    collected = store.load() if store else Collected()
+    remaining = [k for k in range(plan.trials) if k not in collected.results]
     job = Job(plan.scenario, plan.options, plan.system, files, digest)
     try:
-        _execute(plan, job, remaining, results, store, workers, scheduler, client, progress)
+        _execute(plan, job, remaining, collected, store, workers, scheduler, client, progress)
     except KeyboardInterrupt:
         if store:
             store.flush()
-        table = finish(plan, identity, results, store)
+        table = finish(plan, identity, collected, store)
         where = f" in {out}; run the same command with --resume for the rest" if store else ""
         raise SweepInterrupted(f"interrupted: {table.num_rows} of {plan.trials} trials "
                                f"kept{where}") from None
-    return finish(plan, identity, results, store)
+    return finish(plan, identity, collected, store)
 
 
-def _execute(plan, job, remaining, results, store, workers, scheduler, client, progress):
-    """Run the ``remaining`` trials into ``results`` (and ``store``) where asked."""
+@dataclass
+class Collected:
+    """The finished trials ({trial: TrialResult}) and the axis of their curve."""
+
+    results: dict = field(default_factory=dict)
+    series_axis: dict | None = None
+
+    def add(self, results, series_axis):
+        for result in results:
+            self.results[result.trial] = result
+        self.series_axis = self.series_axis or series_axis
+
+
+def _execute(plan, job, remaining, collected, store, workers, scheduler, client, progress):
+    """Run the ``remaining`` trials into ``collected`` (and ``store``) where asked."""
     def finished(batch_results, series_axis):
-        for result in batch_results:
-            results[result.trial] = result
+        collected.add(batch_results, series_axis)
         if store:
             store.add(batch_results, series_axis)
         if progress:
-            progress(len(results), plan.trials)
+            progress(len(collected.results), plan.trials)
 
     if not remaining:
         return
@@ -515,7 +528,7 @@ class _dask_client:
         if not (isinstance(count, int) and count >= 1):
             raise InputError(f"must be a whole number >= 0, got {count}", parameter="--workers")
         cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs="error")
+                               dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
         self.owned += [client, cluster]
         return client
@@ -561,20 +574,19 @@ class Store:
         self.parts = len(list(self.partial.glob("part-*.parquet")))
 
     def load(self):
-        """{trial: TrialResult} of the trials saved so far."""
+        """The :class:`Collected` trials saved so far."""
         import pyarrow.parquet as pq
 
-        results = {}
+        collected = Collected()
         for path in sorted(self.partial.glob("part-*.parquet")):
             table = pq.read_table(path)
-            axis = table.schema.metadata.get(b"feedaxis.series")
-            if axis and self.series_axis is None:
-                self.series_axis = json.loads(axis)
-            for row in table.to_pylist():
-                results[row["trial"]] = TrialResult(
-                    row["trial"], tuple(zip(row["figure_names"], row["figure_values"])),
-                    np.array(row["series"], dtype=float), row["error"])
-        return results
+            axis = (table.schema.metadata or {}).get(b"feedaxis.series")
+            collected.add([TrialResult(row["trial"],
+                                       tuple(zip(row["figure_names"], row["figure_values"])),
+                                       np.array(row["series"], dtype=float), row["error"])
+                           for row in table.to_pylist()], axis and json.loads(axis))
+        self.series_axis = collected.series_axis
+        return collected
 
     def add(self, results, series_axis):
         """Keep ``results``; save them when the last save is :data:`FLUSH_S` old."""
@@ -621,13 +633,12 @@ def parquet_bytes(table):
     return buffer.getvalue()
 
 
-def finish(plan, identity, results, store):
-    """The trial table of ``results``; with a store, also its files (the parts removed
-    once every trial is in)."""
+def finish(plan, identity, collected, store):
+    """The trial table of the ``collected`` trials; with a store, also its files (the
+    parts removed once every trial is in)."""
     from .sweep_summary import summarise, summary_lines
 
-    series_axis = store.series_axis if store else None
-    table = trial_table(plan, identity, results, series_axis)
+    table = trial_table(plan, identity, collected.results, collected.series_axis)
     if store is None:
         return table
     summary = summarise(table)
