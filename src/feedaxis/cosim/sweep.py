@@ -26,9 +26,11 @@ import logging
 import math
 import os
 import shutil
+import signal
 import tempfile
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -38,7 +40,7 @@ import numpy as np
 from .. import __version__
 from ..errors import InputError, ParameterError, json_safe
 from ..output import write_atomically
-from .master import FmuStepError, Master
+from .master import FmuStepError, Master, _StopFlag
 from .physics_check import check_parameters
 from .scenarios import RUNS
 from .sweep_specs import design as make_design, model_draws
@@ -48,6 +50,7 @@ TRIALS_FILE = "trials.parquet"
 TASK_S = 2.0          # a Dask task's target duration (s): batches grow to it
 MAX_BATCH = 256
 FLUSH_S = 10.0        # finished trials reach OUT/.partial at least this often (s)
+POLL_S = 0.02         # how often the client looks for finished Dask tasks (s)
 
 
 class SweepInterrupted(KeyboardInterrupt):
@@ -422,8 +425,6 @@ def sweep(scenario, vary=(), trials=None, seed=0, out=None, *, from_model=None, 
     try:
         _execute(plan, job, remaining, collected, store, workers, scheduler, client, progress)
     except KeyboardInterrupt:
-        if store:
-            store.flush()
         table = finish(plan, identity, collected, store)
         where = f" in {out}; run the same command with --resume for the rest" if store else ""
         raise SweepInterrupted(f"interrupted: {table.num_rows} of {plan.trials} trials "
@@ -455,12 +456,14 @@ def _execute(plan, job, remaining, collected, store, workers, scheduler, client,
 
     if not remaining:
         return
-    if client is None and scheduler is None and workers == 0:
-        _run_here(plan, job, remaining, finished)
-    else:
-        _run_on_dask(plan, job, remaining, finished, workers, scheduler, client)
-    if store:
-        store.flush()
+    try:
+        if client is None and scheduler is None and workers == 0:
+            _run_here(plan, job, remaining, finished)
+        else:
+            _run_on_dask(plan, job, remaining, finished, workers, scheduler, client)
+    finally:
+        if store:
+            store.flush()
 
 
 def _run_here(plan, job, remaining, finished):
@@ -491,15 +494,22 @@ def _run_on_dask(plan, job, remaining, finished, workers, scheduler, client):
         for _ in range(min(slots, len(queue))):
             submit()
         try:
-            for future in running:
-                series_axis, batch_results, seconds = future.result()
-                finished(batch_results, series_axis)
-                batch_size = min(MAX_BATCH, max(1, round(TASK_S * len(batch_results)
-                                                          / max(seconds, 1e-9))))
-                if queue:
-                    submit()
+            with _StopFlag() as stop:  # Ctrl-C must not land inside Dask's own calls
+                while not running.is_empty():
+                    if stop.requested:
+                        raise KeyboardInterrupt
+                    done = running.next_batch(block=False)
+                    if not done:
+                        time.sleep(POLL_S)
+                    for future in done:
+                        series_axis, batch_results, seconds = future.result()
+                        finished(batch_results, series_axis)
+                        batch_size = min(MAX_BATCH, max(1, round(
+                            TASK_S * len(batch_results) / max(seconds, 1e-9))))
+                        if queue:
+                            submit()
         finally:
-            for future in running.futures:
+            for future in list(running.futures):
                 future.cancel()
 
 
@@ -527,8 +537,9 @@ class _dask_client:
         count = self.workers if self.workers is not None else (os.cpu_count() or 1)
         if not (isinstance(count, int) and count >= 1):
             raise InputError(f"must be a whole number >= 0, got {count}", parameter="--workers")
-        cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+        with _ctrl_c_left_to_this_process():
+            cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
         self.owned += [client, cluster]
         return client
@@ -536,6 +547,21 @@ class _dask_client:
     def __exit__(self, *exc):
         for owned in self.owned:
             owned.close()
+
+
+@contextmanager
+def _ctrl_c_left_to_this_process():
+    """Within: processes started ignore Ctrl-C (SIGINT ignored is inherited), so a Ctrl-C
+    in the terminal stops this process, which keeps the finished trials and closes the
+    cluster, instead of killing the local workers under it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 class Store:

@@ -224,13 +224,6 @@ class Design:
                 values.update(zip(spec.names, spec.draw(rng)))
         return {name: values[name] for name in self.names}
 
-    def table(self, trials=None):
-        """Values of ``trials`` (default all) as an array, one row per trial, columns
-        :attr:`names`."""
-        trials = range(self.trials) if trials is None else trials
-        return np.array([list(self.values(k).values()) for k in trials],
-                        dtype=float).reshape(len(trials), len(self.names))
-
 
 def design(texts, trials, seed, drawn_elsewhere=False):
     """The :class:`Design` of ``--vary`` items, ``--trials`` and ``--seed``;
