@@ -1,8 +1,10 @@
 """Sweeps: the same file from any number of Dask workers and after a resume, known answers
 (backlash grid -> ISO reversal B, a linear effect's analytic band), bad specs refused."""
 import json
+import re
 import signal
 import time
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -33,9 +35,10 @@ def file_bytes(folder):
     return (folder / "trials.parquet").read_bytes()
 
 
-def test_dask_workers_give_the_in_process_file_bit_for_bit(fmu_dir):
-    """A LocalCluster of two worker processes, then of one, gives the trials.parquet bytes
-    of the plain loop in this process."""
+def test_dask_workers_give_the_in_process_file_bit_for_bit(fmu_dir, tmp_path):
+    """A LocalCluster of two worker processes (through the API, then the command line's
+    --scheduler), then of one, gives the trials.parquet bytes of the plain loop in this
+    process."""
     distributed = pytest.importorskip("distributed")
     here = sweep("tracking", FRICTION, trials=6, seed=5, workers=0, fmus=fmu_dir, **TRACKING)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
@@ -43,6 +46,10 @@ def test_dask_workers_give_the_in_process_file_bit_for_bit(fmu_dir):
             distributed.Client(cluster) as client:
         two = sweep("tracking", FRICTION, trials=6, seed=5, client=client, fmus=fmu_dir,
                     **TRACKING)
+        assert main(["sweep", "tracking", str(tmp_path / "cli"), *sum(
+            (["--vary", v] for v in FRICTION), []), "--trials", "6", "--seed", "5",
+            "--frequency-hz", "1", "--amplitude-mm", "5", "--duration-s", "1.2",
+            "--step-ms", "2", "--scheduler", cluster.scheduler_address, "--fmus", fmu_dir]) == 0
         cluster.scale(1)
         deadline = time.monotonic() + 60
         while len(client.scheduler_info()["workers"]) > 1 and time.monotonic() < deadline:
@@ -53,6 +60,7 @@ def test_dask_workers_give_the_in_process_file_bit_for_bit(fmu_dir):
     assert here.num_rows == 6 and here.column("error").null_count == 6
     assert parquet_bytes(two) == parquet_bytes(here)
     assert parquet_bytes(one) == parquet_bytes(here)
+    assert (tmp_path / "cli" / "trials.parquet").read_bytes() == parquet_bytes(here)
     friction = here.column("NpidServo.friction_N").to_numpy()
     error_mm = here.column("max_tracking_error_mm").to_numpy()
     assert np.all((friction >= 0) & (friction <= 2)) and np.ptp(error_mm) > 0
@@ -192,3 +200,11 @@ def test_trial_values_depend_on_the_seed_and_the_trial_only():
         parse_spec("C.u,C.v=mvnormal([0,1],[[1,2],[2,1]])")
     with pytest.raises(InputError, match="grid sets its own count"):
         design(["A.x=grid(0,1,3)"], 5, seed=0)
+
+
+def test_the_docs_api_snippet_runs(user_fmu_cache, capsys):
+    page = (Path(__file__).resolve().parent.parent / "docs" / "sweep.md").read_text()
+    snippet = re.search(r"<!-- snippet: sweep-api -->\n```python\n(.*?)```", page, re.S).group(1)
+    exec(compile(snippet, "docs/sweep.md snippet", "exec"), {"__name__": "__main__"})
+    printed = capsys.readouterr().out
+    assert "B_um" in printed and len(printed.splitlines()) == 5
