@@ -1,5 +1,6 @@
 """Sweeps: the same file from any number of Dask workers and after a resume, known answers
 (backlash grid -> ISO reversal B, a linear effect's analytic band), bad specs refused."""
+import importlib.util
 import json
 import re
 import signal
@@ -207,4 +208,18 @@ def test_the_docs_api_snippet_runs(user_fmu_cache, capsys):
     snippet = re.search(r"<!-- snippet: sweep-api -->\n```python\n(.*?)```", page, re.S).group(1)
     exec(compile(snippet, "docs/sweep.md snippet", "exec"), {"__name__": "__main__"})
     printed = capsys.readouterr().out
-    assert "B_um" in printed and len(printed.splitlines()) == 5
+    assert "'B_um'" in printed and len(printed.splitlines()) == 4
+
+
+def test_the_sweep_benchmark_runs_at_a_tiny_size(user_fmu_cache, capsys):
+    """benchmarks/bench_sweep.py --smoke: every path it times runs and it prints the
+    overhead, the speed-up and the cluster size for 10^6 trials."""
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "bench_sweep.py"
+    spec = importlib.util.spec_from_file_location("bench_sweep", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    bench.main(["--smoke"])
+    printed = capsys.readouterr().out
+    assert re.search(r"distributed overhead per trial .*: [-+]\d+\.\d %", printed)
+    assert re.search(r"throughput of 2 workers / 1 worker: \d+\.\d\dx", printed)
+    assert re.search(r"10\^6 such trials in one hour: \d+ worker cores", printed)

@@ -409,14 +409,22 @@ def _simulate(args, run):
 
 
 def _simulate_options(parser):
+    _scenario_parsers(parser, "case folder to create (must not exist)")
+
+
+def _scenario_parsers(parser, out_help, more_options=None, handler=None):
+    """One subparser per scenario: its options, OUT, ``more_options``, the axis options;
+    run by ``handler`` (default: the scenario's own)."""
     scenarios = parser.add_subparsers(dest="scenario", required=True, metavar="SCENARIO")
-    for name, parser_kwargs, options, handler in SCENARIOS:
+    for name, parser_kwargs, options, scenario_handler in SCENARIOS:
         sub = scenarios.add_parser(name, **parser_kwargs)
         options(sub)
-        sub.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
+        sub.add_argument("out", metavar="OUT", help=out_help)
+        if more_options:
+            more_options(sub)
         _add_axis_options(sub)
         _add_common_options(sub)
-        sub.set_defaults(handler=handler)
+        sub.set_defaults(handler=handler or scenario_handler)
 
 
 # the scenarios below carry the handlers
@@ -604,42 +612,38 @@ def _cmd_export_fmu(args):
 
 
 def _sweep_options(parser):
-    scenarios = parser.add_subparsers(dest="scenario", required=True, metavar="SCENARIO")
-    for name, parser_kwargs, options, _ in SCENARIOS:
-        sub = scenarios.add_parser(name, help=parser_kwargs.get("help"),
-                                   description=parser_kwargs.get("description"))
-        options(sub)
-        sub.add_argument("out", metavar="OUT", help="folder to create (must not exist unless "
-                         "--resume): trials.parquet, summary.json, summary.txt, report.html")
-        sub.add_argument("--vary", metavar="NAME=SPEC", action="append", default=[],
-                         help="vary an FMU parameter (repeatable): COMPONENT.PARAMETER= "
-                              "grid(a,b,n) | uniform(a,b) | normal(mu,sigma) | "
-                              "truncnormal(mu,sigma,lo,hi) | triangular(a,mode,b); "
-                              "A.x,B.y=mvnormal([mu1,mu2],[[c11,c12],[c21,c22]]) for a "
-                              "correlated normal")
-        sub.add_argument("--trials", type=int, metavar="N",
-                         help="draws of the sampled specs and of --from-model (each grid "
-                              "point gets N); grids alone set their own count")
-        sub.add_argument("--seed", type=int, default=0,
-                         help="trial k draws from the stream (seed, k) (default 0)")
-        sub.add_argument("--from-model", metavar="M.toml",
-                         help="draw the model's parameters from the covariance its fit saved "
-                              "([fit] table, `feedaxis fit --out`); needs --axis")
-        sub.add_argument("--hold-undetermined", action="store_true",
-                         help="hold the parameters the fit could not determine at their "
-                              "fitted values (without it such a model is refused)")
-        sub.add_argument("--workers", type=int, metavar="N",
-                         help="local Dask worker processes (default: one per core; 0 runs "
-                              "in this process)")
-        sub.add_argument("--scheduler", metavar="ADDRESS",
-                         help="run on the Dask cluster of this scheduler (tcp://host:8786) "
-                              "instead of a local one")
-        sub.add_argument("--resume", action="store_true",
-                         help="run only the trials an interrupted sweep into OUT has not "
-                              "finished")
-        _add_axis_options(sub)
-        _add_common_options(sub)
-        sub.set_defaults(handler=_cmd_sweep)
+    _scenario_parsers(parser, "folder to create (must not exist unless --resume): "
+                              "trials.parquet, summary.json, summary.txt, report.html",
+                      _add_sweep_options, _cmd_sweep)
+
+
+def _add_sweep_options(sub):
+    sub.add_argument("--vary", metavar="NAME=SPEC", action="append", default=[],
+                     help="vary an FMU parameter (repeatable): COMPONENT.PARAMETER= "
+                          "grid(a,b,n) | uniform(a,b) | normal(mu,sigma) | "
+                          "truncnormal(mu,sigma,lo,hi) | triangular(a,mode,b); "
+                          "A.x,B.y=mvnormal([mu1,mu2],[[c11,c12],[c21,c22]]) for a "
+                          "correlated normal")
+    sub.add_argument("--trials", type=int, metavar="N",
+                     help="draws of the sampled specs and of --from-model (each grid "
+                          "point gets N); grids alone set their own count")
+    sub.add_argument("--seed", type=int, default=0,
+                     help="trial k draws from the stream (seed, k) (default 0)")
+    sub.add_argument("--from-model", metavar="M.toml",
+                     help="draw the model's parameters from the covariance its fit saved "
+                          "([fit] table, `feedaxis fit --out`); needs --axis")
+    sub.add_argument("--hold-undetermined", action="store_true",
+                     help="hold the parameters the fit could not determine at their "
+                          "fitted values (without it such a model is refused)")
+    sub.add_argument("--workers", type=int, metavar="N",
+                     help="local Dask worker processes (default: one per core; 0 runs "
+                          "in this process)")
+    sub.add_argument("--scheduler", metavar="ADDRESS",
+                     help="run on the Dask cluster of this scheduler (tcp://host:8786) "
+                          "instead of a local one")
+    sub.add_argument("--resume", action="store_true",
+                     help="run only the trials an interrupted sweep into OUT has not "
+                          "finished")
 
 
 # the scenarios of simulate, each swept by the one handler below
