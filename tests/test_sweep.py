@@ -220,6 +220,7 @@ def test_the_sweep_benchmark_runs_at_a_tiny_size(user_fmu_cache, capsys):
     spec.loader.exec_module(bench)
     bench.main(["--smoke"])
     printed = capsys.readouterr().out
-    assert re.search(r"distributed overhead per trial .*: [-+]\d+\.\d %", printed)
+    assert re.search(r"distributed overhead per trial .*: wall [-+]\d+\.\d %, CPU [-+]\d+\.\d %",
+                     printed)
     assert re.search(r"throughput of 2 workers / 1 worker: \d+\.\d\dx", printed)
     assert re.search(r"10\^6 such trials in one hour: \d+ worker cores", printed)

@@ -41,7 +41,7 @@ from .. import __version__
 from ..errors import InputError, ParameterError, json_safe
 from ..output import write_atomically
 from .master import FmuStepError, Master, _StopFlag
-from .physics_check import check_parameters
+from .physics_check import check_parameters, fmu_variables
 from .scenarios import RUNS
 from .sweep_specs import design as make_design, model_draws
 
@@ -240,8 +240,8 @@ def check_plan(plan):
         RUNS[plan.scenario](_DryMaster(plan.system), **plan.options)
     except _OptionsChecked:
         pass
-    check_parameters(plan.system, plan.fmu_paths)
-    variables = _fmu_variables(plan)
+    variables = fmu_variables(plan.system, plan.fmu_paths)
+    check_parameters(plan.system, plan.fmu_paths, variables)
     for spec in plan.design.specs:
         for name, (low, high) in zip(spec.names, spec.support()):
             _check_within(name, low, high, variables, spec.option, "the spec's range")
@@ -254,7 +254,8 @@ def check_plan(plan):
             component, parameter = name.split(".", 1)
             overrides.setdefault(component, {})[parameter] = value
         try:
-            check_parameters(plan.system.with_parameters(overrides), plan.fmu_paths)
+            check_parameters(plan.system.with_parameters(overrides), plan.fmu_paths,
+                             variables)
         except ParameterError as error:
             raise InputError(f"at the extremes of the drawn values: {error.message}",
                              parameter=_options_of(plan).get(error.parameter, error.parameter))\
@@ -283,13 +284,6 @@ def _drawn_extremes(plan):
                 lowest[name] = min(lowest.get(name, value), value)
                 highest[name] = max(highest.get(name, value), value)
     return lowest, highest
-
-
-def _fmu_variables(plan):
-    from fmpy import read_model_description
-
-    return {c.name: {v.name: v for v in read_model_description(
-        str(plan.fmu_paths[c.fmu])).modelVariables} for c in plan.system.components}
 
 
 def _check_within(name, low, high, variables, option, what):
