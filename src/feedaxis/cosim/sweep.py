@@ -318,6 +318,9 @@ def make_plan(scenario, vary=(), trials=None, seed=0, from_model=None, axis=None
     if from_model and model:
         raise InputError("give the model to draw from (--from-model) or a fixed one (--model),"
                          " not both", parameter="--model")
+    if from_model and not axis:
+        raise InputError("needs --axis (the axis.toml or case folder it was fitted on): the "
+                         "FMU parameters depend on the axis", parameter="--from-model")
     if not vary and not from_model:
         raise InputError("nothing varies: give --vary NAME=SPEC or --from-model M.toml",
                          parameter="--vary")
