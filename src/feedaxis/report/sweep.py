@@ -9,7 +9,7 @@ import numpy as np
 
 from .. import __version__
 from ..output import write_atomically
-from .page import STYLE, _image, _table, micro
+from .page import STYLE, image, micro, table as html_table
 from .plots import _png, plt
 
 MAX_SCATTERS = 4  # inputs shown against each figure, the most influential first
@@ -109,31 +109,31 @@ def write_sweep_report(summary, table, out_path):
         sections.append(f"<p>parameters of <code>{html.escape(summary['from_model'])}</code> "
                         "drawn from its fit's covariance</p>")
     if summary["held"]:
-        sections.append(_table(("held at the fitted value", "why undetermined"),
+        sections.append(html_table(("held at the fitted value", "why undetermined"),
                                summary["held"].items()))
     if summary["figures"] and any(d["n"] for d in summary["figures"].values()):
         sections += ["<h2>Figures</h2>",
-                     _table(("figure", "trials", "mean", "sd", "2.5 %", "50 %", "97.5 %", "min",
+                     html_table(("figure", "trials", "mean", "sd", "2.5 %", "50 %", "97.5 %", "min",
                              "max"), _figure_rows(summary)),
-                     _image(histograms({n: v for n, v in figures.items() if v.size}),
+                     image(histograms({n: v for n, v in figures.items() if v.size}),
                             "histograms of the figures")]
     if summary["bands"]:
-        sections += ["<h2>Prediction band</h2>", _image(band_plot(summary["bands"]),
+        sections += ["<h2>Prediction band</h2>", image(band_plot(summary["bands"]),
                                                         "prediction band")]
     rows = _sensitivity_rows(summary)
     if rows:
         sections += ["<h2>Sensitivities</h2>",
-                     _table(("figure", "input", "SRC", "linear R²", "Spearman", "p"), rows)]
+                     html_table(("figure", "input", "SRC", "linear R²", "Spearman", "p"), rows)]
         for name, s in summary["sensitivities"].items():
             if s:
                 ranked = sorted(s["inputs"], key=lambda n: -abs(s["inputs"][n]["src"]))
                 shown = {n: table.column(n).to_numpy(zero_copy_only=False)[ok]
                          for n in ranked[:MAX_SCATTERS]}
-                sections.append(_image(scatters(name, figures[name], shown),
+                sections.append(image(scatters(name, figures[name], shown),
                                        f"{name} against the inputs"))
     if summary["failures"]:
         sections += ["<h2>Trials the FMUs refused</h2>",
-                     _table(("trial", "why"), [(f["trial"], f["error"])
+                     html_table(("trial", "why"), [(f["trial"], f["error"])
                                                for f in summary["failures"]])]
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}"
             f"</title><style>{STYLE}</style></head><body>" + "\n".join(sections)
