@@ -20,6 +20,7 @@ Ctrl-C writes the outputs of the trials finished so far and keeps the rest for
 from __future__ import annotations
 
 import hashlib
+import inspect
 import io
 import json
 import logging
@@ -199,13 +200,23 @@ class Plan:
         """The plan as JSON-ready data: two sweeps with equal identities give equal tables."""
         return json_safe({
             "feedaxis": __version__, "scenario": self.scenario,
-            "options": _plain(self.options), "vary": [s.text for s in self.design.specs],
+            "options": _plain(scenario_arguments(self.scenario, self.options)),
+            "vary": [s.text for s in self.design.specs],
             "seed": self.design.seed, "trials": self.trials,
             "from_model": self.model_path, "held": dict(self.draws.held) if self.draws else {},
             "set": list(self.set_items), "macro_step_s": self.system.macro_step_s,
             "components": {c.name: {"step_s": c.step_s, "parameters": c.parameters}
                            for c in self.system.components},
             "fmus": fmu_digest})
+
+
+def scenario_arguments(scenario, options):
+    """The scenario run's keyword arguments with their defaults filled in, so options given
+    and options left at their default describe the same plan."""
+    bound = inspect.signature(RUNS[scenario]).bind_partial(**options)
+    bound.apply_defaults()
+    return {k: v for k, v in bound.arguments.items()
+            if k not in ("master", "parameters", "progress")}
 
 
 def _plain(value):
