@@ -49,6 +49,9 @@ def _per_cluster(clusters, error_um, direction, sign):
     starts = np.flatnonzero(np.concatenate(([True], np.diff(sorted_cluster) != 0)))
     counts = np.diff(np.append(starts, order.size))
     values = np.asarray(error_um, dtype=float)[..., order]
+    if counts.max() == 1:  # one run: each target's mean is its one reading
+        return (centres_mm[sorted_cluster], values,
+                np.full(values.shape, np.nan), counts)
     mean = np.add.reduceat(values, starts, axis=-1) / counts
     squares = np.add.reduceat((values - np.repeat(mean, counts, axis=-1)) ** 2, starts,
                               axis=-1)

@@ -1,7 +1,6 @@
 """The self-contained HTML report: tables and PNG plots embedded as data URIs."""
 from __future__ import annotations
 
-import base64
 import html
 import re
 from datetime import datetime, timezone
@@ -11,25 +10,8 @@ from .. import __version__
 
 from ..output import write_atomically
 from . import plots
+from .html import document, image as _image, table as _table
 from .compensation_table import compensation_table_html
-
-STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}
-table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;
-text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
-img{max-width:100%}.verdict{font-size:1.2em;font-weight:bold}"""
-
-
-def _image(png, alt):
-    data = base64.b64encode(png).decode("ascii")
-    return f'<p><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>'
-
-
-def _table(header, rows):
-    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>"
-                   for row in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
-
 
 def micro(unit):
     """A unit as the page writes it: µm, not um."""
@@ -164,8 +146,5 @@ def write_report(analysis, out_path):
         "<h2>Model parameters</h2>",
         _parameter_table(model, diagnosis.base),
     ]
-    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>feedaxis report: "
-            f"{html.escape(case.name)}</title><style>{STYLE}</style></head><body>"
-            + "\n".join(sections) + "</body></html>")
-    write_atomically(out_path, page)
+    write_atomically(out_path, document(f"feedaxis report: {case.name}", sections))
     return Path(out_path)
