@@ -9,7 +9,7 @@ from datetime import datetime, timezone
 from .. import __version__
 from ..output import write_atomically
 from ..report import plots
-from ..report.html import document, image, table
+from ..report.page import STYLE, image, table
 from .budget import CONTRIBUTIONS
 
 
@@ -95,5 +95,8 @@ def write_page(result, out_path):
         *_parameter_parts(result), *_table_parts(result),
         *([f"<p>Note: {html.escape(note)}</p>" for note in result.notes]),
     ]
-    write_atomically(out_path, document(f"feedaxis uncertainty: {result.case}", sections))
+    title = html.escape(f"feedaxis uncertainty: {result.case}")
+    write_atomically(out_path, f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>"
+                               f"{title}</title><style>{STYLE}</style></head><body>"
+                               + "\n".join(sections) + "</body></html>")
     return out_path

@@ -20,10 +20,9 @@ A trial's deviations (µm, every sample k of group g) are
 
 Outputs: the ISO 230-2 figures (:func:`feedaxis.iso230.iso230_figures` of the trials),
 the fitted model's parameters and the compensation table's values at its points. The
-parameters are the fit's linearisation θ* = θ̂ + (JᵀJ)⁺Jᵀ(x* - x) (J the model's Jacobian,
-(JᵀJ)⁺ the fit record's covariance over its residual variance): exact for parameters the
-model is linear in, and checked against refits on a few trials
-(:meth:`PositioningMeasurement.linearisation_check`). The table from a model follows its
+parameters are the fit's linearisation θ* = θ̂ + J⁺(x* - x) (J the model's Jacobian, J⁺ its
+least-squares pseudo-inverse): exact for parameters the model is linear in, and checked
+against refits on a few trials (:meth:`PositioningMeasurement.linearisation_check`). The table from a model follows its
 parameters (θ* - θ̂ through the table's own derivative); a table of measured means is
 linear in the trials' means.
 """
@@ -35,7 +34,7 @@ import numpy as np
 from scipy import sparse
 
 from ..comptable import default_spacing_mm, from_measurement, from_model, grid_mm
-from ..fit import fit
+from ..fit import SINGULAR_RATIO, fit
 from ..iso230 import FIGURE_NAMES, iso230_figures, per_target, target_clusters, target_groups
 from .budget import CONTRIBUTIONS
 
@@ -205,25 +204,26 @@ class PositioningMeasurement:
 
 
 class _Linearisation:
-    """The fit's parameters as a linear map of the deviations: θ* = θ̂ + P·(x* - x),
-    P = (JᵀJ)⁺Jᵀ with (JᵀJ)⁺ the fit record's covariance over its residual variance."""
+    """The fit's parameters as a linear map of the deviations: θ* = θ̂ + P·(x* - x) with
+    P = J⁺, the least-squares pseudo-inverse of the model's Jacobian J (columns scaled to
+    unit length, directions below the fit's singular ratio left out, as the fit treats
+    them). The fit record gives the parameters' order, their own standard uncertainties
+    and the undetermined ones."""
 
     def __init__(self, case, fitted):
         model = fitted.model
         record = fitted.fitted_model().record
         self.model, self.keys = model, list(record.parameters)
         self.estimate = self.vector(model.values)
-        statistics = fitted.statistics
-        variance = statistics.rms_um ** 2 * statistics.n_points / max(
-            statistics.n_points - statistics.n_free, 1)
-        sigma = np.sqrt(np.maximum(np.diag(record.covariance), 0.0))
-        self.steps = np.where(sigma > 0, FINITE_STEP * sigma,
+        self.gum_u = np.sqrt(np.maximum(np.diag(record.covariance), 0.0))
+        self.steps = np.where(self.gum_u > 0, FINITE_STEP * self.gum_u,
                               1e-6 * np.maximum(1.0, np.abs(self.estimate)))
         jacobian = self.derivative(lambda m: m.predict_um(case))
-        self.slope = (record.covariance / variance) @ jacobian.T
+        scale = np.linalg.norm(jacobian, axis=0)
+        scale[scale == 0.0] = 1.0
+        self.slope = np.linalg.pinv(jacobian / scale, SINGULAR_RATIO) / scale[:, None]
         self.determined = np.array([key not in record.undetermined for key in self.keys])
         self.undetermined = dict(record.undetermined)
-        self.gum_u = sigma
 
     def vector(self, values):
         """The parameters of ``values`` ({effect: {parameter: value}}) in the record's order."""
