@@ -161,6 +161,43 @@ def test_measured_means_table_of_a_trial_is_that_trials_table(tmp_path):
                                       abs=1e-12)
 
 
+def test_figures_of_many_trials_are_each_trials_figures(tmp_path):
+    """The trials axis of iso230_figures: the figures of a (trials, samples) array equal the
+    figures of each row computed alone, bidirectional and for one run per target."""
+    case = iso_case(tmp_path / "c")
+    target_mm, direction = case.positioning.target_mm, case.positioning.direction
+    trials = case.positioning.error_um + np.random.default_rng(3).normal(0, 0.5, (4, 110))
+    for targets, directions, values in ((target_mm, direction, trials),
+                                        (target_mm[:11], direction[:11], trials[:, :11])):
+        together = iso230_figures(targets, values, directions)
+        for row, single in enumerate(values):
+            alone = iso230_figures(targets, single, directions)
+            assert together.keys() == alone.keys()
+            for key, value in alone.items():
+                got = together[key] if isinstance(together[key], int) else together[key][row]
+                assert got == pytest.approx(value, abs=1e-12), key
+
+
+def test_report_and_comp_table_take_the_correction(tmp_path, capsys):
+    """report and comp-table run on the corrected deviations: comp-table's expected figures
+    before the table are those of the case corrected to 20 °C."""
+    case = iso_case(tmp_path / "c")
+    model = str(tmp_path / "m.toml")
+    assert main(["fit", str(case.folder), "--add", "lead_error", "--add", "backlash",
+                 "--out", model]) == 0
+    assert main(["report", str(case.folder), "--model", model, "--out",
+                 str(tmp_path / "r.html"), "--correct-to-20C", "21.5"]) == 0
+    capsys.readouterr()
+    assert main(["comp-table", str(case.folder), "--model", model, "--controller", "linuxcnc",
+                 "--out", str(tmp_path / "t.comp"), "--correct-to-20C", "21.5", "--json"]) == 0
+    before = json.loads(capsys.readouterr().out)["figures"]
+    corrected = corrected_case(case, 21.5).positioning
+    expected = iso230_figures(corrected.target_mm, corrected.error_um, corrected.direction)
+    for key, entry in before.items():
+        assert entry["before_um"] == pytest.approx(expected[key], abs=1e-9), key
+    assert (tmp_path / "r.html").stat().st_size > 0
+
+
 # --- the 20 °C correction ------------------------------------------------------------------
 
 def test_uniform_temperature_gives_the_known_change_of_every_figure(tmp_path):
