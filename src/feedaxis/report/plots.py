@@ -246,15 +246,17 @@ def frequency_spectrum(frequency_hz, amplitude_um, structures):
 
 
 def uncertainty_histograms(panels):
-    """A small histogram per ISO 230-2 figure: the Monte Carlo values, the figure of the
-    data (line) and the 95 % coverage interval (shaded). ``panels`` is
+    """A small histogram per ISO 230-2 figure: the Monte Carlo values (their central
+    99.8 %, so a long tail does not squeeze the rest), the figure of the data (line) and
+    the 95 % coverage interval (shaded). ``panels`` is
     [(title, values_um, value_um, (low_um, high_um))]."""
     columns = min(3, len(panels))
     rows = -(-len(panels) // columns)
     figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.4 * rows),
                                 squeeze=False)
     for axis, (title, values, value, (low, high)) in zip(axes.flat, panels):
-        axis.hist(values, bins=60, color="tab:blue", alpha=0.7)
+        axis.hist(values, bins=60, range=tuple(np.quantile(values, (0.001, 0.999))),
+                  color="tab:blue", alpha=0.7)
         axis.axvspan(low, high, color="tab:orange", alpha=0.2, label="95 % interval")
         axis.axvline(value, color="black", lw=1, label="value")
         axis.set_title(title, fontsize=9)

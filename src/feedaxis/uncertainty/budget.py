@@ -56,13 +56,15 @@ CONTRIBUTIONS = {c.name: c for c in (
         f"laser itself ({HP_5528A}); use your laser's calibration certificate"),
     Contribution(
         "machine_temperature", "K",
-        "error of the machine (material) temperature used to correct to 20 °C: α·δT·(X - X_ref)",
+        "error of the machine (material) temperature used to correct to 20 °C: "
+        "α·δT·(X - X_ref)",
         Distribution("rectangular", 0.1),
         f"±0.10 °C, the HP 10757 material sensor ({HP_5528A})",
         with_correction_only=True),
     Contribution(
         "expansion_coefficient", "per_K",
-        "error of the expansion coefficient used to correct to 20 °C: δα·(T - 20 °C)·(X - X_ref)",
+        "error of the expansion coefficient used to correct to 20 °C: "
+        "δα·(T - 20 °C)·(X - X_ref)",
         Distribution("rectangular", 1.0e-6),
         "±1 µm/(m·K) about the 11.7 µm/(m·K) catalogued for steel (HP 5528A manual, seed 003 "
         "Table 1): the spread among carbon and alloy steels (an engineering judgement; use "

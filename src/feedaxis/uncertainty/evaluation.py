@@ -78,7 +78,7 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
         Monte Carlo trials (ignored with ``tolerance_um``).
     tolerance_um : float, optional
         Run the adaptive procedure of JCGM 101 §7.9 to this numerical tolerance (µm) of
-        every figure's and table value's mean, standard uncertainty and interval ends.
+        every figure's mean, standard uncertainty and interval ends.
     seed : int, optional
         The random seed (default: fresh, reported in the result).
     temperature : "ambient" or float, optional
@@ -96,12 +96,14 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
     if tolerance_um is not None and not tolerance_um > 0:
         raise InputError(f"must be > 0, got {tolerance_um:g}", parameter="--tolerance-um")
     if tolerance_um is None and not trials >= engine.MIN_TRIALS:
-        raise InputError(f"must be at least {engine.MIN_TRIALS} (JCGM 101 §7.2: the 95 % interval "
-                         f"needs many more than 1/(1 - p) = 20 trials)", parameter="--trials")
+        raise InputError(f"must be at least {engine.MIN_TRIALS} (JCGM 101 §7.2: a 95 % "
+                         "interval needs many more than 1/(1 - p) = 20 trials)",
+                         parameter="--trials")
     budget = budget or default_budget()
     correction = correction_for(case, temperature) if temperature is not None else None
     case = corrected_case(case, temperature)
-    fitted = fit(model, case) if model is not None and model.effects else None
+    fitted = (fit(model, case, kind="positioning") if model is not None and model.effects
+              else None)
     measurement = PositioningMeasurement(case, budget, correction, fitted)
     inputs = measurement.inputs
     if not inputs:
@@ -120,7 +122,7 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
         values, adaptive = engine.run_adaptive(measurement.sample, inputs, tolerance_um,
                                                judged, seed, chunk, progress=progress,
                                                keep=keep)
-    done = len(next(iter(values.values())))
+    done = len(values[next(key for key in values if key in FIGURE_NAMES)])
     alone = engine.contributions(measurement.sample, inputs, seed, chunk,
                                  min(done, engine.CONTRIBUTION_TRIALS), progress)
     result = Uncertainty(str(case.folder), done, seed, inputs, budget, correction,

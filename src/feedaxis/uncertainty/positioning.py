@@ -4,7 +4,7 @@ input quantity does to the deviations, and the outputs computed from a trial's d
 A trial's deviations (µm, every sample k of group g) are
 
     x*_k = x_k + δ_g - ε·L_k + (θ²/2)·L_k - a·L_k/L_max - d·τ_k
-           - [α*·(T* - 20 °C) - α·(T - 20 °C)]·(X_k - X_ref)      (with the 20 °C correction)
+           - [α*·(T* - 20 °C) - α·(T - 20 °C)]·(X_k - X_ref)   (with the 20 °C correction)
 
 - repeatability, from the data (a type A evaluation, JCGM 101 §6.4.9): each (target,
   direction) group of n ≥ 2 readings with standard deviation s_g has its mean uncertain by
@@ -22,9 +22,9 @@ Outputs: the ISO 230-2 figures (:func:`feedaxis.iso230.iso230_figures` of the tr
 the fitted model's parameters and the compensation table's values at its points. The
 parameters are the fit's linearisation θ* = θ̂ + J⁺(x* - x) (J the model's Jacobian, J⁺ its
 least-squares pseudo-inverse): exact for parameters the model is linear in, and checked
-against refits on a few trials (:meth:`PositioningMeasurement.linearisation_check`). The table from a model follows its
-parameters (θ* - θ̂ through the table's own derivative); a table of measured means is
-linear in the trials' means.
+against refits on a few trials (:meth:`PositioningMeasurement.linearisation_check`). The
+table from a model follows its parameters (θ* - θ̂ through the table's own derivative); a
+table of measured means is linear in the trials' means.
 """
 from __future__ import annotations
 
@@ -190,7 +190,7 @@ class PositioningMeasurement:
         """The model refitted on the case with the deviations ``deviation_um``."""
         case = replace(self.case, positioning=replace(self.case.positioning,
                                                       error_um=deviation_um))
-        return fit(self.fitted.model, case).model
+        return fit(self.fitted.model, case, kind="positioning").model
 
     def refit_sample(self, streams, trials, active, skip=frozenset()):
         """{"parameters", "table_um"} of the model refitted on each trial (the check's
