@@ -137,7 +137,7 @@ def _fit_options(parser):
                      "data cannot determine.",
          options=_fit_options)
 def _cmd_fit(args):
-    from .fit import check_available, evaluate, fit
+    from .fit import check_available, evaluate, fit_with_artefacts
     from .measurement import kinds_for
 
     if args.out:
@@ -151,15 +151,23 @@ def _cmd_fit(args):
         check_available(model, cases, kind)
         before = evaluate(starting, cases, kind)
         with _progress("fitting", " evaluations") as tick:
-            results.append((before, fit(model, cases, progress=tick, kind=kind)))
+            results.append((before, fit_with_artefacts(model, cases, progress=tick, kind=kind)))
     if args.out:
         write_atomically(args.out, results[0][1].fitted_model().to_toml())
-    _emit_each(args, [(result.kind, {
-        "rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
-        "effects": list(result.model.names), "params": result.params(),
-        "uncertainties": result.uncertainties, "undetermined": result.undetermined,
-        "statistics": vars(result.statistics)}, text.fit_lines(result, before.rms_um, args.out))
-        for before, result in results])
+    _emit_each(args, [(result.kind, _fit_payload(before, result),
+                       text.fit_lines(result, before.rms_um, args.out))
+                      for before, result in results])
+
+
+def _fit_payload(before, result):
+    """The --json of a fit: the model's parameters, and the measurement's artefacts apart."""
+    fitted = result.fitted_model()
+    keys = set(fitted.parameter_keys)
+    return {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
+            "effects": list(fitted.names), "params": fitted.values,
+            "uncertainties": {name: result.uncertainties[name] for name in fitted.names},
+            "undetermined": {k: v for k, v in result.undetermined.items() if k in keys},
+            "artefacts": fitted.record.artefacts, "statistics": vars(result.statistics)}
 
 
 def _case_and_model(args):
