@@ -436,8 +436,12 @@ def _cmd_uncertainty(args):
     budget = read_budget(args.budget) if args.budget else default_budget()
     with tqdm(desc="Monte Carlo", unit="trial", unit_scale=True, delay=1.0, leave=False,
               file=sys.stderr) as bar:
+        def tick(trials, planned):
+            bar.total = planned
+            bar.update(trials)
+
         result = evaluate(case, model, budget, args.trials, args.tolerance_um, args.seed,
-                          args.correct_to_20C, progress=bar.update)
+                          args.correct_to_20C, progress=tick)
     payload = result.to_json()
     if args.html:
         from .uncertainty.page import write_page

@@ -5,6 +5,7 @@ input's share (:class:`Uncertainty`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -84,7 +85,8 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
     temperature : "ambient" or float, optional
         Correct the case to 20 °C at this temperature (°C), with its uncertainty.
     progress : callable, optional
-        Called with the number of trials done, chunk by chunk.
+        ``progress(trials, planned)`` after every chunk: the trials it ran and the trials
+        planned in all (None for the adaptive procedure, which ends when it stabilises).
 
     Returns
     -------
@@ -111,6 +113,10 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
                          "carry no repeatability (one reading per target, no model)",
                          path=case.folder / POSITIONING_FILE)
     seed = int(np.random.SeedSequence().entropy if seed is None else seed)
+    if progress:
+        planned = None if tolerance_um else trials + len(inputs) * min(
+            trials, engine.CONTRIBUTION_TRIALS)
+        progress = partial(_report_progress, progress, planned)
     chunk = max(1, CHUNK_VALUES // max(case.positioning.size, measurement.table.size))
     adaptive = None
     keep = {"table_um": TABLE_TRIALS}
@@ -136,6 +142,10 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
     if measurement.table.included:
         result.table = _table(measurement.table, values["table_um"], alone, shares)
     return result
+
+
+def _report_progress(progress, planned, trials):
+    progress(trials, planned)
 
 
 def _interval_entry(value, summary, index=()):
