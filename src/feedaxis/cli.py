@@ -21,6 +21,8 @@ from .case import read_case
 from .errors import InputError, check_writable_target, json_safe
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
+from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
+from .uncertainty.correction import corrected_case, temperature_option
 
 COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
@@ -131,6 +133,7 @@ def _fit_options(parser):
     parser.add_argument("--add", metavar="EFFECT", action="append",
                         help="add an effect by name (repeatable); see `feedaxis effects`")
     parser.add_argument("--out", metavar="M2.toml", help="write the fitted model here")
+    _add_correction_option(parser)
 
 
 @command("fit", help="fit a model's effects to one or several cases",
@@ -148,7 +151,7 @@ def _cmd_fit(args):
     if args.out:
         check_writable_target(args.out)
     effects = _effects(args)
-    cases = [read_case(folder) for folder in args.cases]
+    cases = [corrected_case(read_case(folder), args.correct_to_20C) for folder in args.cases]
     starting = _starting_model(args, effects)
     model = _with_added(starting, args.add, effects)
     results = []
@@ -176,11 +179,12 @@ def _fit_payload(before, result):
 
 
 def _case_and_model(args):
-    """(effects, case, starting model, the kinds of measurement to compare it with)."""
+    """(effects, case (corrected to 20 °C when asked), starting model, the kinds of
+    measurement to compare it with)."""
     from .measurement import kinds_for
 
     effects = _effects(args)
-    case = read_case(args.case)
+    case = corrected_case(read_case(args.case), args.correct_to_20C)
     model = _starting_model(args, effects)
     return effects, case, model, kinds_for([case], model)
 
@@ -202,6 +206,7 @@ def _emit_each(args, outputs):
 def _diagnose_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser)
+    _add_correction_option(parser)
 
 
 @command("diagnose", help="where the model fails and which effect is missing",
@@ -229,6 +234,7 @@ def _cmd_diagnose(args):
 def _compare_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "model (TOML) as fitted; without it the model is empty")
+    _add_correction_option(parser)
 
 
 @command("compare", help="the measurement's figures: measured against the model",
@@ -252,6 +258,7 @@ def _report_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "fitted model (TOML); without it the model is empty")
     parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
+    _add_correction_option(parser)
 
 
 @command("report", help="self-contained HTML page with the plots",
@@ -367,6 +374,7 @@ def _comp_table_options(parser):
                              "effects the data cannot determine, or it is expected to raise A, "
                              "E or the error between the targets), with warnings saying what "
                              "it risks")
+    _add_correction_option(parser)
 
 
 @command("comp-table", help="pitch-error compensation table for a CNC controller",
@@ -388,6 +396,7 @@ def _cmd_comp_table(args):
     case = read_case(args.case)
     if case.positioning is None:
         raise InputError("a compensation table needs positioning.csv", path=case.folder)
+    case = corrected_case(case, args.correct_to_20C)
     if not (args.model or args.from_measurement):
         raise InputError("give the fitted model (--model M.toml) or --from-measurement",
                          parameter="--model")
@@ -397,6 +406,70 @@ def _cmd_comp_table(args):
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
+
+
+def _uncertainty_options(parser):
+    from .uncertainty.engine import DEFAULT_TRIALS
+
+    parser.add_argument("case", metavar="CASE", help="case folder with positioning.csv")
+    _add_model_options(parser, "fitted model (TOML): refitted on the case, then its "
+                               "parameters and compensation table get their uncertainty too")
+    parser.add_argument("--budget", metavar="BUDGET.toml",
+                        help="the uncertainty budget (ISO 230-2 Annex A): the contributions "
+                             "it changes, each with its distribution; the others keep the "
+                             "defaults of docs/uncertainty.md")
+    size = parser.add_mutually_exclusive_group()
+    size.add_argument("--trials", type=int, default=DEFAULT_TRIALS, metavar="N",
+                      help=f"Monte Carlo trials (default {DEFAULT_TRIALS}: JCGM 101 §7.2)")
+    size.add_argument("--tolerance-um", type=float, metavar="T",
+                      help="adaptive instead (JCGM 101 §7.9): blocks of 10^4 trials until "
+                           "every figure's mean, u and interval ends are stable to T µm")
+    parser.add_argument("--seed", type=int, metavar="S",
+                        help="random seed: the same seed gives the same intervals (default: "
+                             "a fresh one, printed)")
+    _add_correction_option(parser)
+    parser.add_argument("--html", metavar="PAGE.html",
+                        help="also write the results as a page with histograms")
+
+
+@command("uncertainty", help="Monte Carlo uncertainty of the ISO 230-2 figures (JCGM 101)",
+         description="The measurement uncertainty of the ISO 230-2 figures (A, E, M, R, B, "
+                     "B̄ per direction), of the fitted model's parameters and of the "
+                     "compensation table's values, by the Monte Carlo method of JCGM 101 "
+                     "over a budget in the structure of ISO 230-2 Annex A (laser "
+                     "calibration, temperature and expansion coefficient of the 20 °C "
+                     "correction, misalignment, set-up/Abbe, EVE) with the repeatability "
+                     "from the case's own runs: 95 % coverage intervals (symmetric and "
+                     "shortest), standard uncertainties and each input's share. See "
+                     "docs/uncertainty.md.",
+         options=_uncertainty_options)
+def _cmd_uncertainty(args):
+    from tqdm import tqdm
+
+    from .uncertainty.budget import default_budget, read_budget
+    from .uncertainty.evaluation import evaluate
+    from .uncertainty.text import uncertainty_lines
+
+    if args.html:
+        check_writable_target(args.html)
+    case = read_case(args.case)
+    model = load_model(args.model, _effects(args)) if args.model else None
+    budget = read_budget(args.budget) if args.budget else default_budget()
+    with tqdm(desc="Monte Carlo", unit="trial", unit_scale=True, delay=1.0, leave=False,
+              file=sys.stderr) as bar:
+        def tick(trials, planned):
+            bar.total = planned
+            bar.update(trials)
+
+        result = evaluate(case, model, budget, args.trials, args.tolerance_um, args.seed,
+                          args.correct_to_20C, progress=tick)
+    payload = result.to_json()
+    if args.html:
+        from .uncertainty.page import write_page
+
+        payload["html"] = str(write_page(result, args.html))
+    _emit(args, payload, uncertainty_lines(result)
+          + (f"\npage: {args.html}" if args.html else ""))
 
 
 def _effects_options(parser):
@@ -756,6 +829,11 @@ def _add_model_options(sub, model_help="starting model (TOML); without it the mo
     sub.add_argument("--model", metavar="M.toml", help=model_help, required=required)
     sub.add_argument("--effects", metavar="F.py", action="append",
                      help="Python file with your own effects (repeatable); see the README")
+
+
+def _add_correction_option(sub):
+    sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T",
+                     type=temperature_option, help=CORRECTION_HELP)
 
 
 def _add_motion_options(sub):
