@@ -41,6 +41,9 @@ from feedaxis.uncertainty.distributions import Distribution  # noqa: E402
 from feedaxis.uncertainty.evaluation import evaluate  # noqa: E402
 from feedaxis.uncertainty.positioning import PositioningMeasurement  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
+
 TRIALS = 100_000
 NOISE_UM = 0.3
 COVERED = ("E_um", "M_um", "B_um", "B_mean_um")
@@ -61,7 +64,7 @@ def spread(times):
     return f"{statistics.median(times):.3g} s ({min(times):.3g}-{max(times):.3g})"
 
 
-def speed(folder, repeats, loop_trials):
+def speed(folder, repeats, loop_trials, trials):
     case, _ = iso_case(folder / "speed", 1)
     measurement = PositioningMeasurement(case, default_budget())
     chunk = 2 ** 21 // case.positioning.size
@@ -72,19 +75,19 @@ def speed(folder, repeats, loop_trials):
     times = {"vectorised": [], "per trial": [], "evaluate": [], "evaluate + model": []}
     for _ in range(repeats):
         start = time.perf_counter()
-        engine.run(measurement.sample, measurement.inputs, TRIALS, 1, chunk)
+        engine.run(measurement.sample, measurement.inputs, trials, 1, chunk)
         times["vectorised"].append(time.perf_counter() - start)
         start = time.perf_counter()
         for values in deviations:
             iso230_figures(case.positioning.target_mm, values, case.positioning.direction)
-        times["per trial"].append((time.perf_counter() - start) * TRIALS / loop_trials)
+        times["per trial"].append((time.perf_counter() - start) * trials / loop_trials)
         start = time.perf_counter()
-        evaluate(case, trials=TRIALS, seed=1)
+        evaluate(case, trials=trials, seed=1)
         times["evaluate"].append(time.perf_counter() - start)
         start = time.perf_counter()
-        evaluate(case, model, trials=TRIALS, seed=1)
+        evaluate(case, model, trials=trials, seed=1)
         times["evaluate + model"].append(time.perf_counter() - start)
-    print(f"figures of {TRIALS} trials of a 5 x 5 x 11 test ({case.positioning.size} readings), "
+    print(f"figures of {trials} trials of a 5 x 5 x 11 test ({case.positioning.size} readings), "
           f"{repeats} interleaved repeats, medians (min-max):")
     for name, values in times.items():
         print(f"  {name:18s} {spread(values)}")
@@ -115,14 +118,16 @@ def coverage(folder, cases):
               f"{statistics.median(widths[key]):.3f} um")
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--loop-trials", type=int, default=5_000)
     parser.add_argument("--cases", type=int, default=200)
-    args = parser.parse_args()
+    parser.add_argument("--trials", type=int, default=TRIALS,
+                        help=f"Monte Carlo trials timed (default {TRIALS})")
+    args = arguments(parser, argv, repeats=1, loop_trials=50, cases=2, trials=2_000)
     with threadpool_limits(limits=1, user_api="blas"), tempfile.TemporaryDirectory() as tmp:
-        speed(Path(tmp), args.repeats, args.loop_trials)
+        speed(Path(tmp), args.repeats, args.loop_trials, args.trials)
         coverage(Path(tmp), args.cases)
 
 
