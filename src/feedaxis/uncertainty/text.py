@@ -57,13 +57,18 @@ def uncertainty_lines(result):
     return "\n".join(lines)
 
 
+def _refit_difference(in_u):
+    """The refit check's largest difference, round-off (below 1e-6 u) shown as a bound."""
+    return "below 1e-6" if in_u < 1e-6 else f"{in_u:.1g}"
+
+
 def _parameter_lines(result):
     if not (result.parameters or result.undetermined):
         return []
     method = result.parameter_method
     lines = ["", f"fitted parameters ({method['method']}; checked by refitting "
                  f"{method['checked_trials']} trials: largest difference "
-                 f"{method['largest_refit_difference_in_u']:.1g} u)",
+                 f"{_refit_difference(method['largest_refit_difference_in_u'])} u)",
              f"{'':44s} {'value':>11s} {'u':>9s} {'u fit':>9s}  95 % interval"]
     for key, entry in result.parameters.items():
         lines.append(f"  {key:42s} {entry['value']:11.5g} {entry['standard_uncertainty']:9.2g} "
