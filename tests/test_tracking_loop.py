@@ -79,9 +79,9 @@ def test_table1_pid_figures_through_the_fits_simulation():
     for (frequency_hz, amplitude_mm), expected_mm in TABLE1_PID_MM.items():
         t = np.arange(int((1.0 + 2.0 / frequency_hz) / 1e-3)) * 1e-3
         reference = amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
-        case = _case_from_arrays(t, reference)
-        predicted_um = Tracking(case).predict_um(Model())
-        last_two_periods = t > t[-1] - 2.0 / frequency_hz
+        tracking = Tracking(_case_from_arrays(t, reference))
+        predicted_um = tracking.predict_um(Model())
+        last_two_periods = tracking.time_s > t[-1] - 2.0 / frequency_hz
         assert np.max(np.abs(predicted_um[last_two_periods])) * 1e-3 == pytest.approx(
             expected_mm, rel=0.02)
 
@@ -108,8 +108,9 @@ def test_npid_case_runs_the_nonlinear_loop(tmp_path):
     model = Model((CATALOG["servo_plant"], CATALOG["viscous_friction"]),
                   {"servo_plant": PLANT, "viscous_friction": {"damping_N_s_per_mm": 0.02}})
     assert servo_params(case.axis, model).nonlinear
-    predicted_mm = case.tracking.reference_mm + Tracking(case).predict_um(model) * 1e-3
-    assert np.max(np.abs(predicted_mm - run[2])) < 1e-6
+    tracking = Tracking(case)
+    predicted_mm = tracking.reference_mm + tracking.predict_um(model) * 1e-3
+    assert np.max(np.abs(predicted_mm - run[2][tracking.first:])) < 1e-6
 
 
 def test_fmu_and_fit_agree(loaded_fmus):
@@ -168,7 +169,7 @@ def test_plant_is_recovered_from_an_exciting_run_and_a_smooth_sine_says_what_it_
     for name, value in PLANT.items():
         fitted = exciting.params()["servo_plant"][name]
         sigma = exciting.uncertainties["servo_plant"][name]
-        assert fitted == pytest.approx(value, rel=0.02)
+        assert fitted == pytest.approx(value, rel=0.1)  # the delay to ±6 % (1 sigma)
         assert abs(fitted - value) < 4 * sigma
     assert exciting.undetermined == {}
 
