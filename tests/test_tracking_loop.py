@@ -110,7 +110,7 @@ def test_npid_case_runs_the_nonlinear_loop(tmp_path):
     assert servo_params(case.axis, model).nonlinear
     tracking = Tracking(case)
     predicted_mm = tracking.reference_mm + tracking.predict_um(model) * 1e-3
-    assert np.max(np.abs(predicted_mm - run[2][tracking.first:])) < 1e-6
+    assert np.max(np.abs(predicted_mm - run[2][tracking.index])) < 1e-6
 
 
 def test_fmu_and_fit_agree(loaded_fmus):
@@ -159,7 +159,9 @@ def test_unknown_periodic_force_is_described_at_its_frequency(tmp_path):
     periodic = found.unexplained[0]
     assert periodic.kind == "periodic"
     assert periodic.frequency_hz == pytest.approx(force_hz, rel=0.02)
-    assert set(periodic.to_json()) >= {"kind", "frequency_hz", "amplitude_um", "evidence"}
+    report = periodic.to_json()
+    assert set(report) >= {"kind", "frequency_hz", "start_s", "end_s", "amplitude_um", "evidence"}
+    assert report["end_s"] == 4.0  # a force lasting the record: no window
 
 
 def test_plant_is_recovered_from_an_exciting_run_and_a_smooth_sine_says_what_it_cannot_fix(

@@ -36,3 +36,24 @@ def test_a_trace_starting_1_ms_after_rest_gives_the_plant_within_its_uncertainty
     assert found.verdict == "adequate"
     for name, value in found.base.params()["servo_plant"].items():
         assert abs(value - PLANT[name]) < 3 * found.base.uncertainties["servo_plant"][name]
+
+
+def test_a_1_s_burst_at_50_hz_is_reported_with_its_window(tmp_path):
+    """A cutting force of 3 N at 50 Hz during 2-3 s of a 5 s trace (record-long sinusoids
+    at 0.14 and 0.66 Hz and `adequate` before): one structure, at 50 Hz within 2 %, its
+    window within one hop of the shortest short-time window (32 ms), the force refitted
+    through the loop."""
+    def burst(t):
+        return 3.0 * np.sin(2 * np.pi * 50.0 * t) if 2.0 <= t < 3.0 else 0.0
+
+    run = step_loop(two_sines, 5.0, plant=PLANT, force_N=burst)
+    truth = Model((CATALOG["servo_plant"],), {"servo_plant": PLANT})
+    found = diagnose(read_case(write_tracking_case(tmp_path / "c", run, 2)), truth)
+    assert found.verdict == "unexplained" and not found.candidates
+    [structure] = found.unexplained
+    report = structure.to_json()
+    assert report["kind"] == "periodic"
+    assert report["frequency_hz"] == pytest.approx(50.0, rel=0.02)
+    assert abs(report["start_s"] - 2.0) <= 0.032 and abs(report["end_s"] - 3.0) <= 0.032
+    assert report["amplitude_um"] > 1.0 and "N at that frequency during that time" in \
+        report["evidence"]

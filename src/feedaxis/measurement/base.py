@@ -224,8 +224,9 @@ class Shape:
 
 class Trial:
     """A shape fitted at the current residual: its ``basis`` (samples x columns), where it
-    sits (``location``: a wavelength or frequency, or None) and, for a search whose
-    significance is family-wise over its own trials, its ``test``."""
+    sits (``location``: a wavelength or frequency, or None), for a search whose
+    significance is family-wise over its own trials its ``test``, and ``extra``: more of
+    where it sits (a dict of JSON fields, e.g. ``start_s`` and ``end_s`` of a burst)."""
 
     def __init__(self, basis, location=None, test=None, extra=None):
         self.basis, self.location, self.test, self.extra = basis, location, test, extra

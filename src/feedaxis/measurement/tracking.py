@@ -20,13 +20,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.signal import fftconvolve
 
 from ..case import AXIS_FILE, CaseError
 from ..fmu_map import servo_to_fmu
 from ..physics.servo import ServoParams, simulate, step_counts
-from ..stats.coloured import autocorrelation_time, peak_p_value
-from ..stats.judge import Test
+from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
+                              peak_p_value, short_time_peak, spikes)
+from ..stats.judge import OUTLIER_ALPHA, Test
 from ..stats.noise import Coloured
 from .base import Measurement, Shape, Trial
 
@@ -55,7 +56,11 @@ def servo_params(axis, model, values=None):
 
 
 class Tracking(Measurement):
-    """The tracking record of a case, ready for repeated simulation."""
+    """The tracking record of a case, ready for repeated simulation.
+
+    The loop is simulated over the whole record; the samples compared (``index`` into the
+    record) are those after the start-up window, less any outliers left out.
+    """
 
     kind = "tracking"
     file = "tracking.csv"
@@ -66,7 +71,7 @@ class Tracking(Measurement):
     stages = ("effects", "structures")
     loose_share = 0.5
 
-    def __init__(self, case):
+    def __init__(self, case, index=None):
         super().__init__(case)
         if not case.axis.servo:
             raise CaseError(Path(case.folder or ".") / AXIS_FILE, "a tracking case needs the "
@@ -75,23 +80,36 @@ class Tracking(Measurement):
         self.record_time_s, self.record_reference_mm = trace.time_s, trace.reference_mm
         self.disturbance_N = trace.disturbance_N
         self.counts = step_counts(trace.time_s, case.axis.servo["loop_step_s"])
-        self.first = _first_settled(trace.time_s)
-        self.time_s = self.coordinate = trace.time_s[self.first:]
-        self.reference_mm = trace.reference_mm[self.first:]
-        self.measured_um = (trace.actual_mm - trace.reference_mm)[self.first:] * 1e3
+        self.index = (np.arange(_first_settled(trace.time_s), trace.time_s.size)
+                      if index is None else np.asarray(index, dtype=int))
+        self.time_s = self.coordinate = trace.time_s[self.index]
+        self.reference_mm = trace.reference_mm[self.index]
+        self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
 
     @property
     def noise(self):
         return Coloured()
 
+    @property
+    def start_s(self):
+        """Time (s) from the record's first sample to the first sample compared."""
+        return float(self.record_time_s[self.index[0]] - self.record_time_s[0])
+
     def describe(self):
-        start = (f" after the first {self.time_s[0] - self.record_time_s[0]:.3g} s"
-                 if self.first else "")
+        start = f" after the first {self.start_s:.3g} s" if self.start_s > 0 else ""
         return (f"{self.size} samples over {np.ptp(self.time_s):.4g} s{start}, "
                 f"{self.case.axis.servo['controller'].upper()} controller")
 
     def rows(self, indices):
-        return [int(i) + self.first + 2 for i in indices]
+        return [int(self.index[i]) + 2 for i in indices]
+
+    def outliers(self, residual_um):
+        """Single-sample spikes in time (:func:`feedaxis.stats.coloured.spikes`, at the
+        outlier level of every diagnosis)."""
+        return spikes(residual_um, OUTLIER_ALPHA)
+
+    def subset(self, keep):
+        return Tracking(self.case, self.index[keep])
 
     def params(self, model, values=None):
         return servo_params(self.case.axis, model, values)
@@ -103,7 +121,7 @@ class Tracking(Measurement):
         force = self.disturbance_N if disturbance_N is None else disturbance_N
         position_mm = simulate(params, self.record_time_s, self.record_reference_mm, force,
                                self.counts)
-        return (position_mm - self.record_reference_mm)[self.first:] * 1e3
+        return (position_mm - self.record_reference_mm)[self.index] * 1e3
 
     def core(self, model):
         return lambda values: self.deviation_um(self.params(model, values))
@@ -114,6 +132,48 @@ class Tracking(Measurement):
         known = self.disturbance_N if self.disturbance_N is not None else 0.0
         params = self.params(model)
         return self.deviation_um(params, known + disturbance_N) - self.deviation_um(params)
+
+    def impulse_response_um(self, model):
+        """The deviation (µm) over the record after a 1 N force held over one sample
+        interval (the record's second), from that sample on: the loop's response to any
+        force is its convolution with this (exactly for a linear loop: PID without Coulomb
+        friction)."""
+        params = self.params(model)
+        known = np.zeros(self.record_time_s.size) if self.disturbance_N is None else \
+            self.disturbance_N
+        kicked = known.copy()
+        kicked[1] += 1.0
+        record_um = [(simulate(params, self.record_time_s, self.record_reference_mm, force,
+                               self.counts) - self.record_reference_mm) * 1e3
+                     for force in (known, kicked)]
+        return (record_um[1] - record_um[0])[1:]
+
+    def fit_window(self, model, residual_um, frequency_hz, first, last):
+        """(first, last) record samples of the window over which a force at
+        ``frequency_hz``, through the loop, best fits ``residual_um`` (at the samples
+        compared): each edge searched to the sample within the loop's settling (the impulse
+        response above 1 % of its peak) plus the whitening filter's length of its estimate,
+        alternately twice."""
+        impulse_um = self.impulse_response_um(model)
+        settling = int(np.flatnonzero(np.abs(impulse_um) >= 0.01 * np.max(np.abs(impulse_um)))
+                       [-1]) + MAX_AR_ORDER + 1
+        phase = 2.0 * np.pi * frequency_hz * self.record_time_s
+        forces = np.column_stack((np.cos(phase), np.sin(phase)))
+        lowest, highest = int(self.index[0]), int(self.index[-1])
+
+        def misfit(a, b):
+            gated = np.zeros_like(forces)
+            gated[a:b + 1] = forces[a:b + 1]
+            response = np.column_stack([fftconvolve(column, impulse_um)[:column.size]
+                                        for column in gated.T])[self.index]
+            return _rss(residual_um - _regress(residual_um, response)[1])
+
+        for _ in range(2):
+            starts = range(max(first - settling, lowest), min(first + settling, last) + 1)
+            first = min(starts, key=lambda a: misfit(a, last))
+            ends = range(max(last - settling, first), min(last + settling, highest) + 1)
+            last = min(ends, key=lambda b: misfit(first, b))
+        return first, last
 
     def uncertainty_inflation(self, residual_um):
         """τ, the residual's integrated autocorrelation time: n/τ samples are independent."""
@@ -150,11 +210,21 @@ class Tracking(Measurement):
         return self.time_s[1:][np.diff(np.sign(velocity)) != 0]
 
     def uniform_step_s(self):
-        """The sampling step (s) when the record is evenly sampled, else None."""
-        steps = np.diff(self.time_s)
+        """The sampling step (s) when the record is evenly sampled over the samples compared
+        (outliers left out are gaps of it), else None."""
+        steps = np.diff(self.record_time_s[self.index[0]:self.index[-1] + 1])
+        if steps.size == 0:
+            return None
         step = float(np.median(steps))
         return step if np.max(np.abs(steps - step)) <= UNIFORM_SAMPLING_TOLERANCE * step \
             else None
+
+    def gridded(self, values):
+        """(time_s, values) on the record's samples from the first to the last compared,
+        ``values`` (one per sample compared) interpolated linearly over the outliers left
+        out: what the spectral tests take."""
+        grid = np.arange(self.index[0], self.index[-1] + 1)
+        return self.record_time_s[grid], np.interp(grid, self.index, values)
 
 
 def _first_settled(time_s):
@@ -178,15 +248,26 @@ def _sinusoid(time_s, frequency_hz):
     return np.column_stack((np.cos(phase), np.sin(phase), np.ones_like(phase)))
 
 
+def _rss(values):
+    return float(values @ values)
+
+
 def _max_abs(fitted_um):
     return float(np.max(np.abs(fitted_um)))
 
 
 class PeriodicForce(Shape):
-    """The strongest sinusoid in the residual, its frequency refined between the
-    neighbouring bins: the loop's response to a periodic force at that frequency (e.g. a
-    cutting force at the tooth-passing frequency, seed 002 Table 2). Its p-value is
-    family-wise over the searched frequencies (whitened max periodogram)."""
+    """The strongest sinusoid in the residual, over the whole record or during part of it:
+    the loop's response to a periodic force at that frequency (e.g. a cutting force at the
+    tooth-passing frequency, seed 002 Table 2), switched on and off where the residual shows
+    it (a cut that lasts part of the record).
+
+    Two searches of the whitened residual (:mod:`feedaxis.stats.coloured`): the record's
+    periodogram maximum (a force lasting the record) and the short-time periodogram's
+    (a burst); the smaller p-value, doubled (Bonferroni over the two), is the test. The
+    window and frequency are then found by least squares (:func:`locate_sinusoid`), the
+    window kept when it describes the sinusoid better than the whole record does.
+    """
 
     kind = "periodic"
     extra = 3  # cosine, sine and the frequency
@@ -195,29 +276,58 @@ class PeriodicForce(Shape):
         return 1 if measurement.uniform_step_s() and measurement.size >= 8 else 0
 
     def trial(self, measurement, current):
-        residual, time_s = current.residual_um, measurement.time_s
+        time_s, residual = measurement.gridded(current.residual_um)
         step_s = measurement.uniform_step_s()
-        peak_hz, p_value, ratio = peak_p_value(residual, step_s)
-        bin_hz = 1.0 / (residual.size * step_s)
-        refined = minimize_scalar(
-            lambda f: _rss(residual - _regress(residual, _sinusoid(time_s, f))[1]),
-            bounds=(max(peak_hz - bin_hz, 0.5 * bin_hz), peak_hz + bin_hz),
-            method="bounded", options={"xatol": 1e-4 * bin_hz})
-        best_hz = float(refined.x)
-        phase = 2.0 * np.pi * best_hz * measurement.record_time_s
-        basis = np.column_stack([measurement.loop_response_um(current.model, np.cos(phase)),
-                                 measurement.loop_response_um(current.model, np.sin(phase))])
-        test = Test(ratio, (1, residual.size), p_value,
-                    "whitened periodogram maximum, family-wise over the frequencies searched",
-                    "ratio")
-        return Trial(basis, best_hz, test)
+        whole_hz, whole_p, whole_ratio = peak_p_value(residual, step_s)
+        burst = short_time_peak(residual, step_s)
+        searches = 1 if burst is None else 2
+        if burst is not None and burst.p_value < whole_p:
+            frequency_hz, bin_hz = burst.frequency_hz, 1.0 / (burst.window * step_s)
+            test = Test(burst.ratio, (1, burst.trials), min(1.0, searches * burst.p_value),
+                        f"short-time periodogram maximum of the whitened residual, family-wise "
+                        f"over {burst.trials} windows and frequencies and the whole record",
+                        "ratio")
+        else:
+            frequency_hz, bin_hz = whole_hz, 1.0 / (residual.size * step_s)
+            test = Test(whole_ratio, (1, residual.size), min(1.0, searches * whole_p),
+                        "whitened periodogram maximum, family-wise over the frequencies "
+                        "searched and the short-time windows", "ratio")
+        first, stop, frequency_hz, localised = locate_sinusoid(residual, time_s, frequency_hz,
+                                                               bin_hz)
+        record_s = measurement.record_time_s
+        on = 1.0
+        start_s, end_s = float(time_s[0]), float(time_s[-1])
+        if localised:
+            grid = int(measurement.index[0])
+            first, last = measurement.fit_window(current.model, current.residual_um,
+                                                 frequency_hz, grid + first, grid + stop - 1)
+            start_s, end_s = float(record_s[first]), float(record_s[last])
+            on = np.zeros(record_s.size)
+            on[first:last + 1] = 1.0
+        phase = 2.0 * np.pi * frequency_hz * record_s
+        basis = np.column_stack([measurement.loop_response_um(current.model, np.cos(phase) * on),
+                                 measurement.loop_response_um(current.model, np.sin(phase) * on)])
+        return Trial(basis, frequency_hz, test,
+                     {"start_s": start_s, "end_s": end_s, "localised": localised})
 
     def amplitude_um(self, measurement, fitted_um, location):
-        return float(np.hypot(*_regress(fitted_um, _sinusoid(measurement.time_s, location))[0][:2]))
+        """The sinusoid's amplitude where the loop's response to the force is on (at least
+        half its largest value)."""
+        on = np.abs(fitted_um) >= 0.5 * _max_abs(fitted_um)
+        if on.sum() < 3:
+            return _max_abs(fitted_um)
+        return float(np.hypot(*_regress(fitted_um[on], _sinusoid(measurement.time_s[on],
+                                                                 location))[0][:2]))
 
     def describe(self, measurement, trial, fitted_um):
         amplitude_um = self.amplitude_um(measurement, fitted_um, trial.location)
         force_N = np.hypot(*_regress(fitted_um, trial.basis)[0])
+        if trial.extra["localised"]:
+            return (f"a sinusoid at {trial.location:.4g} Hz from {trial.extra['start_s']:.4g} s "
+                    f"to {trial.extra['end_s']:.4g} s, {amplitude_um:.3g} µm in the residual "
+                    f"(short-time periodogram {trial.test.statistic:.0f}x the noise level): the "
+                    f"loop's response to a force of {force_N:.3g} N at that frequency during "
+                    "that time (e.g. a cutting force while the tool is engaged)")
         return (f"a sinusoid at {trial.location:.4g} Hz, {amplitude_um:.3g} µm in the residual "
                 f"(whitened periodogram {trial.test.statistic:.0f}x its mean level): the loop's "
                 f"response to a force of {force_N:.3g} N at that frequency (e.g. a cutting "
@@ -239,7 +349,9 @@ class ConstantForce(Shape):
 
     def describe(self, measurement, trial, fitted_um):
         force_N = _regress(fitted_um, trial.basis)[0][0]
-        return f"a steady force of {force_N:+.3g} N acting on the axis"
+        return (f"a steady force of {force_N:+.3g} N acting on the axis (in a record that "
+                "starts mid-motion, equally the controller's integral term at the first sample: "
+                "the record cannot tell them apart)")
 
 
 class Reversal(Shape):
@@ -288,7 +400,3 @@ class TimeTrend(Shape):
     def describe(self, measurement, trial, fitted_um):
         slope = _regress(fitted_um, trial.basis)[0][0]
         return f"the residual drifts {slope:+.3g} µm/s over the record"
-
-
-def _rss(values):
-    return float(values @ values)
