@@ -5,14 +5,17 @@ the false-alarm rate over the null families.
 Cases come from tests/tracking_synthetic.py: a straightforward Runge-Kutta stepping of the
 loop, independent of feedaxis.physics.servo, with seeded noise.
 """
+import json
+
 import numpy as np
 import pytest
 
-from feedaxis.case import read_case
+from feedaxis.case import read_case, write_case
+from feedaxis.cli import main
 from feedaxis.diagnose import diagnose
 from feedaxis.effects import CATALOG, Model
 from feedaxis.fit import fit
-from tracking_synthetic import step_loop, two_sines, write_tracking_case
+from tracking_synthetic import AXIS, step_loop, two_sines, write_tracking_case
 
 PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
          "plant_stiffness_per_s2": 250.0, "delay_s": 0.0015}
@@ -57,3 +60,25 @@ def test_a_1_s_burst_at_50_hz_is_reported_with_its_window(tmp_path):
     assert abs(report["start_s"] - 2.0) <= 0.032 and abs(report["end_s"] - 3.0) <= 0.032
     assert report["amplitude_um"] > 1.0 and "N at that frequency during that time" in \
         report["evidence"]
+
+
+def test_a_measurement_delay_the_plant_absorbs_is_named_in_the_undetermined_report(
+        tmp_path, capsys):
+    """actual_mm recorded 4 ms late: the fitted plant is far off (its gain about half the
+    truth) with the residual at the noise; fit names, in text and JSON, the plant parameters
+    a measurement delay moves unseen. Without noise the residual shows a delay of a sample
+    and nothing is said."""
+    late = step_loop(two_sines, 5.0, plant=PLANT, record_delay_s=0.004)
+    folder = str(write_tracking_case(tmp_path / "late", late, 3))
+    assert main(["fit", folder, "--add", "servo_plant", "--json"]) == 0
+    fitted = json.loads(capsys.readouterr().out)
+    assert fitted["params"]["servo_plant"]["plant_gain_mm_per_Vs2"] < 0.7 * 70000.0
+    delayed = {key for key, why in fitted["undetermined"].items() if "measurement delay" in why}
+    assert {"servo_plant.plant_gain_mm_per_Vs2", "servo_plant.delay_s"} <= delayed
+    assert main(["fit", folder, "--add", "servo_plant"]) == 0
+    assert "cannot separate it from a measurement delay" in capsys.readouterr().out
+
+    time_s, reference_mm, position_mm = step_loop(two_sines, 2.0, plant=PLANT)
+    exact = write_case(tmp_path / "exact", AXIS, tracking={
+        "time_s": time_s, "reference_mm": reference_mm, "actual_mm": position_mm})
+    assert not fit(SERVO_PLANT, read_case(exact)).undetermined

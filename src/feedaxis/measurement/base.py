@@ -154,6 +154,14 @@ class Measurement:
         """Factor on the fit's covariance for the residual's serial correlation (1: none)."""
         return 1.0
 
+    def confounded(self, model, slots, jacobian, residual_um, sigma, inflation):
+        """{"effect.parameter": why}: fitted parameters the samples cannot separate from a
+        measurement artefact the model does not carry (none by default). ``slots`` are the
+        (effect, parameter) of the ``jacobian``'s columns (d residual / d parameter at the
+        optimum), ``sigma`` the standard uncertainties, ``inflation`` the covariance's
+        factor for serial correlation."""
+        return {}
+
     # -- diagnosis ------------------------------------------------------------------------
 
     @property

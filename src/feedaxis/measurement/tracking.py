@@ -179,6 +179,38 @@ class Tracking(Measurement):
         """τ, the residual's integrated autocorrelation time: n/τ samples are independent."""
         return autocorrelation_time(residual_um)
 
+    def confounded(self, model, slots, jacobian, residual_um, sigma, inflation):
+        """The parameters a measurement delay would move unseen: actual_mm recorded late by
+        δ reads x(t - δ) ≈ x(t) - ẋ·δ, so the residual moves by -ẋ·δ (ẋ the predicted
+        velocity). Its least-squares projection on the Jacobian's columns is what the
+        parameters absorb (β per second of delay); the rest ``u`` is what the residual would
+        show, so a delay estimated on top of the fit has the standard error σ·√τ / ‖u‖.
+        Reported: when a delay of one sample interval lies within 3 standard errors (the
+        record cannot see it), each parameter it moves by more than its standard
+        uncertainty."""
+        step_s = float(np.median(np.diff(self.time_s)))
+        position_mm = self.reference_mm + (self.measured_um - residual_um) * 1e-3
+        velocity_um_s = np.gradient(position_mm, self.time_s) * 1e3
+        absorbed, *_ = np.linalg.lstsq(jacobian, velocity_um_s, rcond=None)
+        left_um_s = float(np.linalg.norm(velocity_um_s - jacobian @ absorbed))
+        dof = max(residual_um.size - len(slots), 1)
+        noise_um = float(np.sqrt(residual_um @ residual_um / dof * inflation))
+        unseen_s = 3.0 * noise_um / max(left_um_s, 1e-300)
+        if unseen_s <= step_s:
+            return {}
+        units = {(e.name, p.name): p.unit for e in model.effects for p in e.parameters}
+        moved = {slot: shift * step_s for slot, shift in zip(slots, absorbed)
+                 if abs(shift * step_s) > sigma[slot[0]][slot[1]]}
+        keys = [f"{effect}.{parameter}" for effect, parameter in moved]
+        return {key: (
+            f"the reference cannot separate it from a measurement delay (actual_mm recorded "
+            f"late, outside the loop): the residual would not show a delay under "
+            f"{1e3 * unseen_s:.3g} ms (3 standard errors), and each {1e3 * step_s:.3g} ms of it "
+            f"moves this parameter by {shift:+.3g} {units[slot]} "
+            f"({abs(shift) / sigma[slot[0]][slot[1]]:.0f} standard uncertainties)"
+            + (f", {', '.join(k for k in keys if k != key)} with it" if len(keys) > 1 else ""))
+            for key, (slot, shift) in zip(keys, moved.items())}
+
     def shapes(self, effects):
         return (PeriodicForce(), ConstantForce(), Reversal(), TimeTrend())
 
