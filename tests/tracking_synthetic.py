@@ -132,6 +132,13 @@ def _spikes_um(rng, size):
     return values
 
 
+def spike_indices(size, seed):
+    """Where :func:`_spikes_um` put its spikes for ``seed`` (sorted sample indices)."""
+    rng = np.random.default_rng(seed)
+    _encoder_um(rng, size)
+    return np.sort(rng.choice(size, 3, replace=False))
+
+
 QUANTUM_UM = 0.1  # the encoder's resolution of the quantised null
 # name -> (noise (µm) from (rng, size), resolution (µm) actual_mm is rounded to, or None)
 NOISE_FAMILIES = {

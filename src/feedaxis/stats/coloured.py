@@ -39,7 +39,8 @@ from the cubic through its two neighbours on each side (which follows a smooth s
 sinusoid of 20 samples per period to 0.2 %, where the mean of the neighbours misses it by
 12 %), against the median absolute departure, at the Gaussian quantile of ``alpha`` / n
 (Bonferroni over the samples): the largest first, replaced by its cubic, until none is left;
-the two samples at each end are not judged.
+a sample is a spike only when its neighbours agree once it is replaced (a kink moves
+several); the two samples at each end are not judged.
 """
 from __future__ import annotations
 
@@ -157,22 +158,36 @@ def _cubic_departure(values):
     return departure
 
 
-def spikes(residual, alpha):
-    """Indices (0-based, sorted) of single-sample spikes in ``residual`` (a series in time)."""
+def spikes(residual, alpha, floor=0.0):
+    """Indices (0-based, sorted) of single-sample spikes in ``residual`` (a series in time);
+    none departs by ``floor`` or less (rounding).
+
+    The sample departing most from the cubic through its neighbours is a spike when the
+    departure passes the limit and, once it is replaced by that cubic, none of its four
+    neighbours still does (a kink or a fast change of the signal moves several samples);
+    repeated until the largest departure left is within the limit.
+    """
     values = np.array(residual, dtype=float)
     n = values.size
+    found = []
     if n < 8:
         return np.zeros(0, dtype=int)
     limit = stats.norm.isf(alpha / (2 * n))
-    found = []
+    judged = np.zeros(n, dtype=bool)
     for _ in range(n // 10):
         departure = _cubic_departure(values)
-        scale = 1.4826 * np.median(np.abs(departure))
-        index = int(np.argmax(np.abs(departure)))
-        if not scale > 0.0 or abs(departure[index]) <= limit * scale:
+        scale = 1.4826 * np.median(np.abs(departure[~judged]))
+        candidates = np.where(judged, 0.0, np.abs(departure))
+        index = int(np.argmax(candidates))
+        if not scale > 0.0 or candidates[index] <= max(limit * scale, floor):
             break
-        found.append(index)
-        values[index] -= departure[index]
+        judged[index] = True
+        trial = values.copy()
+        trial[index] -= departure[index]
+        around = _cubic_departure(trial)[max(index - 2, 0):index + 3]
+        if np.sum(np.abs(around) > limit * scale) == 0:
+            values = trial
+            found.append(index)
     return np.array(sorted(found), dtype=int)
 
 
