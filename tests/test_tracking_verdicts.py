@@ -15,7 +15,8 @@ from feedaxis.cli import main
 from feedaxis.diagnose import diagnose
 from feedaxis.effects import CATALOG, Model
 from feedaxis.fit import fit
-from tracking_synthetic import AXIS, step_loop, two_sines, write_tracking_case
+from tracking_synthetic import (AXIS, NOISE_FAMILIES, spike_indices, step_loop, two_sines,
+                                write_tracking_case)
 
 PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
          "plant_stiffness_per_s2": 250.0, "delay_s": 0.0015}
@@ -82,3 +83,25 @@ def test_a_measurement_delay_the_plant_absorbs_is_named_in_the_undetermined_repo
     exact = write_case(tmp_path / "exact", AXIS, tracking={
         "time_s": time_s, "reference_mm": reference_mm, "actual_mm": position_mm})
     assert not fit(SERVO_PLANT, read_case(exact)).undetermined
+
+
+@pytest.fixture(scope="module")
+def null_run():
+    """2 s of the exciting reference on PLANT, nothing else (the benchmarks' null)."""
+    return step_loop(two_sines, 2.0, plant=PLANT)
+
+
+@pytest.mark.parametrize("family", list(NOISE_FAMILIES))
+def test_nulls_of_every_noise_family_name_nothing(tmp_path, null_run, family):
+    """A few seeds of each null family (benchmarks/bench_false_alarms.py measures the rate
+    on 200): no effect and no structure named; a drift is reported as the nuisance it is
+    and spikes as outliers."""
+    truth = Model((CATALOG["servo_plant"],), {"servo_plant": PLANT})
+    for seed in range(2):
+        found = diagnose(read_case(write_tracking_case(tmp_path / f"n{seed}", null_run, seed,
+                                                       family=family)), truth)
+        assert not found.candidates, (family, seed, found.candidates[0].evidence)
+        assert all(s.kind == "drift" for s in found.unexplained), (family, seed)
+        if family == "spikes":
+            spikes = spike_indices(null_run[0].size, seed)
+            assert set(found.outlier_rows) <= set((spikes + 2).tolist())
