@@ -181,11 +181,12 @@ class Tracking(Measurement):
             last = min(ends, key=lambda b: misfit(first, b))
         return first, last
 
-    def uncertainty_inflation(self, residual_um):
-        """τ, the residual's integrated autocorrelation time: n/τ samples are independent."""
-        return autocorrelation_time(residual_um)
+    def noise_gram(self, jacobian, residual_um, variance):
+        """τ · variance · J'J, τ the residual's integrated autocorrelation time: n/τ samples
+        are independent."""
+        return autocorrelation_time(residual_um) * variance * (jacobian.T @ jacobian)
 
-    def confounded(self, model, slots, jacobian, residual_um, sigma, inflation):
+    def confounded(self, model, slots, jacobian, residual_um, sigma):
         """The parameters a measurement delay would move unseen: actual_mm recorded late by
         δ reads x(t - δ) ≈ x(t) - ẋ·δ, so the residual moves by -ẋ·δ (ẋ the predicted
         velocity). Its least-squares projection on the Jacobian's columns is what the
@@ -200,7 +201,8 @@ class Tracking(Measurement):
         absorbed, *_ = np.linalg.lstsq(jacobian, velocity_um_s, rcond=None)
         left_um_s = float(np.linalg.norm(velocity_um_s - jacobian @ absorbed))
         dof = max(residual_um.size - len(slots), 1)
-        noise_um = float(np.sqrt(residual_um @ residual_um / dof * inflation))
+        noise_um = float(np.sqrt(residual_um @ residual_um / dof
+                                 * autocorrelation_time(residual_um)))
         unseen_s = 3.0 * noise_um / max(left_um_s, 1e-300)
         if unseen_s <= step_s:
             return {}
@@ -324,7 +326,7 @@ class PeriodicForce(Shape):
     def trial(self, measurement, current):
         time_s, residual = measurement.gridded(current.residual_um)
         step_s = measurement.uniform_step_s()
-        whole_hz, whole_p, whole_ratio = peak_p_value(residual, step_s)
+        whole_hz, whole_p, whole_ratio = peak_p_value(residual, step_s, robust=True)
         burst = short_time_peak(residual, step_s)
         share = 1.0 if burst is None else WHOLE_RECORD_SHARE
         burst_p = 1.0 if burst is None else min(1.0, burst.p_value / (1.0 - share))
