@@ -27,8 +27,9 @@ rejection rate at α = 0.01 and 0.001 of the periodic tests (the record's and th
 periodogram's) and of the n/τ F test (for a trend and for a square wave locked to the
 reversals).
 
-Run: ``python benchmarks/bench_tracking_fit.py [--repeats 5] [--seeds 100]``. Times are
-medians of repeats in this one run, BLAS on one thread for both.
+Run: ``python benchmarks/bench_tracking_fit.py [--repeats 5] [--seeds 100] [--rates-only]``
+(``--smoke``: one of each, for CI). Times are medians of repeats in this one run, BLAS on
+one thread for both.
 """
 import argparse
 import statistics
@@ -42,7 +43,9 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from common import arguments  # noqa: E402
 from feedaxis.case import read_case  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
 from feedaxis.diagnose import diagnose  # noqa: E402
@@ -202,14 +205,14 @@ def speed(folder, args):
           f"{'met' if fast_s <= 10.0 else 'MISSED'} ({fast_s:.2f} s)")
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--baseline-repeats", type=int, default=1)
     parser.add_argument("--seeds", type=int, default=100)
     parser.add_argument("--rates-only", action="store_true",
                         help="only the error rates and the calibration (no timing)")
-    args = parser.parse_args()
+    args = arguments(parser, argv, repeats=1, baseline_repeats=1, seeds=1)
     with tempfile.TemporaryDirectory() as folder, threadpool_limits(limits=1, user_api="blas"):
         if not args.rates_only:
             speed(folder, args)
