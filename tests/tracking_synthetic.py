@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from feedaxis.case import write_case
+from synthetic import noise_um as null_noise_um
 
 SEED002 = {"plant_gain_mm_per_Vs2": 78020.0, "plant_damping_per_s": 163.0,
            "plant_stiffness_per_s2": 193.3, "delay_s": 0.0012}
@@ -96,19 +97,9 @@ def step_loop(reference, duration_s, sample_s=1e-3, plant=None, servo=None, fric
     return time_s, np.array(set_points[skipped:]), np.array(positions[skipped:])
 
 
-def _ar1_um(rng, size, rho, sigma_um):
-    """Stationary AR(1) noise (µm) with coefficient ``rho`` and standard deviation ``sigma_um``."""
-    innovations = rng.normal(0.0, sigma_um * math.sqrt(1 - rho**2), size)
-    values = np.empty(size)
-    values[0] = rng.normal(0.0, sigma_um)
-    for i in range(1, size):
-        values[i] = rho * values[i - 1] + innovations[i]
-    return values
-
-
 def _encoder_um(rng, size):
     """White plus AR(1) coloured noise (µm)."""
-    return (_ar1_um(rng, size, COLOURED_POLE, COLOURED_NOISE_UM)
+    return (null_noise_um(rng, size, f"ar{COLOURED_POLE}", COLOURED_NOISE_UM)
             + rng.normal(0.0, WHITE_NOISE_UM, size))
 
 
@@ -142,10 +133,10 @@ def spike_indices(size, seed):
 QUANTUM_UM = 0.1  # the encoder's resolution of the quantised null
 # name -> (noise (µm) from (rng, size), resolution (µm) actual_mm is rounded to, or None)
 NOISE_FAMILIES = {
-    "white 0.3 um": (lambda rng, size: rng.normal(0.0, 0.3, size), None),
-    "AR(1) rho 0.5": (lambda rng, size: _ar1_um(rng, size, 0.5, 0.3), None),
-    "AR(1) rho 0.95": (lambda rng, size: _ar1_um(rng, size, 0.95, 0.3), None),
-    "Student-t nu 3": (lambda rng, size: 0.3 / math.sqrt(3) * rng.standard_t(3, size), None),
+    "white 0.3 um": (lambda rng, size: null_noise_um(rng, size, "white", 0.3), None),
+    "AR(1) rho 0.5": (lambda rng, size: null_noise_um(rng, size, "ar0.5", 0.3), None),
+    "AR(1) rho 0.95": (lambda rng, size: null_noise_um(rng, size, "ar0.95", 0.3), None),
+    "Student-t nu 3": (lambda rng, size: null_noise_um(rng, size, "t3", 0.3), None),
     "quantised 0.1 um": (lambda rng, size: rng.normal(0.0, 0.03, size), QUANTUM_UM),
     "drifting": (_drift_um, None),
     "spikes": (_spikes_um, None),
