@@ -28,7 +28,7 @@ from ..fmu_map import servo_to_fmu
 from ..physics.servo import ServoParams, simulate, step_counts
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
                               peak_p_value, short_time_peak, spikes)
-from ..stats.judge import OUTLIER_ALPHA, Test, drift_basis
+from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
 from ..stats.noise import Coloured
 from .base import Measurement, Shape, Trial
 
@@ -159,26 +159,44 @@ class Tracking(Measurement):
         ``frequency_hz``, through the loop, best fits ``residual_um`` (at the samples
         compared): each edge searched to the sample within the loop's settling (the impulse
         response above 1 % of its peak) plus the whitening filter's length of its estimate,
-        alternately twice."""
+        alternately twice. Moving an edge by a sample adds or removes one shifted impulse
+        response, so each edge's search costs one convolution."""
         impulse_um = self.impulse_response_um(model)
+        size = impulse_um.size + 1
         settling = int(np.flatnonzero(np.abs(impulse_um) >= 0.01 * np.max(np.abs(impulse_um)))
                        [-1]) + MAX_AR_ORDER + 1
         phase = 2.0 * np.pi * frequency_hz * self.record_time_s
         forces = np.column_stack((np.cos(phase), np.sin(phase)))
         lowest, highest = int(self.index[0]), int(self.index[-1])
 
-        def misfit(a, b):
+        def response(a, b):
             gated = np.zeros_like(forces)
             gated[a:b + 1] = forces[a:b + 1]
-            response = np.column_stack([fftconvolve(column, impulse_um)[:column.size]
-                                        for column in gated.T])[self.index]
-            return _rss(residual_um - _regress(residual_um, response)[1])
+            return np.column_stack([fftconvolve(column, impulse_um)[:size]
+                                    for column in gated.T])
+
+        def kick(sample):
+            shifted = np.zeros((size, 2))
+            shifted[sample:] = np.outer(impulse_um[:size - sample], forces[sample])
+            return shifted
+
+        def misfit(columns):
+            return _rss(residual_um - _regress(residual_um, columns[self.index])[1])
+
+        def best_edge(fixed, edges, start):
+            """The best of ``edges`` (moving away from the first, each adding a sample)."""
+            columns = response(edges[0], fixed) if start else response(fixed, edges[0])
+            best = (misfit(columns), edges[0])
+            for edge in edges[1:]:
+                columns = columns + kick(edge)
+                best = min(best, (misfit(columns), edge))
+            return best[1]
 
         for _ in range(2):
-            starts = range(max(first - settling, lowest), min(first + settling, last) + 1)
-            first = min(starts, key=lambda a: misfit(a, last))
-            ends = range(max(last - settling, first), min(last + settling, highest) + 1)
-            last = min(ends, key=lambda b: misfit(first, b))
+            first = best_edge(last, list(range(min(first + settling, last),
+                                               max(first - settling, lowest) - 1, -1)), True)
+            last = best_edge(first, list(range(max(last - settling, first),
+                                               min(last + settling, highest) + 1)), False)
         return first, last
 
     def noise_gram(self, jacobian, residual_um, variance):
@@ -345,12 +363,12 @@ class PeriodicForce(Shape):
         first, stop, frequency_hz, localised = locate_sinusoid(residual, time_s, frequency_hz,
                                                                bin_hz)
         record_s = measurement.record_time_s
-        on = 1.0
-        start_s, end_s = float(time_s[0]), float(time_s[-1])
+        on, start_s, end_s = 1.0, float(time_s[0]), float(time_s[-1])
         if localised:
-            grid = int(measurement.index[0])
-            first, last = measurement.fit_window(current.model, current.residual_um,
-                                                 frequency_hz, grid + first, grid + stop - 1)
+            first, last = first + int(measurement.index[0]), stop - 1 + int(measurement.index[0])
+            if test.p_value < FAMILY_ALPHA:  # only a sinusoid that may pass is refined
+                first, last = measurement.fit_window(current.model, current.residual_um,
+                                                     frequency_hz, first, last)
             start_s, end_s = float(record_s[first]), float(record_s[last])
             on = np.zeros(record_s.size)
             on[first:last + 1] = 1.0
