@@ -546,7 +546,21 @@ def _simulate(args, run):
 
 
 def _simulate_options(parser):
-    _scenario_parsers(parser, "case folder to create (must not exist)")
+    _scenario_parsers(parser, "case folder to create (must not exist)", _noise_options)
+
+
+def _noise_options(sub):
+    sub.add_argument("--noise-um", type=float, default=0.0,
+                     help="white Gaussian measurement noise added to what the case records "
+                          "as measured, standard deviation in um (default 0: the simulated "
+                          "axis exactly)")
+    sub.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
+
+
+def _noise(args):
+    from .cosim.scenarios import MeasurementNoise
+
+    return MeasurementNoise(args.noise_um, args.seed) if args.noise_um else None
 
 
 def _scenario_parsers(parser, out_help, more_options=None, handler=None):
@@ -596,7 +610,7 @@ def _cmd_simulate_iso230(args):
     from .cosim.scenarios import simulate_iso230
 
     summary = _simulate(args, lambda master, progress: simulate_iso230(
-        args.out, master, **_iso230_arguments(args), progress=progress))
+        args.out, master, **_iso230_arguments(args), progress=progress, noise=_noise(args)))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples, {args.targets} targets x "
                          f"{args.runs} runs each direction; deviation "
                          f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} um")
@@ -630,7 +644,7 @@ def _cmd_simulate_thermal(args):
     from .cosim.scenarios import simulate_thermal
 
     summary = _simulate(args, lambda master, progress: simulate_thermal(
-        args.out, master, **_thermal_arguments(args), progress=progress))
+        args.out, master, **_thermal_arguments(args), progress=progress, noise=_noise(args)))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples (duty.csv + "
                          f"positioning.csv); deviation {summary['error_min_um']:.3f} to "
                          f"{summary['error_max_um']:.3f} um")
@@ -667,7 +681,7 @@ def _cmd_simulate_tracking(args):
     from .cosim.scenarios import simulate_tracking
 
     summary = _simulate(args, lambda master, progress: simulate_tracking(
-        args.out, master, **_tracking_arguments(args), progress=progress))
+        args.out, master, **_tracking_arguments(args), progress=progress, noise=_noise(args)))
     _emit(args, summary, f"{args.out}/tracking.csv: {args.controller.upper()}, "
                          f"{args.frequency_hz:g} Hz, {args.amplitude_mm:g} mm"
                          + (f", cutting force at {args.spindle_rpm:g} rpm"

@@ -215,6 +215,10 @@ def fit(model, data, progress=None, kind=None):
     fitted = model.with_values(layout.values(solution.x))
     if found[0].loose_share is not None:
         flag_loose(fitted, sigma, undetermined, found[0].loose_share)
+    if len(found) == 1:
+        for key, reason in found[0].confounded(fitted, layout.slots, solution.jac, solution.fun,
+                                               sigma).items():
+            undetermined.setdefault(key, reason)
     result = FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
                        problem.measured_um, solution.fun, sigma, undetermined, covariance, found,
                        jacobian=solution.jac if layout.nonlinear_index.size else None)
