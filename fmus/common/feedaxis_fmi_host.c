@@ -36,32 +36,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fmi2Functions.h" /* the official FMI 2.0 headers (fmi2/): every export checked */
 #include "feedaxis_fmi_vars.h"
 
-typedef void *fmi2Component;
-typedef void *fmi2ComponentEnvironment;
-typedef void *fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Integer;
-typedef int fmi2Boolean;
-typedef char fmi2Char;
-typedef const fmi2Char *fmi2String;
-typedef char fmi2Byte;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef int fmi2StatusKind;
-typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String,
-                                   fmi2String, ...);
-typedef struct {
-    fmi2CallbackLogger logger;
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
-
-#define EXPORT __attribute__((visibility("default")))
+#define EXPORT FMI2_Export
 
 #define MAX_MIRRORED 16
 #define HANDOFF_MODULE "feedaxis_fmu_handoff" /* feedaxis_slave.HANDOFF_MODULE */
@@ -243,7 +221,7 @@ static fmi2Status refuse(Guard *g, const char *format, ...)
     return fmi2Error;
 }
 
-/* ---- the state machine ------------------------------------------------------------ */
+/* ---- the state guard -------------------------------------------------------------- */
 
 static const char *const MODE_NAMES[] = {"instantiated", "initialisation mode", "step mode",
                                          "terminated", "failed", "dead after fmi2Fatal"};
@@ -292,7 +270,7 @@ static int settable(Guard *g, const fmi2ValueReference vr[], size_t nvr)
     return 1;
 }
 
-/* ---- Real inputs and outputs kept here while stepping (item 5) ----------------------- */
+/* ---- the mirror: Real inputs and outputs kept here while stepping (item 5) ------------ */
 
 /* The Python C API, found with dlsym once Python runs (never linked: see the top). */
 static struct {
@@ -549,9 +527,13 @@ static fmi2Status exchange_step(Guard *g, fmi2Real t, fmi2Real h)
     return status;
 }
 
-/* Whether fmi2GetReal of ``vr`` can be answered from the mirror; copies the values. */
-static int get_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+/* Whether fmi2GetReal of ``vr`` is answered from the mirror (instance ``c`` stepping, every
+ * ``vr`` a mirrored input or output, the mirror current); copies the values. */
+static int mirror_get(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                      fmi2Real value[])
 {
+    Guard *g = c;
+    if (!g || !fast(g)) return 0;
     for (size_t i = 0; i < nvr; ++i) {
         int k = mirror_index(output_vr, n_outputs, vr[i]);
         if (k >= 0 && g->outputs_current) continue;
@@ -565,10 +547,13 @@ static int get_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr, fmi
     return 1;
 }
 
-/* Whether fmi2SetReal of ``vr`` (all inputs) can be kept in the mirror; stores the values. */
-static int set_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr,
-                        const fmi2Real value[])
+/* Whether fmi2SetReal of ``vr`` is kept in the mirror (instance ``c`` stepping, every ``vr`` a
+ * mirrored input); stores the values, handed to the slave at the next step. */
+static int mirror_set(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                      const fmi2Real value[])
 {
+    Guard *g = c;
+    if (!g || !fast(g)) return 0;
     for (size_t i = 0; i < nvr; ++i)
         if (mirror_index(input_vr, n_inputs, vr[i]) < 0) return 0;
     if (!g->inputs_current && !load_mirror(g)) return 0;
@@ -579,8 +564,8 @@ static int set_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr,
 
 /* ---- the fmi2 functions ------------------------------------------------------------ */
 
-EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
-EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
+EXPORT const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+EXPORT const char *fmi2GetVersion(void) { return fmi2Version; }
 
 /* Freed instances are kept (up to POOL_SIZE) and reused through pythonfmu's fmi2Reset, which
  * creates a fresh Python slave: pythonfmu's fmi2Instantiate leaks about 1.4 kB in findClass
@@ -723,12 +708,15 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
     return fmi2OK;
 }
 
-#define FORWARD(function, when_failed, signature, ...)                                          \
+/* The state guard around a call forwarded to pythonfmu: refuse it when the instance may not
+ * take it, hand over pending inputs, and make the call's status the worse of pythonfmu's and
+ * what the slave logged meanwhile. Declares ``g`` and ``status``. */
+#define FORWARD(function, when_failed, ...)                                                     \
     Guard *g = c;                                                                              \
     if (!g) return fmi2Error;                                                                  \
     if (!usable(g, #function, when_failed)) return fmi2Error;                                  \
-    static fmi2Status(*call) signature; /* resolved once: dlsym costs a microsecond */     \
-    if (!call) call = (fmi2Status(*) signature)real(#function);                                \
+    static function##TYPE *call; /* resolved once: dlsym costs a microsecond */                \
+    if (!call) call = (function##TYPE *)real(#function);                                       \
     hand_over_inputs(g);                                                                       \
     begin(g);                                                                                  \
     fmi2Status status = finish(g, call(g->real, ##__VA_ARGS__))
@@ -736,15 +724,14 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol,
                                       fmi2Real start, fmi2Boolean stopDefined, fmi2Real stop)
 {
-    FORWARD(fmi2SetupExperiment, 0, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean,
-                                     fmi2Real), tolDefined, tol, start, stopDefined, stop);
+    FORWARD(fmi2SetupExperiment, 0, tolDefined, tol, start, stopDefined, stop);
     g->last_successful_time = start;
     return status;
 }
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
-    FORWARD(fmi2EnterInitializationMode, 0, (fmi2Component));
+    FORWARD(fmi2EnterInitializationMode, 0);
     slave_changed(g);
     if (status <= fmi2Warning) g->mode = INITIALISING;
     return status;
@@ -752,7 +739,7 @@ EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
-    FORWARD(fmi2ExitInitializationMode, 0, (fmi2Component));
+    FORWARD(fmi2ExitInitializationMode, 0);
     slave_changed(g);
     if (status <= fmi2Warning) g->mode = STEPPING;
     if (fast(g)) load_mirror(g);
@@ -761,7 +748,7 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
-    FORWARD(fmi2Terminate, 1, (fmi2Component));
+    FORWARD(fmi2Terminate, 1);
     slave_changed(g);
     if (status <= fmi2Warning) g->mode = TERMINATED;
     return status;
@@ -770,7 +757,7 @@ EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
     expect_slave();
-    FORWARD(fmi2Reset, 1, (fmi2Component));
+    FORWARD(fmi2Reset, 1);
     slave_changed(g);
     if (status <= fmi2Warning) {
         g->mode = INSTANTIATED;
@@ -780,82 +767,95 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     return status;
 }
 
-/* ``mirrored``: a statement that may answer the call from the mirror (item 5); a setter's
- * mirror takes inputs only, which are always settable, so it may come before the check. */
-#define GETTER(function, type, mirrored)                                                         \
+#define GETTER(function, type)                                                                  \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                type value[])                                                    \
     {                                                                                           \
-        Guard *guard = c;                                                                       \
-        if (guard) { mirrored }                                                                 \
-        FORWARD(function, 1, (fmi2Component, const fmi2ValueReference *, size_t, type *), vr,   \
-                nvr, value);                                                                    \
+        FORWARD(function, 1, vr, nvr, value);                                                   \
         return status;                                                                          \
     }
 
-GETTER(fmi2GetReal, fmi2Real,
-       if (fast(guard) && get_mirrored(guard, vr, nvr, value)) return fmi2OK;)
-GETTER(fmi2GetInteger, fmi2Integer, )
-GETTER(fmi2GetBoolean, fmi2Boolean, )
-GETTER(fmi2GetString, fmi2String, )
+GETTER(fmi2GetInteger, fmi2Integer)
+GETTER(fmi2GetBoolean, fmi2Boolean)
+GETTER(fmi2GetString, fmi2String)
 
-#define SETTER(function, type, mirrored)                                                         \
+/* Whether instance ``c`` may take a set of ``vr`` now; refuses it with a message otherwise. */
+static int may_set(fmi2Component c, const fmi2ValueReference vr[], size_t nvr)
+{
+    Guard *g = c;
+    return !g || g->mode == DEAD || settable(g, vr, nvr);
+}
+
+#define SETTER(function, type)                                                                  \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                const type value[])                                              \
     {                                                                                           \
-        Guard *guard = c;                                                                       \
-        if (guard) { mirrored }                                                                 \
-        if (guard && guard->mode != DEAD && !settable(guard, vr, nvr)) return fmi2Error;        \
-        FORWARD(function, 0, (fmi2Component, const fmi2ValueReference *, size_t, const type *), \
-                vr, nvr, value);                                                                \
+        if (!may_set(c, vr, nvr)) return fmi2Error;                                             \
+        FORWARD(function, 0, vr, nvr, value);                                                   \
         slave_changed(g);                                                                       \
         return status;                                                                          \
     }
 
-SETTER(fmi2SetReal, fmi2Real,
-       if (fast(guard) && set_mirrored(guard, vr, nvr, value)) return fmi2OK;)
-SETTER(fmi2SetInteger, fmi2Integer, )
-SETTER(fmi2SetBoolean, fmi2Boolean, )
-SETTER(fmi2SetString, fmi2String, )
+SETTER(fmi2SetInteger, fmi2Integer)
+SETTER(fmi2SetBoolean, fmi2Boolean)
+SETTER(fmi2SetString, fmi2String)
+
+/* Reals: while stepping, the mirror answers the Real inputs and outputs (mirror_get,
+ * mirror_set); any other Real goes through the guard as the other types do. */
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                              fmi2Real value[])
+{
+    if (mirror_get(c, vr, nvr, value)) return fmi2OK;
+    FORWARD(fmi2GetReal, 1, vr, nvr, value);
+    return status;
+}
+
+EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                              const fmi2Real value[])
+{
+    if (mirror_set(c, vr, nvr, value)) return fmi2OK; /* inputs only: always settable */
+    if (!may_set(c, vr, nvr)) return fmi2Error;
+    FORWARD(fmi2SetReal, 0, vr, nvr, value);
+    slave_changed(g);
+    return status;
+}
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    FORWARD(fmi2GetFMUstate, 0, (fmi2Component, fmi2FMUstate *), state);
+    FORWARD(fmi2GetFMUstate, 0, state);
     return status;
 }
 
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
-    FORWARD(fmi2SetFMUstate, 0, (fmi2Component, fmi2FMUstate), state);
+    FORWARD(fmi2SetFMUstate, 0, state);
     slave_changed(g);
     return status;
 }
 
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
-    FORWARD(fmi2FreeFMUstate, 1, (fmi2Component, fmi2FMUstate *), state);
+    FORWARD(fmi2FreeFMUstate, 1, state);
     return status;
 }
 
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
-    FORWARD(fmi2SerializedFMUstateSize, 0, (fmi2Component, fmi2FMUstate, size_t *), state, size);
+    FORWARD(fmi2SerializedFMUstateSize, 0, state, size);
     return status;
 }
 
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[],
                                         size_t size)
 {
-    FORWARD(fmi2SerializeFMUstate, 0, (fmi2Component, fmi2FMUstate, fmi2Byte *, size_t), state,
-            bytes, size);
+    FORWARD(fmi2SerializeFMUstate, 0, state, bytes, size);
     return status;
 }
 
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                           fmi2FMUstate *state)
 {
-    FORWARD(fmi2DeSerializeFMUstate, 0, (fmi2Component, const fmi2Byte *, size_t, fmi2FMUstate *),
-            bytes, size, state);
+    FORWARD(fmi2DeSerializeFMUstate, 0, bytes, size, state);
     return status;
 }
 
@@ -903,7 +903,7 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         begin(guard);
         return stepped(guard, t, h, finish(guard, exchange_step(guard, t, h)));
     }
-    FORWARD(fmi2DoStep, 0, (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean), t, h, no_set_prior);
+    FORWARD(fmi2DoStep, 0, t, h, no_set_prior);
     slave_changed(g);
     return stepped(g, t, h, status);
 }
@@ -916,7 +916,7 @@ EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 #define STATUS_GETTER(function, type)                                                            \
     EXPORT fmi2Status function(fmi2Component c, const fmi2StatusKind kind, type *value)         \
     {                                                                                           \
-        FORWARD(function, 1, (fmi2Component, fmi2StatusKind, type *), kind, value);             \
+        FORWARD(function, 1, kind, value);                                                      \
         return status;                                                                          \
     }
 
@@ -925,16 +925,15 @@ STATUS_GETTER(fmi2GetIntegerStatus, fmi2Integer)
 STATUS_GETTER(fmi2GetStringStatus, fmi2String)
 
 /* The two kinds pythonfmu answers are kept here: the layer may step without it. */
-enum { LAST_SUCCESSFUL_TIME = 2, TERMINATED_KIND = 3 };
 
 EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Real *value)
 {
     Guard *guard = c;
-    if (guard && kind == LAST_SUCCESSFUL_TIME && value && guard->mode != DEAD) {
+    if (guard && kind == fmi2LastSuccessfulTime && value && guard->mode != DEAD) {
         *value = guard->last_successful_time;
         return fmi2OK;
     }
-    FORWARD(fmi2GetRealStatus, 1, (fmi2Component, fmi2StatusKind, fmi2Real *), kind, value);
+    FORWARD(fmi2GetRealStatus, 1, kind, value);
     return status;
 }
 
@@ -942,10 +941,10 @@ EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind kin
                                        fmi2Boolean *value)
 {
     Guard *guard = c;
-    if (guard && kind == TERMINATED_KIND && value && guard->mode != DEAD) {
+    if (guard && kind == fmi2Terminated && value && guard->mode != DEAD) {
         *value = guard->wants_to_terminate;
         return fmi2OK;
     }
-    FORWARD(fmi2GetBooleanStatus, 1, (fmi2Component, fmi2StatusKind, fmi2Boolean *), kind, value);
+    FORWARD(fmi2GetBooleanStatus, 1, kind, value);
     return status;
 }

@@ -165,7 +165,8 @@ def _compile_host_layer(sources, variables, work_dir):
     output = work_dir / "host.so"
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     command = [compiler, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-Wall",
-               f"-I{sysconfig.get_paths()['include']}", f"-I{work_dir}",
+               f"-I{sysconfig.get_paths()['include']}", f"-I{sources / 'common' / 'fmi2'}",
+               f"-I{work_dir}",
                f'-DFEEDAXIS_PYTHON="{sys.executable}"', f'-DFEEDAXIS_LIBPYTHON="{_libpython()}"',
                "-o", str(output), str(sources / "common" / "feedaxis_fmi_host.c"),
                "-ldl", "-lpthread"]

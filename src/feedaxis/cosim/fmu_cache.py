@@ -24,7 +24,7 @@ def source_hash():
     """SHA-256 (first 12 hex digits) of every source file that goes into the FMUs."""
     digest = hashlib.sha256()
     sources = fmu_sources()
-    files = sorted([*sources.glob("*/*.py"), *sources.glob("common/*.c"),
+    files = sorted([*sources.glob("*/*.py"), *sources.glob("common/*.c"), *sources.glob("common/fmi2/*.h"),
                     *(SOURCE_DIR / "physics").glob("*.py"), SOURCE_DIR / "fmu_build.py"])
     for path in files:
         digest.update(path.name.encode())
