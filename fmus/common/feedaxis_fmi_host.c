@@ -29,12 +29,15 @@
 #define _GNU_SOURCE
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <ctype.h>
 #include <dlfcn.h>
+#include <errno.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "fmi2Functions.h" /* the official FMI 2.0 headers (fmi2/): every export checked */
 #include "feedaxis_fmi_vars.h"
@@ -68,71 +71,318 @@ typedef struct {
 
 static void *real_library;
 static char load_error[1024];
-static pthread_once_t load_once = PTHREAD_ONCE_INIT;
 
-/* ---- loading Python and pythonfmu's library ---------------------------------------- */
-
-static const char *setting(const char *name, const char *built_in)
-{
-    const char *value = getenv(name);
-    return value && *value ? value : built_in;
-}
-
+/* pythonfmu's function ``symbol`` (NULL before its library is loaded). */
 static void *real(const char *symbol)
 {
     return real_library ? dlsym(real_library, symbol) : NULL;
 }
 
-static int start_python(void)
-{
-    int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
-    if (!is_initialized) {
-        const char *libpython = setting("FEEDAXIS_LIBPYTHON", FEEDAXIS_LIBPYTHON);
-        if (!*libpython) {
-            snprintf(load_error, sizeof load_error, "the Python that built this FMU has no shared "
-                     "libpython: set FEEDAXIS_LIBPYTHON to one (and FEEDAXIS_PYTHON)");
-            return -1;
-        }
-        if (!dlopen(libpython, RTLD_NOW | RTLD_GLOBAL)) {
-            snprintf(load_error, sizeof load_error,
-                     "cannot load libpython (set FEEDAXIS_LIBPYTHON): %s", dlerror());
-            return -1;
-        }
-        is_initialized = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
-        if (!is_initialized) {
-            snprintf(load_error, sizeof load_error, "%s is not a libpython", libpython);
-            return -1;
-        }
-    }
-    if (is_initialized()) return 0;
+/* ---- the Python C API, found with dlsym (never linked: see the top) ------------------- */
 
-    void (*init_config)(PyConfig *) = dlsym(RTLD_DEFAULT, "PyConfig_InitPythonConfig");
+static struct {
+    PyGILState_STATE (*gil_ensure)(void);
+    void (*gil_release)(PyGILState_STATE);
+    PyObject *(*import)(const char *);
+    PyObject *(*add_module)(const char *);
+    PyObject *(*get_attr)(PyObject *, const char *);
+    PyObject *(*call)(PyObject *, PyObject *);
+    PyObject *(*tuple_new)(Py_ssize_t);
+    int (*tuple_set)(PyObject *, Py_ssize_t, PyObject *);
+    PyObject *(*tuple_get)(PyObject *, Py_ssize_t);
+    Py_ssize_t (*tuple_size)(PyObject *);
+    PyObject *(*list_get)(PyObject *, Py_ssize_t);
+    Py_ssize_t (*list_size)(PyObject *);
+    int (*list_append)(PyObject *, PyObject *);
+    int (*contains)(PyObject *, PyObject *);
+    PyObject *(*dict_get)(PyObject *, const char *);
+    PyObject *(*sys_get)(const char *);
+    PyObject *(*from_double)(double);
+    double (*as_double)(PyObject *);
+    long (*as_long)(PyObject *);
+    PyObject *(*from_string)(const char *);
+    PyObject *(*from_path)(const char *);
+    const char *(*as_utf8)(PyObject *);
+    void (*decref)(PyObject *);
+    PyObject *(*err_occurred)(void);
+    void (*err_fetch)(PyObject **, PyObject **, PyObject **);
+    void (*err_clear)(void);
+    PyObject *(*str)(PyObject *);
+    int (*is_initialized)(void);
+    PyObject *none;
+    int ready;
+} py;
+
+#define FIND(field, symbol) (py.field = dlsym(RTLD_DEFAULT, symbol)) != NULL
+
+/* Resolve the API once Python runs; py.ready stays 0 if a symbol is missing. */
+static void resolve_python_api(void)
+{
+    py.ready = FIND(gil_ensure, "PyGILState_Ensure") && FIND(gil_release, "PyGILState_Release")
+        && FIND(import, "PyImport_ImportModule") && FIND(add_module, "PyImport_AddModule")
+        && FIND(get_attr, "PyObject_GetAttrString") && FIND(call, "PyObject_CallObject")
+        && FIND(tuple_new, "PyTuple_New") && FIND(tuple_set, "PyTuple_SetItem")
+        && FIND(tuple_get, "PyTuple_GetItem") && FIND(tuple_size, "PyTuple_Size")
+        && FIND(list_get, "PyList_GetItem") && FIND(list_size, "PyList_Size")
+        && FIND(list_append, "PyList_Append") && FIND(contains, "PySequence_Contains")
+        && FIND(dict_get, "PyDict_GetItemString") && FIND(sys_get, "PySys_GetObject")
+        && FIND(from_double, "PyFloat_FromDouble") && FIND(as_double, "PyFloat_AsDouble")
+        && FIND(as_long, "PyLong_AsLong") && FIND(from_string, "PyUnicode_FromString")
+        && FIND(from_path, "PyUnicode_DecodeFSDefault") && FIND(as_utf8, "PyUnicode_AsUTF8")
+        && FIND(decref, "Py_DecRef") && FIND(err_occurred, "PyErr_Occurred")
+        && FIND(err_fetch, "PyErr_Fetch") && FIND(err_clear, "PyErr_Clear")
+        && FIND(str, "PyObject_Str") && FIND(is_initialized, "Py_IsInitialized")
+        && FIND(none, "_Py_NoneStruct");
+}
+
+/* ---- loading Python and pythonfmu's library ---------------------------------------- */
+
+/* Why loading failed: the message fmi2Instantiate gives the host. Returns -1. */
+static int fail(const char *format, ...)
+{
+    va_list args;
+    va_start(args, format);
+    vsnprintf(load_error, sizeof load_error, format, args);
+    va_end(args);
+    return -1;
+}
+
+/* Whether ``version`` (Py_GetVersion: "3.11.7 (main, ...") is FEEDAXIS_PYTHON_VERSION: the
+ * layer is compiled against that minor version's C API (PyConfig's layout, the object
+ * macros), so the minor version must match; ``which`` names the Python in the message. */
+static int check_version(const char *version, const char *which)
+{
+    size_t n = strlen(FEEDAXIS_PYTHON_VERSION);
+    if (version && strncmp(version, FEEDAXIS_PYTHON_VERSION, n) == 0 && version[n] == '.')
+        return 0;
+    return fail("%s is Python %.*s; this FMU needs CPython %s (the minor version that built it: "
+                "its host layer is compiled against that version's C API)", which,
+                version ? (int)strcspn(version, " ") : 1, version ? version : "?",
+                FEEDAXIS_PYTHON_VERSION);
+}
+
+/* Load libpython ``path`` RTLD_GLOBAL (pythonfmu's library and numpy's extension modules
+ * take its symbols from the process); ``which`` names it in the messages. */
+static int load_libpython(const char *path, const char *which)
+{
+    void *library = dlopen(path, RTLD_NOW | RTLD_GLOBAL);
+    if (!library) return fail("cannot load %s: %s", which, dlerror());
+    const char *(*get_version)(void) = (const char *(*)(void))dlsym(library, "Py_GetVersion");
+    if (!get_version || !dlsym(library, "Py_IsInitialized"))
+        return fail("%s is not a libpython", which);
+    return check_version(get_version(), which);
+}
+
+/* Start the interpreter: ``isolated`` (the FMU's own runtime: no environment variables, no
+ * user site, no bytecode written) with prefix ``path``, else Python's default configuration
+ * with program name ``path`` (which finds that interpreter's virtual environment). Never
+ * finalised: finalisation runs libgfortran's close_units on a heap pythonfmu has already
+ * damaged, and the process is ending anyway. */
+static int start_interpreter(int isolated, const char *path, const char *which)
+{
+    void (*init_config)(PyConfig *) =
+        dlsym(RTLD_DEFAULT, isolated ? "PyConfig_InitIsolatedConfig" : "PyConfig_InitPythonConfig");
     PyStatus (*set_string)(PyConfig *, wchar_t **, const char *) =
         dlsym(RTLD_DEFAULT, "PyConfig_SetBytesString");
     PyStatus (*initialize)(const PyConfig *) = dlsym(RTLD_DEFAULT, "Py_InitializeFromConfig");
     void (*clear)(PyConfig *) = dlsym(RTLD_DEFAULT, "PyConfig_Clear");
     int (*is_exception)(PyStatus) = dlsym(RTLD_DEFAULT, "PyStatus_Exception");
     PyThreadState *(*save_thread)(void) = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
-    if (!init_config || !set_string || !initialize || !clear || !is_exception || !save_thread) {
-        snprintf(load_error, sizeof load_error, "libpython lacks the PyConfig API (3.8 or newer)");
-        return -1;
-    }
+    if (!init_config || !set_string || !initialize || !clear || !is_exception || !save_thread)
+        return fail("%s lacks the PyConfig API", which);
     PyConfig config;
     init_config(&config);
-    config.install_signal_handlers = 0;  /* the host owns SIGINT */
+    config.install_signal_handlers = 0; /* the host owns SIGINT */
     config.parse_argv = 0;
-    PyStatus status = set_string(&config, &config.program_name,
-                                 setting("FEEDAXIS_PYTHON", FEEDAXIS_PYTHON));
+    if (isolated) config.write_bytecode = 0; /* the FMU's folder may be read-only */
+    PyStatus status = set_string(&config, isolated ? &config.home : &config.program_name, path);
     if (!is_exception(status)) status = initialize(&config);
     clear(&config);
-    if (is_exception(status)) {
-        snprintf(load_error, sizeof load_error, "cannot start Python (set FEEDAXIS_PYTHON): %s",
-                 status.err_msg ? status.err_msg : "unknown error");
-        return -1;
-    }
-    save_thread();  /* pythonfmu takes the GIL with PyGILState_Ensure */
+    if (is_exception(status))
+        return fail("cannot start %s: %s", which, status.err_msg ? status.err_msg : "unknown error");
+    save_thread(); /* pythonfmu takes the GIL with PyGILState_Ensure */
     return 0;
 }
+
+#ifdef FEEDAXIS_RUNTIME
+/* A standalone FMU: it carries its own CPython (libpython, the standard library and the
+ * packages its step path imports) in <unpacked FMU>/binaries/linux64/FEEDAXIS_RUNTIME, found
+ * from the resource location the host passes, never from a path of the build machine.
+ * A C host: the layer starts that Python. A process where another standalone feedaxis FMU
+ * started its own: this FMU's packages go behind that one's on sys.path. A Python host: its
+ * own interpreter runs the FMU when it imports FEEDAXIS_REQUIRED_MODULES, else
+ * fmi2Instantiate fails naming what is missing. */
+#define RUNTIME_MARK "feedaxis_fmu_runtime" /* the module a standalone FMU's Python carries */
+
+/* The local path of file URI ``uri`` (file:///p, file://localhost/p, file:/p), decoded. */
+static int uri_path(const char *uri, char *path, size_t size)
+{
+    const char *p = strncmp(uri, "file://localhost/", 17) == 0 ? uri + 16
+                    : strncmp(uri, "file:///", 8) == 0         ? uri + 7
+                    : strncmp(uri, "file:/", 6) == 0           ? uri + 5 : NULL;
+    size_t n = 0;
+    for (; p && *p && n + 1 < size; ++p) {
+        if (p[0] == '%' && isxdigit((unsigned char)p[1]) && isxdigit((unsigned char)p[2])) {
+            char hex[3] = {p[1], p[2], 0};
+            path[n++] = (char)strtol(hex, NULL, 16);
+            p += 2;
+        } else {
+            path[n++] = *p;
+        }
+    }
+    if (!p || *p) return -1;
+    path[n] = 0;
+    while (n > 1 && path[n - 1] == '/') path[--n] = 0;
+    return 0;
+}
+
+static char runtime[4096]; /* this FMU's own CPython prefix */
+
+static int find_runtime(const char *resources)
+{
+    char folder[4096];
+    if (uri_path(resources, folder, sizeof folder) != 0)
+        return fail("the resource location %s is not a file URI: this standalone FMU finds its "
+                    "own Python beside it", resources);
+    char *slash = strrchr(folder, '/');
+    if (slash) *slash = 0; /* the unpacked FMU */
+    snprintf(runtime, sizeof runtime, "%s/binaries/linux64/%s", folder, FEEDAXIS_RUNTIME);
+    if (access(runtime, R_OK | X_OK) != 0)
+        return fail("this standalone FMU's own Python is missing: %s: %s (resource location %s)",
+                    runtime, strerror(errno), resources);
+    return 0;
+}
+
+/* Start the Python this FMU carries (its libpython loaded already, by this FMU or another
+ * of the same minor version) and mark it as a standalone FMU's. */
+static int start_own_python(void)
+{
+    if (start_interpreter(1, runtime, "this FMU's own Python") != 0) return -1;
+    resolve_python_api();
+    if (!py.ready) return fail("this FMU's own libpython lacks a function the layer calls");
+    PyGILState_STATE gil = py.gil_ensure();
+    py.add_module(RUNTIME_MARK);
+    py.gil_release(gil);
+    return 0;
+}
+
+/* Put ``folder`` at the end of sys.path (once); holds the GIL. */
+static void append_path(const char *folder)
+{
+    PyObject *path = py.sys_get("path"), *entry = py.from_path(folder);
+    if (path && entry && py.contains(path, entry) == 0) py.list_append(path, entry);
+    if (entry) py.decref(entry);
+    if (py.err_occurred()) py.err_clear();
+}
+
+/* The names of FEEDAXIS_REQUIRED_MODULES the running Python cannot import, in ``missing``;
+ * holds the GIL. */
+static void find_missing(char *missing, size_t size)
+{
+    PyObject *util = py.import("importlib.util");
+    PyObject *find_spec = util ? py.get_attr(util, "find_spec") : NULL;
+    char names[] = FEEDAXIS_REQUIRED_MODULES;
+    for (char *name = strtok(names, " "); name && find_spec; name = strtok(NULL, " ")) {
+        PyObject *args = py.tuple_new(1);
+        PyObject *spec = NULL;
+        if (args && py.tuple_set(args, 0, py.from_string(name)) == 0) spec = py.call(find_spec, args);
+        if (args) py.decref(args);
+        if (!spec || spec == py.none)
+            snprintf(missing + strlen(missing), size - strlen(missing), "%s%s", *missing ? ", " : "", name);
+        if (spec) py.decref(spec);
+        if (py.err_occurred()) py.err_clear();
+    }
+    if (find_spec) py.decref(find_spec);
+    if (util) py.decref(util);
+    if (py.err_occurred()) py.err_clear();
+}
+
+/* Python runs already: join the runtime another standalone FMU started, or check that the
+ * host's own Python imports what this FMU needs. */
+static int use_running_python(void)
+{
+    resolve_python_api();
+    if (!py.ready) return fail("the Python running in this process lacks a function the layer calls");
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *modules = py.sys_get("modules");
+    int joined = modules && py.dict_get(modules, RUNTIME_MARK);
+    char missing[512] = "", executable[512] = "?";
+    if (joined) {
+        char folder[4200];
+        snprintf(folder, sizeof folder, "%s/lib/python%s/lib-dynload", runtime, FEEDAXIS_PYTHON_VERSION);
+        append_path(folder);
+        snprintf(folder, sizeof folder, "%s/lib/python%s/site-packages", runtime, FEEDAXIS_PYTHON_VERSION);
+        append_path(folder);
+    } else {
+        find_missing(missing, sizeof missing);
+        PyObject *program = py.sys_get("executable");
+        const char *text = program ? py.as_utf8(program) : NULL;
+        if (text) snprintf(executable, sizeof executable, "%s", text);
+        if (py.err_occurred()) py.err_clear();
+    }
+    py.gil_release(gil);
+    if (*missing)
+        return fail("the Python running in this process (%s) cannot import %s, which this FMU "
+                    "needs: install it there, or run the FMU in a host that is not a Python "
+                    "process, where it starts the Python it carries", executable, missing);
+    return 0;
+}
+
+static int start_python(const char *resources)
+{
+    if (find_runtime(resources) != 0) return -1;
+    const char *(*get_version)(void) = dlsym(RTLD_DEFAULT, "Py_GetVersion");
+    if (get_version) {
+        if (check_version(get_version(), "the Python loaded in this process") != 0) return -1;
+    } else {
+        char libpython[4160], which[4200];
+        snprintf(libpython, sizeof libpython, "%s/lib/%s", runtime, FEEDAXIS_LIBPYTHON_NAME);
+        snprintf(which, sizeof which, "this FMU's own libpython %s", libpython);
+        if (load_libpython(libpython, which) != 0) return -1;
+    }
+    int (*is_initialized)(void) = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    return is_initialized() ? use_running_python() : start_own_python();
+}
+#else
+/* The FMU runs in the Python that built it (FEEDAXIS_PYTHON, FEEDAXIS_LIBPYTHON at build
+ * time), or the one the environment variables of the same names give, or the host's own. */
+static const char *setting(const char *name, const char *built_in, char *which, size_t size)
+{
+    const char *value = getenv(name);
+    if (value && *value) {
+        snprintf(which, size, "%s=%s", name, value);
+        return value;
+    }
+    snprintf(which, size, "%s (the build machine's; set %s to one here)", built_in, name);
+    return built_in;
+}
+
+static int start_python(const char *resources)
+{
+    (void)resources;
+    char which[4200];
+    const char *(*get_version)(void) = dlsym(RTLD_DEFAULT, "Py_GetVersion");
+    if (get_version) { /* a Python host, or another FMU loaded one */
+        if (check_version(get_version(), "the Python loaded in this process") != 0) return -1;
+    } else {
+        const char *libpython = setting("FEEDAXIS_LIBPYTHON", FEEDAXIS_LIBPYTHON, which, sizeof which);
+        if (!*libpython)
+            return fail("the Python that built this FMU has no shared libpython: set "
+                        "FEEDAXIS_LIBPYTHON to a CPython %s libpython (and FEEDAXIS_PYTHON)",
+                        FEEDAXIS_PYTHON_VERSION);
+        if (load_libpython(libpython, which) != 0) return -1;
+    }
+    int (*is_initialized)(void) = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (!is_initialized()) {
+        const char *python = setting("FEEDAXIS_PYTHON", FEEDAXIS_PYTHON, which, sizeof which);
+        if (access(python, X_OK) != 0)
+            return fail("cannot use %s as the Python: %s", which, strerror(errno));
+        if (start_interpreter(0, python, which) != 0) return -1;
+    }
+    resolve_python_api();
+    return py.ready ? 0 : fail("the libpython in this process lacks a function the layer calls");
+}
+#endif
 
 /* pythonfmu's library keeps its interpreter state in a static shared_ptr, destroyed at exit
  * by a C++ static destructor, and then assigns nullptr to that destroyed shared_ptr in its
@@ -149,12 +399,13 @@ static void release_pythonfmu_state(void)
 
 static void prepare_mirror(void);
 
-static void load(void)
+/* Start (or find) Python, then load pythonfmu's library from this library's folder. */
+static void load(const char *resources)
 {
     Dl_info self;
-    if (start_python() != 0) return;
+    if (start_python(resources) != 0) return;
     if (!dladdr((void *)&load, &self) || !self.dli_fname) {
-        snprintf(load_error, sizeof load_error, "cannot locate the FMU's binary folder");
+        fail("cannot locate the FMU's binary folder");
         return;
     }
     char path[4096];
@@ -164,7 +415,7 @@ static void load(void)
              "libpythonfmu-export.so");
     real_library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!real_library) {
-        snprintf(load_error, sizeof load_error, "cannot load %s: %s", path, dlerror());
+        fail("cannot load %s: %s", path, dlerror());
         return;
     }
     /* Stay loaded to the end (the exit handler below lives here), then register the handler
@@ -172,6 +423,17 @@ static void load(void)
     dlopen(self.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
     atexit(release_pythonfmu_state);
     prepare_mirror();
+}
+
+/* The first fmi2Instantiate of this library loads; later ones see its outcome. */
+static void load_once(const char *resources)
+{
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    static int tried;
+    pthread_mutex_lock(&lock);
+    if (!tried) load(resources);
+    tried = 1;
+    pthread_mutex_unlock(&lock);
 }
 
 /* ---- logging ---------------------------------------------------------------------- */
@@ -272,41 +534,13 @@ static int settable(Guard *g, const fmi2ValueReference vr[], size_t nvr)
 
 /* ---- the mirror: Real inputs and outputs kept here while stepping (item 5) ------------ */
 
-/* The Python C API, found with dlsym once Python runs (never linked: see the top). */
-static struct {
-    PyGILState_STATE (*gil_ensure)(void);
-    void (*gil_release)(PyGILState_STATE);
-    PyObject *(*import)(const char *);
-    PyObject *(*get_attr)(PyObject *, const char *);
-    PyObject *(*call)(PyObject *, PyObject *);
-    PyObject *(*tuple_new)(Py_ssize_t);
-    int (*tuple_set)(PyObject *, Py_ssize_t, PyObject *);
-    PyObject *(*tuple_get)(PyObject *, Py_ssize_t);
-    Py_ssize_t (*tuple_size)(PyObject *);
-    PyObject *(*list_get)(PyObject *, Py_ssize_t);
-    Py_ssize_t (*list_size)(PyObject *);
-    PyObject *(*from_double)(double);
-    double (*as_double)(PyObject *);
-    long (*as_long)(PyObject *);
-    PyObject *(*from_string)(const char *);
-    const char *(*as_utf8)(PyObject *);
-    void (*decref)(PyObject *);
-    PyObject *(*err_occurred)(void);
-    void (*err_fetch)(PyObject **, PyObject **, PyObject **);
-    void (*err_clear)(void);
-    PyObject *(*str)(PyObject *);
-    int (*is_initialized)(void);
-    PyObject *none;
-    int ready;
-} py;
-
 static fmi2ValueReference input_vr[MAX_MIRRORED], output_vr[MAX_MIRRORED];
 static size_t n_inputs, n_outputs;
 
-#define FIND(field, symbol) (py.field = dlsym(RTLD_DEFAULT, symbol)) != NULL
+/* Index the mirrored variables; ``mirrorable`` stays 0 (every call then goes through
+ * pythonfmu) if an input or output is not a Real or there are too many. */
+static int mirrorable;
 
-/* Resolve the API and index the mirrored variables; py.ready stays 0 (every call then goes
- * through pythonfmu) if a symbol is missing or an input or output is not a Real. */
 static void prepare_mirror(void)
 {
     for (size_t k = 0; k < FEEDAXIS_N_VARS; ++k) {
@@ -321,18 +555,7 @@ static void prepare_mirror(void)
             output_vr[n_outputs++] = v->vr;
         }
     }
-    py.ready = FIND(gil_ensure, "PyGILState_Ensure") && FIND(gil_release, "PyGILState_Release")
-        && FIND(import, "PyImport_ImportModule") && FIND(get_attr, "PyObject_GetAttrString")
-        && FIND(call, "PyObject_CallObject") && FIND(tuple_new, "PyTuple_New")
-        && FIND(tuple_set, "PyTuple_SetItem") && FIND(tuple_get, "PyTuple_GetItem")
-        && FIND(tuple_size, "PyTuple_Size") && FIND(list_get, "PyList_GetItem")
-        && FIND(list_size, "PyList_Size") && FIND(from_double, "PyFloat_FromDouble")
-        && FIND(as_double, "PyFloat_AsDouble") && FIND(as_long, "PyLong_AsLong")
-        && FIND(from_string, "PyUnicode_FromString") && FIND(as_utf8, "PyUnicode_AsUTF8")
-        && FIND(decref, "Py_DecRef") && FIND(err_occurred, "PyErr_Occurred")
-        && FIND(err_fetch, "PyErr_Fetch") && FIND(err_clear, "PyErr_Clear")
-        && FIND(str, "PyObject_Str") && FIND(is_initialized, "Py_IsInitialized")
-        && FIND(none, "_Py_NoneStruct");
+    mirrorable = 1;
 }
 
 static int mirror_index(const fmi2ValueReference list[], size_t n, fmi2ValueReference vr)
@@ -384,7 +607,7 @@ static PyObject *call_handoff(const char *function, PyObject *args)
 /* Before pythonfmu constructs a slave: forget any slave constructed earlier on this thread. */
 static void expect_slave(void)
 {
-    if (!py.ready) return;
+    if (!py.ready || !mirrorable) return;
     PyGILState_STATE gil = py.gil_ensure();
     PyObject *result = call_handoff("forget", py.tuple_new(0));
     if (result) py.decref(result);
@@ -397,7 +620,7 @@ static void claim_exchange(Guard *g)
 {
     drop_exchange(g);
     g->inputs_current = g->inputs_pending = g->outputs_current = 0;
-    if (!py.ready) return;
+    if (!py.ready || !mirrorable) return;
     PyGILState_STATE gil = py.gil_ensure();
     PyObject *args = py.tuple_new(2);
     if (args) {
@@ -652,7 +875,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
                                      fmi2Boolean visible, fmi2Boolean loggingOn)
 {
     if (!functions || !functions->logger || !guid || !resources) return NULL;
-    pthread_once(&load_once, load);
+    load_once(resources);
     Guard *g = fmuType == fmi2CoSimulation && real_library
                    ? reuse(instanceName, guid, resources, functions, loggingOn) : NULL;
     if (g) return g;

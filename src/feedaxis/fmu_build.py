@@ -103,15 +103,22 @@ SI_UNITS = {
 }
 
 
-def build_fmus(out_dir, names=FMU_NAMES):
-    """Build the named FMUs into ``out_dir``; return their paths."""
+def build_fmus(out_dir, names=FMU_NAMES, standalone=False):
+    """Build the named FMUs into ``out_dir``; return their paths. ``standalone``: each
+    carries the Python its step path needs (:mod:`feedaxis.fmu_standalone`)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    return [build_fmu(name, out_dir) for name in names]
+    if not standalone:
+        return [build_fmu(name, out_dir) for name in names]
+    from .fmu_standalone import RuntimeBuilder
+
+    with RuntimeBuilder() as runtime:
+        return [build_fmu(name, out_dir, runtime) for name in names]
 
 
-def build_fmu(name, out_dir):
-    """Build one FMU ``<out_dir>/<name>.fmu``: pythonfmu, then the host layer and description."""
+def build_fmu(name, out_dir, runtime=None):
+    """Build one FMU ``<out_dir>/<name>.fmu``: pythonfmu, then the host layer and description;
+    with ``runtime`` (a :class:`~feedaxis.fmu_standalone.RuntimeBuilder`) a standalone FMU."""
     from pythonfmu.builder import FmuBuilder
 
     sources = fmu_sources()
@@ -130,7 +137,9 @@ def build_fmu(name, out_dir):
             _forget_modules(staging, (name, package))
         variables = _complete_model_description(fmu_path, slave)
         missing = host_layer_missing()
-        if missing is None:
+        if runtime is not None:
+            _make_standalone(fmu_path, name, sources, variables, staging, runtime, missing)
+        elif missing is None:
             _install_host_layer(fmu_path, name, _compile_host_layer(sources, variables, staging))
         elif os.environ.get("CI") == "true":
             raise HostLayerUnavailable(f"{missing}: CI requires the FMUs' C host layer")
@@ -153,8 +162,21 @@ def _stage_package(sources, name, package_dir):
         (package_dir / source.name).write_text(text, encoding="utf-8")
 
 
-def _compile_host_layer(sources, variables, work_dir):
-    """Compile fmus/common/feedaxis_fmi_host.c for this FMU's variables; return the .so."""
+def _make_standalone(fmu_path, name, sources, variables, work_dir, runtime, missing):
+    """The host layer that starts the FMU's own Python, and that Python's files."""
+    from .fmu_standalone import StandaloneUnavailable, trace_fmu, host_layer_defines
+
+    if missing is not None:
+        raise StandaloneUnavailable(f"{missing}: a standalone FMU needs the C host layer")
+    trace = trace_fmu(fmu_path, name, sources / name / f"{name}_in.csv")
+    host_layer = _compile_host_layer(sources, variables, work_dir, host_layer_defines(trace))
+    _install_host_layer(fmu_path, name, host_layer)
+    runtime.add_runtime(fmu_path, trace)
+
+
+def _compile_host_layer(sources, variables, work_dir, defines=None):
+    """Compile fmus/common/feedaxis_fmi_host.c for this FMU's variables; return the .so.
+    ``defines``: a standalone FMU's constants, else the Python that builds (its paths)."""
     rows = [f'    {{{vr}, \'{kind}\', {int(real)}, "{variable}"}},'
             for vr, kind, real, variable in variables]
     (work_dir / "feedaxis_fmi_vars.h").write_text(
@@ -162,12 +184,14 @@ def _compile_host_layer(sources, variables, work_dir):
         "static const FeedaxisVar FEEDAXIS_VARS[] = {\n" + "\n".join(rows) + "\n};\n"
         "#define FEEDAXIS_N_VARS (sizeof FEEDAXIS_VARS / sizeof FEEDAXIS_VARS[0])\n",
         encoding="utf-8")
+    defines = {**(defines or {"FEEDAXIS_PYTHON": sys.executable,
+                              "FEEDAXIS_LIBPYTHON": libpython_path()}),
+               "FEEDAXIS_PYTHON_VERSION": f"{sys.version_info.major}.{sys.version_info.minor}"}
     output = work_dir / "host.so"
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     command = [compiler, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-Wall",
                f"-I{sysconfig.get_paths()['include']}", f"-I{sources / 'common' / 'fmi2'}",
-               f"-I{work_dir}",
-               f'-DFEEDAXIS_PYTHON="{sys.executable}"', f'-DFEEDAXIS_LIBPYTHON="{_libpython()}"',
+               f"-I{work_dir}", *(f'-D{name}="{value}"' for name, value in defines.items()),
                "-o", str(output), str(sources / "common" / "feedaxis_fmi_host.c"),
                "-ldl", "-lpthread"]
     result = subprocess.run(command, capture_output=True, text=True)
@@ -176,7 +200,7 @@ def _compile_host_layer(sources, variables, work_dir):
     return output
 
 
-def _libpython():
+def libpython_path():
     """Path of this Python's shared library ('' for a Python built without one)."""
     if not sysconfig.get_config_var("Py_ENABLE_SHARED"):
         return ""
