@@ -84,7 +84,6 @@ static struct {
     PyGILState_STATE (*gil_ensure)(void);
     void (*gil_release)(PyGILState_STATE);
     PyObject *(*import)(const char *);
-    PyObject *(*add_module)(const char *);
     PyObject *(*get_attr)(PyObject *, const char *);
     PyObject *(*call)(PyObject *, PyObject *);
     PyObject *(*tuple_new)(Py_ssize_t);
@@ -93,8 +92,6 @@ static struct {
     Py_ssize_t (*tuple_size)(PyObject *);
     PyObject *(*list_get)(PyObject *, Py_ssize_t);
     Py_ssize_t (*list_size)(PyObject *);
-    int (*list_append)(PyObject *, PyObject *);
-    int (*contains)(PyObject *, PyObject *);
     PyObject *(*dict_get)(PyObject *, const char *);
     PyObject *(*sys_get)(const char *);
     PyObject *(*from_double)(double);
@@ -119,12 +116,11 @@ static struct {
 static void resolve_python_api(void)
 {
     py.ready = FIND(gil_ensure, "PyGILState_Ensure") && FIND(gil_release, "PyGILState_Release")
-        && FIND(import, "PyImport_ImportModule") && FIND(add_module, "PyImport_AddModule")
-        && FIND(get_attr, "PyObject_GetAttrString") && FIND(call, "PyObject_CallObject")
+        && FIND(import, "PyImport_ImportModule") && FIND(get_attr, "PyObject_GetAttrString")
+        && FIND(call, "PyObject_CallObject")
         && FIND(tuple_new, "PyTuple_New") && FIND(tuple_set, "PyTuple_SetItem")
         && FIND(tuple_get, "PyTuple_GetItem") && FIND(tuple_size, "PyTuple_Size")
         && FIND(list_get, "PyList_GetItem") && FIND(list_size, "PyList_Size")
-        && FIND(list_append, "PyList_Append") && FIND(contains, "PySequence_Contains")
         && FIND(dict_get, "PyDict_GetItemString") && FIND(sys_get, "PySys_GetObject")
         && FIND(from_double, "PyFloat_FromDouble") && FIND(as_double, "PyFloat_AsDouble")
         && FIND(as_long, "PyLong_AsLong") && FIND(from_string, "PyUnicode_FromString")
@@ -133,6 +129,21 @@ static void resolve_python_api(void)
         && FIND(err_fetch, "PyErr_Fetch") && FIND(err_clear, "PyErr_Clear")
         && FIND(str, "PyObject_Str") && FIND(is_initialized, "Py_IsInitialized")
         && FIND(none, "_Py_NoneStruct");
+}
+
+/* The pending Python exception's text in ``text``; clears it. Holds the GIL. */
+static void take_python_error(char *text, size_t size)
+{
+    PyObject *type = NULL, *value = NULL, *traceback = NULL;
+    py.err_fetch(&type, &value, &traceback);
+    PyObject *message = value ? py.str(value) : NULL;
+    const char *reason = message ? py.as_utf8(message) : NULL;
+    snprintf(text, size, "%s", reason ? reason : "(no message)");
+    if (py.err_occurred()) py.err_clear();
+    if (message) py.decref(message);
+    if (type) py.decref(type);
+    if (value) py.decref(value);
+    if (traceback) py.decref(traceback);
 }
 
 /* ---- loading Python and pythonfmu's library ---------------------------------------- */
@@ -253,26 +264,34 @@ static int find_runtime(const char *resources)
     return 0;
 }
 
+/* feedaxis_fmu_runtime.join(runtime): this FMU's runtime joins the interpreter (its module,
+ * fmus/common/feedaxis_fmu_runtime.py, is carried in the runtime's site-packages). */
+static int join_runtime(void)
+{
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *module = py.import(RUNTIME_MARK);
+    PyObject *join = module ? py.get_attr(module, "join") : NULL;
+    PyObject *args = join ? py.tuple_new(1) : NULL;
+    PyObject *result = NULL;
+    if (args && py.tuple_set(args, 0, py.from_path(runtime)) == 0) result = py.call(join, args);
+    char reason[512] = "";
+    if (!result) take_python_error(reason, sizeof reason);
+    if (result) py.decref(result);
+    if (args) py.decref(args);
+    if (join) py.decref(join);
+    if (module) py.decref(module);
+    py.gil_release(gil);
+    return result ? 0 : fail("cannot use this FMU's own Python: %s", reason);
+}
+
 /* Start the Python this FMU carries (its libpython loaded already, by this FMU or another
- * of the same minor version) and mark it as a standalone FMU's. */
+ * of the same minor version). */
 static int start_own_python(void)
 {
     if (start_interpreter(1, runtime, "this FMU's own Python") != 0) return -1;
     resolve_python_api();
     if (!py.ready) return fail("this FMU's own libpython lacks a function the layer calls");
-    PyGILState_STATE gil = py.gil_ensure();
-    py.add_module(RUNTIME_MARK);
-    py.gil_release(gil);
-    return 0;
-}
-
-/* Put ``folder`` at the end of sys.path (once); holds the GIL. */
-static void append_path(const char *folder)
-{
-    PyObject *path = py.sys_get("path"), *entry = py.from_path(folder);
-    if (path && entry && py.contains(path, entry) == 0) py.list_append(path, entry);
-    if (entry) py.decref(entry);
-    if (py.err_occurred()) py.err_clear();
+    return join_runtime();
 }
 
 /* The names of FEEDAXIS_REQUIRED_MODULES the running Python cannot import, in ``missing``;
@@ -297,23 +316,17 @@ static void find_missing(char *missing, size_t size)
     if (py.err_occurred()) py.err_clear();
 }
 
-/* Python runs already: join the runtime another standalone FMU started, or check that the
- * host's own Python imports what this FMU needs. */
+/* Python runs already: join the interpreter another standalone FMU started, or check that
+ * the host's own Python imports what this FMU needs. */
 static int use_running_python(void)
 {
     resolve_python_api();
     if (!py.ready) return fail("the Python running in this process lacks a function the layer calls");
     PyGILState_STATE gil = py.gil_ensure();
     PyObject *modules = py.sys_get("modules");
-    int joined = modules && py.dict_get(modules, RUNTIME_MARK);
+    int started_by_a_standalone_fmu = modules && py.dict_get(modules, RUNTIME_MARK);
     char missing[512] = "", executable[512] = "?";
-    if (joined) {
-        char folder[4200];
-        snprintf(folder, sizeof folder, "%s/lib/python%s/lib-dynload", runtime, FEEDAXIS_PYTHON_VERSION);
-        append_path(folder);
-        snprintf(folder, sizeof folder, "%s/lib/python%s/site-packages", runtime, FEEDAXIS_PYTHON_VERSION);
-        append_path(folder);
-    } else {
+    if (!started_by_a_standalone_fmu) {
         find_missing(missing, sizeof missing);
         PyObject *program = py.sys_get("executable");
         const char *text = program ? py.as_utf8(program) : NULL;
@@ -321,6 +334,7 @@ static int use_running_python(void)
         if (py.err_occurred()) py.err_clear();
     }
     py.gil_release(gil);
+    if (started_by_a_standalone_fmu) return join_runtime();
     if (*missing)
         return fail("the Python running in this process (%s) cannot import %s, which this FMU "
                     "needs: install it there, or run the FMU in a host that is not a Python "
@@ -699,19 +713,10 @@ static int read_outputs(Guard *g, PyObject *outputs)
 /* A Python exception out of the exchange function is a bug: fmi2Fatal with its text. */
 static fmi2Status exchange_failed(Guard *g)
 {
-    PyObject *type = NULL, *value = NULL, *traceback = NULL;
-    py.err_fetch(&type, &value, &traceback);
-    PyObject *text = value ? py.str(value) : NULL;
-    const char *reason = text ? py.as_utf8(text) : NULL;
-    char message[512];
-    snprintf(message, sizeof message, "doStep: internal error in the slave's exchange: %s",
-             reason ? reason : "(no message)");
+    char reason[400], message[512];
+    take_python_error(reason, sizeof reason);
+    snprintf(message, sizeof message, "doStep: internal error in the slave's exchange: %s", reason);
     tell_host(g, fmi2Fatal, NULL, message);
-    if (py.err_occurred()) py.err_clear();
-    if (text) py.decref(text);
-    if (type) py.decref(type);
-    if (value) py.decref(value);
-    if (traceback) py.decref(traceback);
     return fmi2Fatal;
 }
 

@@ -19,6 +19,7 @@ but not in plain C hosts, and a warning says so once. Under CI the host layer is
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
 import math
 import os
@@ -103,17 +104,24 @@ SI_UNITS = {
 }
 
 
-def build_fmus(out_dir, names=FMU_NAMES, standalone=False):
+def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None):
     """Build the named FMUs into ``out_dir``; return their paths. ``standalone``: each
-    carries the Python its step path needs (:mod:`feedaxis.fmu_standalone`)."""
+    carries the Python its step path needs (:mod:`feedaxis.fmu_standalone`); ``progress``
+    is called after each FMU."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    if not standalone:
-        return [build_fmu(name, out_dir) for name in names]
-    from .fmu_standalone import RuntimeBuilder
+    with contextlib.ExitStack() as stack:
+        runtime = None
+        if standalone:
+            from .fmu_standalone import RuntimeBuilder
 
-    with RuntimeBuilder() as runtime:
-        return [build_fmu(name, out_dir, runtime) for name in names]
+            runtime = stack.enter_context(RuntimeBuilder())
+        paths = []
+        for name in names:
+            paths.append(build_fmu(name, out_dir, runtime))
+            if progress:
+                progress()
+        return paths
 
 
 def build_fmu(name, out_dir, runtime=None):

@@ -42,6 +42,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from .fmu_build import fmu_sources, libpython_path
+
 RUNTIME = "python"  # binaries/linux64/<RUNTIME>: the CPython prefix inside a standalone FMU
 RUNTIME_ROOT = f"binaries/linux64/{RUNTIME}"
 PYTHON_VERSION = f"{sys.version_info.major}.{sys.version_info.minor}"
@@ -59,6 +61,8 @@ STDLIB_LEFT_OUT = frozenset({
     "ensurepip", "distutils", "venv", "pydoc_data", "site-packages", "lib-dynload",
     "__pycache__", f"config-{PYTHON_VERSION}-{sys.implementation._multiarch}"})
 EXTENSION_LEFT_OUT = ("_test", "_xx", "xx", "_ctypes_test")
+RUNTIME_MODULE = "feedaxis_fmu_runtime"  # fmus/common/: standalone FMUs sharing one Python
+MANIFEST = "feedaxis-runtime.json"  # feedaxis_fmu_runtime.MANIFEST: what the runtime carries
 
 
 class StandaloneUnavailable(RuntimeError):
@@ -163,8 +167,6 @@ def _lib_dynload():
 
 
 def _libpython():
-    from .fmu_build import libpython_path
-
     return Path(libpython_path())
 
 
@@ -201,6 +203,8 @@ class RuntimeBuilder:
     def add_runtime(self, fmu_path, trace):
         """Rewrite ``fmu_path`` with the runtime ``trace`` asks for in ``binaries/linux64/python``."""
         files = dict(self._shared_files())
+        runtime_module = fmu_sources() / "common" / f"{RUNTIME_MODULE}.py"
+        files[Path(SITE_PACKAGES) / runtime_module.name] = (runtime_module, runtime_module)
         for source in trace.extensions:
             files[Path(LIB_DYNLOAD) / source.name] = (self._stripped(source), source)
         for source, target in trace.site_files.items():
@@ -218,6 +222,7 @@ class RuntimeBuilder:
                 shutil.copyfile(content, runtime / target)
                 origins[runtime / target] = origin
             self._add_libraries(unpacked, runtime, origins)
+            (runtime / MANIFEST).write_text(json.dumps(_manifest(trace)), encoding="utf-8")
             _write_folder(fmu_path, unpacked)
 
     # -- the shared part ----------------------------------------------------------------
@@ -316,6 +321,22 @@ class RuntimeBuilder:
             origin = "$ORIGIN" if to_lib == "." else f"$ORIGIN/{to_lib}"
             subprocess.run([patchelf_program(), "--force-rpath", option, origin, str(path)],
                            check=True, capture_output=True)
+
+
+def is_standalone(fmu_path):
+    """Whether the FMU carries its own Python (a standalone FMU)."""
+    with zipfile.ZipFile(fmu_path) as archive:
+        return f"{RUNTIME_ROOT}/{MANIFEST}" in archive.namelist()
+
+
+def _manifest(trace):
+    """The runtime's Python and package versions: standalone FMUs share an interpreter only
+    when these agree (feedaxis_fmu_runtime.join)."""
+    from importlib.metadata import packages_distributions, version
+
+    distributions = packages_distributions()
+    return {"python": sys.version.split()[0],
+            "packages": {name: version(distributions[name][0]) for name in trace.packages}}
 
 
 def _is_elf(path):
