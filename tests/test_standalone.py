@@ -153,32 +153,65 @@ def test_fmpy_gives_the_same_outputs_standalone_or_not(standalone, fmu_paths, na
         np.testing.assert_array_equal(runs[0][output], runs[1][output])
 
 
-def test_two_instances_of_a_standalone_fmu_in_a_c_host_without_python(standalone, fmu_paths,
-                                                                      bare_root, tmp_path):
-    """A C host (tests/fmi_c_host.c) steps two instances of NpidServo in the root, as the
-    same host does with the FMU that uses this machine's Python."""
+@pytest.fixture(scope="module")
+def c_host(bare_root):
+    """tests/fmi_c_host.c compiled into the root (it needs only glibc)."""
     program = bare_root / "fmi_c_host"
     subprocess.run(["cc", "-O2", f"-I{FMU_SOURCES / 'common' / 'fmi2'}", "-o", str(program),
                     str(ROOT / "tests" / "fmi_c_host.c"), "-ldl"], check=True)
-    outputs = {}
-    for kind, path, unpacked, where in (
-            ("standalone", standalone["NpidServo"], bare_root / "tmp" / "servo", "/tmp/servo"),
-            ("not standalone", fmu_paths["NpidServo"], tmp_path / "servo", tmp_path / "servo")):
+    return program
+
+
+def c_host_command(fmu_path, unpacked, outputs, n_instances=2, n_steps=300):
+    """Arguments of tests/fmi_c_host.c: ``n_steps`` of 1 ms with the first input at 1."""
+    description = read_model_description(str(fmu_path))
+    variables = [v for v in description.modelVariables]
+    first_input = next(v for v in variables if v.causality == "input")
+    return [str(unpacked), description.coSimulation.modelIdentifier, description.guid, "0.001",
+            str(n_steps), str(n_instances), f"{first_input.valueReference}=1.0",
+            ",".join(str(v.valueReference) for v in variables if v.name in outputs)]
+
+
+def outputs_of(run):
+    assert run.returncode == 0, run.stdout[-2000:]
+    return [line.split()[1:] for line in run.stdout.splitlines() if line.startswith("output")]
+
+
+def test_two_instances_of_a_standalone_fmu_in_a_c_host_without_python(standalone, fmu_paths,
+                                                                      bare_root, c_host,
+                                                                      tmp_path):
+    """A C host (tests/fmi_c_host.c) steps two instances of NpidServo in the root, as the
+    same host does with the FMU that uses this machine's Python."""
+    outputs = ("position_mm", "velocity_mm_s")
+    for path, unpacked in ((standalone["NpidServo"], bare_root / "tmp" / "servo"),
+                           (fmu_paths["NpidServo"], tmp_path / "servo")):
         with zipfile.ZipFile(path) as archive:
             archive.extractall(unpacked)
-        description = read_model_description(str(path))
-        vr = {v.name: v.valueReference for v in description.modelVariables}
-        command = [str(where), "NpidServo", description.guid, "0.001", "300", "2",
-                   f"{vr['position_ref_mm']}=1.0",
-                   ",".join(str(vr[n]) for n in ("position_mm", "velocity_mm_s"))]
-        run = (chroot(bare_root, "/fmi_c_host", *command) if kind == "standalone" else
-               subprocess.run([str(program), *command], capture_output=True, text=True))
-        assert run.returncode == 0, run.stdout[-2000:]
-        outputs[kind] = [line.split()[1:] for line in run.stdout.splitlines()
-                         if line.startswith("output")]
-    by_instance = {i: [v for k, _, v in outputs["standalone"] if k == i] for i in ("0", "1")}
+    alone = outputs_of(chroot(bare_root, "/fmi_c_host", *c_host_command(
+        standalone["NpidServo"], "/tmp/servo", outputs)))
+    not_alone = outputs_of(subprocess.run(
+        [str(c_host), *c_host_command(fmu_paths["NpidServo"], tmp_path / "servo", outputs)],
+        capture_output=True, text=True))
+    by_instance = {i: [v for k, _, v in alone if k == i] for i in ("0", "1")}
     assert by_instance["0"] == by_instance["1"] and float(by_instance["0"][0]) > 0.5
-    assert outputs["standalone"] == outputs["not standalone"]
+    assert alone == not_alone
+
+
+def test_a_standalone_fmu_ignores_the_pythons_of_the_machine_it_runs_on(standalone, c_host,
+                                                                        tmp_path):
+    """Outside the root, with a virtual environment's python first on PATH and Python's
+    variables pointing elsewhere, a C host still gets the FMU's own Python: it starts
+    isolated, its program name inside the FMU (a bare one would be looked up on PATH and
+    the environment found there would become its prefix, without the FMU's packages)."""
+    with zipfile.ZipFile(standalone["StepperError"]) as archive:
+        archive.extractall(tmp_path / "motor")
+    environment = dict(os.environ, PATH=f"{Path(sys.executable).parent}:{os.environ['PATH']}",
+                       PYTHONHOME="/nonexistent", PYTHONPATH="/nonexistent",
+                       VIRTUAL_ENV=sys.prefix)
+    run = subprocess.run([str(c_host), *c_host_command(standalone["StepperError"],
+                                                        tmp_path / "motor", ("error_um",))],
+                         capture_output=True, text=True, env=environment)
+    assert len(outputs_of(run)) == 2
 
 
 def test_standalone_fmus_of_every_kind_share_a_python_host(standalone, fmu_paths):

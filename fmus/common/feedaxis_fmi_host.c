@@ -205,8 +205,18 @@ static int start_interpreter(int isolated, const char *path, const char *which)
     init_config(&config);
     config.install_signal_handlers = 0; /* the host owns SIGINT */
     config.parse_argv = 0;
-    if (isolated) config.write_bytecode = 0; /* the FMU's folder may be read-only */
-    PyStatus status = set_string(&config, isolated ? &config.home : &config.program_name, path);
+    PyStatus status;
+    if (isolated) {
+        /* the prefix, and a program name inside it: a bare name would be looked up on PATH,
+         * and a virtual environment found there would become sys.prefix */
+        char program[4200];
+        snprintf(program, sizeof program, "%s/bin/python%s", path, FEEDAXIS_PYTHON_VERSION);
+        config.write_bytecode = 0; /* the FMU's folder may be read-only */
+        status = set_string(&config, &config.home, path);
+        if (!is_exception(status)) status = set_string(&config, &config.program_name, program);
+    } else {
+        status = set_string(&config, &config.program_name, path);
+    }
     if (!is_exception(status)) status = initialize(&config);
     clear(&config);
     if (is_exception(status))
