@@ -4,9 +4,11 @@
  * the host to have loaded libpython, which only Python hosts do. This layer
  *   1. loads libpython RTLD_GLOBAL when the host has not (a plain C host such as
  *      fmuCheck or OMSimulator) and starts the interpreter that built the FMU (its
- *      program name finds the virtual environment, so numpy and scipy import), never
- *      finalising it: finalisation runs libgfortran's close_units on a heap pythonfmu has
- *      already damaged, and the process is ending anyway;
+ *      program name finds the virtual environment, so numpy and scipy import) or, in a
+ *      standalone FMU, the one the FMU carries (FEEDAXIS_RUNTIME), never finalising it:
+ *      finalisation runs libgfortran's close_units on a heap pythonfmu has already
+ *      damaged, and the process is ending anyway; a Python of another minor version than
+ *      the one the layer is compiled against is refused;
  *   2. forwards every fmi2 function to pythonfmu's library, guarding the FMI state machine:
  *      a fixed parameter or an output set after initialisation is refused with fmi2Error,
  *      a call made after fmi2Fatal is refused without reaching pythonfmu (whose instance
@@ -21,10 +23,13 @@
  *      pythonfmu makes three, each building Python lists (about 6 of its 7.5 us per step).
  *      Any other call first hands pending inputs to the slave through pythonfmu.
  *
- * Build-time constants (-D): FEEDAXIS_PYTHON (the interpreter to start) and
- * FEEDAXIS_LIBPYTHON (its shared library); the environment variables of the same names
- * override them on the host. The per-FMU variable table comes from feedaxis_fmi_vars.h. Python is reached
- * only through dlsym, so the library loads in a host without libpython.
+ * Build-time constants (-D): FEEDAXIS_PYTHON_VERSION (major.minor of the C API compiled
+ * against); FEEDAXIS_PYTHON (the interpreter to start) and FEEDAXIS_LIBPYTHON (its shared
+ * library), which the environment variables of the same names override on the host; or, for
+ * a standalone FMU, FEEDAXIS_RUNTIME (its CPython's folder in binaries/linux64),
+ * FEEDAXIS_LIBPYTHON_NAME and FEEDAXIS_REQUIRED_MODULES (what a Python host must import).
+ * The per-FMU variable table comes from feedaxis_fmi_vars.h. Python is reached only through
+ * dlsym, so the library loads in a host without libpython.
  */
 #define _GNU_SOURCE
 #define PY_SSIZE_T_CLEAN
