@@ -129,7 +129,8 @@ int main(int argc, char **argv)
     if (n_steps > 0) printf("step_us %.3f\n", 1e6 * (now_s() - started) / (n_steps * n_instances));
     for (int i = 0; i < n_instances; ++i) {
         CHECK(fmi2GetReal(instances[i], out_vr, n_out, out_values));
-        for (size_t j = 0; j < n_out; ++j) printf("output %d %u %.17g\n", i, out_vr[j], out_values[j]);
+        for (size_t j = 0; j < n_out; ++j)
+            printf("output %d %u %.17g\n", i, out_vr[j], out_values[j]);
         CHECK(fmi2Terminate(instances[i]));
         fmi2FreeInstance(instances[i]);
     }

@@ -225,7 +225,7 @@ static int start_interpreter(int isolated, const char *path, const char *which)
     if (!is_exception(status)) status = initialize(&config);
     clear(&config);
     if (is_exception(status))
-        return fail("cannot start %s: %s", which, status.err_msg ? status.err_msg : "unknown error");
+        return fail("cannot start %s: %s", which, status.err_msg ? status.err_msg : "no reason");
     save_thread(); /* pythonfmu takes the GIL with PyGILState_Ensure */
     return 0;
 }
@@ -319,10 +319,12 @@ static void find_missing(char *missing, size_t size)
     for (char *name = strtok(names, " "); name && find_spec; name = strtok(NULL, " ")) {
         PyObject *args = py.tuple_new(1);
         PyObject *spec = NULL;
-        if (args && py.tuple_set(args, 0, py.from_string(name)) == 0) spec = py.call(find_spec, args);
+        if (args && py.tuple_set(args, 0, py.from_string(name)) == 0)
+            spec = py.call(find_spec, args);
         if (args) py.decref(args);
         if (!spec || spec == py.none)
-            snprintf(missing + strlen(missing), size - strlen(missing), "%s%s", *missing ? ", " : "", name);
+            snprintf(missing + strlen(missing), size - strlen(missing), "%s%s",
+                     *missing ? ", " : "", name);
         if (spec) py.decref(spec);
         if (py.err_occurred()) py.err_clear();
     }
@@ -336,7 +338,7 @@ static void find_missing(char *missing, size_t size)
 static int use_running_python(void)
 {
     resolve_python_api();
-    if (!py.ready) return fail("the Python running in this process lacks a function the layer calls");
+    if (!py.ready) return fail("the Python in this process lacks a function the layer calls");
     PyGILState_STATE gil = py.gil_ensure();
     PyObject *modules = py.sys_get("modules");
     int started_by_a_standalone_fmu = modules && py.dict_get(modules, RUNTIME_MARK);
@@ -394,7 +396,8 @@ static int start_python(const char *resources)
     if (get_version) { /* a Python host, or another FMU loaded one */
         if (check_version(get_version(), "the Python loaded in this process") != 0) return -1;
     } else {
-        const char *libpython = setting("FEEDAXIS_LIBPYTHON", FEEDAXIS_LIBPYTHON, which, sizeof which);
+        const char *libpython =
+            setting("FEEDAXIS_LIBPYTHON", FEEDAXIS_LIBPYTHON, which, sizeof which);
         if (!*libpython)
             return fail("the Python that built this FMU has no shared libpython: set "
                         "FEEDAXIS_LIBPYTHON to a CPython %s libpython (and FEEDAXIS_PYTHON)",

@@ -33,6 +33,8 @@ import zipfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from .fmu_standalone import libpython_path
+
 FMU_NAMES = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 PHYSICS_PACKAGE = "feedaxis_fmu_physics"
 ADAPTER_MODULE = "feedaxis_slave"
@@ -115,7 +117,7 @@ def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None):
         if standalone:
             from .fmu_standalone import RuntimeBuilder
 
-            runtime = stack.enter_context(RuntimeBuilder())
+            runtime = stack.enter_context(RuntimeBuilder(fmu_sources()))
         paths = []
         for name in names:
             paths.append(build_fmu(name, out_dir, runtime))
@@ -193,7 +195,7 @@ def _compile_host_layer(sources, variables, work_dir, defines=None):
         "#define FEEDAXIS_N_VARS (sizeof FEEDAXIS_VARS / sizeof FEEDAXIS_VARS[0])\n",
         encoding="utf-8")
     defines = {**(defines or {"FEEDAXIS_PYTHON": sys.executable,
-                              "FEEDAXIS_LIBPYTHON": libpython_path()}),
+                              "FEEDAXIS_LIBPYTHON": libpython_path() or ""}),
                "FEEDAXIS_PYTHON_VERSION": f"{sys.version_info.major}.{sys.version_info.minor}"}
     output = work_dir / "host.so"
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
@@ -206,13 +208,6 @@ def _compile_host_layer(sources, variables, work_dir, defines=None):
     if result.returncode != 0:
         raise RuntimeError(f"compiling the FMU host layer failed:\n{result.stderr}")
     return output
-
-
-def libpython_path():
-    """Path of this Python's shared library ('' for a Python built without one)."""
-    if not sysconfig.get_config_var("Py_ENABLE_SHARED"):
-        return ""
-    return str(Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME"))
 
 
 def _install_host_layer(fmu_path, name, host_library):

@@ -42,8 +42,6 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from .fmu_build import fmu_sources, libpython_path
-
 RUNTIME = "python"  # binaries/linux64/<RUNTIME>: the CPython prefix inside a standalone FMU
 RUNTIME_ROOT = f"binaries/linux64/{RUNTIME}"
 PYTHON_VERSION = f"{sys.version_info.major}.{sys.version_info.minor}"
@@ -61,6 +59,9 @@ STDLIB_LEFT_OUT = frozenset({
     "ensurepip", "distutils", "venv", "pydoc_data", "site-packages", "lib-dynload",
     "__pycache__", f"config-{PYTHON_VERSION}-{sys.implementation._multiarch}"})
 EXTENSION_LEFT_OUT = ("_test", "_xx", "xx", "_ctypes_test")
+# The installed packages an FMU's Python may use: the physics core's (a standalone FMU
+# carries what it imports of them; any other import is optional and hidden from its trace)
+FMU_PACKAGES = ("numpy", "scipy")
 RUNTIME_MODULE = "feedaxis_fmu_runtime"  # fmus/common/: standalone FMUs sharing one Python
 MANIFEST = "feedaxis-runtime.json"  # feedaxis_fmu_runtime.MANIFEST: what the runtime carries
 
@@ -83,7 +84,7 @@ def standalone_missing():
     """Why this machine cannot build standalone FMUs (None when it can)."""
     if sys.platform != "linux" or sys.implementation._multiarch != "x86_64-linux-gnu":
         return f"standalone FMUs are built on x86-64 Linux only, not {sys.platform}"
-    if not sysconfig.get_config_var("Py_ENABLE_SHARED"):
+    if libpython_path() is None:
         return f"this Python ({sys.executable}) has no shared libpython to carry"
     try:
         import auditwheel.lddtree  # noqa: F401
@@ -111,14 +112,16 @@ class Trace:
 
 
 def trace_fmu(fmu_path, class_name, input_csv):
-    """Run the FMU's slave in a fresh interpreter (:mod:`feedaxis.fmu_trace`); its :class:`Trace`."""
+    """Run the FMU's slave in a fresh interpreter (:mod:`feedaxis.fmu_trace`), every installed
+    package but :data:`FMU_PACKAGES` hidden; its :class:`Trace`."""
     with tempfile.TemporaryDirectory(prefix="feedaxis_trace_") as work:
         work = Path(work)
         with zipfile.ZipFile(fmu_path) as archive:
             archive.extractall(work, [n for n in archive.namelist() if n.startswith("resources/")])
         result = work / "trace.json"
         run = subprocess.run([sys.executable, "-I", str(Path(__file__).with_name("fmu_trace.py")),
-                              str(work / "resources"), class_name, str(input_csv), str(result)],
+                              str(work / "resources"), class_name, str(input_csv),
+                              ",".join(FMU_PACKAGES), str(result)],
                              capture_output=True, text=True)
         if run.returncode != 0:
             raise RuntimeError(f"tracing {Path(fmu_path).name}'s step path failed:\n{run.stderr}")
@@ -130,7 +133,8 @@ def _site_folders():
     """The folders third-party packages are installed in, longest first."""
     import site
 
-    folders = {*site.getsitepackages(), sysconfig.get_path("purelib"), sysconfig.get_path("platlib")}
+    folders = {*site.getsitepackages(), sysconfig.get_path("purelib"),
+               sysconfig.get_path("platlib")}
     return sorted({Path(f).resolve() for f in folders}, key=lambda p: -len(p.parts))
 
 
@@ -147,7 +151,8 @@ def _classify(loaded, resources):
     site_files, extensions, packages = {}, set(), set()
     named = {Path(file).resolve(): name for name, file in loaded["modules"].items()}
     for file in {*named, *(Path(f).resolve() for f in loaded["opened"])}:
-        if file.is_relative_to(resources) or not file.is_file() or file.parent.name == "__pycache__":
+        if (file.is_relative_to(resources) or not file.is_file()
+                or file.parent.name == "__pycache__"):
             continue
         if file.is_relative_to(_lib_dynload()):
             extensions.add(file)
@@ -166,8 +171,11 @@ def _lib_dynload():
     return Path(sysconfig.get_config_var("DESTSHARED")).resolve()
 
 
-def _libpython():
-    return Path(libpython_path())
+def libpython_path():
+    """This Python's shared library (None for a Python built without one)."""
+    if not sysconfig.get_config_var("Py_ENABLE_SHARED"):
+        return None
+    return Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME")
 
 
 def host_layer_defines(trace):
@@ -182,10 +190,12 @@ class RuntimeBuilder:
     library compiled, libpython and the baseline-only extension modules stripped) is made
     once, in a temporary folder removed by :meth:`close`."""
 
-    def __init__(self):
+    def __init__(self, sources):
+        """``sources``: the ``fmus`` folder (fmu_build.fmu_sources)."""
         missing = standalone_missing()
         if missing:
             raise StandaloneUnavailable(missing)
+        self._sources = Path(sources)
         self._work = Path(tempfile.mkdtemp(prefix="feedaxis_runtime_"))
         self._baseline = baseline()
         self._shared = None
@@ -201,9 +211,9 @@ class RuntimeBuilder:
         self.close()
 
     def add_runtime(self, fmu_path, trace):
-        """Rewrite ``fmu_path`` with the runtime ``trace`` asks for in ``binaries/linux64/python``."""
+        """Rewrite ``fmu_path`` with the runtime ``trace`` asks for in :data:`RUNTIME_ROOT`."""
         files = dict(self._shared_files())
-        runtime_module = fmu_sources() / "common" / f"{RUNTIME_MODULE}.py"
+        runtime_module = self._sources / "common" / f"{RUNTIME_MODULE}.py"
         files[Path(SITE_PACKAGES) / runtime_module.name] = (runtime_module, runtime_module)
         for source in trace.extensions:
             files[Path(LIB_DYNLOAD) / source.name] = (self._stripped(source), source)
@@ -231,7 +241,8 @@ class RuntimeBuilder:
         """{bundle path: (file to copy, original)}: libpython, the standard library,
         the baseline-only extension modules."""
         if self._shared is None:
-            shared = {Path("lib") / _libpython().name: (self._stripped(_libpython()), _libpython())}
+            libpython = libpython_path()
+            shared = {Path("lib") / libpython.name: (self._stripped(libpython), libpython)}
             stdlib = Path(sysconfig.get_paths()["stdlib"])
             for source in sorted(stdlib.rglob("*.py")):
                 relative = source.relative_to(stdlib)
@@ -306,7 +317,7 @@ class RuntimeBuilder:
                     origins[target] = Path(found.path)
                     carried.add(target.name)
                     pending.append(target)
-        interpreter = {lib / _libpython().name, *(runtime / LIB_DYNLOAD).glob("*.so")}
+        interpreter = {lib / libpython_path().name, *(runtime / LIB_DYNLOAD).glob("*.so")}
         self._point_to(lib, interpreter, "--set-rpath")
         self._point_to(lib, needs_lib - interpreter, "--add-rpath")
 

@@ -10,7 +10,8 @@ and once with every Real parameter that defaults to 0 set to 1, so the branches 
 switch (NPID, friction) run too. Errors the slave logs (a refused long step) are part of
 the path.
 
-Usage: ``python -I fmu_trace.py RESOURCES CLASS INPUT_CSV OUT_JSON``; writes
+Usage: ``python -I fmu_trace.py RESOURCES CLASS INPUT_CSV ALLOWED OUT_JSON``, ALLOWED the
+installed packages the FMU may use (comma-separated; others are hidden); writes
 ``{"modules": {name: file}, "opened": [file], "libraries": [file]}``: the modules imported
 and files opened after start-up, and the shared libraries mapped at the end.
 """
@@ -20,9 +21,6 @@ import json
 import sys
 
 HANDOFF_MODULE = "feedaxis_fmu_handoff"  # feedaxis_slave.HANDOFF_MODULE
-# Hidden as on a host without feedaxis: an FMU carries its own copy of the physics, which
-# takes feedaxis's error class only where feedaxis is installed.
-HIDDEN_PACKAGE = "feedaxis"
 LONG_STEP_S = 1000.0
 SHORT_RUN_ROWS = 50
 
@@ -91,14 +89,28 @@ def drive(slave_class, resources, parameters, times, inputs, n_rows):
     slave.terminate()
 
 
-class HidePackage:
-    """A meta path finder that makes :data:`HIDDEN_PACKAGE` unimportable."""
+class OnlyAllowed:
+    """A meta path finder that hides every installed package but the allowed ones, as on a
+    host that has only those: the FMU carries its own copy of the physics, which takes
+    optional helpers (feedaxis's error class, threadpoolctl) only where they are installed.
+    The standard library, the FMU's own resources and private modules stay visible."""
 
-    @staticmethod
-    def find_spec(name, path=None, target=None):
-        if name.split(".")[0] == HIDDEN_PACKAGE:
+    def __init__(self, allowed):
+        self.allowed = set(allowed)
+
+    def find_spec(self, name, path=None, target=None):
+        top = name.split(".")[0]
+        if not (top in self.allowed or top in sys.stdlib_module_names or top.startswith("_")
+                or top in sys.builtin_module_names):
             raise ModuleNotFoundError(f"{name} is hidden from the trace", name=name)
         return None
+
+
+def own_modules(resources):
+    """The top-level modules the FMU carries in ``resources``."""
+    import pkgutil
+
+    return [module.name for module in pkgutil.iter_modules([resources])]
 
 
 def mapped_libraries():
@@ -107,7 +119,7 @@ def mapped_libraries():
         return sorted({line.split()[-1] for line in maps if ".so" in line.split()[-1]})
 
 
-def main(resources, class_name, input_csv, out_json):
+def main(resources, class_name, input_csv, allowed, out_json):
     times, inputs = read_inputs(input_csv)
     with open(f"{resources}/slavemodule.txt", encoding="utf-8") as stream:
         entry_module = stream.read().strip()
@@ -115,7 +127,7 @@ def main(resources, class_name, input_csv, out_json):
     sys.addaudithook(lambda event, args: opened.add(args[0]) if recording[0] and event == "open"
                      and isinstance(args[0], str) else None)
     started = set(sys.modules)
-    sys.meta_path.insert(0, HidePackage)
+    sys.meta_path.insert(0, OnlyAllowed([*allowed.split(","), *own_modules(resources)]))
     sys.path.insert(0, resources)
     slave_class = getattr(importlib.import_module(entry_module), class_name)
     for k, parameters in enumerate(variations(slave_class)):
