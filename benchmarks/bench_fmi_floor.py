@@ -124,7 +124,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15,
                         help="interleaved repeats (default 15)")
-    parser.add_argument("--steps", type=int, default=2000, help="macro steps per run (default 2000)")
+    parser.add_argument("--steps", type=int, default=2000,
+                        help="macro steps per run (default 2000)")
     parser.add_argument("--standalone", action="store_true",
                         help="also time the standalone FMUs (feedaxis build-fmus --standalone)")
     args = parser.parse_args()
@@ -154,14 +155,19 @@ def main():
           f"{totals['full'] / totals['empty']:>8.2f}")
     print(f"{'axis w/o servo':<16}{without_servo['full']:>10.1f}{without_servo['empty']:>10.1f}"
           f"{without_servo['full'] / without_servo['empty']:>8.2f}")
-    pair_ratios = sorted(sum(f.values()) / sum(e.values())
-                         for f, e in zip(runs["full"], runs["empty"]))
-    low, _, high = statistics.quantiles(pair_ratios, n=4)
-    print(f"full axis ratio over the {len(pair_ratios)} interleaved pairs: median "
-          f"{statistics.median(pair_ratios):.2f}, quartiles {low:.2f}-{high:.2f}, "
-          f"range {pair_ratios[0]:.2f}-{pair_ratios[-1]:.2f}")
+    print_pair_ratios("full axis ratio", runs, "full", "empty")
     if "standalone" in runs:
         print_standalone(runs, medians, totals)
+
+
+def print_pair_ratios(label, runs, kind, reference):
+    """The full axis's ratio ``kind`` / ``reference`` over the interleaved pairs."""
+    pair_ratios = sorted(sum(k.values()) / sum(r.values())
+                         for k, r in zip(runs[kind], runs[reference]))
+    low, _, high = statistics.quantiles(pair_ratios, n=4)
+    print(f"{label} over the {len(pair_ratios)} interleaved pairs: median "
+          f"{statistics.median(pair_ratios):.2f}, quartiles {low:.2f}-{high:.2f}, "
+          f"range {pair_ratios[0]:.2f}-{pair_ratios[-1]:.2f}")
 
 
 def print_standalone(runs, medians, totals):
@@ -172,11 +178,7 @@ def print_standalone(runs, medians, totals):
               f"{medians['standalone'][name] / medians['full'][name]:>12.2f}")
     print(f"{'full axis':<16}{totals['standalone']:>10.1f}"
           f"{totals['standalone'] / totals['full']:>12.2f}")
-    pair_ratios = sorted(sum(s.values()) / sum(f.values())
-                         for s, f in zip(runs["standalone"], runs["full"]))
-    low, _, high = statistics.quantiles(pair_ratios, n=4)
-    print(f"standalone / feedaxis over the {len(pair_ratios)} interleaved pairs: median "
-          f"{statistics.median(pair_ratios):.2f}, quartiles {low:.2f}-{high:.2f}")
+    print_pair_ratios("standalone / feedaxis", runs, "standalone", "full")
 
 
 if __name__ == "__main__":
