@@ -315,8 +315,9 @@ static void find_missing(char *missing, size_t size)
 {
     PyObject *util = py.import("importlib.util");
     PyObject *find_spec = util ? py.get_attr(util, "find_spec") : NULL;
-    char names[] = FEEDAXIS_REQUIRED_MODULES;
-    for (char *name = strtok(names, " "); name && find_spec; name = strtok(NULL, " ")) {
+    char names[] = FEEDAXIS_REQUIRED_MODULES, *rest = NULL;
+    for (char *name = strtok_r(names, " ", &rest); name && find_spec;
+         name = strtok_r(NULL, " ", &rest)) {
         PyObject *args = py.tuple_new(1);
         PyObject *spec = NULL;
         if (args && py.tuple_set(args, 0, py.from_string(name)) == 0)
