@@ -1,6 +1,7 @@
 """Standalone FMUs against the FMUs that use this machine's Python: size, start-up, stepping.
 
-Run: ``python benchmarks/bench_standalone.py [--repeats 9] [--steps 2000]``. It builds both
+Run: ``python benchmarks/bench_standalone.py [--repeats 9] [--steps 2000] [--instructions]``.
+It builds both
 sets of the four FMUs, compiles ``tests/fmi_c_host.c`` (a C host: no Python in the process
 until an FMU starts one) and, per FMU and repeat, runs it in a fresh process on the unpacked
 FMU, the two builds interleaved (standalone, not, standalone, ...). Each run reports the
@@ -8,8 +9,12 @@ first ``fmi2Instantiate`` (the standalone FMU starts the Python it carries, the 
 build machine's) and the µs per step (set the inputs, ``fmi2DoStep``, get the outputs) on
 the axis schedule (1 ms; the thermal screw 0.1 s, a tenth as many). It prints medians with
 quartiles, and each standalone FMU's size by part (unpacked / compressed MB).
+``--instructions`` counts instead, once per FMU and build, the instructions the host process
+executes (valgrind's callgrind: the same count whatever else the machine does) up to the end
+of initialisation and per step (from a run with no step and one with ``--steps // 4``).
 """
 import argparse
+import re
 import statistics
 import subprocess
 import sys
@@ -60,6 +65,31 @@ def measure(command):
     return float(values["instantiate_s"]), float(values["step_us"])
 
 
+def instructions(command):
+    """Instructions the host process executes, counted by callgrind."""
+    run = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
+                          *command], capture_output=True, text=True)
+    if run.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} failed under valgrind:\n{run.stderr[-3000:]}")
+    return int(re.search(r"Collected : (\d+)", run.stderr).group(1))
+
+
+def print_instructions(commands, n_steps):
+    """Instructions to the end of initialisation and per step, per FMU and build."""
+    print(f"\ninstructions (callgrind), millions: to the end of initialisation, per step "
+          f"(from {n_steps} steps)")
+    counted = {}
+    for (kind, name), command in commands.items():
+        steps = int(command[5])
+        started = instructions(command[:5] + ["0"] + command[6:])
+        stepped = instructions(command[:5] + [str(steps)] + command[6:])
+        counted[(kind, name)] = (started / 1e6, (stepped - started) / steps / 1e6)
+    for name in FMU_NAMES:
+        alone, plain = counted[("standalone", name)], counted[("not standalone", name)]
+        print(f"{name:<16}standalone {alone[0]:8.1f} {alone[1]:8.4f}   not standalone "
+              f"{plain[0]:8.1f} {plain[1]:8.4f}   per-step ratio {alone[1] / plain[1]:.3f}")
+
+
 def summary(values, scale=1.0, digits=3):
     low, middle, high = statistics.quantiles([v * scale for v in values], n=4)
     return f"{statistics.median(values) * scale:.{digits}f} ({low:.{digits}f}-{high:.{digits}f})"
@@ -77,6 +107,8 @@ def print_sizes(standalone):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=9, help="interleaved repeats (default 9)")
+    parser.add_argument("--instructions", action="store_true",
+                        help="count instructions with callgrind instead of timing")
     parser.add_argument("--steps", type=int, default=2000,
                         help="steps per run (the thermal screw's 0.1 s steps: a tenth; "
                              "default 2000)")
@@ -86,9 +118,13 @@ def main():
         sets = {"standalone": build_fmus(folder / "standalone", standalone=True),
                 "not standalone": build_fmus(folder / "plain")}
         program = compile_host(folder)
+        n_steps = args.steps // 4 if args.instructions else args.steps
         commands = {(kind, path.stem): host_command(program, path, folder / kind / path.stem,
-                                                    args.steps)
+                                                    n_steps)
                     for kind, paths in sets.items() for path in paths}
+        if args.instructions:
+            print_instructions(commands, n_steps)
+            return
         runs = {key: [] for key in commands}
         for _ in range(args.repeats):
             for key, command in commands.items():
