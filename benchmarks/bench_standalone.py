@@ -9,9 +9,10 @@ first ``fmi2Instantiate`` (the standalone FMU starts the Python it carries, the 
 build machine's) and the µs per step (set the inputs, ``fmi2DoStep``, get the outputs) on
 the axis schedule (1 ms; the thermal screw 0.1 s, a tenth as many). It prints medians with
 quartiles, and each standalone FMU's size by part (unpacked / compressed MB).
-``--instructions`` counts instead, once per FMU and build, the instructions the host process
-executes (valgrind's callgrind: the same count whatever else the machine does) up to the end
-of initialisation and per step (from a run with no step and one with ``--steps // 4``).
+``--instructions`` counts instead, once per FMU and build, the instructions executed
+(valgrind's callgrind: about the same count whatever else the machine does): by the host
+process to the end of initialisation (a run with no step), and inside fmi2SetReal,
+fmi2DoStep and fmi2GetReal per step (a run of ``--steps // 4`` steps).
 """
 import argparse
 import re
@@ -65,10 +66,15 @@ def measure(command):
     return float(values["instantiate_s"]), float(values["step_us"])
 
 
-def instructions(command):
-    """Instructions the host process executes, counted by callgrind."""
+STEP_FUNCTIONS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")
+
+
+def instructions(command, inside=()):
+    """Instructions executed by the host process (``inside``: only within these functions,
+    callees included), counted by callgrind."""
+    toggles = [f"--toggle-collect={function}" for function in inside]
     run = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
-                          *command], capture_output=True, text=True)
+                          *toggles, *command], capture_output=True, text=True)
     if run.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} failed under valgrind:\n{run.stderr[-3000:]}")
     return int(re.search(r"Collected : (\d+)", run.stderr).group(1))
@@ -82,8 +88,8 @@ def print_instructions(commands, n_steps):
     for (kind, name), command in commands.items():
         steps = int(command[5])
         started = instructions(command[:5] + ["0"] + command[6:])
-        stepped = instructions(command[:5] + [str(steps)] + command[6:])
-        counted[(kind, name)] = (started / 1e6, (stepped - started) / steps / 1e6)
+        stepping = instructions(command, STEP_FUNCTIONS)
+        counted[(kind, name)] = (started / 1e6, stepping / steps / 1e6)
     for name in FMU_NAMES:
         alone, plain = counted[("standalone", name)], counted[("not standalone", name)]
         print(f"{name:<16}standalone {alone[0]:8.1f} {alone[1]:8.4f}   not standalone "

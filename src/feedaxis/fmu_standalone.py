@@ -26,7 +26,8 @@ runs exactly what was tested, and nothing is downloaded. What goes in:
   ``patchelf`` (the interpreter's own files lose the build machine's RUNPATH).
 
 The FMU's own files (its slave package, pythonfmu, a compiled kernel in ``resources/`` or
-``binaries/``) are already in it; their shared-library needs are collected the same way.
+``binaries/``) are already in it; their shared-library needs are collected the same way, and
+its modules get their bytecode beside them (the carried Python writes none).
 """
 from __future__ import annotations
 
@@ -146,7 +147,8 @@ def _site_relative(file):
 
 def _classify(loaded, resources):
     """Sort the traced files: the FMU's own (carried already), the standard library's
-    (carried whole), the interpreter's extension modules, third-party files."""
+    (carried whole), the interpreter's extension modules, third-party files (modules, files
+    opened, libraries mapped; a system library mapped is found by the ELF closure instead)."""
     stdlib, resources = Path(sysconfig.get_paths()["stdlib"]).resolve(), resources.resolve()
     site_files, extensions, packages = {}, set(), set()
     named = {Path(file).resolve(): name for name, file in loaded["modules"].items()}
@@ -164,6 +166,10 @@ def _classify(loaded, resources):
             site_files[file] = Path(SITE_PACKAGES) / relative
             if file in named and not named[file].startswith("_"):
                 packages.add(named[file].split(".")[0])
+    for library in map(Path, loaded["libraries"]):  # a wheel's library loaded with dlopen
+        relative = _site_relative(library.resolve())
+        if relative is not None:
+            site_files[library.resolve()] = Path(SITE_PACKAGES) / relative
     return Trace(site_files, frozenset(extensions), tuple(sorted(packages)))
 
 
@@ -233,6 +239,7 @@ class RuntimeBuilder:
                 origins[runtime / target] = origin
             self._add_libraries(unpacked, runtime, origins)
             (runtime / MANIFEST).write_text(json.dumps(_manifest(trace)), encoding="utf-8")
+            _compile_resources(unpacked / "resources")
             _write_folder(fmu_path, unpacked)
 
     # -- the shared part ----------------------------------------------------------------
@@ -348,6 +355,17 @@ def _manifest(trace):
     distributions = packages_distributions()
     return {"python": sys.version.split()[0],
             "packages": {name: version(distributions[name][0]) for name in trace.packages}}
+
+
+def _compile_resources(resources):
+    """Bytecode beside the FMU's own modules (its Python writes none into the FMU's folder):
+    checked against the source's hash, so an edited source is compiled afresh."""
+    import importlib.util
+
+    for source in resources.rglob("*.py"):
+        py_compile.compile(str(source), cfile=importlib.util.cache_from_source(str(source)),
+                           doraise=True,
+                           invalidation_mode=py_compile.PycInvalidationMode.CHECKED_HASH)
 
 
 def _is_elf(path):
