@@ -165,7 +165,7 @@ def c_host(bare_root):
 def c_host_command(fmu_path, unpacked, outputs, n_instances=2, n_steps=300):
     """Arguments of tests/fmi_c_host.c: ``n_steps`` of 1 ms with the first input at 1."""
     description = read_model_description(str(fmu_path))
-    variables = [v for v in description.modelVariables]
+    variables = list(description.modelVariables)
     first_input = next(v for v in variables if v.causality == "input")
     return [str(unpacked), description.coSimulation.modelIdentifier, description.guid, "0.001",
             str(n_steps), str(n_instances), f"{first_input.valueReference}=1.0",

