@@ -23,10 +23,13 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from fmpy import read_model_description
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from feedaxis.fmu_build import FMU_NAMES, build_fmus
-from feedaxis.fmu_standalone import runtime_sizes
+from fmpy import read_model_description  # noqa: E402
+
+from common import arguments  # noqa: E402
+from feedaxis.fmu_build import FMU_NAMES, build_fmus  # noqa: E402
+from feedaxis.fmu_standalone import runtime_sizes  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 STEP_S = {"NpidServo": 1e-3, "StepperError": 1e-3, "GeometricError": 1e-3, "ThermalScrew": 0.1}
@@ -110,7 +113,7 @@ def print_sizes(standalone):
                           for part, (unpacked, packed) in parts))
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=9, help="interleaved repeats (default 9)")
     parser.add_argument("--instructions", action="store_true",
@@ -118,7 +121,7 @@ def main():
     parser.add_argument("--steps", type=int, default=2000,
                         help="steps per run (the thermal screw's 0.1 s steps: a tenth; "
                              "default 2000)")
-    args = parser.parse_args()
+    args = arguments(parser, argv, repeats=2, steps=40)
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         sets = {"standalone": build_fmus(folder / "standalone", standalone=True),

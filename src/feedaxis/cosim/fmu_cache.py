@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 from .. import __version__
+from ..errors import InputError
 from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
 
 
@@ -61,3 +62,22 @@ def cached_fmus(root=None, standalone=False):
         finally:
             shutil.rmtree(staging, ignore_errors=True)
     return {name: folder / f"{name}.fmu" for name in FMU_NAMES}
+
+
+def fmu_paths(folder=None, standalone=False):
+    """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``), else of the cache;
+    ``standalone``: FMUs that carry their Python (those in ``folder`` must be)."""
+    if folder is None:
+        return cached_fmus(standalone=standalone)
+    paths = {name: Path(folder) / f"{name}.fmu" for name in FMU_NAMES}
+    missing = [str(p) for p in paths.values() if not p.exists()]
+    if missing:
+        raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {folder}")
+    if standalone:
+        from ..fmu_standalone import is_standalone
+
+        plain = [str(p) for p in paths.values() if not is_standalone(p)]
+        if plain:
+            raise InputError(f"not standalone: {', '.join(plain)} (build them with "
+                             "build-fmus --standalone)", parameter=f"--fmus {folder}")
+    return paths
