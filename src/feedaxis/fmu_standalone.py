@@ -59,7 +59,7 @@ NOT_ON_EVERY_LINUX = frozenset({
 STDLIB_LEFT_OUT = frozenset({
     "test", "tests", "idle_test", "idlelib", "tkinter", "turtledemo", "turtle.py", "lib2to3",
     "ensurepip", "distutils", "venv", "pydoc_data", "site-packages", "lib-dynload",
-    "__pycache__", f"config-{PYTHON_VERSION}-{sys.implementation._multiarch}"})
+    "__pycache__", Path(sysconfig.get_config_var("LIBPL") or "config").name})
 EXTENSION_LEFT_OUT = ("_test", "_xx", "xx", "_ctypes_test")
 # The installed packages an FMU's Python may use: the physics core's (a standalone FMU
 # carries what it imports of them; any other import is optional and hidden from its trace)
@@ -84,8 +84,8 @@ def baseline():
 
 def standalone_missing():
     """Why this machine cannot build standalone FMUs (None when it can)."""
-    if sys.platform != "linux" or sys.implementation._multiarch != "x86_64-linux-gnu":
-        return f"standalone FMUs are built on x86-64 Linux only, not {sys.platform}"
+    if sysconfig.get_platform() != "linux-x86_64":
+        return f"standalone FMUs are built on x86-64 Linux only, not {sysconfig.get_platform()}"
     if libpython_path() is None:
         return f"this Python ({sys.executable}) has no shared libpython to carry"
     if importlib.util.find_spec("auditwheel") is None:
