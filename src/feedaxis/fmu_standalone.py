@@ -373,11 +373,14 @@ def _is_elf(path):
 def _write_folder(fmu_path, folder):
     """Write every file under ``folder`` into the FMU (replaced whole, never half-written)."""
     partial = Path(fmu_path).with_name(f".{Path(fmu_path).name}.partial")
-    with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as archive:
-        for path in sorted(folder.rglob("*")):
-            if path.is_file():
-                archive.write(path, path.relative_to(folder).as_posix())
-    os.replace(partial, fmu_path)
+    try:
+        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as archive:
+            for path in sorted(folder.rglob("*")):
+                if path.is_file():
+                    archive.write(path, path.relative_to(folder).as_posix())
+        os.replace(partial, fmu_path)
+    finally:
+        partial.unlink(missing_ok=True)
 
 
 def runtime_sizes(fmu_path):
