@@ -1,7 +1,7 @@
 """The FMUs' cost against the FMI floor: the full axis per 1 ms macro step vs empty FMUs.
 
-Run: ``python benchmarks/bench_fmi_floor.py [--repeats 7] [--steps 2000]``. It builds the
-four feedaxis FMUs and four empty pythonfmu FMUs with the same interface (the same
+Run: ``python benchmarks/bench_fmi_floor.py [--repeats 7] [--steps 2000] [--standalone]``. It
+builds the four feedaxis FMUs and four empty pythonfmu FMUs with the same interface (the same
 variables, names, types and causalities; ``do_step`` does nothing), and drives both sets
 with the same raw fmpy ctypes calls (``fmi2SetReal`` of the inputs, ``fmi2DoStep``,
 ``fmi2GetReal`` of the outputs; preallocated arrays, as feedaxis.cosim.master does) on the
@@ -9,7 +9,9 @@ default axis schedule: servo, motor and geometric error every 1 ms macro step, t
 screw every 0.1 s. Repeats are interleaved (full, empty, full, ...). It prints the median
 cost per macro step of each set and per FMU (so the servo's share can be read on its own),
 the ratio of the medians, and the spread of the ratio over the interleaved pairs (the
-machine is shared: a busy moment slows the pair it falls on).
+machine is shared: a busy moment slows the pair it falls on). ``--standalone`` adds the
+standalone build (each FMU carrying its Python; in this Python host it runs on the host's
+interpreter) to the interleaved sets and prints its ratio to the feedaxis FMUs.
 """
 import argparse
 import ctypes
@@ -125,14 +127,20 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15,
                         help="interleaved repeats (default 15)")
-    parser.add_argument("--steps", type=int, default=2000, help="macro steps per run (default 2000)")
+    parser.add_argument("--steps", type=int, default=2000,
+                        help="macro steps per run (default 2000)")
+    parser.add_argument("--standalone", action="store_true",
+                        help="also time the standalone FMUs (feedaxis build-fmus --standalone)")
     args = arguments(parser, argv, repeats=2, steps=200)
     with tempfile.TemporaryDirectory() as folder:
-        full = {p.stem: p for p in build_fmus(Path(folder) / "full")}
-        empty = build_empty_fmus(full, Path(folder))
-        runs = {"full": [], "empty": []}
+        sets = {"full": {p.stem: p for p in build_fmus(Path(folder) / "full")}}
+        sets["empty"] = build_empty_fmus(sets["full"], Path(folder))
+        if args.standalone:
+            sets["standalone"] = {p.stem: p for p in build_fmus(Path(folder) / "standalone",
+                                                                standalone=True)}
+        runs = {kind: [] for kind in sets}
         for _ in range(args.repeats):
-            for kind, paths in (("full", full), ("empty", empty)):
+            for kind, paths in sets.items():
                 runs[kind].append(time_per_macro_step_us(paths, args.steps))
     medians = {kind: {name: statistics.median(r[name] for r in results) for name in FMU_NAMES}
                for kind, results in runs.items()}
@@ -150,12 +158,30 @@ def main(argv=None):
           f"{totals['full'] / totals['empty']:>8.2f}")
     print(f"{'axis w/o servo':<16}{without_servo['full']:>10.1f}{without_servo['empty']:>10.1f}"
           f"{without_servo['full'] / without_servo['empty']:>8.2f}")
-    pair_ratios = sorted(sum(f.values()) / sum(e.values())
-                         for f, e in zip(runs["full"], runs["empty"]))
+    print_pair_ratios("full axis ratio", runs, "full", "empty")
+    if "standalone" in runs:
+        print_standalone(runs, medians, totals)
+
+
+def print_pair_ratios(label, runs, kind, reference):
+    """The full axis's ratio ``kind`` / ``reference`` over the interleaved pairs."""
+    pair_ratios = sorted(sum(k.values()) / sum(r.values())
+                         for k, r in zip(runs[kind], runs[reference]))
     low, _, high = statistics.quantiles(pair_ratios, n=4)
-    print(f"full axis ratio over the {len(pair_ratios)} interleaved pairs: median "
+    print(f"{label} over the {len(pair_ratios)} interleaved pairs: median "
           f"{statistics.median(pair_ratios):.2f}, quartiles {low:.2f}-{high:.2f}, "
           f"range {pair_ratios[0]:.2f}-{pair_ratios[-1]:.2f}")
+
+
+def print_standalone(runs, medians, totals):
+    """The standalone FMUs against the feedaxis FMUs (same physics, same host)."""
+    print(f"{'standalone':<16}{'µs':>10}{'/ feedaxis':>12}")
+    for name in FMU_NAMES:
+        print(f"{name:<16}{medians['standalone'][name]:>10.1f}"
+              f"{medians['standalone'][name] / medians['full'][name]:>12.2f}")
+    print(f"{'full axis':<16}{totals['standalone']:>10.1f}"
+          f"{totals['standalone'] / totals['full']:>12.2f}")
+    print_pair_ratios("standalone / feedaxis", runs, "standalone", "full")
 
 
 if __name__ == "__main__":

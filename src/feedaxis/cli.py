@@ -488,8 +488,14 @@ def _cmd_effects(args):
     _emit(args, payload, text.effect_lines(effects))
 
 
+STANDALONE_HELP = ("each FMU carries the Python its physics needs (21-37 MB each), for FMI "
+                   "hosts on machines without Python (docs/fmu-hosts.md); without it the FMUs "
+                   "are small and need this machine's Python")
+
+
 def _build_fmus_options(parser):
     parser.add_argument("--out", default="build/fmus", help="FMU folder (default: build/fmus)")
+    parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
 
 
 @command("build-fmus", help="build the four FMUs",
@@ -499,8 +505,21 @@ def _cmd_build_fmus(args):
     from . import fmu_build
 
     check_writable_target(args.out, "folder")
-    paths = fmu_build.build_fmus(args.out)
+    with _progress("building FMUs", "FMU") as tick, _standalone_errors():
+        paths = fmu_build.build_fmus(args.out, standalone=args.standalone, progress=tick)
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
+
+
+@contextmanager
+def _standalone_errors():
+    """A machine that cannot build standalone FMUs: one clear error naming the option."""
+    from .fmu_standalone import StandaloneUnavailable
+
+    try:
+        yield
+    except StandaloneUnavailable as error:
+        raise InputError(f"cannot build standalone FMUs here: {error}",
+                         parameter="--standalone") from None
 
 
 def _axis_system(args):
@@ -515,7 +534,8 @@ def _axis_system(args):
 def _fmu_paths(args):
     from .cosim.fmu_cache import fmu_paths
 
-    return fmu_paths(args.fmus)
+    with _standalone_errors():
+        return fmu_paths(args.fmus, getattr(args, "standalone", False))
 
 
 @contextmanager
@@ -719,6 +739,7 @@ def _checked_axis(args):
 
 def _export_ssp_options(parser):
     parser.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
+    parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
     parser.add_argument("--stop-time", type=float, default=1.0, metavar="S",
                         help="DefaultExperiment stopTime in s (default 1)")
     parser.add_argument("--osp-step-hints", action="store_true",
@@ -734,17 +755,27 @@ def _export_ssp_options(parser):
                      "ecos; see README.",
          options=_export_ssp_options)
 def _cmd_export_ssp(args):
-    from .cosim.ssp import export_ssp
+    from .cosim.ssp import export_ssp, open_inputs
 
     check_writable_target(args.out)
-    path = export_ssp(args.out, *_checked_axis(args), args.stop_time, args.osp_step_hints)
-    _emit(args, {"ssp": str(path)}, f"{path}: SystemStructure.ssd, a parameter-values file "
-                                    "(.ssv) per component and the four FMUs")
+    system, paths = _checked_axis(args)
+    path = export_ssp(args.out, system, paths, args.stop_time, args.osp_step_hints)
+    unconnected = [{"input": connector, "unit": variable.unit, "start": variable.start,
+                    "meaning": variable.description}
+                   for connector, variable in open_inputs(system)]
+    _emit(args, {"ssp": str(path), "open_inputs": unconnected},
+          f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
+          f"four {'standalone ' if args.standalone else ''}FMUs\n"
+          "open inputs (unconnected: drive them from the importing tool, else they keep their "
+          "start values; position_ref_mm at 0 is a standing axis):\n"
+          + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
+                      for i in unconnected))
 
 
 
 def _export_fmu_options(parser):
     parser.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
+    parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
     _add_axis_options(parser, thermal_step=False)
 
 

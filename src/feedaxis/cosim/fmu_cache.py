@@ -3,10 +3,10 @@
 Building takes seconds per FMU (pythonfmu), so ``feedaxis simulate`` and ``export-ssp``
 reuse ``<cache>/feedaxis/fmus-<version>-<hash>/``, where the hash covers every file that
 goes into an FMU (the slave scripts, the adapter, the host layer, the physics package, the
-build script):
-a changed source builds a new folder, never a stale FMU. FMUs built without the C host
-layer (no compiler here) go to a folder of their own, so installing a compiler rebuilds. The folder is built in a staging
-folder and renamed into place, so a crash or Ctrl-C never leaves half a cache.
+build scripts): a changed source builds a new folder, never a stale FMU. FMUs built
+without the C host layer (no compiler here) go to a folder of their own, so installing a
+compiler rebuilds; standalone FMUs (``export-ssp --standalone``) too. The folder is built
+in a staging folder and renamed into place, so a crash or Ctrl-C never leaves half a cache.
 """
 from __future__ import annotations
 
@@ -26,7 +26,9 @@ def source_hash():
     digest = hashlib.sha256()
     sources = fmu_sources()
     files = sorted([*sources.glob("*/*.py"), *sources.glob("common/*.c"),
-                    *(SOURCE_DIR / "physics").glob("*.py"), SOURCE_DIR / "fmu_build.py"])
+                    *sources.glob("common/fmi2/*.h"), *(SOURCE_DIR / "physics").glob("*.py"),
+                    *(SOURCE_DIR / name for name in ("fmu_build.py", "fmu_standalone.py",
+                                                     "fmu_trace.py"))])
     for path in files:
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
@@ -39,20 +41,22 @@ def cache_root():
     return Path(base) / "feedaxis"
 
 
-def cache_folder(root=None):
-    """The cache folder of this version's FMUs (``root`` defaults to :func:`cache_root`)."""
-    python_only = "-python-hosts" if host_layer_missing() else ""
-    return Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{python_only}"
+def cache_folder(root=None, standalone=False):
+    """The cache folder of this version's FMUs (``root`` defaults to :func:`cache_root`);
+    standalone FMUs (:mod:`feedaxis.fmu_standalone`) have their own."""
+    kind = "-standalone" if standalone else "-python-hosts" if host_layer_missing() else ""
+    return Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{kind}"
 
 
-def cached_fmus(root=None):
-    """{FMU name: path} of the four FMUs, built into the cache on first use."""
-    folder = cache_folder(root)
+def cached_fmus(root=None, standalone=False):
+    """{FMU name: path} of the four FMUs (``standalone``: carrying their Python), built into
+    the cache on first use."""
+    folder = cache_folder(root, standalone)
     if not all((folder / f"{name}.fmu").exists() for name in FMU_NAMES):
         folder.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
         try:
-            build_fmus(staging)
+            build_fmus(staging, standalone=standalone)
             shutil.rmtree(folder, ignore_errors=True)
             os.replace(staging, folder)
         finally:
@@ -60,12 +64,20 @@ def cached_fmus(root=None):
     return {name: folder / f"{name}.fmu" for name in FMU_NAMES}
 
 
-def fmu_paths(folder=None):
-    """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``), else of the cache."""
+def fmu_paths(folder=None, standalone=False):
+    """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``), else of the cache;
+    ``standalone``: FMUs that carry their Python (those in ``folder`` must be)."""
     if folder is None:
-        return cached_fmus()
+        return cached_fmus(standalone=standalone)
     paths = {name: Path(folder) / f"{name}.fmu" for name in FMU_NAMES}
     missing = [str(p) for p in paths.values() if not p.exists()]
     if missing:
         raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {folder}")
+    if standalone:
+        from ..fmu_standalone import is_standalone
+
+        plain = [str(p) for p in paths.values() if not is_standalone(p)]
+        if plain:
+            raise InputError(f"not standalone: {', '.join(plain)} (build them with "
+                             "build-fmus --standalone)", parameter=f"--fmus {folder}")
     return paths
