@@ -32,20 +32,15 @@ def image(png, alt):
 
 
 def table(header, rows):
-    """An HTML table of text cells: numbers right-aligned (so their digits line up), text
+    """An HTML table of text cells: a number right-aligned (so digits line up), text
     left-aligned."""
-    rows = [[str(cell) for cell in row] for row in rows]
-    columns = list(zip(*rows)) or [()] * len(header)
-    numeric = [any(column) and all(not c or NUMBER_CELL.fullmatch(c) for c in column)
-               for column in columns]
-
-    def cell(tag, text, number):
-        align = ' class="number"' if number else ""
+    def cell(tag, text):
+        text = str(text)
+        align = ' class="number"' if NUMBER_CELL.fullmatch(text) else ""
         return f"<{tag}{align}>{html.escape(text)}</{tag}>"
 
-    head = "".join(cell("th", str(h), n) for h, n in zip(header, numeric))
-    body = "".join("<tr>" + "".join(cell("td", c, n) for c, n in zip(row, numeric)) + "</tr>"
-                   for row in rows)
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+    body = "".join("<tr>" + "".join(cell("td", c) for c in row) + "</tr>" for row in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
