@@ -190,14 +190,19 @@ def _diagnose_options(parser):
 
 
 @command("diagnose", help="where the model fails and which effect is missing",
-         description="Refit the model, fit each missing effect on top and judge it by an F "
-                     "test against the noise the data support (the pure error of repeated "
-                     "samples, the residual mean square, or the effective sample count of a "
-                     "serially correlated trace), stepwise at a family-wise error rate of "
-                     "0.001 (Bonferroni); describe structure no effect explains by the same "
-                     "tests; give a verdict: adequate, missing_effect or unexplained. A case "
-                     "with positioning.csv and tracking.csv is diagnosed on the samples the "
-                     "model's effects act on, or on each in turn with an empty model.",
+         description="Refit the model (positioning samples far outside their repeats or "
+                     "neighbours are named by row and kept out as outliers), fit each missing effect on top and judge it by an F test against "
+                     "the noise the data support (the pure error of repeated samples, the "
+                     "residual mean square with no repeats, or the effective sample count of "
+                     "serially correlated noise), stepwise: the smallest p-value is accepted "
+                     "below a family-wise error rate of 0.001 (Bonferroni over the stages and "
+                     "the effects tried). Then describe structure no effect explains "
+                     "(a periodic error, a trend, a reversal, a drift, a constant force; a lack "
+                     "of fit or serial correlation left) under the same policy, and give a verdict: adequate, "
+                     "missing_effect or unexplained. The noise line and the test line name "
+                     "the same noise model. A case with positioning.csv and tracking.csv is "
+                     "diagnosed on the samples the model's effects act on, or on each in turn "
+                     "with an empty model.",
          options=_diagnose_options)
 def _cmd_diagnose(args):
     from .diagnose import diagnose
@@ -240,10 +245,11 @@ def _report_options(parser):
 
 
 @command("report", help="self-contained HTML page with the plots",
-         description="The diagnosis, the measurement against the model, the residual and its "
-                     "spectrum, each effect's contribution, the error ladder, the figures of "
-                     "compare and the model's parameters, on one page (a case with both "
-                     "measurements: both).",
+         description="The diagnosis, the measurement against the model (drawn between the "
+                     "targets too), the residual and its spectrum, each effect's contribution, "
+                     "the error ladder, the figures of compare with the ISO 230-2 deviation "
+                     "plot, and the model's parameters, on one self-contained HTML page (a "
+                     "case with both measurements: both).",
          options=_report_options)
 def _cmd_report(args):
     from .analysis import analyse
@@ -308,7 +314,7 @@ def _import_options(parser):
                 "          50.012,0.8,2.9,,3.0\n"
                 "        target_mm first (mm); then one column per run and direction,\n"
                 "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
-                "        measured - target in um; an empty cell = not measured; '#' comment\n"
+                "        measured - target in µm; an empty cell = not measured; '#' comment\n"
                 "        lines; ';'- or tab-separated files may use a decimal comma.",
          options=_import_options)
 def _cmd_import(args):
@@ -544,7 +550,7 @@ def _cmd_simulate_iso230(args):
         progress=progress))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples, {args.targets} targets x "
                          f"{args.runs} runs each direction; deviation "
-                         f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} um")
+                         f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} µm")
 
 
 def _simulate_thermal_options(parser):
@@ -573,7 +579,7 @@ def _cmd_simulate_thermal(args):
         progress=progress))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples (duty.csv + "
                          f"positioning.csv); deviation {summary['error_min_um']:.3f} to "
-                         f"{summary['error_max_um']:.3f} um")
+                         f"{summary['error_max_um']:.3f} µm")
 
 
 def _simulate_tracking_options(parser):

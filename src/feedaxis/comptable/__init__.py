@@ -125,7 +125,7 @@ def summary_lines(report):
              f"  in the table: {', '.join(report['included']) or '(nothing)'}"]
     lines += [f"  left out {name}: {reason}" for name, reason in report["excluded"].items()]
     lines += [f"  sign: {report['sign']}", f"  load: {report['load']}", "",
-              f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
+              f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (µm)"]
     lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
               for f in report["figures"].values()]
     between = report["between_targets"]

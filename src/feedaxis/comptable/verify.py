@@ -14,6 +14,7 @@ import numpy as np
 from scipy import stats
 
 from ..iso230 import FIGURE_NAMES, iso230_figures, target_groups
+from ..stats.wording import p_text
 from .table import position_error_um
 
 ALPHA = 0.05
@@ -70,12 +71,12 @@ def _warnings(figures, systematic):
     p_value = systematic["p_value"]
     if p_value is not None and p_value > ALPHA:
         warnings.append(f"the table cannot help: the target means do not differ beyond the "
-                        f"scatter (ANOVA p = {p_value:.3g} > {ALPHA}); the error is "
+                        f"scatter (ANOVA {p_text(p_value)} > {ALPHA}); the error is "
                         "repeatability or drift")
     key = _headline(figures)
     if key and figures[key]["after_um"] > (1 - LITTLE_GAIN) * figures[key]["before_um"]:
         warnings.append(f"{figures[key]['name']} only falls from {figures[key]['before_um']:.3g}"
-                        f" to {figures[key]['after_um']:.3g} um: only "
+                        f" to {figures[key]['after_um']:.3g} µm: only "
                         f"{100 * systematic['systematic_share']:.0f} % of the variance is "
                         "systematic (the part a table removes); the rest is repeatability or "
                         "drift")

@@ -13,6 +13,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .. import __version__
+from ..stats.wording import p_text
+from ..text import micro
 from ..output import write_atomically
 from . import plots
 from .compensation_table import compensation_table_html
@@ -44,11 +46,6 @@ def table(header, rows):
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
-def micro(unit):
-    """A unit as the page writes it: µm, not um."""
-    return re.sub(r"\bum\b", "µm", unit)
-
-
 def _parameter_table(model, refit):
     """The model's parameters with the standard uncertainties of ``refit`` (its refit on
     the case: the diagnosis's base)."""
@@ -71,7 +68,7 @@ def _diagnosis_html(analysis):
              f"({html.escape(diagnosis.noise_source)})</p>"]
     if diagnosis.candidates:
         parts.append(table(("missing effect", "RMS after (µm)", "p-value", "meaning", "evidence"),
-                           [(c.effect, f"{c.rms_after_um:.4g}", f"{c.test.p_value:.2g}",
+                           [(c.effect, f"{c.rms_after_um:.4g}", p_text(c.test.p_value),
                              c.meaning, c.evidence) for c in diagnosis.candidates]))
     if diagnosis.unexplained:
         parts.append(table(("unexplained", location, "amplitude (µm)", "evidence"),

@@ -1,6 +1,10 @@
 """Noise models: what a term's reduction of the residual is judged against, named in every
 verdict. One per layout of the samples; the measurement chooses the one its data support.
 
+Each model has a ``label`` that both its test (``name``) and its noise estimate
+(``source``) carry, so the noise a diagnosis prints and the test it decided by always name
+the same model.
+
 - :class:`PureError`: repeated samples (target x direction groups with at least
   ``judge.MIN_PURE_DOF`` degrees of freedom). The extra-sum-of-squares F test against their
   within-group scatter (Draper & Smith, Applied Regression Analysis, 3rd ed., §2.1 and
@@ -33,8 +37,9 @@ def _f_test(rss_before, rss_after, extra, denominator, dof, name):
 class PureError:
     """The scatter of repeated samples: ``layout`` holds the repeat groups."""
 
-    name = "F test against the pure error of repeated samples"
-    source = "scatter of repeated samples"
+    label = "repeated samples"
+    name = f"F test against the pure error of the {label}"
+    source = f"pure error: the scatter of the {label}"
 
     def __init__(self, layout):
         self.layout = layout
@@ -67,8 +72,9 @@ class ResidualMeanSquare:
     """No repeats: the residual mean square; ``order`` sorts the samples along the test
     (run or time, then position) for the noise estimate."""
 
-    name = "partial F test against the residual mean square (no repeats)"
-    source = "point-to-point scatter along the travel"
+    label = "no repeats"
+    name = f"partial F test against the residual mean square ({label})"
+    source = f"{label}: the point-to-point scatter along the travel"
 
     def __init__(self, order):
         self.order = order
@@ -93,7 +99,8 @@ class ResidualMeanSquare:
 class Coloured:
     """A serially correlated residual: the effective sample count n / τ."""
 
-    name = "F test with the effective sample count n/τ (serially correlated noise)"
+    label = "serially correlated noise"
+    name = f"F test with the effective sample count n/τ ({label})"
 
     def extra_ss_test(self, before_um, after_um, extra, n_free_after):
         """F test of ``extra`` parameters with n replaced by n / τ, τ the integrated
@@ -113,8 +120,8 @@ class Coloured:
         """(σ (µm), source): the RMS of the residual left, its autocorrelation time named."""
         tau = autocorrelation_time(residual_um)
         return (float(np.sqrt(np.mean(residual_um ** 2))),
-                f"residual left after the effects and structures found (autocorrelation time "
-                f"{tau:.1f} samples)")
+                f"{self.label}: the residual left after the effects and structures found "
+                f"(autocorrelation time {tau:.1f} samples)")
 
     def error_scale(self, result):
         return 1.0
