@@ -12,13 +12,14 @@ from feedaxis.case import read_case
 from feedaxis.cli import COMMANDS, SCENARIOS, build_parser, main
 from feedaxis.diagnose import diagnose
 from feedaxis.effects import CATALOG, Model
+from feedaxis.measurement import measurement_of
+from feedaxis.physics import geometry
 from feedaxis.stats import noise
 from feedaxis.stats.judge import Test as FTest
 from feedaxis.stats.wording import p_text
 
 MICRONS_AS_UM = re.compile(r"(?<![\w_])um(?![\w_])")
 P_VALUE = re.compile(r"\bp\b(?! = \S| < 1e-300)")   # a "p" not followed by "= x" or "< 1e-300"
-NOISE_MODELS = [noise.PureError, noise.ResidualMeanSquare, noise.Coloured]
 
 
 def test_p_values_are_written_one_way():
@@ -29,34 +30,62 @@ def test_p_values_are_written_one_way():
     assert FTest(4.54, (2, 40), 0.013, "t").describe().endswith("p = 0.013")
 
 
-def test_every_noise_model_names_itself_in_its_test_and_its_noise():
-    """Each noise model's label is in its test's name and in the source of its noise
-    estimate, and no other model's label is: the two lines cannot contradict each other."""
-    assert {cls.__name__ for cls in NOISE_MODELS} == {
-        name for name, value in vars(noise).items()
-        if isinstance(value, type) and hasattr(value, "extra_ss_test")}
-    for cls in NOISE_MODELS:
-        others = [other.label for other in NOISE_MODELS if other is not cls]
-        assert cls.label in cls.name and not any(o in cls.name for o in others), cls
-    residual = np.random.default_rng(1).normal(0.0, 1.0, 200)
-    coloured_source = noise.Coloured().estimate_um(residual)[1]
-    assert noise.Coloured.label in coloured_source
+LABELS = ("repeated samples", "+ and - readings at each target", "no replicates",
+          "serially correlated noise")
 
 
-@pytest.mark.parametrize("trial", ["iso_trial", "scan_trial"])
-def test_a_diagnosis_names_one_noise_model(trial):
-    """A case with repeats and a dense scan without: the noise line and the test line of
-    the diagnosis (text and JSON) carry the same noise model's label, and only it."""
-    case, _ = getattr(syn, trial)(np.random.default_rng(4))
+def assert_one_noise_model(label, *lines):
+    """Every line carries ``label`` and no other noise model's label."""
+    assert label in LABELS
+    for line in lines:
+        assert label in line, (label, line)
+        assert not any(other in line for other in LABELS if other != label), (label, line)
+
+
+def one_pass_each_way(rng):
+    """One + and one - pass over 21 targets: replicates as pairs about a constant reversal."""
+    target_mm, direction, run = syn.iso_layout(n_runs=1)
+    error_um = (geometry.lead_error_um(target_mm, 1.5, -0.012)
+                + geometry.backlash_error_um(direction, 2.0)
+                + rng.normal(0.0, syn.ISO_NOISE_UM, target_mm.size))
+    return syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=error_um,
+                              direction=direction, run=run), None
+
+
+def correlated_scan(rng):
+    """A dense scan whose noise is an AR(1) process along the pass (φ = 0.9)."""
+    target_mm = np.arange(0.0, 501.0, 1.0)
+    noise_um = np.zeros(target_mm.size)
+    for index in range(1, target_mm.size):
+        noise_um[index] = 0.9 * noise_um[index - 1] + rng.normal(0.0, syn.ISO_NOISE_UM)
+    error_um = geometry.lead_error_um(target_mm, 1.5, -0.012) + noise_um
+    return syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=error_um), None
+
+
+@pytest.mark.parametrize("layout, label", [
+    (syn.iso_trial, "repeated samples"), (one_pass_each_way, "+ and - readings at each target"),
+    (syn.scan_trial, "no replicates"), (correlated_scan, "no replicates")])
+def test_a_diagnosis_names_one_noise_model(layout, label):
+    """Repeated runs, one pass each way, a white and a serially correlated scan: the noise
+    line and the test line of the diagnosis (text and JSON) carry the same noise model's
+    label, and no other's."""
+    case, _ = layout(np.random.default_rng(4))
     diagnosis = diagnose(case, Model([CATALOG["lead_error"]]))
-    expected = noise.PureError if trial == "iso_trial" else noise.ResidualMeanSquare
+    assert measurement_of(case, "positioning").noise.label == label
     lines = text.diagnosis_lines(diagnosis).splitlines()
     noise_line = next(line for line in lines if line.startswith("residual RMS"))
     test_line = next(line for line in lines if line.strip().startswith("test:"))
-    for line in (noise_line, test_line, diagnosis.to_json()["noise_source"],
-                 diagnosis.to_json()["test"]):
-        assert expected.label in line
-        assert not any(other.label in line for other in NOISE_MODELS if other is not expected)
+    payload = diagnosis.to_json()
+    assert_one_noise_model(label, noise_line, test_line, payload["noise_source"],
+                           payload["test"])
+    if layout is correlated_scan:
+        assert "serially correlated" in noise_line
+
+
+def test_a_tracking_trace_names_its_noise_model():
+    residual = np.random.default_rng(1).normal(0.0, 1.0, 200)
+    assert_one_noise_model(noise.Coloured.label, noise.Coloured.name,
+                           noise.Coloured().estimate_um(residual)[1])
 
 
 @pytest.fixture(scope="module")
@@ -117,8 +146,9 @@ def test_help_texts_describe_the_method_used():
     diagnose_help = " ".join(helps["diagnose"].split())
     assert "BIC" not in diagnose_help and "rank" not in diagnose_help
     for words in ("F test", "pure error of repeated samples", "residual mean square",
-                  "effective sample count", "family-wise error rate of 0.001", "Bonferroni",
-                  "adequate, missing_effect or unexplained"):
+                  "serially correlated", "effective sample count",
+                  "family-wise error rate of 0.001", "Bonferroni",
+                  "adequate, missing_effect, unexplained, or undetermined"):
         assert words in diagnose_help
     assert "variable projection" in " ".join(helps["fit"].split())
 

@@ -135,7 +135,7 @@ def _fit_options(parser):
                      "data cannot determine.",
          options=_fit_options)
 def _cmd_fit(args):
-    from .fit import check_available, evaluate, fit
+    from .fit import check_available, evaluate, fit_with_artefacts
     from .measurement import kinds_for
 
     if args.out:
@@ -149,15 +149,23 @@ def _cmd_fit(args):
         check_available(model, cases, kind)
         before = evaluate(starting, cases, kind)
         with _progress("fitting", " evaluations") as tick:
-            results.append((before, fit(model, cases, progress=tick, kind=kind)))
+            results.append((before, fit_with_artefacts(model, cases, progress=tick, kind=kind)))
     if args.out:
         write_atomically(args.out, results[0][1].fitted_model().to_toml())
-    _emit_each(args, [(result.kind, {
-        "rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
-        "effects": list(result.model.names), "params": result.params(),
-        "uncertainties": result.uncertainties, "undetermined": result.undetermined,
-        "statistics": vars(result.statistics)}, text.fit_lines(result, before.rms_um, args.out))
-        for before, result in results])
+    _emit_each(args, [(result.kind, _fit_payload(before, result),
+                       text.fit_lines(result, before.rms_um, args.out))
+                      for before, result in results])
+
+
+def _fit_payload(before, result):
+    """The --json of a fit: the model's parameters, and the measurement's artefacts apart."""
+    fitted = result.fitted_model()
+    keys = set(fitted.parameter_keys)
+    return {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
+            "effects": list(fitted.names), "params": fitted.values,
+            "uncertainties": {name: result.uncertainties[name] for name in fitted.names},
+            "undetermined": {k: v for k, v in result.undetermined.items() if k in keys},
+            "artefacts": fitted.record.artefacts, "statistics": vars(result.statistics)}
 
 
 def _case_and_model(args):
@@ -190,19 +198,23 @@ def _diagnose_options(parser):
 
 
 @command("diagnose", help="where the model fails and which effect is missing",
-         description="Refit the model (positioning samples far outside their repeats or "
-                     "neighbours are named by row and kept out as outliers), fit each missing effect on top and judge it by an F test against "
-                     "the noise the data support (the pure error of repeated samples, the "
-                     "residual mean square with no repeats, or the effective sample count of "
-                     "serially correlated noise), stepwise: the smallest p-value is accepted "
-                     "below a family-wise error rate of 0.001 (Bonferroni over the stages and "
-                     "the effects tried). Then describe structure no effect explains "
-                     "(a periodic error, a trend, a reversal, a drift, a constant force; a lack "
-                     "of fit or serial correlation left) under the same policy, and give a verdict: adequate, "
-                     "missing_effect or unexplained. The noise line and the test line name "
-                     "the same noise model. A case with positioning.csv and tracking.csv is "
-                     "diagnosed on the samples the model's effects act on, or on each in turn "
-                     "with an empty model.",
+         description="Refit the model as fit does (outliers named by row and kept out, a "
+                     "drift along the test fitted beside the effects), then fit each missing "
+                     "effect on top and judge it by an F test against the noise the samples "
+                     "support: the pure error of repeated samples (or of the + and - readings "
+                     "at each target in one pass each way), the residual mean square where "
+                     "there are no replicates, the noise power at the term's frequencies "
+                     "where the residual is serially correlated (Ljung-Box, AR model), or "
+                     "the effective sample count of a tracking trace. Stepwise: the smallest "
+                     "p-value is accepted below a family-wise error rate of 0.001 (Bonferroni "
+                     "over the stages and the effects tried). Then describe structure no "
+                     "effect explains (a periodic error, a trend, a reversal, a drift, a "
+                     "constant force; a lack of fit left) under the same policy, and give a "
+                     "verdict: adequate, missing_effect, unexplained, or undetermined (the "
+                     "samples cannot tell noise from structure; the reason is given). The "
+                     "noise line and the test line name the same noise model. A case with "
+                     "positioning.csv and tracking.csv is diagnosed on the samples the "
+                     "model's effects act on, or on each in turn with an empty model.",
          options=_diagnose_options)
 def _cmd_diagnose(args):
     from .diagnose import diagnose

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
-from .effects import FitRecord, Model
+from .effects import BasisEffect, FitRecord, Model
 from .errors import InputError
 from .measurement import Measurement, kinds_for, measurement_of
 from .physics.threads import one_blas_thread
@@ -78,6 +78,7 @@ class FitResult:
     undetermined: dict = field(default_factory=dict)
     covariance: np.ndarray | None = field(default=None, repr=False)
     measurements: list = field(default_factory=list, repr=False)
+    artefacts: dict = field(default_factory=dict)
 
     @property
     def rms_um(self):
@@ -93,12 +94,22 @@ class FitResult:
         return {name: dict(self.model.values[name]) for name in self.model.names}
 
     def fitted_model(self):
-        """The fitted model carrying its :class:`~feedaxis.effects.FitRecord` (covariance,
-        undetermined parameters), as ``fit --out`` saves it."""
-        keys = self.model.parameter_keys
-        covariance = self.covariance if self.covariance is not None else np.zeros((len(keys),) * 2)
-        return self.model.with_record(FitRecord(keys, covariance, dict(self.undetermined),
-                                                self.statistics.n_points, self.rms_um))
+        """The fitted model as ``fit --out`` saves it: its effects (the measurement
+        artefacts fitted beside them, a drift, left out: they are not the machine's) with
+        the :class:`~feedaxis.effects.FitRecord` of their covariance, the undetermined
+        parameters and the artefacts."""
+        kept = [e for e in self.model.effects if not isinstance(e, BasisEffect)]
+        model = Model(kept, {e.name: self.model.values[e.name] for e in kept})
+        keys, every = model.parameter_keys, self.model.parameter_keys
+        index = [every.index(key) for key in keys]
+        covariance = (self.covariance[np.ix_(index, index)] if self.covariance is not None
+                      else np.zeros((len(keys),) * 2))
+        nuisances = {e.name: dict(self.model.values[e.name]) for e in self.model.effects
+                     if isinstance(e, BasisEffect)}
+        artefacts = {**self.artefacts, **({"nuisances": nuisances} if nuisances else {})}
+        return model.with_record(FitRecord(
+            keys, covariance, {k: v for k, v in self.undetermined.items() if k in keys},
+            self.statistics.n_points, self.rms_um, artefacts))
 
 
 def measurements(model, data, kind=None):
@@ -193,15 +204,43 @@ def fit(model, data, progress=None, kind=None):
     start = variable_projection(problem, layout)
     solution = least_squares(problem.residual(layout), start, jac=problem.jacobian(layout),
                              bounds=layout.bounds(), x_scale="jac", method="trf")
-    inflation = found[0].uncertainty_inflation(solution.fun)
     sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
-                                                    solution.active_mask, layout, inflation)
+                                                    solution.active_mask, layout, found)
     fitted = model.with_values(layout.values(solution.x))
     if found[0].loose_share is not None:
         flag_loose(fitted, sigma, undetermined, found[0].loose_share)
     result = FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
                        problem.measured_um, solution.fun, sigma, undetermined, covariance, found)
     _check_finite(result, found)
+    return result
+
+
+def fit_with_artefacts(model, data, progress=None, kind=None):
+    """:func:`fit` with what the measurement says about its own samples fitted too, as the
+    diagnosis does: its outliers kept out (refitted without them), its nuisances (a drift
+    along a positioning test's clock) fitted beside the effects as measurement artefacts.
+    ``artefacts`` lists the outlier and transient rows and the nuisances; the measurement
+    fitted is ``result.measurements[0]``. Cases fitted jointly get the plain fit."""
+    found = check_available(model, data, kind)
+    if len(found) > 1:
+        return fit(model, found, progress)
+    measurement = found[0]
+    result = fit(model, measurement, progress)
+    outliers = measurement.outliers(result.residual_um)
+    transients = measurement.transients(outliers)
+    artefacts = {"outlier_rows": measurement.rows(np.setdiff1d(outliers, transients)),
+                 "transient_rows": measurement.rows(transients)}
+    if outliers.size:
+        keep = np.ones(measurement.size, dtype=bool)
+        keep[outliers] = False
+        measurement = measurement.subset(keep)
+        result = fit(model, measurement, progress)
+    with_nuisances = model
+    for name, _, basis in measurement.nuisances():
+        with_nuisances = with_nuisances + BasisEffect(name, basis)
+    if with_nuisances is not model and not too_few_samples(with_nuisances, [measurement]):
+        result = fit(with_nuisances, measurement, progress)
+    result.artefacts = artefacts
     return result
 
 
@@ -375,29 +414,35 @@ def _probed_step(model, found, probed):
     return model.with_values(values)
 
 
-def uncertainties(jacobian, residual, active_mask, layout, inflation=1.0):
+def uncertainties(jacobian, residual, active_mask, layout, found):
     """(standard uncertainties, undetermined parameters, covariance) from the Jacobian at
-    the optimum; the covariance is in the order of ``layout.slots`` and multiplied by
-    ``inflation`` (a serially correlated residual's autocorrelation time).
+    the optimum, the covariance in the order of ``layout.slots``: the sandwich
+    (J'J)⁺ J'ΣJ (J'J)⁺ with each measurement's J'ΣJ for the noise its residual shows
+    (:meth:`~feedaxis.measurement.Measurement.noise_gram`: σ² J'J for white noise, which
+    gives the usual σ² (J'J)⁺).
 
     A parameter is undetermined when it has a share in a (nearly) singular direction of the
     Jacobian with its columns scaled to unit length (so units do not matter), or when it
     ends on a bound.
     """
-    variance = float(residual @ residual) / max(residual.size - layout.size, 1) * inflation
+    variance = float(residual @ residual) / max(residual.size - layout.size, 1)
     scale = np.linalg.norm(jacobian, axis=0)
     scale[scale == 0.0] = 1.0
-    _, singular, vt = np.linalg.svd(jacobian / scale, full_matrices=False)
+    scaled = jacobian / scale
+    _, singular, vt = np.linalg.svd(scaled, full_matrices=False)
     strong = singular > SINGULAR_RATIO * max(singular[0], 1e-300)
-    covariance = ((vt[strong].T / singular[strong] ** 2) @ vt[strong] * variance
-                  / np.outer(scale, scale))
+    inverse = (vt[strong].T / singular[strong] ** 2) @ vt[strong]
+    bounds = np.cumsum([0] + [m.size for m in found])
+    gram = sum(m.noise_gram(scaled[start:stop], residual[start:stop], variance)
+               for m, start, stop in zip(found, bounds[:-1], bounds[1:]))
+    covariance = inverse @ gram @ inverse / np.outer(scale, scale)
     in_weak_direction = np.abs(vt[~strong]) > 0.1
     keys = [f"{effect_name}.{parameter_name}" for effect_name, parameter_name in layout.slots]
     sigma = {name: {} for name in layout.model.names}
     undetermined = {}
     for index, (effect_name, parameter_name) in enumerate(layout.slots):
         key = keys[index]
-        sigma[effect_name][parameter_name] = float(np.sqrt(covariance[index, index]))
+        sigma[effect_name][parameter_name] = float(np.sqrt(max(covariance[index, index], 0.0)))
         partners = {keys[j] for row in in_weak_direction if row[index]
                     for j in np.flatnonzero(row) if j != index}
         if in_weak_direction[:, index].any():
