@@ -107,7 +107,7 @@ def test_null_iso_case_invents_nothing(tmp_path):
         case = read_case(syn.iso_case(tmp_path / f"iso{seed}", seed=seed))
         result = diagnose(case, Model([CATALOG["lead_error"]]))
         assert (result.verdict, result.candidates, result.unexplained) == ("adequate", [], [])
-        assert result.noise_source == "pure error: the scatter of the repeated samples"
+        assert result.noise_source == "scatter of repeated samples"
 
 
 USER_EFFECTS = Path(__file__).resolve().parents[1] / "examples" / "coupling_ripple.py"

@@ -15,6 +15,7 @@ from feedaxis.analysis import POINTS_PER_PERIOD, analyse
 from feedaxis.case import read_case, write_case
 from feedaxis.effects import CATALOG, Model
 from feedaxis.examples import write_table2_case
+from feedaxis.measurement import measurement_of
 from feedaxis.physics import geometry
 from feedaxis.report import write_report
 from feedaxis.report.page import _positioning_contributions
@@ -138,7 +139,9 @@ def test_wavelengths_the_targets_cannot_resolve_are_not_marked(eccentric):
     eccentric, page, drawn = eccentric
     details = eccentric.details
     assert "assembly_eccentricity" not in details.marks
-    assert "same phase" in details.unresolved["assembly_eccentricity"]
+    assert details.unresolved["assembly_eccentricity"] == measurement_of(
+        eccentric.case, "positioning").unresolvable(CATALOG["assembly_eccentricity"])
+    assert "10 mm" in details.unresolved["assembly_eccentricity"]
     assert "Not marked, the targets cannot resolve them: assembly_eccentricity" in page
     residual = titled(drawn, "Residual against position")
     assert [t.get_text() for t in residual.get_legend().get_texts()] == ["residual"]
