@@ -179,7 +179,8 @@ def _positioning_details(measurement, model, effects, result):
     table = from_model(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
     thermal = case.is_thermal and any(name in model for name in THERMAL_EFFECTS)
     residual = residual_spectrum(case, result.residual_um, effects)
-    trend_um = np.polyval(np.polyfit(target_mm, result.measured_um, 1), target_mm)
+    trend_um = (np.polyval(np.polyfit(target_mm, result.measured_um, 1), target_mm)
+                if np.unique(target_mm).size > 1 else np.mean(result.measured_um))
     measured = residual_spectrum(case, result.measured_um - trend_um, effects)
     targets = target_clusters(target_mm)[0].size
     unresolved = {name: measurement.unresolvable(effects[name]) for name in residual.marks}
@@ -204,41 +205,49 @@ def dense_model(measurement, model, run_of_sample=None):
     :class:`DenseModel`: each line (an approach direction, or a run of ``run_of_sample``
     and a direction) resampled evenly from its first to its last target, its time and
     ambient interpolated along the position, and predicted through the measurement like
-    the samples themselves."""
+    the samples themselves. Empty when no line has two targets."""
     samples, case = measurement.samples, measurement.case
     keys = _line_keys(samples, run_of_sample)
-    lines = [(key, sign) for key in np.unique(keys) for sign in (1.0, -1.0)
-             if np.unique(samples.target_mm[(keys == key) & (samples.direction == sign)]).size > 1]
+    lines = [(keys == key) & (samples.direction == sign)
+             for key in np.unique(keys) for sign in (1.0, -1.0)]
+    lines = [chosen for chosen in lines if np.unique(samples.target_mm[chosen]).size > 1]
     wavelengths = marked_wavelengths(case.axis, {e.name: e for e in model.effects})
     span_mm = float(np.ptp(samples.target_mm))
-    count = max(DENSE_POINTS_PER_LINE, int(np.ceil(span_mm / min(wavelengths.values(),
-                                                                 default=np.inf)
-                                                   * POINTS_PER_PERIOD)) + 1)
-    count = max(min(count, MAX_DENSE_POINTS // max(len(lines), 1)), 2)
-    columns = {"target_mm": [], "direction": [], "line": [], "time_s": [], "ambient_C": []}
-    for number, (key, sign) in enumerate(lines):
-        chosen = (keys == key) & (samples.direction == sign)
+    start_mm = float(samples.target_mm.min())
+    windows = {name: (start_mm, start_mm + ZOOM_PERIODS * wavelength)
+               for name, wavelength in wavelengths.items()
+               if span_mm > MAX_PERIODS_READABLE * wavelength}
+    if not lines:
+        empty = np.zeros(0)
+        return DenseModel(empty, empty, empty.astype(int), run_of_sample is not None, empty,
+                          {name: empty for name in model.names}, {})
+    count = DENSE_POINTS_PER_LINE
+    if wavelengths:
+        count = max(count, int(np.ceil(span_mm / min(wavelengths.values())
+                                       * POINTS_PER_PERIOD)) + 1)
+    dense, line = _resampled(samples, lines, max(min(count, MAX_DENSE_POINTS // len(lines)), 2))
+    resampled = measurement_of(replace(case, positioning=dense), measurement.kind)
+    return DenseModel(dense.target_mm, dense.direction, line, run_of_sample is not None,
+                      resampled.predict_um(model), resampled.components(model), windows)
+
+
+def _resampled(samples, lines, count):
+    """(Positioning, line number per point): ``count`` points evenly from the first to the
+    last target of each line (a boolean mask of ``samples``), its direction, its time and
+    ambient interpolated along the position."""
+    columns = {"target_mm": [], "direction": [], "time_s": [], "ambient_C": []}
+    for chosen in lines:
         position_mm = samples.target_mm[chosen]
         grid_mm = np.linspace(position_mm.min(), position_mm.max(), count)
         columns["target_mm"].append(grid_mm)
-        columns["direction"].append(np.full(count, sign))
-        columns["line"].append(np.full(count, number))
+        columns["direction"].append(np.full(count, samples.direction[chosen][0]))
         for name in ("time_s", "ambient_C"):
             values = getattr(samples, name)
             if values is not None:
                 columns[name].append(_along(position_mm, values[chosen], grid_mm))
     joined = {name: np.concatenate(parts) if parts else None for name, parts in columns.items()}
-    dense = replace(samples, target_mm=joined["target_mm"],
-                    error_um=np.zeros(joined["target_mm"].size), direction=joined["direction"],
-                    run=None, time_s=joined["time_s"], ambient_C=joined["ambient_C"])
-    resampled = measurement_of(replace(case, positioning=dense), measurement.kind)
-    start_mm = float(samples.target_mm.min())
-    windows = {name: (start_mm, start_mm + ZOOM_PERIODS * wavelength)
-               for name, wavelength in wavelengths.items()
-               if span_mm > MAX_PERIODS_READABLE * wavelength}
-    return DenseModel(joined["target_mm"], joined["direction"], joined["line"],
-                      run_of_sample is not None, resampled.predict_um(model),
-                      resampled.components(model), windows)
+    dense = replace(samples, **joined, error_um=np.zeros(joined["target_mm"].size), run=None)
+    return dense, np.repeat(np.arange(len(lines)), count)
 
 
 def _line_keys(samples, run_of_sample):

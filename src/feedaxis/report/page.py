@@ -127,13 +127,17 @@ def _positioning_views(analysis):
 
 
 def _positioning_contributions(analysis):
-    """Each effect's contribution between the targets, a short period also over a window."""
+    """Each effect's contribution between the targets, a short period also over a window
+    (at the samples when no line joins two targets)."""
     dense = analysis.details.dense
+    if not dense.position_mm.size:
+        return _sample_contributions(analysis)
     return plots.contributions(dense.position_mm, dense.components, "position (mm)",
                                dense.line, dense.direction, dense.windows)
 
 
-def _tracking_contributions(analysis):
+def _sample_contributions(analysis):
+    """Each effect's contribution at the samples, against their coordinate."""
     measurement = analysis.measurement
     return plots.contributions(measurement.coordinate, analysis.components,
                                measurement.coordinate_label)
@@ -210,7 +214,7 @@ def _tracking_views(analysis):
 
 # per kind: its views, its figures, its contributions plot
 VIEWS = {"positioning": (_positioning_views, _positioning_figures, _positioning_contributions),
-         "tracking": (_tracking_views, lambda analysis: [], _tracking_contributions)}
+         "tracking": (_tracking_views, lambda analysis: [], _sample_contributions)}
 
 
 def _sections(analysis):
