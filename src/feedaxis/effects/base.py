@@ -106,7 +106,8 @@ class Effect:
 
         The error is ``base_um + columns_um @ [values[p] for p in linear]``; ``values`` of the
         linear parameters are ignored. By default built from :meth:`prepare` (one evaluation
-        with the linear parameters at 0, one more per linear parameter at 1).
+        with the linear parameters at 0, one more per linear parameter at 1), once for all
+        when every parameter is linear (the split then depends on no value).
         """
         evaluate = self.prepare(case)
 
@@ -116,7 +117,10 @@ class Effect:
             columns = [evaluate({**zero, name: 1.0}) - base_um for name in self.linear]
             return base_um, np.array(columns).reshape(len(self.linear), base_um.size).T
 
-        return separate
+        if set(self.linear) != set(self.parameter_names):
+            return separate
+        fixed = separate({})
+        return lambda values: fixed
 
     def bounds(self, axis):
         """{parameter: (lower, upper)} on this axis; by default the parameters' own bounds."""

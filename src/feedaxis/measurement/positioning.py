@@ -65,12 +65,17 @@ class Positioning(Measurement):
         self.marks = {}
 
     @cached_property
+    def clusters(self):
+        """(target positions, target index of each sample): :func:`target_clusters`."""
+        return target_clusters(self.position_mm)
+
+    @cached_property
     def layout(self):
         """Repeat groups and the test's clock."""
-        return Layout.of(self.samples)
+        return Layout.of(self.samples, self.clusters)
 
     def describe(self):
-        return (f"{self.size} samples at {target_clusters(self.position_mm)[0].size} targets, "
+        return (f"{self.size} samples at {self.clusters[0].size} targets, "
                 f"{self.position_mm.min():g} to {self.position_mm.max():g} mm")
 
     def unresolvable(self, effect):
@@ -86,7 +91,7 @@ class Positioning(Measurement):
             return None
         if not wavelength_mm:
             return None
-        centres_mm, _ = target_clusters(self.position_mm)
+        centres_mm, _ = self.clusters
         if centres_mm.size < 4:
             return f"its {wavelength_mm:.4g} mm wavelength needs at least 4 targets"
         share = resolved_share(centres_mm, wavelength_mm)
@@ -118,7 +123,7 @@ class Positioning(Measurement):
             return PureError(self.layout.groups)
         if not self.bidirectional:
             return None
-        _, target = target_clusters(self.position_mm)
+        _, target = self.clusters
         pairs = PureError(target, within=self.direction, paired=True)
         return pairs if pairs.dof >= MIN_PAIRED_DOF else None
 
@@ -234,7 +239,7 @@ class Positioning(Measurement):
         if self.replicates is not None:
             return None
         if self.size < SERIAL_MIN_SAMPLES:
-            return (f"one pass at {target_clusters(self.position_mm)[0].size} targets without "
+            return (f"one pass at {self.clusters[0].size} targets without "
                     "replicates: the scatter from target to target is the error itself or "
                     "noise, and the data cannot tell which; repeat the runs (ISO 230-2: 5 each "
                     "way) or measure both directions")
@@ -291,9 +296,25 @@ def resolved_share(position_mm, wavelength_mm):
 
 
 def least_squares_fit(residual_um, basis):
-    """Projection of the residual on the columns of ``basis``."""
-    coefficients = np.linalg.lstsq(basis, residual_um, rcond=None)[0]
-    return basis @ coefficients
+    """Projection of the residual on the few columns of ``basis`` (normal equations of the
+    unit-scaled columns: a k x k solve, where a QR of samples x k costs seconds at 10^6)."""
+    scale = np.linalg.norm(basis, axis=0)
+    scale[scale == 0.0] = 1.0
+    scaled = basis / scale
+    coefficients = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ residual_um, rcond=None)[0]
+    return scaled @ coefficients
+
+
+def _weighted_misfit(clusters, residual_um, frequency_per_mm):
+    """Sum of squares left by a sinusoid at ``frequency_per_mm`` fitted to the target means
+    of the residual, each weighted by its sample count: the fit to every sample, for a
+    basis constant at a target, at the cost of the targets."""
+    centres_mm, index = clusters
+    counts = np.bincount(index)
+    means = np.bincount(index, residual_um) / counts
+    weights = np.sqrt(counts)
+    basis = sinusoid(centres_mm, frequency_per_mm) * weights[:, None]
+    return _rss(means * weights - least_squares_fit(means * weights, basis))
 
 
 def _normalised(values):
@@ -329,7 +350,7 @@ class Periodic(Shape):
         in the resolvable band (Rayleigh spacing 1/span)."""
         if measurement.even_step_mm():
             return 1
-        centres, _ = target_clusters(measurement.position_mm)
+        centres, _ = measurement.clusters
         if centres.size < 8:
             return 0
         low, high = self.band_per_mm(centres)
@@ -353,18 +374,17 @@ class Periodic(Shape):
                         "whitened periodogram maximum along the pass, family-wise over the "
                         "wavelengths searched", "ratio")
         else:
-            spectrum = amplitude_spectrum(position_mm, residual_um)
-            low = self.band_per_mm(target_clusters(position_mm)[0])[0]
+            spectrum = amplitude_spectrum(position_mm, residual_um, measurement.clusters)
+            low = self.band_per_mm(measurement.clusters[0])[0]
             if spectrum is None or not np.any(1.0 / spectrum.wavelength_mm >= low):
                 return None
             searched = 1.0 / spectrum.wavelength_mm >= low
             peak = 1.0 / spectrum.wavelength_mm[searched][int(np.argmax(
                 spectrum.amplitude_um[searched]))]
-            width = 1.0 / (5 * np.ptp(target_clusters(position_mm)[0]))
-        best = minimize_scalar(
-            lambda f: _rss(residual_um - least_squares_fit(residual_um, sinusoid(position_mm, f))),
-            bounds=(max(peak - width, width / 2), peak + width), method="bounded",
-            options={"xatol": width * 1e-4})
+            width = 1.0 / (5 * np.ptp(measurement.clusters[0]))
+        best = minimize_scalar(lambda f: _weighted_misfit(measurement.clusters, residual_um, f),
+                               bounds=(max(peak - width, width / 2), peak + width),
+                               method="bounded", options={"xatol": width * 1e-4})
         return Trial(sinusoid(position_mm, best.x), float(1.0 / best.x), test)
 
     def describe(self, measurement, trial, fitted_um):
@@ -431,14 +451,14 @@ class Trend(Shape):
     extra = MAX_TREND_DEGREE
 
     def trials(self, measurement):
-        targets = target_clusters(measurement.position_mm)[0].size
+        targets = measurement.clusters[0].size
         return MAX_TREND_DEGREE if targets >= MIN_TREND_TARGETS else 0
 
     def trial(self, measurement, current):
         return Trial(np.vander(_normalised(measurement.position_mm), MAX_TREND_DEGREE + 1))
 
     def describe(self, measurement, trial, fitted_um):
-        centres, index = target_clusters(measurement.position_mm)
+        centres, index = measurement.clusters
         curve = np.bincount(index, fitted_um) / np.bincount(index)
         turns = int(np.count_nonzero(np.diff(np.sign(np.diff(curve))) != 0))
         shape = ("rises or falls steadily" if turns == 0 else "bows once" if turns == 1

@@ -49,8 +49,8 @@ class Layout:
     clock_unit: str | None
 
     @classmethod
-    def of(cls, positioning):
-        groups = target_groups(positioning)
+    def of(cls, positioning, clusters=None):
+        groups = target_groups(positioning, clusters)
         clock, unit = test_clock(positioning)
         return cls(groups, int(groups.max()) + 1, clock, unit)
 
