@@ -30,8 +30,10 @@ import numpy as np
 from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import synthetic as syn  # noqa: E402
+from common import arguments  # noqa: E402
 from feedaxis.case import read_case  # noqa: E402
 from feedaxis.diagnose import diagnose  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
@@ -100,7 +102,7 @@ def main(argv=None):
     parser.add_argument("--trials", type=int, default=200, help="nulls per family (default 200)")
     parser.add_argument("--power-trials", type=int, default=200,
                         help="trials per backlash of the power curve (default 200)")
-    args = parser.parse_args(argv)
+    args = arguments(parser, argv, trials=2, power_trials=2)
     print(f"family-wise error rate of a whole diagnosis, every kind: {FAMILY_ALPHA:g}")
     print(f"{'null family':30s} {'effect or periodic named':>34s}   {'other structure named':>34s}")
     for seed, family in enumerate(syn.NULL_FAMILIES):

@@ -24,6 +24,9 @@ from fmpy.fmi2 import FMU2Slave
 
 from feedaxis.fmu_build import FMU_NAMES, build_fmus
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
+
 MACRO_STEP_S = 1e-3
 EVERY = {"NpidServo": 1, "StepperError": 1, "GeometricError": 1, "ThermalScrew": 100}
 INPUT_VALUES = {"position_ref_mm": 5.0, "disturbance_N": 0.0, "position_mm": 5.0,
@@ -118,12 +121,12 @@ def time_per_macro_step_us(paths, n_steps):
     return {name: 1e6 * seconds / n_steps for name, seconds in spent.items()}
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15,
                         help="interleaved repeats (default 15)")
     parser.add_argument("--steps", type=int, default=2000, help="macro steps per run (default 2000)")
-    args = parser.parse_args()
+    args = arguments(parser, argv, repeats=2, steps=200)
     with tempfile.TemporaryDirectory() as folder:
         full = {p.stem: p for p in build_fmus(Path(folder) / "full")}
         empty = build_empty_fmus(full, Path(folder))

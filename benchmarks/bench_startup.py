@@ -32,6 +32,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from common import arguments  # noqa: E402
 
 from tracking_synthetic import step_loop, two_sines, write_tracking_case  # noqa: E402
 
@@ -89,10 +91,10 @@ def summary(values):
     return f"{statistics.median(values):5.2f} s ({min(values):.2f}-{max(values):.2f})"
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=7)
-    args = parser.parse_args()
+    args = arguments(parser, argv, repeats=1)
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         case, model = make_case(folder)
