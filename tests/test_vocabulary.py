@@ -18,7 +18,7 @@ from feedaxis.stats import noise
 from feedaxis.stats.judge import Test as FTest
 from feedaxis.stats.wording import p_text
 
-MICRONS_AS_UM = re.compile(r"(?<![\w_])um(?![\w_])")
+MICRONS_AS_UM = re.compile(r"(?<![\w_-])um(?![\w_])")   # not in --tolerance-um
 P_VALUE = re.compile(r"\bp\b(?! = \S| < 1e-300)")   # a "p" not followed by "= x" or "< 1e-300"
 
 
