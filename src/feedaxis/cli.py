@@ -210,13 +210,22 @@ def _diagnose_options(parser):
 
 
 @command("diagnose", help="where the model fails and which effect is missing",
-         description="Refit the model, fit each missing effect on top and judge it by an F "
-                     "test against the noise the data support (the pure error of repeated "
-                     "samples, the residual mean square, or the effective sample count of a "
-                     "serially correlated trace), stepwise at a family-wise error rate of "
-                     "0.001 (Bonferroni); describe structure no effect explains by the same "
-                     "tests; give a verdict: adequate, missing_effect or unexplained. A case "
-                     "with positioning.csv and tracking.csv is diagnosed on the samples the "
+         description="Refit the model as fit does (outliers named by row and kept out, a "
+                     "drift along the test fitted beside the effects), then fit each missing "
+                     "effect on top and judge it by an F test against the noise the samples "
+                     "support: the pure error of repeated samples (or of the + and - readings "
+                     "at each target in one pass each way), the residual mean square where "
+                     "there are no replicates, the noise power at the term's frequencies "
+                     "where the residual is serially correlated (Ljung-Box, AR model), or "
+                     "the effective sample count of a tracking trace. Stepwise: the smallest "
+                     "p-value is accepted below a family-wise error rate of 0.001 (Bonferroni "
+                     "over the stages and the effects tried). Then describe structure no "
+                     "effect explains (a periodic error, a trend, a reversal, a drift, a "
+                     "constant force; a lack of fit left) under the same policy, and give a "
+                     "verdict: adequate, missing_effect, unexplained, or undetermined (the "
+                     "samples cannot tell noise from structure; the reason is given). The "
+                     "noise line and the test line name the same noise model. A case with "
+                     "positioning.csv and tracking.csv is diagnosed on the samples the "
                      "model's effects act on, or on each in turn with an empty model.",
          options=_diagnose_options)
 def _cmd_diagnose(args):
@@ -262,10 +271,11 @@ def _report_options(parser):
 
 
 @command("report", help="self-contained HTML page with the plots",
-         description="The diagnosis, the measurement against the model, the residual and its "
-                     "spectrum, each effect's contribution, the error ladder, the figures of "
-                     "compare and the model's parameters, on one page (a case with both "
-                     "measurements: both).",
+         description="The diagnosis, the measurement against the model (drawn between the "
+                     "targets too), the residual and its spectrum, each effect's contribution, "
+                     "the error ladder, the figures of compare with the ISO 230-2 deviation "
+                     "plot, and the model's parameters, on one self-contained HTML page (a "
+                     "case with both measurements: both).",
          options=_report_options)
 def _cmd_report(args):
     from .analysis import analyse
@@ -330,7 +340,7 @@ def _import_options(parser):
                 "          50.012,0.8,2.9,,3.0\n"
                 "        target_mm first (mm); then one column per run and direction,\n"
                 "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
-                "        measured - target in um; an empty cell = not measured; '#' comment\n"
+                "        measured - target in µm; an empty cell = not measured; '#' comment\n"
                 "        lines; ';'- or tab-separated files may use a decimal comma.",
          options=_import_options)
 def _cmd_import(args):
@@ -572,7 +582,7 @@ def _simulate_options(parser):
 def _noise_options(sub):
     sub.add_argument("--noise-um", type=float, default=0.0,
                      help="white Gaussian measurement noise added to what the case records "
-                          "as measured, standard deviation in um (default 0: the simulated "
+                          "as measured, standard deviation in µm (default 0: the simulated "
                           "axis exactly)")
     sub.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
 
@@ -633,7 +643,7 @@ def _cmd_simulate_iso230(args):
         args.out, master, **_iso230_arguments(args), progress=progress, noise=_noise(args)))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples, {args.targets} targets x "
                          f"{args.runs} runs each direction; deviation "
-                         f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} um")
+                         f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} µm")
 
 
 @scenario_arguments("iso230")
@@ -667,7 +677,7 @@ def _cmd_simulate_thermal(args):
         args.out, master, **_thermal_arguments(args), progress=progress, noise=_noise(args)))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples (duty.csv + "
                          f"positioning.csv); deviation {summary['error_min_um']:.3f} to "
-                         f"{summary['error_max_um']:.3f} um")
+                         f"{summary['error_max_um']:.3f} µm")
 
 
 @scenario_arguments("thermal")

@@ -39,7 +39,7 @@ def improve(case, model, effects=None, echo=print, max_rounds=MAX_ROUNDS):
         diagnosis = diagnose(case, model, effects)
         round_ = {"round": number, "rms_um": diagnosis.rms_um, "noise_um": diagnosis.noise_um,
                   "verdict": diagnosis.verdict, **diagnosis.to_json()}
-        echo(f"round {number}: RMS {diagnosis.rms_um:.4f} um (noise {diagnosis.noise_um:.4f} um)"
+        echo(f"round {number}: RMS {diagnosis.rms_um:.4f} µm (noise {diagnosis.noise_um:.4f} µm)"
              f" -> {diagnosis.verdict}")
         for structure in diagnosis.unexplained:
             echo(f"    unexplained {structure.kind}: {structure.evidence}")
@@ -52,7 +52,7 @@ def improve(case, model, effects=None, echo=print, max_rounds=MAX_ROUNDS):
         rounds.append(round_)
         echo(f"    missing: {best.effect} ({best.meaning})")
         echo(f"    evidence: {best.evidence}")
-        echo(f"    add {best.effect}, refit: RMS {best.rms_after_um:.4f} um")
+        echo(f"    add {best.effect}, refit: RMS {best.rms_after_um:.4f} µm")
     return model, rounds, diagnose(case, model, effects)
 
 
@@ -81,7 +81,7 @@ def run_demo(out_dir, echo=print):
     difference_um = float(np.max(np.abs(replay_positioning(case, model, fmu_paths)
                                         - model.predict_um(case))))
     echo(f"FMUs {' + '.join(POSITION_FMUS)} with the fitted parameters reproduce the model "
-         f"within {difference_um:.1e} um ({out_dir / 'fmus'})")
+         f"within {difference_um:.1e} µm ({out_dir / 'fmus'})")
     return {"case": str(case.folder), "rounds": rounds, "effects": list(model.names),
             "params": model.values, "model": str(model_path), "report": str(report_path),
             "laser_example": str(laser_path),

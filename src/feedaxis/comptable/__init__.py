@@ -177,7 +177,7 @@ def summary_lines(report):
 def _figure_lines(report):
     """The ISO 230-2 figures expected before and after the table, and the model's view
     between the targets."""
-    lines = [f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
+    lines = [f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (µm)"]
     lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
               for f in report["figures"].values()]
     between = report["between_targets"]

@@ -37,7 +37,7 @@ DETECTION_UNIT_UM = 1.0
 MAX_VALUE = 127
 PITCH_DATA = 10000
 BIDIRECTIONAL_BITS = 3605  # bit parameter, written bit 7 .. bit 0; #0 = bidirectional
-SIGN = "increment of -(measured - target) per interval, detection units (1 um) x 3623"
+SIGN = "increment of -(measured - target) per interval, detection units (1 µm) x 3623"
 LOAD = ("parameter tape (or MDI): 3605#0 = 1 for bidirectional, 3620-3627, then the pitch "
         "data; power off and on, reference return (G28); point 3620 is the reference position "
         "at 0 mm (parameter 1240 = 0)")

@@ -501,7 +501,7 @@ class MeasurementNoise:
 
     def __post_init__(self):
         if not (math.isfinite(self.sigma_um) and self.sigma_um >= 0):
-            raise ParameterError(f"must be a finite number >= 0 (um), got {self.sigma_um}",
+            raise ParameterError(f"must be a finite number >= 0 (µm), got {self.sigma_um}",
                                  parameter="--noise-um")
 
     def measured(self, tables):
