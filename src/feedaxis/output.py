@@ -7,28 +7,45 @@ from __future__ import annotations
 
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
-from .errors import check_writable_target
+from .errors import check_writable_target, write_error
+
+
+@contextmanager
+def writing(path):
+    """Turn an OSError of a full, read-only or forbidden disk while writing ``path`` into an
+    :class:`~feedaxis.errors.InputError` naming ``path`` (any other OSError passes)."""
+    try:
+        yield
+    except OSError as error:
+        refused = write_error(error, path)
+        if refused is None:
+            raise
+        raise refused from None
 
 
 def write_atomically(path, content):
     """Write text or bytes to ``path`` through a temporary file in the same folder.
 
-    Raises :class:`~feedaxis.errors.InputError` when ``path`` is a folder or lies under a file.
+    Two writers of one path each publish a whole file; the last rename wins. Raises
+    :class:`~feedaxis.errors.InputError` when ``path`` is a folder or lies under a file, or
+    the disk is full or read-only.
     """
     path = Path(path)
     check_writable_target(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, staging = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(content.encode("utf-8") if isinstance(content, str) else content)
-        os.chmod(staging, umask_mode(0o666))
-        os.replace(staging, path)
-    except BaseException:
-        Path(staging).unlink(missing_ok=True)
-        raise
+    with writing(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, staging = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
+        try:
+            with os.fdopen(handle, "wb") as stream:
+                stream.write(content.encode("utf-8") if isinstance(content, str) else content)
+            os.chmod(staging, umask_mode(0o666))
+            os.replace(staging, path)
+        except BaseException:
+            Path(staging).unlink(missing_ok=True)
+            raise
     return path
 
 

@@ -30,10 +30,15 @@ from functools import lru_cache
 
 import numpy as np
 
-from .checks import require_finite, require_non_negative, require_positive
+from .checks import ParameterError, require_finite, require_non_negative, require_positive
 
 FRICTION_SMOOTHING_MM_S = 0.1
 STATE_SIZE = 6  # position_mm, velocity_mm_s, integral_V, previous_error_mm, reference_mm, head
+# The loop steps through every interval of a record, so its cost is the record's span over
+# the loop step, whatever the samples: a record may ask for at most this many steps between
+# two samples (10 s at 0.1 ms) and in all (about 1.5 s of the compiled loop per simulation).
+MAX_INTERVAL_STEPS = 10**5
+MAX_LOOP_STEPS = 10**8
 
 
 @dataclass(frozen=True)
@@ -232,9 +237,39 @@ def whole_steps(pending_s, duration_s, time_step_s):
     return n_steps, max(0.0, (elapsed_steps - n_steps) * time_step_s)
 
 
+def loop_budget_problem(time_s, time_step_s):
+    """Where stepping the loop every ``time_step_s`` through samples at ``time_s`` costs more
+    than a record may: (index of the sample, why), or None.
+
+    A gap of more than :data:`MAX_INTERVAL_STEPS` loop steps before a sample, or a record
+    needing more than :data:`MAX_LOOP_STEPS` in all, is refused rather than simulated for
+    minutes or hours.
+    """
+    interval_s = np.diff(np.asarray(time_s, dtype=float))
+    steps = interval_s / time_step_s
+    gaps = np.flatnonzero(steps > MAX_INTERVAL_STEPS)
+    if gaps.size:
+        i = gaps[0]
+        return i + 1, (f"a gap of {interval_s[i]:g} s before this sample, {steps[i]:.3g} steps "
+                       f"of the {time_step_s:g} s control loop; samples may be at most "
+                       f"{MAX_INTERVAL_STEPS:g} steps ({MAX_INTERVAL_STEPS * time_step_s:g} s) "
+                       "apart: split the record at the gap into two cases")
+    over = np.flatnonzero(np.cumsum(steps) > MAX_LOOP_STEPS)
+    if over.size:
+        return over[0] + 1, (f"the record reaches {MAX_LOOP_STEPS:g} steps of the "
+                             f"{time_step_s:g} s control loop here ({steps.sum():.3g} in all), "
+                             f"the most one may need: split it into cases of at most "
+                             f"{MAX_LOOP_STEPS * time_step_s:g} s")
+    return None
+
+
 def step_counts(time_s, time_step_s):
     """Internal steps between consecutive samples, carrying remainders as :class:`Servo` does;
-    the first sample gets 0 (the loop starts there)."""
+    the first sample gets 0 (the loop starts there). Samples beyond the loop's budget
+    (:func:`loop_budget_problem`) raise :class:`ParameterError` naming ``time_s``."""
+    problem = loop_budget_problem(time_s, time_step_s)
+    if problem is not None:
+        raise ParameterError(f"sample {problem[0] + 1}: {problem[1]}", "time_s")
     counts, pending = np.zeros(len(time_s), dtype=np.int64), 0.0
     for i, duration_s in enumerate(np.diff(time_s), start=1):
         counts[i], pending = whole_steps(pending, float(duration_s), time_step_s)
