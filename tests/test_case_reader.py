@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from feedaxis.case import (PHYSICAL_RANGE, POSITIONING_COLUMNS, TRACKING_COLUMNS, CaseError,
-                           _check_header, _range_problem, _read_csv, _read_text, _row_label)
+                           _check_header, _read_csv, _read_text, _row_label, range_problem)
 from feedaxis.errors import finite_float, text_lines
 from test_fuzz import CONTENT, FUZZ
 
@@ -54,7 +54,7 @@ def reference_read_csv(path, spec):
         bad = np.flatnonzero((column < low) | (column > high))
         if bad.size:
             value = column[bad[0]]
-            raise CaseError(path, f"{value:g} {_range_problem(name, value)}",
+            raise CaseError(path, f"{value:g} {range_problem(name, value)}",
                             row_labels[bad[0]], name)
     return values, row_labels
 

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .errors import InputError, finite_float, finite_value, read_text, read_toml, text_lines
+from .errors import (InputError, finite_float, finite_value, read_text, read_toml,
+                     shown_value, text_lines)
 from .output import umask_mode, writing
 from .physics.geometry import SUPPORTS
 from .physics.servo import loop_budget_problem
@@ -248,7 +249,7 @@ def _check_table(path, text, table, values):
             raise CaseError(path, _unknown_key_message(key, list(known)), row, column)
         problem = _value_problem(known[key], key, value)
         if problem:
-            raise CaseError(path, f"{key} {problem}, got {value!r}", row, column)
+            raise CaseError(path, f"{key} {problem}, got {shown_value(value)}", row, column)
     return dict(values)
 
 
@@ -272,10 +273,10 @@ def _value_problem(rule, key, value):
         return "must be >= 0"
     if rule == "positive_integer" and (not isinstance(value, int) or value < 1):
         return "must be a whole number >= 1"
-    return _range_problem(key, value)
+    return range_problem(key, value)
 
 
-def _range_problem(key, value):
+def range_problem(key, value):
     """Why ``value`` lies beyond any physical axis for ``key`` (None when it does not)."""
     low, high = PHYSICAL_RANGE.get(key, (-math.inf, math.inf))
     if low <= value <= high:
@@ -326,7 +327,7 @@ def _read_csv(path, spec):
         bad = np.flatnonzero((column < low) | (column > high))
         if bad.size:
             value = column[bad[0]]
-            raise CaseError(path, f"{value:g} {_range_problem(name, value)}", rows[bad[0]], name)
+            raise CaseError(path, f"{value:g} {range_problem(name, value)}", rows[bad[0]], name)
     return values, rows
 
 

@@ -90,8 +90,10 @@ def json_safe(value):
     return value
 
 
-def read_text(path, what="file"):
-    """The text of ``path``: UTF-8 with or without a byte-order mark, or UTF-16 with one.
+def read_text(path, what="file", legacy_encoding=None):
+    """The text of ``path``: UTF-8 with or without a byte-order mark, or UTF-16 with one;
+    with ``legacy_encoding`` (a code page such as cp1252) a file that is not UTF-8 is read
+    in it, undecodable bytes replaced.
 
     Raises
     ------
@@ -118,12 +120,19 @@ def read_text(path, what="file"):
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as error:
+        if legacy_encoding:
+            return _without_nul(path, data.decode(legacy_encoding, errors="replace"))
         line = data.count(b"\n", 0, error.start) + 1
         raise InputError(f"not UTF-8 text: byte 0x{data[error.start]:02x} cannot be decoded; "
                          "save the file as UTF-8", path=path, row=line) from None
+    return _without_nul(path, text)
+
+
+def _without_nul(path, text):
+    """``text``, refused when it holds a NUL character (a binary file)."""
     if "\x00" in text:
         raise InputError("holds NUL characters: a binary file, not text", path=path,
-                         row=text.count("\n", 0, text.index("\x00")) + 1)
+                         row=line_of(text, text.index("\x00")))
     return text
 
 
@@ -194,6 +203,13 @@ def finite_value(value):
     if not math.isfinite(number):
         raise ValueError("must be finite")
     return number
+
+
+def shown_value(value):
+    """``value`` for a message: its repr, or its length when it is a very long integer."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 10**20:
+        return f"an integer of {len(str(abs(value)))} digits"
+    return repr(value)
 
 
 def check_writable_target(path, kind="file"):
