@@ -18,7 +18,7 @@ from .diagnose import diagnose
 from .effects import CATALOG, Model
 from .examples import BUNDLED_CASE
 from .fmu_build import build_fmus
-from .output import write_atomically
+from .output import staged_folder, write_atomically
 from .report import write_report
 
 MAX_ROUNDS = 8
@@ -60,21 +60,27 @@ def ladder_of(rounds):
 
 
 def run_demo(out_dir, echo=print):
-    """Run the loop on the bundled case and write model, report and FMUs to ``out_dir``."""
+    """Run the loop on the bundled case and write model, report and FMUs to ``out_dir``.
+
+    The three are written together (:func:`feedaxis.output.staged_folder`): an error, a full
+    disk or Ctrl-C on the way leaves none of them.
+    """
     out_dir = Path(out_dir)
     case = read_case(BUNDLED_CASE)
     echo(f"case: {case.name}")
     echo(f"      {case.positioning.size} laser points, {case.positioning.target_mm.min():g} to "
          f"{case.positioning.target_mm.max():g} mm; model: empty")
     model, rounds, diagnosis = improve(case, Model(), echo=echo)
-    model_path = write_atomically(out_dir / "model.toml", model.to_toml())
     analysis = analyse(case, model, CATALOG, diagnosis=diagnosis, ladder=ladder_of(rounds))
-    report_path = write_report(analysis, out_dir / "report.html")
+    with staged_folder(out_dir) as staging:
+        write_atomically(staging / "model.toml", model.to_toml())
+        write_report(analysis, staging / "report.html")
+        fmu_paths = {path.stem: path for path in build_fmus(staging / "fmus", POSITION_FMUS)}
+        difference_um = float(np.max(np.abs(replay_positioning(case, model, fmu_paths)
+                                            - model.predict_um(case))))
+    model_path, report_path = out_dir / "model.toml", out_dir / "report.html"
     echo(f"fitted model: {model_path}")
     echo(f"report:       {report_path}")
-    fmu_paths = {path.stem: path for path in build_fmus(out_dir / "fmus", POSITION_FMUS)}
-    difference_um = float(np.max(np.abs(replay_positioning(case, model, fmu_paths)
-                                        - model.predict_um(case))))
     echo(f"FMUs {' + '.join(POSITION_FMUS)} with the fitted parameters reproduce the model "
          f"within {difference_um:.1e} um ({out_dir / 'fmus'})")
     return {"case": str(case.folder), "rounds": rounds, "effects": list(model.names),

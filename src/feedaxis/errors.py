@@ -245,6 +245,11 @@ WRITE_ERRORS = {errno.ENOSPC: "no space left on the device",
                 errno.EACCES: "permission denied", errno.EPERM: "permission denied"}
 
 
+# Of those, the ones any write may meet (a command's own output is checked beforehand for
+# permission): reported as the disk's state wherever they arise.
+DISK_STATE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS)
+
+
 def write_error(error, path=None):
     """The :class:`InputError` for an OSError raised while writing ``path`` (or the error's
     own file name), or None when the error is not one of ``WRITE_ERRORS``."""

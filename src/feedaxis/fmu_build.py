@@ -32,6 +32,8 @@ import zipfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from .output import write_atomically, writing
+
 FMU_NAMES = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 PHYSICS_PACKAGE = "feedaxis_fmu_physics"
 ADAPTER_MODULE = "feedaxis_slave"
@@ -106,12 +108,18 @@ SI_UNITS = {
 def build_fmus(out_dir, names=FMU_NAMES):
     """Build the named FMUs into ``out_dir``; return their paths."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with writing(out_dir):
+        out_dir.mkdir(parents=True, exist_ok=True)
     return [build_fmu(name, out_dir) for name in names]
 
 
 def build_fmu(name, out_dir):
-    """Build one FMU ``<out_dir>/<name>.fmu``: pythonfmu, then the host layer and description."""
+    """Build one FMU ``<out_dir>/<name>.fmu``: pythonfmu, then the host layer and description.
+
+    The FMU is completed in a private folder and then written whole under its name (a
+    temporary file renamed), so an interrupted build or a full disk leaves no partial FMU,
+    and builds racing for one folder each leave a complete one.
+    """
     from pythonfmu.builder import FmuBuilder
 
     sources = fmu_sources()
@@ -123,7 +131,7 @@ def build_fmu(name, out_dir):
         script.write_text(ENTRY_SCRIPT.format(name=name), encoding="utf-8")
         try:
             fmu_path = Path(FmuBuilder.build_FMU(
-                script, dest=out_dir, project_files=[staging / package],
+                script, dest=staging / "built", project_files=[staging / package],
                 canGetAndSetFMUstate=True, canSerializeFMUstate=True))
             slave = getattr(importlib.import_module(name), name)(instance_name="describe")
         finally:
@@ -137,7 +145,7 @@ def build_fmu(name, out_dir):
         else:
             warnings.warn(f"the FMUs run in Python hosts only ({missing}); plain C hosts "
                           "need the host layer: see fmus/README.md", stacklevel=2)
-    return fmu_path
+        return write_atomically(out_dir / fmu_path.name, fmu_path.read_bytes())
 
 
 def _stage_package(sources, name, package_dir):

@@ -6,6 +6,7 @@ published gets the mode a plain ``open``/``mkdir`` would give under the user's u
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -47,6 +48,42 @@ def write_atomically(path, content):
             Path(staging).unlink(missing_ok=True)
             raise
     return path
+
+
+@contextmanager
+def staged_folder(folder):
+    """Yield a private folder beside ``folder`` to write into; when the block ends without
+    an error its files are moved into ``folder`` (created if need be), each replacing its
+    namesake at once, so ``folder`` never holds half of a result; on an error or Ctrl-C
+    the staged files are removed and ``folder`` is left as it was."""
+    folder = Path(folder)
+    check_writable_target(folder, "folder")
+    with writing(folder):
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+        try:
+            yield staging
+            os.chmod(staging, umask_mode(0o777))
+            if not folder.exists():
+                os.replace(staging, folder)
+            else:
+                _merge(staging, folder)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _merge(staging, folder):
+    """Move each entry of ``staging`` into ``folder``: files by one rename, a folder by
+    moving the old one aside first."""
+    for entry in staging.iterdir():
+        target = folder / entry.name
+        if entry.is_dir() and target.is_dir():
+            old = Path(tempfile.mkdtemp(prefix=f".{entry.name}-old-", dir=folder))
+            os.replace(target, old / entry.name)
+            os.replace(entry, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(entry, target)
 
 
 def umask_mode(mode):

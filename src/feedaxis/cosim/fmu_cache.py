@@ -18,6 +18,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
+from ..output import writing
 
 
 def source_hash():
@@ -47,13 +48,29 @@ def cache_folder(root=None):
 def cached_fmus(root=None):
     """{FMU name: path} of the four FMUs, built into the cache on first use."""
     folder = cache_folder(root)
-    if not all((folder / f"{name}.fmu").exists() for name in FMU_NAMES):
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
-        try:
-            build_fmus(staging)
-            shutil.rmtree(folder, ignore_errors=True)
-            os.replace(staging, folder)
-        finally:
-            shutil.rmtree(staging, ignore_errors=True)
+    if not _complete(folder):
+        with writing(folder):
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
+            try:
+                build_fmus(staging)
+                if folder.exists() and not _complete(folder):
+                    shutil.rmtree(folder, ignore_errors=True)
+                _publish(staging, folder)
+            finally:
+                shutil.rmtree(staging, ignore_errors=True)
     return {name: folder / f"{name}.fmu" for name in FMU_NAMES}
+
+
+def _complete(folder):
+    return all((folder / f"{name}.fmu").exists() for name in FMU_NAMES)
+
+
+def _publish(staging, folder):
+    """Rename ``staging`` to ``folder``; a run that built the same cache meanwhile keeps its
+    folder (a rename never replaces a folder holding files), and this one uses it."""
+    try:
+        os.replace(staging, folder)
+    except OSError:
+        if not _complete(folder):
+            raise

@@ -26,6 +26,7 @@ from ..case import PHYSICAL_RANGE, write_case
 from ..errors import ParameterError
 from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..physics.checks import require_positive
+from ..physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
 from .physics_check import start_value
@@ -361,6 +362,9 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
         raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
     overrides = {**(parameters or {})}
     overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
+    axis = axis_values(master, overrides, "simulated tracking test", with_servo=True)
+    stop_s = _stop_time_s(duration_s, h)
+    _check_loop_budget(h, stop_s, axis["servo"]["loop_step_s"])
 
     def reference_mm(t):
         return amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
@@ -368,7 +372,6 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     inputs = {"position_ref_mm": lambda t: reference_mm(t + h)}
     if spindle_rpm is not None:
         inputs["disturbance_N"] = lambda t: cutting_force_N(t, spindle_rpm, force_N)
-    stop_s = _stop_time_s(duration_s, h)
     try:
         rows, completed = master.run(stop_s, inputs, overrides, progress=progress), True
     except SimulationInterrupted as stopped:
@@ -380,9 +383,9 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
         tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
     if rows.size == 0:
         raise ScenarioInterrupted("interrupted before the first step; nothing written")
-    name = "simulated tracking test" + ("" if completed else
-                                        f" (interrupted at t = {rows['time'][-1]:g} s)")
-    write_case(out, axis_values(master, overrides, name, with_servo=True), tracking=tracking)
+    if not completed:
+        axis["name"] += f" (interrupted at t = {rows['time'][-1]:g} s)"
+    write_case(out, axis, tracking=tracking)
     settled = rows["time"] > SETTLE_S
     error_mm = np.abs(rows["NpidServo.tracking_error_mm"][settled])
     summary = {"case": str(out), "controller": controller, "frequency_hz": frequency_hz,
@@ -395,6 +398,22 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
         raise ScenarioInterrupted(f"interrupted at t = {summary['simulated_s']:g} s; the "
                                   f"partial tracking.csv is in {out}")
     return summary
+
+
+def _check_loop_budget(macro_step_s, stop_s, loop_step_s):
+    """Refuse a tracking test whose case no reader would take: samples every macro step too
+    far apart for the control loop, or a record too long for it
+    (:func:`feedaxis.physics.servo.loop_budget_problem`)."""
+    if macro_step_s / loop_step_s > MAX_INTERVAL_STEPS:
+        steps = macro_step_s / loop_step_s
+        raise ParameterError(f"a sample every {macro_step_s:g} s is {steps:.3g} "
+                             f"steps of the {loop_step_s:g} s control loop; a tracking case may "
+                             f"hold at most {MAX_INTERVAL_STEPS:g} between samples", "--step-ms")
+    if stop_s / loop_step_s > MAX_LOOP_STEPS:
+        raise ParameterError(f"{stop_s:g} s is {stop_s / loop_step_s:.3g} steps of the "
+                             f"{loop_step_s:g} s control loop; a tracking case may need at most "
+                             f"{MAX_LOOP_STEPS:g} ({MAX_LOOP_STEPS * loop_step_s:g} s)",
+                             "duration_s")
 
 
 def _positioning_parameters(parameters):

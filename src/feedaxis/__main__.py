@@ -1,0 +1,4 @@
+"""``python -m feedaxis``: the console script."""
+from .console import run
+
+run()
