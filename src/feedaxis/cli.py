@@ -133,7 +133,7 @@ def _cmd_fit(args):
     with _progress("fitting", "model evaluations") as tick:
         result = fit(model, cases, progress=tick)
     if args.out:
-        write_atomically(args.out, result.model.to_toml())
+        write_atomically(args.out, result.fitted_model().to_toml())
     payload = {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
                "effects": list(result.model.names), "params": result.params(),
                "uncertainties": result.uncertainties, "undetermined": result.undetermined,

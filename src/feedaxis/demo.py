@@ -17,6 +17,7 @@ from .cosim.replay import POSITION_FMUS, replay_positioning
 from .diagnose import diagnose
 from .effects import CATALOG, Model
 from .examples import BUNDLED_CASE
+from .fit import fit
 from .fmu_build import build_fmus
 from .output import staged_folder, write_atomically
 from .report import write_report
@@ -73,7 +74,7 @@ def run_demo(out_dir, echo=print):
     model, rounds, diagnosis = improve(case, Model(), echo=echo)
     analysis = analyse(case, model, CATALOG, diagnosis=diagnosis, ladder=ladder_of(rounds))
     with staged_folder(out_dir) as staging:
-        write_atomically(staging / "model.toml", model.to_toml())
+        write_atomically(staging / "model.toml", fit(model, case).fitted_model().to_toml())
         write_report(analysis, staging / "report.html")
         fmu_paths = {path.stem: path for path in build_fmus(staging / "fmus", POSITION_FMUS)}
         difference_um = float(np.max(np.abs(replay_positioning(case, model, fmu_paths)

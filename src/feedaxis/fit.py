@@ -11,7 +11,7 @@ import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 from threadpoolctl import threadpool_limits
 
-from .effects import Model
+from .effects import FitRecord, Model
 from .errors import InputError
 
 SINGULAR_RATIO = 1e-6
@@ -63,10 +63,19 @@ class FitResult:
     residual_um: np.ndarray
     uncertainties: dict = field(default_factory=dict)
     undetermined: dict = field(default_factory=dict)
+    covariance: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def rms_um(self):
         return self.statistics.rms_um
+
+    def fitted_model(self):
+        """The fitted model carrying its :class:`~feedaxis.effects.FitRecord` (covariance,
+        undetermined parameters), as ``fit --out`` saves it."""
+        keys = self.model.parameter_keys
+        covariance = self.covariance if self.covariance is not None else np.zeros((len(keys),) * 2)
+        return self.model.with_record(FitRecord(keys, covariance, dict(self.undetermined),
+                                                self.statistics.n_points, self.rms_um))
 
     def params(self):
         """{effect: {parameter: value}} of the fitted model."""
@@ -200,9 +209,9 @@ def _fit(model, cases, progress):
     solution = least_squares(residual, start, bounds=layout.bounds(), x_scale="jac",
                              method="trf")
     fitted = model.with_values(layout.values(solution.x))
-    sigma, undetermined = _uncertainties(solution, layout, measured.size)
+    sigma, undetermined, covariance = _uncertainties(solution, layout, measured.size)
     result = FitResult(fitted, Statistics.of(measured, solution.fun, layout.size), measured,
-                       solution.fun, sigma, undetermined)
+                       solution.fun, sigma, undetermined, covariance)
     _check_finite(result, cases)
     return result
 
@@ -306,7 +315,8 @@ class _Layout:
 
 
 def _uncertainties(solution, layout, n_points):
-    """Standard uncertainties from the Jacobian at the optimum; flag what the data cannot fix.
+    """(standard uncertainties, undetermined parameters, covariance) from the Jacobian at
+    the optimum; the covariance is in the order of ``layout.slots``.
 
     A parameter is undetermined when it has a share in a (nearly) singular direction of the
     Jacobian with its columns scaled to unit length (so units do not matter), or when it
@@ -334,4 +344,4 @@ def _uncertainties(solution, layout, n_points):
             sigma[effect_name][parameter_name] = float("nan")
         elif solution.active_mask[index] != 0:
             undetermined[key] = "ended on its bound"
-    return sigma, undetermined
+    return sigma, undetermined, covariance

@@ -12,7 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 import tomli_w
 
+from ..errors import InputError, finite_value
 from ..fmu_map import neutral_fmu_parameters
+
+FIT_TABLE = "fit"  # the model file's table holding its FitRecord: no effect may take the name
 
 
 @dataclass(frozen=True)
@@ -163,16 +166,91 @@ def effect(name, meaning, parameters, needs=Needs(), wavelength_mm=None, guess=N
     return wrap
 
 
-class Model:
-    """An ordered set of effects with their parameter values; add effects with ``+``."""
+@dataclass(frozen=True)
+class FitRecord:
+    """How a model's values were fitted, saved with the model in its ``[fit]`` table.
 
-    def __init__(self, effects=(), values=None):
+    ``parameters`` are ``"effect.parameter"`` keys in the order of ``covariance`` (their
+    covariance matrix, in the products of their units); ``undetermined`` maps the keys the
+    data could not determine to why (their covariance rows mean nothing); ``rms_um`` and
+    ``n_points`` describe the residual of the fit.
+    """
+
+    parameters: tuple
+    covariance: np.ndarray
+    undetermined: dict
+    n_points: int
+    rms_um: float
+
+    def to_table(self):
+        """The record as a TOML table (plain lists and numbers)."""
+        return {"parameters": list(self.parameters),
+                "covariance": [[float(v) for v in row] for row in self.covariance],
+                "undetermined": dict(self.undetermined), "n_points": int(self.n_points),
+                "rms_um": float(self.rms_um)}
+
+    @classmethod
+    def from_table(cls, table, path, model_keys):
+        """The record read back from a model file's ``[fit]`` table, checked against the
+        model's parameter keys; :class:`InputError` names the file and key otherwise."""
+        def bad(message, key):
+            return InputError(message, path=path, column=f"{FIT_TABLE}.{key}")
+
+        expected = {"parameters", "covariance", "undetermined", "n_points", "rms_um"}
+        unknown = sorted(set(table) - expected)
+        if unknown:
+            raise bad(f"unknown key; expected {', '.join(sorted(expected))}", unknown[0])
+        missing = sorted(expected - set(table))
+        if missing:
+            raise bad("missing", missing[0])
+        parameters = table["parameters"]
+        if not (isinstance(parameters, list) and all(isinstance(k, str) for k in parameters)
+                and sorted(parameters) == sorted(model_keys)):
+            raise bad(f"must list the model's parameters: {', '.join(model_keys)}", "parameters")
+        try:
+            covariance = np.array(table["covariance"], dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            covariance = np.zeros(0)
+        size = len(parameters)
+        if covariance.shape != (size, size) or not np.all(np.isfinite(covariance)):
+            raise bad(f"must be a {size} x {size} matrix of finite numbers", "covariance")
+        undetermined = table["undetermined"]
+        if not isinstance(undetermined, dict) or not set(undetermined) <= set(parameters):
+            raise bad("must map parameters of the model to reasons", "undetermined")
+        n_points, rms_um = table["n_points"], table["rms_um"]
+        if isinstance(n_points, bool) or not isinstance(n_points, int) or n_points < 1:
+            raise bad("must be a positive integer", "n_points")
+        try:
+            if finite_value(rms_um) < 0:
+                raise ValueError
+        except ValueError:
+            raise bad("must be a finite number >= 0", "rms_um") from None
+        return cls(tuple(parameters), covariance, {k: str(v) for k, v in undetermined.items()},
+                   n_points, float(rms_um))
+
+    def standard_uncertainty(self, key):
+        """Standard uncertainty of one parameter (its unit); NaN when undetermined."""
+        if key in self.undetermined:
+            return float("nan")
+        index = self.parameters.index(key)
+        return float(np.sqrt(max(self.covariance[index, index], 0.0)))
+
+
+class Model:
+    """An ordered set of effects with their parameter values; add effects with ``+``.
+
+    ``record`` (a :class:`FitRecord`) is how the values were fitted; a model with other
+    effects or values has none.
+    """
+
+    def __init__(self, effects=(), values=None, record=None):
         self.effects = tuple(effects)
         names = [e.name for e in self.effects]
         duplicated = {n for n in names if names.count(n) > 1}
         if duplicated:
             raise ValueError(f"effect {sorted(duplicated)[0]!r} appears twice in the model")
         self.values = {e.name: dict((values or {}).get(e.name, {})) for e in self.effects}
+        self.record = record
 
     def __add__(self, other):
         if isinstance(other, Effect):
@@ -188,6 +266,11 @@ class Model:
     @property
     def names(self):
         return tuple(e.name for e in self.effects)
+
+    @property
+    def parameter_keys(self):
+        """``"effect.parameter"`` of every parameter, in the model's order."""
+        return tuple(f"{e.name}.{p.name}" for e in self.effects for p in e.parameters)
 
     def with_values(self, values):
         """A copy with ``values`` ({effect: {parameter: value}}) replacing the current ones."""
@@ -234,7 +317,15 @@ class Model:
                 parameters.setdefault(fmu, {}).update(values)
         return parameters
 
+    def with_record(self, record):
+        """This model carrying ``record`` (how its values were fitted)."""
+        return Model(self.effects, self.values, record)
+
     def to_toml(self):
-        """The model as TOML text: one table per effect holding its parameter values."""
+        """The model as TOML text: one table per effect holding its parameter values, then
+        the ``[fit]`` table of its :class:`FitRecord` when it has one."""
         header = "# feedaxis model: one table per effect, parameter values with units in names\n"
-        return header + tomli_w.dumps({name: self.values[name] for name in self.names})
+        tables = {name: self.values[name] for name in self.names}
+        if self.record is not None:
+            tables[FIT_TABLE] = self.record.to_table()
+        return header + tomli_w.dumps(tables)

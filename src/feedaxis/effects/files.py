@@ -10,7 +10,7 @@ import numpy as np
 
 from ..case import PHYSICAL_RANGE
 from ..errors import InputError, finite_value, read_text, read_toml, shown_value
-from .base import Effect, Model
+from .base import FIT_TABLE, Effect, FitRecord, Model
 from .catalog import CATALOG
 
 
@@ -34,9 +34,11 @@ def load_user_effects(path):
     if not found:
         raise InputError("defines no effect (an Effect instance or an @effect function)",
                          path=path)
-    clash = sorted(set(found) & set(CATALOG))
+    clash = sorted(set(found) & (set(CATALOG) | {FIT_TABLE}))
     if clash:
-        raise InputError(f"effect name '{clash[0]}' is taken by the catalog", path=path)
+        raise InputError(f"effect name '{clash[0]}' is taken by the catalog"
+                         if clash[0] in CATALOG else f"effect name '{clash[0]}' is reserved "
+                         "for the model file's fit record", path=path)
     for user_effect in found.values():
         _check_parameters(path, user_effect)
         user_effect.prepare = _checked_prepare(user_effect, path)
@@ -150,9 +152,11 @@ def available_effects(effect_files=()):
 
 
 def load_model(path, effects):
-    """Read a model TOML (one table per effect) against the ``effects`` known by name."""
+    """Read a model TOML (one table per effect, and the optional ``[fit]`` record of how
+    its values were fitted) against the ``effects`` known by name."""
     path = Path(path)
     _, data = read_toml(path, "model file")
+    record = data.pop(FIT_TABLE, None)
     chosen, values = [], {}
     for name, table in data.items():
         if name not in effects or not isinstance(table, dict):
@@ -160,7 +164,12 @@ def load_model(path, effects):
                              "(load your own with --effects FILE.py)", path=path, column=name)
         chosen.append(effects[name])
         values[name] = _checked_values(path, effects[name], table)
-    return Model(chosen, values)
+    model = Model(chosen, values)
+    if record is None:
+        return model
+    if not isinstance(record, dict):
+        raise InputError("must be a table (the fit record)", path=path, column=FIT_TABLE)
+    return model.with_record(FitRecord.from_table(record, path, model.parameter_keys))
 
 
 def _checked_values(path, effect, table):

@@ -109,13 +109,13 @@ def _fit(model, cases, progress, offset_um):
     solution = least_squares(residual, layout.start(), bounds=layout.bounds(), x_scale="jac",
                              method="trf")
     fitted = model.with_values(layout.values(solution.x))
-    sigma, undetermined = _uncertainties(solution, layout, problem.measured_um.size)
-    widening = np.sqrt(autocorrelation_time(solution.fun))
-    sigma = {name: {p: value * widening for p, value in values.items()}
+    sigma, undetermined, covariance = _uncertainties(solution, layout, problem.measured_um.size)
+    tau = autocorrelation_time(solution.fun)
+    sigma = {name: {p: value * np.sqrt(tau) for p, value in values.items()}
              for name, values in sigma.items()}
     _flag_loose(fitted, sigma, undetermined)
     return FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
-                     problem.measured_um, solution.fun, sigma, undetermined)
+                     problem.measured_um, solution.fun, sigma, undetermined, covariance * tau)
 
 
 def _flag_loose(model, sigma, undetermined):
