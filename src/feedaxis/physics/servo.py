@@ -39,6 +39,7 @@ STATE_SIZE = 6  # position_mm, velocity_mm_s, integral_V, previous_error_mm, ref
 # two samples (10 s at 0.1 ms) and in all (about 1.5 s of the compiled loop per simulation).
 MAX_INTERVAL_STEPS = 10**5
 MAX_LOOP_STEPS = 10**8
+MAX_POSITION_MM = 1e5  # a simulated position beyond any axis (data-format.md): the loop ran away
 
 
 @dataclass(frozen=True)
@@ -68,7 +69,8 @@ class ServoParams:
         for field in fields(self):
             value = getattr(self, field.name)
             if field.name in ("delay_s", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm",
-                              "plant_stiffness_per_s2", "friction_N", "damping_N_s_per_mm"):
+                              "plant_damping_per_s", "plant_stiffness_per_s2", "friction_N",
+                              "damping_N_s_per_mm"):
                 require_non_negative(field.name, value)
             elif field.name != "nonlinear":
                 require_positive(field.name, value)
@@ -292,6 +294,27 @@ def simulate(params, time_s, reference_mm, disturbance_N=None, counts=None):
                     np.ascontiguousarray(disturbance_V), state, np.zeros(params.buffer_size),
                     positions_mm)
     return positions_mm
+
+
+class LoopRunsAway(ParameterError):
+    """The closed loop runs away with these plant, friction and controller values: its
+    position leaves any axis (beyond ±``MAX_POSITION_MM``) or is not finite."""
+
+    def __init__(self, params):
+        super().__init__(
+            f"the closed position loop runs away (beyond ±{MAX_POSITION_MM:g} mm) with plant "
+            f"gain {params.plant_gain_mm_per_Vs2:g} mm/(V.s2), damping "
+            f"{params.plant_damping_per_s:g} 1/s, stiffness {params.plant_stiffness_per_s2:g} "
+            f"1/s2, delay {params.delay_s:g} s, friction {params.friction_N:g} N + "
+            f"{params.damping_N_s_per_mm:g} N.s/mm under kp {params.kp_V_per_mm:g} V/mm: no "
+            "working axis behaves so", "tracking model")
+
+
+def check_runs(params, positions_mm):
+    """Raise :class:`LoopRunsAway` when positions :func:`simulate` gave with ``params`` leave
+    any axis. (A fit's trial values may run away: the optimiser steps back from them.)"""
+    if not np.all(np.abs(positions_mm) <= MAX_POSITION_MM):
+        raise LoopRunsAway(params)
 
 
 class Servo:

@@ -20,6 +20,7 @@ from threadpoolctl import threadpool_limits
 from ..case import AXIS_FILE, CaseError
 from ..errors import InputError
 from ..fit import NOISE_DOF, FitResult, Statistics, _Layout, _uncertainties
+from ..physics.servo import check_runs
 from .model import Record, servo_params
 from .tests import autocorrelation_time
 
@@ -65,12 +66,22 @@ class Problem:
     def residual_um(self, values):
         return self.measured_um - self.predicted_um(values)
 
+    def starting_residual_um(self, values):
+        """The residual at ``values`` a fit starts from or a comparison takes, refused
+        (:class:`~feedaxis.physics.servo.LoopRunsAway`) when the loop runs away with them."""
+        params = servo_params(self.cases[0].axis, self.model, values)
+        predicted = []
+        for record in self.records:
+            predicted.append(record.predicted_um(params))
+            check_runs(params, record.case.tracking.reference_mm + predicted[-1] * 1e-3)
+        return self.measured_um - np.concatenate(predicted)
+
 
 def evaluate(model, cases):
     """Statistics and residual of ``model`` as it stands (no fitting)."""
     check_available(model, cases)
     problem = Problem(model, cases)
-    residual = problem.residual_um(model.values)
+    residual = problem.starting_residual_um(model.values)
     return FitResult(model, Statistics.of(problem.measured_um, residual, 0),
                      problem.measured_um, residual)
 
@@ -106,6 +117,7 @@ def _fit(model, cases, progress, offset_um):
             progress()
         return problem.residual_um(layout.values(x))
 
+    problem.starting_residual_um(layout.values(layout.start()))
     solution = least_squares(residual, layout.start(), bounds=layout.bounds(), x_scale="jac",
                              method="trf")
     fitted = model.with_values(layout.values(solution.x))
@@ -140,7 +152,7 @@ def _with_starting_values(model, cases):
     if not probed:
         return model
     problem = Problem(model, cases)
-    base_um = problem.predicted_um(model.values)
+    base_um = problem.measured_um - problem.starting_residual_um(model.values)
     columns = []
     for effect, name, step in probed:
         shifted = {**model.values, effect.name: {**model.values[effect.name], name: step}}
