@@ -11,7 +11,7 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-from .errors import check_writable_target, write_error
+from .errors import InputError, check_writable_target, write_error
 
 
 @contextmanager
@@ -62,7 +62,13 @@ def staged_folder(folder):
         folder.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
         try:
-            yield staging
+            try:
+                yield staging
+            except InputError as error:  # name the user's folder, not the staging one
+                if error.path is None or staging not in error.path.parents:
+                    raise
+                raise InputError(error.message, folder / error.path.relative_to(staging),
+                                 error.row, error.column, error.parameter) from None
             os.chmod(staging, umask_mode(0o777))
             if not folder.exists():
                 os.replace(staging, folder)

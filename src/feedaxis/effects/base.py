@@ -138,7 +138,7 @@ class FunctionEffect(Effect):
         self._wavelength_mm, self._guess = wavelength_mm, guess
 
     def prepare(self, case):
-        return lambda values: np.asarray(self.function(case, **values), dtype=float)
+        return lambda values: np.asarray(self.function(case, **values))
 
     def guess(self, case, residual_um):
         return self._guess(case, residual_um) if self._guess else super().guess(case, residual_um)

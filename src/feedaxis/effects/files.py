@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib.util
+import math
 import sys
 from pathlib import Path
 
@@ -61,6 +62,11 @@ def _check_parameters(path, user_effect):
             raise InputError(f"{where}: the lower bound {lower:g} must be below the upper "
                              f"{upper:g} (a fixed value belongs in the effect's code)",
                              path=path)
+        width = upper - lower
+        if not (math.isfinite(width) and width > 1e-12 * max(abs(lower), abs(upper))):
+            raise InputError(f"{where}: the bounds {lower:g} to {upper:g} are too "
+                             f"{'wide' if not math.isfinite(width) else 'narrow'} for a fit "
+                             "to search between them", path=path)
     if len(set(names)) != len(names):
         raise InputError(f"effect {user_effect.name} names a parameter twice", path=path)
     unknown = sorted(set(user_effect.linear) - set(names))
