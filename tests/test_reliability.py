@@ -57,6 +57,12 @@ def tracking_case(folder, time_s=None):
     return folder
 
 
+def default_sigint():
+    """In a child: Ctrl-C as a terminal delivers it (a shell's background job, which this
+    test may run in, starts its children with SIGINT ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def fmu_folder(fmu_paths):
     return next(iter(fmu_paths.values())).parent
 
@@ -379,7 +385,8 @@ def test_ctrl_c_during_build_fmus_exits_130_and_leaves_only_whole_fmus(tmp_path,
     before any feedaxis code runs, is not what is tested here)."""
     out = tmp_path / "fmus"
     build = subprocess.Popen([*FEEDAXIS, "build-fmus", "--out", str(out)],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=default_sigint)
     while not out.exists() and build.poll() is None:
         time.sleep(0.01)
     try:
@@ -412,7 +419,8 @@ def test_ctrl_c_during_the_start_up_imports_exits_130_with_one_line(tmp_path, mo
     case = small_case(tmp_path / "c")
     result = subprocess.run([sys.executable, "-c", INTERRUPT_ON_IMPORT.format(module=module),
                              "report", str(case), "--model", str(tmp_path / "none.toml")],
-                            capture_output=True, text=True, timeout=300)
+                            capture_output=True, text=True, timeout=300,
+                            preexec_fn=default_sigint)
     assert (result.returncode, result.stderr) == (130, "feedaxis: interrupted\n")
 
 
@@ -486,3 +494,13 @@ def test_every_output_writer_stages_and_renames(tmp_path, monkeypatch):
     with pytest.raises(InputError, match="no space left on the device"):
         write_atomically(path, "new")
     assert path.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_the_import_benchmark_runs_at_a_tiny_size():
+    """benchmarks/bench_import.py measures that import is linear in the rows (a list search
+    per target made 10^5 rows take 60 s); here it must only finish."""
+    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_import.py"),
+                             "--rows", "50", "--repeats", "1"], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "10x the rows takes" in result.stdout

@@ -603,15 +603,16 @@ def _write_csv(path, columns):
 
 
 def csv_text(columns):
-    """{column: values} as CSV text in the case format (header row, full float precision)."""
-    names = list(columns)
-    table = np.column_stack([np.asarray(columns[name], dtype=float) for name in names])
-    lines = [",".join(names)] + [",".join(_format_cell(name, v) for name, v in zip(names, row))
-                                 for row in table]
-    return "\n".join(lines) + "\n"
+    """{column: values} as CSV text in the case format (header row, full float precision:
+    each value as Python's shortest repr, which reads back exactly)."""
+    cells = [_formatted(name, np.asarray(values, dtype=float)) for name, values in columns.items()]
+    return "\n".join([",".join(columns), *map(",".join, zip(*cells))]) + "\n"
 
 
-def _format_cell(name, value):
-    if name in ("direction", "run"):
-        return f"{int(value):+d}" if name == "direction" else f"{int(value)}"
-    return repr(float(value))
+def _formatted(name, values):
+    """The cells of one column: ``direction`` as +1/-1, ``run`` as a whole number."""
+    if name == "direction":
+        return [f"{value:+d}" for value in values.astype(int).tolist()]
+    if name == "run":
+        return list(map(str, values.astype(int).tolist()))
+    return list(map(repr, values.tolist()))
