@@ -29,16 +29,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_fuzz import (CONTENT, ENCODINGS, FILES, FUZZ, GOOD, GUESSES, IMPORT_TEXTS,  # noqa: E402
-                       IMPORT_TIME, RETURNS, BOUNDS, TIME_STEPS, _cli_json, _controller_text,
-                       _strict, _write, positioning_cases, toml_with_a_strange_value)
+from test_fuzz import (BOUNDS, CONTENT, ENCODINGS, FILES, FUZZ, GOOD, GUESSES,  # noqa: E402
+                       IMPORT_TEXTS, IMPORT_TIME, RETURNS, TIME_STEPS, _cli_json,
+                       _controller_text, _strict, _write, positioning_cases,
+                       toml_with_a_strange_value, within_loop_budget, write_effect_case,
+                       write_span_case)
 
 from feedaxis.case import read_case, write_case  # noqa: E402
 from feedaxis.comptable import CONTROLLERS  # noqa: E402
 from feedaxis.effects import CATALOG, load_model  # noqa: E402
 from feedaxis.effects.tracking import TRACKING_EFFECTS  # noqa: E402
 from feedaxis.errors import InputError  # noqa: E402
-from feedaxis.physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS, step_counts  # noqa: E402
 
 COMMANDS = (["fit", "{case}", "--add", "lead_error", "--add", "backlash"],
             ["compare", "{case}"], ["diagnose", "{case}"])
@@ -128,16 +129,7 @@ def encodings(root, n):
 def user_effects(root, n):
     def check(body, bounds, guess, extra):
         folder = Path(tempfile.mkdtemp(dir=root))
-        write_case(folder / "c", {"name": "probe", "screw": {"lead_mm": 5.0}},
-                   positioning={"target_mm": np.linspace(0.0, 100.0, 30),
-                                "error_um": np.linspace(0.0, 3.0, 30)})
-        guess_code = f", guess=lambda case, residual: {guess}" if guess else ""
-        (folder / "mine.py").write_text(
-            "import numpy as np\nfrom feedaxis.effects import Parameter, effect\n" + extra +
-            f"@effect('probe', 'a probe', [Parameter('a_um', 'um', {bounds})]{guess_code})\n"
-            f"def probe(case, a_um):\n    return {body}\n")
-        return cli_outcome(["fit", folder / "c", "--effects", folder / "mine.py", "--add",
-                            "probe"])
+        return cli_outcome(write_effect_case(folder, bounds, body, guess, extra)[:-1])
     return drawn(RETURNS, n, check, bounds=BOUNDS, guess=GUESSES, extra=IMPORT_TIME)
 
 
@@ -156,23 +148,15 @@ def controller_tables(root, n):
 
 def tracking_spans(root, n):
     def check(steps, loop_step_s):
-        time_s = np.concatenate(([0.0], np.cumsum(steps)))
         folder = Path(tempfile.mkdtemp(dir=root)) / "c"
-        servo = ('[servo]\ncontroller = "pid"\nkp_V_per_mm = 0.9\nki_V_per_mm_s = 0.0\n'
-                 f"kd_V_s_per_mm = 0.0\nforce_constant_N_per_V = 100.0\n"
-                 f"loop_step_s = {loop_step_s!r}\n")
-        _write(folder, {"axis.toml": "[screw]\nlead_mm = 5.0\n" + servo,
-                        "tracking.csv": "time_s,reference_mm,actual_mm\n" + "".join(
-                            f"{t!r},0.0,0.0\n" for t in time_s.tolist())})
+        write_span_case(folder, steps, loop_step_s)
         try:
             case = read_case(folder)
         except InputError as error:
             return "refused with location" if located(error, folder) else "left: unlocated"
-        counts = step_counts(case.tracking.time_s, loop_step_s)
-        within = counts.max() <= MAX_INTERVAL_STEPS + 1 and counts.sum() <= MAX_LOOP_STEPS + 1
-        return "accepted" if within else "left: beyond the loop's budget"
+        return "accepted" if within_loop_budget(case) else "left: beyond the loop's budget"
     return drawn(st.lists(TIME_STEPS, min_size=1, max_size=40), n, check,
-                 loop_step_s=st.sampled_from([1e-4, 1e-7, 1e-2]))
+                 loop_step_s=st.sampled_from([1e-4, 1e-7, 1e-2, None]))
 
 
 def tracking_models(root, n, seed=26):

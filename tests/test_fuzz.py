@@ -260,11 +260,9 @@ IMPORT_TIME = st.sampled_from(["", "print('hello')\n", "import sys\nsys.exit(2)\
                                "raise RuntimeError('x')\n", "while False: pass\n"])
 
 
-@settings(FUZZ, max_examples=120)
-@given(bounds=BOUNDS, body=RETURNS, guess=GUESSES, extra=IMPORT_TIME)
-def test_user_effects_exit_0_or_2_with_strict_json(tmp_path_factory, bounds, body, guess,
-                                                   extra):
-    folder = tmp_path_factory.mktemp("effect")
+def write_effect_case(folder, bounds, body, guess, extra):
+    """A 30-sample case ``folder/c`` and an effects file ``folder/mine.py`` of one effect
+    ``probe`` built from the pieces; returns the ``fit`` command line."""
     write_case(folder / "c", {"name": "fuzz", "screw": {"lead_mm": 5.0}},
                positioning={"target_mm": np.linspace(0.0, 100.0, 30),
                             "error_um": np.linspace(0.0, 3.0, 30)})
@@ -273,8 +271,16 @@ def test_user_effects_exit_0_or_2_with_strict_json(tmp_path_factory, bounds, bod
         "import numpy as np\nfrom feedaxis.effects import Parameter, effect\n" + extra +
         f"@effect('probe', 'a probe', [Parameter('a_um', 'um', {bounds})]{guess_code})\n"
         f"def probe(case, a_um):\n    return {body}\n")
-    code, out, _ = _cli_json(["fit", str(folder / "c"), "--effects", str(folder / "mine.py"),
-                              "--add", "probe", "--json"])
+    return ["fit", str(folder / "c"), "--effects", str(folder / "mine.py"), "--add", "probe",
+            "--json"]
+
+
+@settings(FUZZ, max_examples=120)
+@given(bounds=BOUNDS, body=RETURNS, guess=GUESSES, extra=IMPORT_TIME)
+def test_user_effects_exit_0_or_2_with_strict_json(tmp_path_factory, bounds, body, guess,
+                                                   extra):
+    folder = tmp_path_factory.mktemp("effect")
+    code, out, _ = _cli_json(write_effect_case(folder, bounds, body, guess, extra))
     payload = _strict(out)
     assert code in (0, 2), payload
     event("fitted" if code == 0 else "refused")
@@ -320,21 +326,33 @@ def test_controller_tables_read_bounded_or_refused_naming_the_line(data, name):
 TIME_STEPS = st.one_of(st.floats(1e-5, 1e-2), st.floats(1e-2, 1e9), st.sampled_from([0.0, -1.0]))
 
 
+def write_span_case(folder, steps, loop_step_s):
+    """A tracking case at ``folder`` sampled after the intervals ``steps`` (s), its loop
+    stepping ``loop_step_s`` (the default 0.1 ms when None: no [servo] table)."""
+    time_s = np.concatenate(([0.0], np.cumsum(steps)))
+    servo = "" if loop_step_s is None else (
+        '[servo]\ncontroller = "pid"\nkp_V_per_mm = 0.9\nki_V_per_mm_s = 0.0\n'
+        f"kd_V_s_per_mm = 0.0\nforce_constant_N_per_V = 100.0\nloop_step_s = {loop_step_s!r}\n")
+    rows = "".join(f"{t!r},0.0,0.0\n" for t in time_s.tolist())
+    _write(folder, {"axis.toml": "[screw]\nlead_mm = 5.0\n" + servo,
+                    "tracking.csv": "time_s,reference_mm,actual_mm\n" + rows})
+
+
+def within_loop_budget(case):
+    """Whether the loop's steps through ``case``'s tracking record stay within its budget."""
+    from feedaxis.physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS, step_counts
+
+    counts = step_counts(case.tracking.time_s, case.axis.servo.get("loop_step_s", 1e-4))
+    return counts.max() <= MAX_INTERVAL_STEPS + 1 and counts.sum() <= MAX_LOOP_STEPS + 1
+
+
 @settings(FUZZ, max_examples=300)
 @given(steps=st.lists(TIME_STEPS, min_size=1, max_size=40),
        loop_step_s=st.sampled_from([1e-4, 1e-7, 1e-2, None]))
 def test_tracking_spans_are_read_within_the_loops_budget_or_refused(tmp_path_factory, steps,
                                                                     loop_step_s):
-    from feedaxis.physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS, step_counts
-
-    time_s = np.concatenate(([0.0], np.cumsum(steps)))
-    servo = "" if loop_step_s is None else (
-        '[servo]\ncontroller = "pid"\nkp_V_per_mm = 0.9\nki_V_per_mm_s = 0.0\n'
-        f"kd_V_s_per_mm = 0.0\nforce_constant_N_per_V = 100.0\nloop_step_s = {loop_step_s!r}\n")
     folder = tmp_path_factory.mktemp("span") / "c"
-    rows = "".join(f"{t!r},0.0,0.0\n" for t in time_s.tolist())
-    _write(folder, {"axis.toml": "[screw]\nlead_mm = 5.0\n" + servo,
-                    "tracking.csv": "time_s,reference_mm,actual_mm\n" + rows})
+    write_span_case(folder, steps, loop_step_s)
     try:
         case = read_case(folder)
     except InputError as error:
@@ -342,5 +360,4 @@ def test_tracking_spans_are_read_within_the_loops_budget_or_refused(tmp_path_fac
         assert _located(error, folder), str(error)
         return
     event("accepted")
-    counts = step_counts(case.tracking.time_s, case.axis.servo.get("loop_step_s", 1e-4))
-    assert counts.max() <= MAX_INTERVAL_STEPS + 1 and counts.sum() <= MAX_LOOP_STEPS + 1
+    assert within_loop_budget(case)
