@@ -1,9 +1,10 @@
 """Effects and models: the shape every physical effect, built in or the user's own, takes.
 
-An :class:`Effect` names a physical cause of positioning error, its parameters (unit,
-bounds), a starting guess from the data, its evaluation at the samples of a case, and the
-FMU parameters it maps to. Effects compose into a :class:`Model` with ``+``, as lmfit
-models do: ``model = LeadError() + Backlash()``.
+An :class:`Effect` names a physical cause of error, the kind of measurement it acts on, its
+parameters (unit, bounds), a starting guess from the data, its evaluation at the samples
+of a case, and the FMU parameters it maps to. Effects compose into a :class:`Model` with
+``+``, as lmfit models do: ``model = LeadError() + Backlash()``. How a model predicts a
+case's samples is the measurement's business (:mod:`feedaxis.measurement`).
 """
 from __future__ import annotations
 
@@ -41,13 +42,20 @@ class Needs:
 
 
 class Effect:
-    """A physical effect that adds to the positioning error (µm) at each sample.
+    """A physical effect; by default one that adds to the positioning error (µm) at each
+    sample.
 
     Subclasses set ``name``, ``meaning``, ``parameters`` and ``needs`` and implement
     :meth:`prepare`; :meth:`guess`, :meth:`fmu_parameters`, :meth:`evidence` and
     :meth:`wavelength_mm` have sensible defaults. ``linear`` names the parameters the error
     is linear in (error = base + Σ value·column, base and columns set by the others); the fit
-    solves for them exactly at each step (variable projection).
+    solves for them exactly at each step (variable projection). ``measurement`` is the kind
+    of measurement the effect acts on (``"positioning"``, ``"tracking"``; None: any, as a
+    structure's basis); ``additive`` is False for an effect acting inside the measured
+    system (the tracking effects set the closed loop's parameters), whose prediction the
+    measurement computes from its values and, to take it out, its ``neutral`` values.
+    ``probe`` gives, per parameter, a step for a linearised first guess where the fit has no
+    better start (the prediction is not separable in it).
     """
 
     name = "effect"
@@ -56,6 +64,9 @@ class Effect:
     linear: tuple = ()
     needs = Needs()
     fmu = None
+    measurement = "positioning"
+    additive = True
+    probe: dict = {}
 
     def __add__(self, other):
         return Model((self,)) + other
@@ -166,6 +177,29 @@ def effect(name, meaning, parameters, needs=Needs(), wavelength_mm=None, guess=N
     return wrap
 
 
+class BasisEffect(Effect):
+    """Fixed linear columns (samples x k) added to any measurement's prediction: a
+    structure found in the residual or a nuisance (a drift), refitted with the model."""
+
+    measurement = None
+
+    def __init__(self, name, basis):
+        self.name, self.basis = name, basis
+        self.parameters = tuple(Parameter(f"c{i}_um", "um", -1e6, 1e6)
+                                for i in range(basis.shape[1]))
+        self.linear = self.parameter_names
+
+    def unavailable(self, case):
+        return None
+
+    def prepare(self, case):
+        return lambda v: self.basis @ np.array([v[p.name] for p in self.parameters])
+
+    def guess(self, case, residual_um):
+        coefficients = np.linalg.lstsq(self.basis, residual_um, rcond=None)[0]
+        return {p.name: float(c) for p, c in zip(self.parameters, coefficients)}
+
+
 @dataclass(frozen=True)
 class FitRecord:
     """How a model's values were fitted, saved with the model in its ``[fit]`` table.
@@ -207,12 +241,14 @@ class FitRecord:
         if not (isinstance(parameters, list) and all(isinstance(k, str) for k in parameters)
                 and sorted(parameters) == sorted(model_keys)):
             raise bad(f"must list the model's parameters: {', '.join(model_keys)}", "parameters")
+        size, rows = len(parameters), table["covariance"]
+        square = isinstance(rows, list) and len(rows) == size and all(
+            isinstance(row, list) and len(row) == size for row in rows)
         try:
-            covariance = np.array(table["covariance"], dtype=float)
+            covariance = np.array(rows, dtype=float).reshape(size, size) if square else None
         except (TypeError, ValueError, OverflowError):
-            covariance = np.zeros(0)
-        size = len(parameters)
-        if covariance.shape != (size, size) or not np.all(np.isfinite(covariance)):
+            covariance = None
+        if covariance is None or not np.all(np.isfinite(covariance)):
             raise bad(f"must be a {size} x {size} matrix of finite numbers", "covariance")
         undetermined = table["undetermined"]
         if not isinstance(undetermined, dict) or not set(undetermined) <= set(parameters):
@@ -276,38 +312,19 @@ class Model:
         """A copy with ``values`` ({effect: {parameter: value}}) replacing the current ones."""
         return Model(self.effects, {**self.values, **values})
 
-    def prepare(self, case):
-        """Per effect, its evaluation function on ``case``."""
-        return [(e, e.prepare(case)) for e in self.effects]
+    def predict_um(self, case):
+        """Total modelled deviation (µm) at the case's samples of the kind the model acts on
+        (:mod:`feedaxis.measurement`)."""
+        return self._measurement(case).predict_um(self)
 
     def components(self, case):
-        """{effect name: error_um contribution} at the case's positioning samples."""
-        return {e.name: f(self.values[e.name]) for e, f in self.prepare(case)}
+        """{effect name: its contribution (µm)} at the case's samples of the model's kind."""
+        return self._measurement(case).components(self)
 
-    def predictor(self, case):
-        """``f(values) -> total error_um`` at the case's samples, each effect prepared once."""
-        prepared, size = self.prepare(case), case.positioning.size
-        return lambda values: sum((f(values[e.name]) for e, f in prepared), np.zeros(size))
+    def _measurement(self, case):
+        from ..measurement import kinds_for, measurement_of  # SciPy-heavy: when predicting
 
-    def separable_predictor(self, case):
-        """``f(values) -> (base_um, columns_um)`` of the whole model on ``case``: the total
-        error is ``base_um + columns_um @ linear values``, columns in the order of
-        ``(effect, parameter) for effect in effects for parameter in effect.linear``."""
-        prepared, size = [(e, e.prepare_separable(case)) for e in self.effects], case.positioning.size
-
-        def separate(values):
-            base_um, columns = np.zeros(size), []
-            for e, f in prepared:
-                effect_base_um, effect_columns_um = f(values[e.name])
-                base_um = base_um + effect_base_um
-                columns.append(effect_columns_um)
-            return base_um, np.hstack(columns) if columns else np.zeros((size, 0))
-
-        return separate
-
-    def predict_um(self, case):
-        """Total modelled error (µm) at the case's positioning samples."""
-        return self.predictor(case)(self.values)
+        return measurement_of(case, kinds_for([case], self)[0])
 
     def fmu_parameters(self, axis):
         """{FMU name: {parameter: value}} for the co-simulated axis to reproduce the model."""
