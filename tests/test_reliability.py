@@ -409,7 +409,7 @@ class Interrupt:
         return None
 sys.meta_path.insert(0, Interrupt())
 sys.argv = ["feedaxis", *sys.argv[1:]]
-from feedaxis.console import run
+from feedaxis.__main__ import run
 run()
 """
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from . import __version__, text
 from .case import read_case
-from .console import INTERRUPTED_EXIT, fail, run
+from .console import INTERRUPTED_EXIT, fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
@@ -812,4 +812,4 @@ def _internal_error(wants_json, debug, error):
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(main())
