@@ -122,7 +122,7 @@ def test_fuzz_corpus_reads_as_the_per_cell_reader_did(tmp_path_factory, data, tr
     assert_same(path, TRACKING_COLUMNS if tracking else POSITIONING_COLUMNS)
 
 
-@settings(FUZZ, max_examples=600)
+@settings(FUZZ, max_examples=300)
 @given(data=near_valid_csv())
 def test_near_valid_tables_read_as_the_per_cell_reader_did(tmp_path_factory, data):
     path = tmp_path_factory.mktemp("csv") / "data.csv"

@@ -239,7 +239,7 @@ IMPORT_TEXTS = st.one_of(
 )
 
 
-@settings(FUZZ, max_examples=150)
+@settings(FUZZ, max_examples=80)
 @given(text=IMPORT_TEXTS, encoding=ENCODINGS, axis_encoding=ENCODINGS,
        suffix=st.sampled_from([".csv", ".rtl"]))
 def test_import_in_any_encoding_writes_a_readable_case_or_nothing(tmp_path_factory, text,
@@ -299,7 +299,7 @@ def write_effect_case(folder, bounds, body, guess, extra):
             "--json"]
 
 
-@settings(FUZZ, max_examples=120)
+@settings(FUZZ, max_examples=60)
 @given(bounds=BOUNDS, body=RETURNS, guess=GUESSES, extra=IMPORT_TIME)
 def test_user_effects_exit_0_or_2_with_strict_json(tmp_path_factory, bounds, body, guess,
                                                    extra):
