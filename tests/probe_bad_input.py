@@ -43,7 +43,8 @@ from feedaxis.errors import InputError  # noqa: E402
 
 COMMANDS = (["fit", "{case}", "--add", "lead_error", "--add", "backlash"],
             ["compare", "{case}"], ["diagnose", "{case}"])
-CLEAN = ("accepted", "refused with location")
+CLEAN = ("accepted", "refused with location", "interrupted: exit 130, only whole FMUs",
+         "disk full: exit 2 naming the file, nothing left")
 
 
 def located(error, *paths):
@@ -214,7 +215,7 @@ def interrupted_builds(root, n, seed=26):
         except AssertionError:
             whole = False
         clean = (code == 130 and err == "feedaxis: interrupted\n" or code == 0) and whole
-        counts["accepted" if clean and code == 0 else "refused with location" if clean else
+        counts["accepted" if clean and code == 0 else CLEAN[2] if clean else
                f"left: exit {code}, whole {whole}: {err[-80:]!r}"] += 1
     return counts
 
@@ -245,8 +246,7 @@ def full_disk(root, n):
                 return Counter({f"not run: {skipped}": 1})
             files = [entry for entry in left if not entry.startswith("d ")]
             clean = code == 2 and "no space left on the device" in err and not files
-            counts["refused with location" if clean else
-                   f"left: {argv[0]} exit {code}, files {files[:2]}"] += 1
+            counts[CLEAN[3] if clean else f"left: {argv[0]} exit {code}, files {files[:2]}"] += 1
     return counts
 
 
