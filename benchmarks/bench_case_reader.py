@@ -1,6 +1,6 @@
 """The case reader against NumPy's own CSV reader (issue 25 item 3).
 
-Run: ``python benchmarks/bench_case_reader.py [--rows 1000000] [--repeats 5]``. Writes one
+Run: ``python benchmarks/bench_case_reader.py [--rows 1000000] [--repeats 5] [--smoke]``. Writes one
 positioning.csv (target_mm, error_um, direction, run: the ISO 230-2 layout) and times
 ``feedaxis.case.read_positioning`` (decoding, the header, NumPy's parse, every check of
 data-format.md) against a bare ``np.loadtxt`` of the same file, in interleaved repeats;
@@ -8,6 +8,7 @@ prints the medians (with their range) and the ratio. The target is a ratio <= 1.
 """
 import argparse
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -15,6 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from feedaxis.case import read_positioning
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
+
 
 
 def write_positioning(path, rows, seed=1):
@@ -37,11 +42,11 @@ def timed(call):
     return time.perf_counter() - start
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, default=1_000_000)
     parser.add_argument("--repeats", type=int, default=5)
-    args = parser.parse_args()
+    args = arguments(parser, argv, rows=300, repeats=1)
     with tempfile.TemporaryDirectory() as folder:
         path = write_positioning(Path(folder) / "positioning.csv", args.rows)
         reader, numpy = [], []

@@ -1,6 +1,6 @@
 """Wide-CSV import against its size (issue 26): linear in the rows, not quadratic.
 
-Run: ``python benchmarks/bench_import.py [--rows 10000] [--repeats 3]``. Times
+Run: ``python benchmarks/bench_import.py [--rows 10000] [--repeats 3] [--smoke]``. Times
 ``feedaxis.importers.import_case`` (read, check, write the case, read it back) on a wide CSV
 of ROWS targets and of 10 x ROWS, interleaved; prints the medians and their ratio: about 10
 when the import is linear (before issue 26, a list search per target made it about 100:
@@ -8,6 +8,7 @@ when the import is linear (before issue 26, a list search per target made it abo
 """
 import argparse
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -15,6 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from feedaxis.importers import import_case
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
+
 
 
 def write_wide_csv(path, rows):
@@ -27,11 +32,11 @@ def write_wide_csv(path, rows):
     return path
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, default=10_000)
     parser.add_argument("--repeats", type=int, default=3)
-    args = parser.parse_args()
+    args = arguments(parser, argv, rows=50, repeats=1)
     sizes = (args.rows, 10 * args.rows)
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)

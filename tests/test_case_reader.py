@@ -145,7 +145,7 @@ def test_a_long_file_with_a_bad_cell_at_the_end_is_named_there(tmp_path):
 
 def test_the_reader_benchmark_runs_at_a_tiny_size():
     result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_case_reader.py"),
-                             "--rows", "300", "--repeats", "1"],
+                             "--smoke"],
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert "reader / np.loadtxt" in result.stdout

@@ -136,7 +136,7 @@ def _fit_options(parser):
                      "data cannot determine.",
          options=_fit_options)
 def _cmd_fit(args):
-    from .fit import check_available, evaluate, fit
+    from .fit import check_available, evaluate, fit_with_artefacts
     from .measurement import kinds_for
 
     if args.out:
@@ -150,15 +150,23 @@ def _cmd_fit(args):
         check_available(model, cases, kind)
         before = evaluate(starting, cases, kind)
         with _progress("fitting", " evaluations") as tick:
-            results.append((before, fit(model, cases, progress=tick, kind=kind)))
+            results.append((before, fit_with_artefacts(model, cases, progress=tick, kind=kind)))
     if args.out:
         write_atomically(args.out, results[0][1].fitted_model().to_toml())
-    _emit_each(args, [(result.kind, {
-        "rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
-        "effects": list(result.model.names), "params": result.params(),
-        "uncertainties": result.uncertainties, "undetermined": result.undetermined,
-        "statistics": vars(result.statistics)}, text.fit_lines(result, before.rms_um, args.out))
-        for before, result in results])
+    _emit_each(args, [(result.kind, _fit_payload(before, result),
+                       text.fit_lines(result, before.rms_um, args.out))
+                      for before, result in results])
+
+
+def _fit_payload(before, result):
+    """The --json of a fit: the model's parameters, and the measurement's artefacts apart."""
+    fitted = result.fitted_model()
+    keys = set(fitted.parameter_keys)
+    return {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
+            "effects": list(fitted.names), "params": fitted.values,
+            "uncertainties": {name: result.uncertainties[name] for name in fitted.names},
+            "undetermined": {k: v for k, v in result.undetermined.items() if k in keys},
+            "artefacts": fitted.record.artefacts, "statistics": vars(result.statistics)}
 
 
 def _case_and_model(args):
@@ -320,9 +328,14 @@ def _cmd_import(args):
     payload = {"case": str(folder), "samples": int(measurement.error_um.size),
                "targets": int(len(set(measurement.target_mm))),
                "runs": int(measurement.run.max()), "directions": directions,
-               "name": read_case(folder).name, "dropped": dropped}
+               "name": read_case(folder).name, "dropped": dropped,
+               "ambient_C": None if measurement.ambient_C is None else
+               [float(measurement.ambient_C.min()), float(measurement.ambient_C.max())]}
     lines = [f"{folder}: {payload['samples']} samples, {payload['targets']} targets, "
              f"{payload['runs']} runs, directions {', '.join(f'{d:+d}' for d in directions)}"]
+    if payload["ambient_C"]:
+        lines.append("  kept: the air temperature as positioning.csv ambient_C, "
+                     + " to ".join(f"{t:g}" for t in sorted(set(payload["ambient_C"]))) + " °C")
     lines += [f"  dropped (the case format has no place for it): {key} = {value}"
               for key, value in dropped.items()]
     _emit(args, payload, "\n".join(lines))
@@ -343,6 +356,11 @@ def _comp_table_options(parser):
     parser.add_argument("--axis-id", metavar="ID",
                         help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
                              "axis number 1, fanuc axis 1: the defaults)")
+    parser.add_argument("--force", action="store_true",
+                        help="write the table even when it is refused (it had to leave out "
+                             "effects the data cannot determine, or it is expected to raise A, "
+                             "E or the error between the targets), with warnings saying what "
+                             "it risks")
 
 
 @command("comp-table", help="pitch-error compensation table for a CNC controller",
@@ -353,7 +371,10 @@ def _comp_table_options(parser):
                      "--from-measurement: the classical table of the measured means. Then "
                      "read the file back as the controller does and print the ISO 230-2 "
                      "figures expected after it on the measured case, next to those before, "
-                     "with a warning when a table cannot help. See docs/compensation-tables.md.",
+                     "with a warning when a table cannot help. A table is refused (exit 2, "
+                     "nothing written) when it would have to use an effect the data cannot "
+                     "determine or is expected to make the axis worse; --force writes it "
+                     "anyway. See docs/compensation-tables.md.",
          options=_comp_table_options)
 def _cmd_comp_table(args):
     from .comptable import comp_table, summary_lines
@@ -366,7 +387,7 @@ def _cmd_comp_table(args):
                          parameter="--model")
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
-                               args.from_measurement, args.axis_id)
+                               args.from_measurement, args.axis_id, args.force)
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
@@ -535,10 +556,12 @@ def _simulate_iso230_options(parser):
     _add_motion_options(parser)
 
 
-@scenario("iso230", help="ISO 230-2 positioning test -> axis.toml + positioning.csv",
+@scenario("iso230", help="ISO 230-2 positioning test -> positioning.csv + duty.csv",
           description="Targets P_i = (i-1) p + r_i (r_i a different small offset at each), "
                       "RUNS runs approaching every target in + and in -, overrun beyond the "
-                      "end targets, dwell, then the deviation table position - target.",
+                      "end targets, dwell, then the deviation table position - target; "
+                      "duty.csv holds the motion simulated (it warms the screw), "
+                      "positioning.csv the samples with their time.",
           options=_simulate_iso230_options)
 def _cmd_simulate_iso230(args):
     from .cosim.scenarios import iso230_targets, simulate_iso230

@@ -1,12 +1,14 @@
 """`feedaxis demo`: the whole loop on the bundled seed 001 case, then the FMUs.
 
 Each round diagnoses the model, adds the best missing effect and refits, until the verdict
-is no longer ``missing_effect``. The fitted model, the report and the FMUs are written to
-the output folder, and the FMUs driven with the fitted parameters are checked against the
-model.
+is no longer ``missing_effect``. The case (copied first, to try the loop by hand on), the
+laser example (an ``axis.toml`` and ``.rtl`` for ``feedaxis import``), the fitted model, the
+report and the FMUs are written to the output folder, and the FMUs driven with the fitted
+parameters are checked against the model.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +18,7 @@ from .case import read_case
 from .cosim.replay import POSITION_FMUS, replay_positioning
 from .diagnose import diagnose
 from .effects import CATALOG, Model
-from .examples import BUNDLED_CASE
+from .examples import BUNDLED_CASE, LASER_EXAMPLE
 from .fit import fit
 from .fmu_build import build_fmus
 from .output import staged_folder, write_atomically
@@ -61,29 +63,42 @@ def ladder_of(rounds):
 
 
 def run_demo(out_dir, echo=print):
-    """Run the loop on the bundled case and write model, report and FMUs to ``out_dir``.
+    """Run the loop on the bundled case and write the case, model, report, laser example and
+    FMUs to ``out_dir``.
 
-    The three are written together (:func:`feedaxis.output.staged_folder`): an error, a full
-    disk or Ctrl-C on the way leaves none of them.
+    They are written together (:func:`feedaxis.output.staged_folder`): an error, a full disk
+    or Ctrl-C on the way leaves none of them.
     """
     out_dir = Path(out_dir)
-    case = read_case(BUNDLED_CASE)
+    case = replace(read_case(BUNDLED_CASE), folder=out_dir / "case")
     echo(f"case: {case.name}")
     echo(f"      {case.positioning.size} laser points, {case.positioning.target_mm.min():g} to "
-         f"{case.positioning.target_mm.max():g} mm; model: empty")
+         f"{case.positioning.target_mm.max():g} mm; model: empty; copied to {case.folder}")
     model, rounds, diagnosis = improve(case, Model(), echo=echo)
     analysis = analyse(case, model, CATALOG, diagnosis=diagnosis, ladder=ladder_of(rounds))
     with staged_folder(out_dir) as staging:
+        _copy_files(BUNDLED_CASE, staging / "case")
         write_atomically(staging / "model.toml", fit(model, case).fitted_model().to_toml())
         write_report(analysis, staging / "report.html")
+        _copy_files(LASER_EXAMPLE, staging / "laser-example")
         fmu_paths = {path.stem: path for path in build_fmus(staging / "fmus", POSITION_FMUS)}
         difference_um = float(np.max(np.abs(replay_positioning(case, model, fmu_paths)
                                             - model.predict_um(case))))
     model_path, report_path = out_dir / "model.toml", out_dir / "report.html"
+    laser_path = out_dir / "laser-example"
     echo(f"fitted model: {model_path}")
     echo(f"report:       {report_path}")
+    echo(f"laser example: {laser_path} (axis.toml + X-axis.rtl for feedaxis import)")
     echo(f"FMUs {' + '.join(POSITION_FMUS)} with the fitted parameters reproduce the model "
          f"within {difference_um:.1e} um ({out_dir / 'fmus'})")
     return {"case": str(case.folder), "rounds": rounds, "effects": list(model.names),
             "params": model.values, "model": str(model_path), "report": str(report_path),
+            "laser_example": str(laser_path),
             "fmu_max_difference_um": difference_um}
+
+
+def _copy_files(source, target):
+    """The files of folder ``source`` written into ``target`` (a full disk named as such)."""
+    for path in sorted(source.iterdir()):
+        if path.is_file():
+            write_atomically(target / path.name, path.read_bytes())

@@ -99,9 +99,9 @@ FIGURE_NAMES = {
 }
 
 
-def target_groups(positioning):
+def target_groups(positioning, clusters=None):
     """Group index of each sample: one group per (target, approach direction), the targets
-    from :func:`target_clusters`."""
-    _, cluster = target_clusters(positioning.target_mm)
+    from :func:`target_clusters` (``clusters``, when already computed)."""
+    _, cluster = clusters or target_clusters(positioning.target_mm)
     keys = cluster * 2 + (positioning.direction > 0)
     return np.unique(keys, return_inverse=True)[1].ravel()

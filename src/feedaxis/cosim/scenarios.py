@@ -235,7 +235,9 @@ def run_motion(master, motion, parameters=None, progress=None):
 
 def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5,
                     overrun_mm=2.0, parameters=None, progress=None):
-    """Simulate an ISO 230-2 positioning test and write it as a case folder.
+    """Simulate an ISO 230-2 positioning test and write it as a case folder: the samples
+    (with ``time_s``) as positioning.csv, the motion simulated (moves and dwells, which warm
+    the screw) as duty.csv.
 
     Parameters
     ----------
@@ -270,7 +272,9 @@ def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s
         rows = rows[:complete_runs * 2 * len(targets_mm)]
         name += f" (interrupted: {complete_runs} of {runs} runs)"
     positioning = _positioning_columns(motion.samples[:rows.size], rows, with_time=True)
-    write_case(out, axis_values(master, parameters, name), positioning=positioning)
+    until_s = None if completed else float(positioning["time_s"][-1])
+    write_case(out, axis_values(master, parameters, name), positioning=positioning,
+               duty=motion.duty_columns(until_s))
     return _finish(out, positioning, completed, motion.samples)
 
 

@@ -220,17 +220,20 @@ def loop_propagator(coefficients, n_steps, buffer_size):
 
 @lru_cache(maxsize=1)
 def compiled_loop():
-    """:func:`run_loop` compiled by numba (cached on disk): the same code object, its call
-    of :func:`npid_gain` bound to a compiled :func:`npid_gain`; about 40x faster.
+    """:func:`run_loop` compiled by numba (cached on disk, also where site-packages is
+    read-only: :func:`.numba_cache.cached_njit`): the same code object, its call of
+    :func:`npid_gain` bound to a compiled :func:`npid_gain`; about 40x faster.
 
     numba is imported here, not with the module: the FMU and the CLI's quick commands do
     without it.
     """
     import numba
 
-    namespace = {**run_loop.__globals__, "npid_gain": numba.njit(cache=True)(npid_gain)}
+    from .numba_cache import cached_njit
+
+    namespace = {**run_loop.__globals__, "npid_gain": cached_njit(numba, npid_gain)}
     loop = types.FunctionType(run_loop.__code__, namespace, run_loop.__name__)
-    return numba.njit(cache=True, nogil=True)(loop)
+    return cached_njit(numba, loop, nogil=True)
 
 
 def whole_steps(pending_s, duration_s, time_step_s):
