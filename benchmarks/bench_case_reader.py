@@ -21,7 +21,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import arguments  # noqa: E402
 
 
-
 def write_positioning(path, rows, seed=1):
     """A positioning.csv of ``rows`` samples: 5 runs over equally spaced targets, both
     directions, deviations as a laser writes them (full float precision)."""

@@ -21,7 +21,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import arguments  # noqa: E402
 
 
-
 def write_wide_csv(path, rows):
     """``rows`` targets 0.01 mm apart, two runs in both directions, deviations in µm."""
     rng = np.random.default_rng(3)
