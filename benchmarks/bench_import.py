@@ -26,7 +26,8 @@ def write_wide_csv(path, rows):
     rng = np.random.default_rng(3)
     deviation_um = rng.normal(0.0, 2.0, (rows, 4)).round(4)
     lines = ["target_mm,run1+,run1-,run2+,run2-"] + [
-        f"{i * 0.01:.2f}," + ",".join(map(repr, row)) for i, row in enumerate(deviation_um.tolist())]
+        f"{i * 0.01:.2f}," + ",".join(map(repr, row))
+        for i, row in enumerate(deviation_um.tolist())]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
 

@@ -31,7 +31,8 @@ from hypothesis import strategies as st
 sys.path.insert(0, str(Path(__file__).parent))
 from test_fuzz import (BOUNDS, CONTENT, ENCODINGS, FILES, FUZZ, GOOD, GUESSES,  # noqa: E402
                        IMPORT_TEXTS, IMPORT_TIME, RETURNS, TIME_STEPS, _cli_json,
-                       _controller_text, _strict, _write, positioning_cases,
+                       _controller_text, _strict, _write, controller_outcome,
+                       positioning_cases,
                        toml_with_a_strange_value, within_loop_budget, write_effect_case,
                        write_span_case)
 
@@ -137,13 +138,9 @@ def user_effects(root, n):
 def controller_tables(root, n):
     def check(data, name):
         module = CONTROLLERS[name]
-        text = _controller_text(data.draw, module)
-        try:
-            table = module.read(text)
-        except InputError as error:
-            return "refused with location" if ("line" in str(error) or "field" in str(error)) \
-                else "left: unlocated"
-        return "accepted" if table.size <= text.count("\n") + 1024 else "left: unbounded"
+        outcome = controller_outcome(module, _controller_text(data.draw, module))
+        return {"read": "accepted", "refused": "refused with location"}.get(outcome,
+                                                                           f"left: {outcome}")
     return drawn(st.data(), n, check, name=st.sampled_from(list(CONTROLLERS)))
 
 
