@@ -10,7 +10,6 @@ import errno
 import io
 import math
 import os
-import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -20,7 +19,7 @@ import numpy as np
 import tomli_w
 
 from .errors import (InputError, finite_float, finite_value, read_text, read_toml,
-                     shown_value, text_lines)
+                     shown_value, toml_key_line)
 from .output import umask_mode, writing
 from .physics.geometry import SUPPORTS
 from .physics.servo import loop_budget_problem
@@ -197,13 +196,13 @@ def read_axis(path):
     for key, value in data.items():
         if key == "name":
             if not isinstance(value, str):
-                raise CaseError(path, "name must be a string", _key_line(text, key), key)
+                raise CaseError(path, "name must be a string", toml_key_line(text, key), key)
         elif key in TABLES and isinstance(value, dict):
             tables[key] = _check_table(path, text, key, value)
         else:
             raise CaseError(path, _unknown_key_message(key, ["name", "[screw]", "[motor]",
                                                              "[servo]"]),
-                            _key_line(text, key), key)
+                            toml_key_line(text, key), key)
     if "screw" not in tables or "lead_mm" not in tables["screw"]:
         raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
                         column="screw.lead_mm")
@@ -229,7 +228,7 @@ def _check_servo(path, text, servo):
     for key in required:
         if key not in servo:
             raise CaseError(path, f"[servo] {key} is required for a {servo.get('controller')} "
-                                  "controller", _key_line(text, "servo"), f"servo.{key}")
+                                  "controller", toml_key_line(text, "servo"), f"servo.{key}")
     return {"loop_step_s": DEFAULT_LOOP_STEP_S, **servo}
 
 
@@ -244,7 +243,7 @@ def _read_text(path):
 def _check_table(path, text, table, values):
     known = TABLES[table]
     for key, value in values.items():
-        row, column = _key_line(text, key, table), f"{table}.{key}"
+        row, column = toml_key_line(text, key, table), f"{table}.{key}"
         if key not in known:
             raise CaseError(path, _unknown_key_message(key, list(known)), row, column)
         problem = _value_problem(known[key], key, value)
@@ -282,23 +281,6 @@ def range_problem(key, value):
     if low <= value <= high:
         return None
     return f"is beyond any physical axis: expected {low:g} to {high:g}"
-
-
-def _key_line(text, key, table=None):
-    """1-based line of ``key = ...`` (inside ``[table]`` when given), or of ``[key]``."""
-    current = None
-    for number, line in enumerate(text_lines(text), start=1):
-        stripped = line.strip()
-        header = re.match(r"\[\s*([A-Za-z0-9_.-]+)\s*\]", stripped)
-        if header:
-            current = header.group(1)
-            if table is None and current == key:
-                return number
-        elif current == table and re.match(rf"{re.escape(key)}\s*=", stripped):
-            return number
-        elif table and re.match(rf"{re.escape(table)}\.{re.escape(key)}\s*=", stripped):
-            return number
-    return None
 
 
 def _read_csv(path, spec):

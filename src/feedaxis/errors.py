@@ -275,3 +275,20 @@ def finite_float(text):
     if not math.isfinite(value):
         raise ValueError(f"must be finite, got {text!r}")
     return value
+
+
+def toml_key_line(text, key, table=None):
+    """1-based line of ``key = ...`` (inside ``[table]`` when given), or of ``[key]``."""
+    current = None
+    for number, line in enumerate(text_lines(text), start=1):
+        stripped = line.strip()
+        header = re.match(r"\[\s*([A-Za-z0-9_.-]+)\s*\]", stripped)
+        if header:
+            current = header.group(1)
+            if table is None and current == key:
+                return number
+        elif current == table and re.match(rf"{re.escape(key)}\s*=", stripped):
+            return number
+        elif table and re.match(rf"{re.escape(table)}\.{re.escape(key)}\s*=", stripped):
+            return number
+    return None

@@ -17,8 +17,10 @@ import tempfile
 from pathlib import Path
 
 from .. import __version__
+from ..errors import InputError
 from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
 from ..output import writing
+from .fmu_runner import check_fmu_archive
 
 
 def source_hash():
@@ -74,3 +76,17 @@ def _publish(staging, folder):
     except OSError:
         if not _complete(folder):
             raise
+
+
+def fmu_paths(folder=None):
+    """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``: each checked to be a safe
+    FMU archive), else of the cache."""
+    if folder is None:
+        return cached_fmus()
+    paths = {name: Path(folder) / f"{name}.fmu" for name in FMU_NAMES}
+    missing = [str(p) for p in paths.values() if not p.exists()]
+    if missing:
+        raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {folder}")
+    for path in paths.values():
+        check_fmu_archive(path)
+    return paths

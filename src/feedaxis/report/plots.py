@@ -243,3 +243,39 @@ def frequency_spectrum(frequency_hz, amplitude_um, structures):
                          label=f"unexplained {structure.frequency_hz:.4g} Hz")
     return _finish(figure, axes, "frequency (Hz)", "amplitude (µm)", "Residual spectrum",
                    grid="both")
+
+
+def uncertainty_histograms(panels):
+    """A small histogram per ISO 230-2 figure: the Monte Carlo values (their central
+    99.8 %, so a long tail does not squeeze the rest), the figure of the data (line) and
+    the 95 % coverage interval (shaded). ``panels`` is
+    [(title, values_um, value_um, (low_um, high_um))]."""
+    columns = min(3, len(panels))
+    rows = -(-len(panels) // columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.4 * rows),
+                                squeeze=False)
+    for axis, (title, values, value, (low, high)) in zip(axes.flat, panels):
+        axis.hist(values, bins=60, range=tuple(np.quantile(values, (0.001, 0.999))),
+                  color="tab:blue", alpha=0.7)
+        axis.axvspan(low, high, color="tab:orange", alpha=0.2, label="95 % interval")
+        axis.axvline(value, color="black", lw=1, label="value")
+        axis.set_title(title, fontsize=9)
+        axis.set_xlabel("µm", fontsize=8)
+        axis.tick_params(labelsize=7)
+        axis.set_yticks([])
+    for axis in list(axes.flat)[len(panels):]:
+        axis.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    return _png(figure)
+
+
+def table_with_uncertainty(position_mm, sides):
+    """The compensation table's values against position with their 95 % coverage band,
+    per direction; ``sides`` is [(label, value_um, low_um, high_um)]."""
+    figure, axes = plt.subplots(figsize=(9, 3.4))
+    for (label, value, low, high), colour in zip(sides, ("tab:blue", "tab:orange")):
+        axes.plot(position_mm, value, color=colour, lw=1, label=label)
+        axes.fill_between(position_mm, low, high, color=colour, alpha=0.25,
+                          label=f"{label}: 95 % interval")
+    return _finish(figure, axes, "position (mm)", "table value (µm)",
+                   "compensation table and its 95 % coverage interval")
