@@ -437,6 +437,19 @@ def test_a_trace_the_loop_would_step_for_hours_is_refused_at_the_row(tmp_path, c
     assert_refused(capsys, ["compare", case], "tracking.csv", f"row {row}", "'time_s'", *words)
 
 
+@pytest.mark.parametrize("options, words", [
+    (["--step-ms", "20000", "--frequency-hz", "0.001", "--duration-s", "100"],
+     ["--step-ms", "2e+05 steps", "at most 100000 between samples"]),
+    (["--set", "NpidServo.time_step_s=1e-7", "--duration-s", "20"],
+     ["duration_s", "2e+08 steps", "at most 1e+08"]),
+])
+def test_simulate_tracking_refuses_a_case_the_reader_would_refuse(tmp_path, capsys, fmu_paths,
+                                                                   options, words):
+    assert_refused(capsys, ["simulate", "tracking", tmp_path / "t", "--fmus",
+                            fmu_folder(fmu_paths), *options], *words)
+    assert not (tmp_path / "t").exists()
+
+
 def test_samples_just_within_the_loops_budget_are_read(tmp_path):
     time_s = np.array([0.0, MAX_INTERVAL_STEPS * 1e-4, MAX_INTERVAL_STEPS * 1e-4 + 1e-3])
     assert read_case(tracking_case(tmp_path / "t", time_s)).tracking.time_s.size == 3

@@ -32,7 +32,7 @@ from ..errors import ParameterError
 from ..iso230 import iso230_figures, per_target
 from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..physics.checks import require_positive
-from ..physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS
+from ..physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS, ServoParams
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
 from .physics_check import start_value
@@ -442,8 +442,8 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     overrides = {**(parameters or {})}
     overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
     stop_s = _stop_time_s(duration_s, h)
-    _check_loop_budget(h, stop_s, axis_values(master, overrides, "", with_servo=True)["servo"]
-                       ["loop_step_s"])
+    servo = master.system.with_parameters(overrides).component("NpidServo").parameters
+    _check_loop_budget(h, stop_s, servo.get("time_step_s", ServoParams.time_step_s))
 
     def reference_mm(t):
         return amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
