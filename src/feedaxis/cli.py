@@ -18,7 +18,8 @@ from pathlib import Path
 
 from . import __version__, text
 from .case import read_case
-from .errors import InputError, check_writable_target, json_safe
+from .console import INTERRUPTED_EXIT, fail
+from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
@@ -971,43 +972,47 @@ def _one_line_warnings():
 
 
 def main(argv=None):
-    """Entry point of the ``feedaxis`` console script; returns the exit code.
+    """Entry point of the command line; returns the exit code.
 
-    Bad input (:class:`InputError`, a usage error) exits 2 with one message naming where;
-    anything else is a bug: exit 1 with one line (``--debug`` re-raises it for the
-    traceback). With ``--json`` the message is a JSON object on stdout.
+    Bad input (:class:`InputError`, a usage error) exits 2 with one message naming where,
+    and so does a disk that is full or read-only (naming the file); anything else is a bug:
+    exit 1 with one line (``--debug`` re-raises it for the traceback). With ``--json`` the
+    message is a JSON object on stdout. Ctrl-C exits 130 with one line.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     wants_json, debug = "--json" in argv, "--debug" in argv
     try:
+        from threadpoolctl import threadpool_limits
+
         args = build_parser().parse_args(argv)
         with _one_line_warnings():
             args.handler(args)
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
         message = str(stopped)
-        return _fail(wants_json, message if message.startswith("interrupted") else
-                     "interrupted", 130)
+        return fail(wants_json, message if message.startswith("interrupted") else
+                    "interrupted", INTERRUPTED_EXIT)
     except BrokenPipeError:
         sys.stderr.close()
         return 0
     except InputError as error:
-        return _fail(wants_json, str(error), 2, error.as_json())
+        return fail(wants_json, str(error), 2, error.as_json())
+    except OSError as error:
+        refused = write_error(error) if error.errno in DISK_STATE_ERRORS else None
+        if refused is None:
+            return _internal_error(wants_json, debug, error)
+        return fail(wants_json, str(refused), 2, refused.as_json())
     except Exception as error:  # a bug: one line, the traceback with --debug
-        if debug:
-            raise
-        return _fail(wants_json, f"internal error (a bug, please report it): "
-                                 f"{type(error).__name__}: {error}; run the command again "
-                                 "with --debug to see the traceback", 1)
+        return _internal_error(wants_json, debug, error)
     return 0
 
 
-def _fail(wants_json, message, code, payload=None):
-    """Report a failure on stderr, and as JSON on stdout with ``--json``; return ``code``."""
-    print(f"feedaxis: {message}", file=sys.stderr)
-    if wants_json:
-        print(_json_text(payload or {"error": message, "file": None, "row": None,
-                                     "column": None, "parameter": None}))
-    return code
+def _internal_error(wants_json, debug, error):
+    """Exit 1 with one line; ``--debug`` re-raises for the traceback."""
+    if debug:
+        raise error
+    return fail(wants_json, f"internal error (a bug, please report it): "
+                            f"{type(error).__name__}: {error}; run the command again with "
+                            "--debug to see the traceback", 1)
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from .fmu_standalone import libpython_path
+from .output import write_atomically, writing
 
 FMU_NAMES = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 PHYSICS_PACKAGE = "feedaxis_fmu_physics"
@@ -111,7 +112,8 @@ def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None):
     carries the Python its step path needs (:mod:`feedaxis.fmu_standalone`); ``progress``
     is called after each FMU."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with writing(out_dir):
+        out_dir.mkdir(parents=True, exist_ok=True)
     with contextlib.ExitStack() as stack:
         runtime = None
         if standalone:
@@ -128,7 +130,12 @@ def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None):
 
 def build_fmu(name, out_dir, runtime=None):
     """Build one FMU ``<out_dir>/<name>.fmu``: pythonfmu, then the host layer and description;
-    with ``runtime`` (a :class:`~feedaxis.fmu_standalone.RuntimeBuilder`) a standalone FMU."""
+    with ``runtime`` (a :class:`~feedaxis.fmu_standalone.RuntimeBuilder`) a standalone FMU.
+
+    The FMU is completed in a private folder and then written whole under its name (a
+    temporary file renamed), so an interrupted build or a full disk leaves no partial FMU,
+    and builds racing for one folder each leave a complete one.
+    """
     from pythonfmu.builder import FmuBuilder
 
     sources = fmu_sources()
@@ -140,7 +147,7 @@ def build_fmu(name, out_dir, runtime=None):
         script.write_text(ENTRY_SCRIPT.format(name=name), encoding="utf-8")
         try:
             fmu_path = Path(FmuBuilder.build_FMU(
-                script, dest=out_dir, project_files=[staging / package],
+                script, dest=staging / "built", project_files=[staging / package],
                 canGetAndSetFMUstate=True, canSerializeFMUstate=True))
             slave = getattr(importlib.import_module(name), name)(instance_name="describe")
         finally:
@@ -156,7 +163,7 @@ def build_fmu(name, out_dir, runtime=None):
         else:
             warnings.warn(f"the FMUs run in Python hosts only ({missing}); plain C hosts "
                           "need the host layer: see fmus/README.md", stacklevel=2)
-    return fmu_path
+        return write_atomically(out_dir / fmu_path.name, fmu_path.read_bytes())
 
 
 def _stage_package(sources, name, package_dir):

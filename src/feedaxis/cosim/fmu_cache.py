@@ -19,6 +19,8 @@ from pathlib import Path
 from .. import __version__
 from ..errors import InputError
 from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
+from ..output import writing
+from .fmu_runner import check_fmu_archive
 
 
 def source_hash():
@@ -52,27 +54,46 @@ def cached_fmus(root=None, standalone=False):
     """{FMU name: path} of the four FMUs (``standalone``: carrying their Python), built into
     the cache on first use."""
     folder = cache_folder(root, standalone)
-    if not all((folder / f"{name}.fmu").exists() for name in FMU_NAMES):
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
-        try:
-            build_fmus(staging, standalone=standalone)
-            shutil.rmtree(folder, ignore_errors=True)
-            os.replace(staging, folder)
-        finally:
-            shutil.rmtree(staging, ignore_errors=True)
+    if not _complete(folder):
+        with writing(folder):
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
+            try:
+                build_fmus(staging, standalone=standalone)
+                if folder.exists() and not _complete(folder):
+                    shutil.rmtree(folder, ignore_errors=True)
+                _publish(staging, folder)
+            finally:
+                shutil.rmtree(staging, ignore_errors=True)
     return {name: folder / f"{name}.fmu" for name in FMU_NAMES}
 
 
+def _complete(folder):
+    return all((folder / f"{name}.fmu").exists() for name in FMU_NAMES)
+
+
+def _publish(staging, folder):
+    """Rename ``staging`` to ``folder``; a run that built the same cache meanwhile keeps its
+    folder (a rename never replaces a folder holding files), and this one uses it."""
+    try:
+        os.replace(staging, folder)
+    except OSError:
+        if not _complete(folder):
+            raise
+
+
 def fmu_paths(folder=None, standalone=False):
-    """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``), else of the cache;
-    ``standalone``: FMUs that carry their Python (those in ``folder`` must be)."""
+    """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``: each checked to be a safe
+    FMU archive), else of the cache; ``standalone``: FMUs that carry their Python (those in
+    ``folder`` must be)."""
     if folder is None:
         return cached_fmus(standalone=standalone)
     paths = {name: Path(folder) / f"{name}.fmu" for name in FMU_NAMES}
     missing = [str(p) for p in paths.values() if not p.exists()]
     if missing:
         raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {folder}")
+    for path in paths.values():
+        check_fmu_archive(path)
     if standalone:
         from ..fmu_standalone import is_standalone
 

@@ -32,6 +32,7 @@ from ..errors import ParameterError
 from ..iso230 import iso230_figures, per_target
 from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..physics.checks import require_positive
+from ..physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS, ServoParams
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
 from .physics_check import start_value
@@ -440,6 +441,9 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
         raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
     overrides = {**(parameters or {})}
     overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
+    stop_s = _stop_time_s(duration_s, h)
+    servo = master.system.with_parameters(overrides).component("NpidServo").parameters
+    _check_loop_budget(h, stop_s, servo.get("time_step_s", ServoParams.time_step_s))
 
     def reference_mm(t):
         return amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
@@ -447,7 +451,6 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     inputs = {"position_ref_mm": lambda t: reference_mm(t + h)}
     if spindle_rpm is not None:
         inputs["disturbance_N"] = lambda t: cutting_force_N(t, spindle_rpm, force_N)
-    stop_s = _stop_time_s(duration_s, h)
     try:
         rows, completed = master.run(stop_s, inputs, overrides, progress=progress), True
     except SimulationInterrupted as stopped:
@@ -543,6 +546,22 @@ def write_run(out, master, run, noise=None):
         raise ScenarioInterrupted(f"interrupted: {summary['samples']} of "
                                   f"{summary['planned_samples']} samples written to {out}")
     return summary
+
+
+def _check_loop_budget(macro_step_s, stop_s, loop_step_s):
+    """Refuse a tracking test whose case no reader would take: samples every macro step too
+    far apart for the control loop, or a record too long for it
+    (:func:`feedaxis.physics.servo.loop_budget_problem`)."""
+    if macro_step_s / loop_step_s > MAX_INTERVAL_STEPS:
+        steps = macro_step_s / loop_step_s
+        raise ParameterError(f"a sample every {macro_step_s:g} s is {steps:.3g} "
+                             f"steps of the {loop_step_s:g} s control loop; a tracking case may "
+                             f"hold at most {MAX_INTERVAL_STEPS:g} between samples", "--step-ms")
+    if stop_s / loop_step_s > MAX_LOOP_STEPS:
+        raise ParameterError(f"{stop_s:g} s is {stop_s / loop_step_s:.3g} steps of the "
+                             f"{loop_step_s:g} s control loop; a tracking case may need at most "
+                             f"{MAX_LOOP_STEPS:g} ({MAX_LOOP_STEPS * loop_step_s:g} s)",
+                             "duration_s")
 
 
 def _positioning_parameters(parameters):

@@ -91,6 +91,11 @@ class Measurement:
         """Why the samples cannot support any fit beyond their count (None when they can)."""
         return None
 
+    def check_start(self, model, values):
+        """Raise :class:`InputError` when ``model`` with ``values``, as a comparison takes
+        them or a fit starts from them, cannot describe a working axis; by default every
+        value within its effect's bounds can."""
+
     def core(self, model):
         """``f(values) -> predicted_um`` of the effects that are not additive, or None when
         the model has none (their prediction is 0)."""

@@ -25,7 +25,7 @@ from scipy.signal import fftconvolve
 
 from ..case import AXIS_FILE, CaseError
 from ..fmu_map import servo_to_fmu
-from ..physics.servo import ServoParams, simulate, step_counts
+from ..physics.servo import ServoParams, check_runs, simulate, step_counts
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
                               peak_p_value, short_time_peak, spikes)
 from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
@@ -128,6 +128,14 @@ class Tracking(Measurement):
         position_mm = simulate(params, self.record_time_s, self.record_reference_mm, force,
                                self.counts)
         return (position_mm - self.record_reference_mm)[self.index] * 1e3
+
+    def check_start(self, model, values):
+        """The closed loop must not run away with ``values``
+        (:class:`~feedaxis.physics.servo.LoopRunsAway`); a fit's trial values may, the
+        optimiser steps back from them."""
+        params = self.params(model, values)
+        check_runs(params, simulate(params, self.record_time_s, self.record_reference_mm,
+                                    self.disturbance_N, self.counts))
 
     def core(self, model):
         return lambda values: self.deviation_um(self.params(model, values))
