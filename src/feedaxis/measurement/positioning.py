@@ -78,6 +78,14 @@ class Positioning(Measurement):
         return (f"{self.size} samples at {self.clusters[0].size} targets, "
                 f"{self.position_mm.min():g} to {self.position_mm.max():g} mm")
 
+    def wavelength_mm(self, effect):
+        """The effect's wavelength along the travel on this axis (mm); None when it has none
+        or the axis lacks what it needs."""
+        try:
+            return effect.wavelength_mm(self.case.axis)
+        except KeyError:
+            return None
+
     def unresolvable(self, effect):
         """Why the targets cannot resolve a periodic effect's wavelength (None when they
         can): its cosine and sine at the targets, taken apart from an offset and a slope
@@ -85,10 +93,7 @@ class Positioning(Measurement):
         ``RESOLVABLE_SHARE`` of their size. Irregular targets resolve wavelengths far below
         their spacing (ISO 230-2 staggers them for this); targets at whole multiples of the
         wavelength resolve nothing."""
-        try:
-            wavelength_mm = effect.wavelength_mm(self.case.axis)
-        except KeyError:
-            return None
+        wavelength_mm = self.wavelength_mm(effect)
         if not wavelength_mm:
             return None
         centres_mm, _ = self.clusters
@@ -170,10 +175,7 @@ class Positioning(Measurement):
         sinusoid in the resolvable band, fitted to the residual before the effect, leaves
         significantly less than the effect refitted with the model does: F test at
         ``judge.FAMILY_ALPHA``). The structure is then described for what it is instead."""
-        try:
-            wavelength_mm = effect.wavelength_mm(self.case.axis)
-        except KeyError:
-            return None
+        wavelength_mm = self.wavelength_mm(effect)
         if not wavelength_mm:
             return None
         shape = self.noise.shape_test(left.residual_um, result.residual_um,
