@@ -1,9 +1,13 @@
 """Shared fixtures: the four FMUs are built once per test session."""
+import importlib.machinery
+import importlib.util
+import os
 import shutil
 
 import pytest
 
-from feedaxis.cosim.fmu_cache import cache_folder
+from feedaxis import kernel_build
+from feedaxis.cosim.fmu_cache import cache_folder, cache_root
 from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.fmu_build import FMU_NAMES, build_fmus
 
@@ -33,3 +37,20 @@ def user_fmu_cache(fmu_paths, tmp_path, monkeypatch):
     for path in fmu_paths.values():
         shutil.copy2(path, cache / path.name)
     return cache
+
+
+@pytest.fixture(scope="session")
+def compiled_servo_loop():
+    """physics.servo.run_loop compiled ahead of time as the NpidServo FMU carries it
+    (feedaxis.kernel_build, the user cache); skips without a compiler, fails under CI."""
+    missing = kernel_build.kernel_missing()
+    if missing is not None:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"CI requires the compiled servo kernel: {missing}")
+        pytest.skip(f"the servo kernel cannot be compiled here: {missing}")
+    path = kernel_build.cached_kernel(cache_root())
+    loader = importlib.machinery.ExtensionFileLoader(kernel_build.MODULE_NAME, str(path))
+    module = importlib.util.module_from_spec(
+        importlib.util.spec_from_loader(kernel_build.MODULE_NAME, loader))
+    loader.exec_module(module)
+    return module.run_loop

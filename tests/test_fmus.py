@@ -1,4 +1,7 @@
 """The four FMUs as products: valid, faithful to the physics, robust, restorable."""
+import json
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -174,3 +177,74 @@ def test_without_a_compiler_the_fmus_still_run_in_python_hosts(tmp_path, monkeyp
             np.testing.assert_array_equal(got[output], expected[output])
     finally:
         python_only.close()
+
+
+# Runs the NPID scenario of one FMU in a fresh process (an FMU's package is imported once per
+# process: a second build of NpidServo in this one would run the first one's code).
+SCENARIO = """
+import json, sys
+sys.path.insert(0, sys.argv[2])
+from feedaxis.cosim.fmu_runner import run_fmu
+from scenarios import N_STEPS, OUTPUTS, PARAMETERS, STEP_SIZE_S, scripted_inputs
+result = run_fmu(sys.argv[1], STEP_SIZE_S["NpidServo"], N_STEPS["NpidServo"],
+                 scripted_inputs("NpidServo"), PARAMETERS["NpidServo"], OUTPUTS["NpidServo"])
+print(json.dumps({name: result[name].tolist() for name in OUTPUTS["NpidServo"]}))
+"""
+
+
+def npid_scenario_in_fresh_process(fmu_path):
+    """(outputs by name, what the FMU logged) of the NPID scenario in a new process."""
+    run = subprocess.run([sys.executable, "-c", SCENARIO, str(fmu_path),
+                          str(Path(__file__).parent)], capture_output=True, text=True, check=True)
+    *log, outputs = run.stdout.strip().splitlines()
+    return {name: np.array(values) for name, values in json.loads(outputs).items()}, log
+
+
+def kernels_in(fmu_path):
+    with zipfile.ZipFile(fmu_path) as archive:
+        return [name for name in archive.namelist() if "/physics/servo_kernel" in name]
+
+
+def test_servo_fmu_steps_the_compiled_loop(fmu_paths, compiled_servo_loop):
+    """NpidServo carries run_loop compiled ahead of time; NPID through it equals the physics
+    stepped by Python (test_fmu_reproduces_physics_called_directly runs NPID in-process)."""
+    assert len(kernels_in(fmu_paths["NpidServo"])) == 1
+    outputs, log = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
+    expected = direct("NpidServo", scripted_inputs("NpidServo"), PARAMETERS["NpidServo"])[1:]
+    np.testing.assert_allclose(outputs["position_mm"], expected[:, 0], rtol=0, atol=1e-12)
+    assert not log
+
+
+def test_without_the_servo_kernel_the_fmu_steps_python_with_the_same_results(
+        tmp_path, monkeypatch, fmu_paths):
+    """Where the kernel cannot be compiled (no numba.pycc, no compiler): a warning at the build,
+    no kernel in the FMU, the Python loop with the same results; under CI it is an error."""
+    from feedaxis import fmu_build, kernel_build
+
+    monkeypatch.setattr(kernel_build, "kernel_missing", lambda: "no setuptools (test)")
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(kernel_build.KernelUnavailable, match="CI requires"):
+        fmu_build.build_fmu("NpidServo", tmp_path / "ci")
+    monkeypatch.delenv("CI")
+    with pytest.warns(UserWarning, match="steps NPID and friction in Python"):
+        path = fmu_build.build_fmu("NpidServo", tmp_path)
+    assert kernels_in(path) == []
+    python_loop, log = npid_scenario_in_fresh_process(path)
+    compiled, _ = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
+    for output in OUTPUTS["NpidServo"]:
+        np.testing.assert_allclose(python_loop[output], compiled[output], rtol=0, atol=1e-12)
+    assert not log
+
+
+def test_a_kernel_that_does_not_load_is_a_warning_and_the_python_loop(tmp_path, fmu_paths):
+    """An FMU moved to a Python whose ABI the kernel does not fit: the import fails, the FMU
+    says so once (logStatusWarning) and steps the Python loop."""
+    broken = tmp_path / "NpidServo.fmu"
+    with zipfile.ZipFile(fmu_paths["NpidServo"]) as source, zipfile.ZipFile(broken, "w") as fmu:
+        for entry in source.infolist():
+            data = source.read(entry)
+            fmu.writestr(entry, b"not a library" if "servo_kernel" in entry.filename else data)
+    outputs, log = npid_scenario_in_fresh_process(broken)
+    expected, _ = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
+    np.testing.assert_allclose(outputs["position_mm"], expected["position_mm"], rtol=0, atol=1e-12)
+    assert len(log) == 1 and "the compiled servo loop does not load" in log[0]

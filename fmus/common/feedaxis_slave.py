@@ -119,11 +119,8 @@ class AxisSlave(Fmi2Slave):
             self._report("initialisation", error)
 
     def do_step(self, current_time, step_size):
-        try:
-            self._step_checked(step_size)
-        except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
-            return self._report(f"at t = {current_time} s", error)
-        return True
+        names = self._input_names
+        return self._advance(current_time, step_size, names, [getattr(self, n) for n in names])
 
     def exchanger(self, input_names, output_names):
         """``exchange(current_time, step_size, *inputs)``: set the inputs (in the order of
@@ -134,27 +131,35 @@ class AxisSlave(Fmi2Slave):
         read = operator.attrgetter(*names) if len(names) > 1 else (
             lambda slave: (getattr(slave, names[0]),))
         inputs = tuple(input_names)
+        set_inputs = vars(self).update  # the inputs are plain attributes (AxisSlave.input)
 
         def exchange(current_time, step_size, *values):
-            for name, value in zip(inputs, values):
-                setattr(self, name, value)
-            outputs = read(self) if self.do_step(current_time, step_size) else None
-            if outputs is not None and not self.log_queue:
-                return outputs
+            set_inputs(zip(inputs, values))
+            stepped = self._advance(current_time, step_size, inputs, values)
+            if stepped and not self.log_queue:
+                return read(self)
             messages = [(int(m.status), m.category, m.msg) for m in self.log_queue]
             self.log_queue.clear()
-            return [outputs, messages]
+            return [read(self) if stepped else None, messages]
         return exchange
 
-    def _step_checked(self, step_size):
-        if self.model is None:
-            raise ValueError("doStep after a failed initialisation")
-        if not (step_size > 0 and math.isfinite(step_size)):
-            raise ValueError(f"communication step size must be finite and > 0, got {step_size!r}")
-        for name in self._input_names:
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"input {name} must be finite, got {getattr(self, name)!r}")
-        self.step(step_size)
+    def _advance(self, current_time, step_size, input_names, values):
+        """The checked step, the inputs ``input_names`` holding ``values``: True, or False
+        with the error logged (nothing may raise into pythonfmu)."""
+        try:
+            if self.model is None:
+                raise ValueError("doStep after a failed initialisation")
+            if not 0.0 < step_size < math.inf:
+                raise ValueError(f"communication step size must be finite and > 0, "
+                                 f"got {step_size!r}")
+            if not math.isfinite(sum(values)):  # one check for all; the loop names the input
+                for name, value in zip(input_names, values):
+                    if not math.isfinite(value):
+                        raise ValueError(f"input {name} must be finite, got {value!r}")
+            self.step(step_size)
+        except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+            return self._report(f"at t = {current_time} s", error)
+        return True
 
     def _report(self, where, error):
         """Log ``error``: a ValueError (bad input) as an error, anything else (a bug) as

@@ -143,7 +143,12 @@ def build_fmu(name, out_dir):
 def _stage_package(sources, name, package_dir):
     """``feedaxis_fmu_<name>``: the slave, the adapter and the physics, imported relatively."""
     shutil.copytree(SOURCE_DIR / "physics", package_dir / "physics",
-                    ignore=shutil.ignore_patterns("__pycache__"))
+                    ignore=shutil.ignore_patterns("__pycache__", "*.so"))
+    if name == "NpidServo":
+        from .cosim.fmu_cache import cache_root
+        from .kernel_build import install_kernel
+
+        install_kernel(package_dir / "physics", cache_root())
     (package_dir / "__init__.py").write_text(f'"""The {name} FMU\'s Python code."""\n',
                                              encoding="utf-8")
     for source in (sources / "common" / f"{ADAPTER_MODULE}.py", sources / name / f"{name}.py"):

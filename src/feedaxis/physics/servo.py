@@ -84,12 +84,43 @@ def npid_gain(error_mm, ko_per_mm, e_max_mm):
     return math.cosh(ko_per_mm * min(abs(error_mm), e_max_mm))
 
 
-def _zoh(continuous, duration_s):
-    """(Φ, Γ) = (e^{A·τ}, ∫₀^τ e^{A·s} ds · B) for a 3x3 augmented [[A, B], [0, 0]]."""
-    from scipy.linalg import expm  # scipy.linalg takes 0.2 s to import: only when stepping
+def expm(matrix):
+    """e^M of a small square matrix by scaling and squaring its Taylor series.
 
-    augmented = expm(continuous * duration_s)
-    return augmented[:2, :2], augmented[:2, 2]
+    e^M = (e^{M/2^s})^{2^s} with s chosen so that ||M/2^s||_1 <= 1, where the series is
+    summed until a term no longer changes the sum (Moler & Van Loan, "Nineteen dubious ways
+    to compute the exponential of a matrix, twenty-five years later", SIAM Review 45 (2003),
+    methods 1 and 3). The servo needs one 3x3 exponential per loop discretisation; this
+    keeps scipy.linalg (0.2 s to import) off the FMU's initialisation. Agrees with
+    scipy.linalg.expm to rounding (tests/test_physics.py).
+    """
+    matrix = np.asarray(matrix, dtype=float)
+    norm = np.abs(matrix).sum(axis=0).max()
+    squarings = max(0, math.ceil(math.log2(norm))) if norm > 1.0 else 0
+    scaled = matrix / 2.0**squarings
+    result = term = np.eye(len(matrix))
+    for k in range(1, 40):
+        term = term @ scaled / k
+        total = result + term
+        if np.array_equal(total, result):
+            break
+        result = total
+    for _ in range(squarings):
+        result = result @ result
+    return result
+
+
+def _zoh(plant, duration_s):
+    """(Φ, Γ) = (e^{A·τ}, ∫₀^τ e^{A·s} ds · B) from e^{M·τ}, M = [[A, e₂], [0, 0]] (Van Loan).
+
+    ``plant`` is (a0, a1, b) of ẋ = [[0, 1], [-a0, -a1]] x + [0, b] u. The input column
+    is the unit e₂ and Γ is scaled by b afterwards (Γ is linear in B): b·τ would otherwise
+    set the number of squarings (7.8 at the defaults) and cost accuracy in Φ.
+    """
+    stiffness, damping, gain = plant
+    augmented = expm(np.array([[0.0, 1.0, 0.0], [-stiffness, -damping, 1.0], [0.0, 0.0, 0.0]])
+                     * duration_s)
+    return augmented[:2, :2], gain * augmented[:2, 2]
 
 
 def discrete_plant(params):
@@ -108,14 +139,12 @@ def discrete_plant(params):
     h = params.time_step_s
     fraction = params.delay_s / h - params.delay_steps
     fraction = min(max(fraction, 0.0), 1.0)
-    continuous = np.array([[0.0, 1.0, 0.0],
-                           [-params.plant_stiffness_per_s2, -params.plant_damping_per_s,
-                            params.plant_gain_mm_per_Vs2],
-                           [0.0, 0.0, 0.0]])
-    transition, late = _zoh(continuous, (1.0 - fraction) * h)
+    plant = (params.plant_stiffness_per_s2, params.plant_damping_per_s,
+             params.plant_gain_mm_per_Vs2)
+    transition, late = _zoh(plant, (1.0 - fraction) * h)
     if fraction == 0.0:
         return transition, late, np.zeros(2)
-    transition_early, early = _zoh(continuous, fraction * h)
+    transition_early, early = _zoh(plant, fraction * h)
     return transition @ transition_early, late, transition @ early
 
 
@@ -210,19 +239,43 @@ def loop_propagator(coefficients, n_steps, buffer_size):
     return np.array(columns).T
 
 
+def numba_ready_loop(numba):
+    """:func:`run_loop`'s code with its call of :func:`npid_gain` bound to a numba-compiled
+    :func:`npid_gain` (numba compiles calls to compiled functions only): what numba's JIT
+    (:func:`compiled_loop`) and its ahead-of-time compiler (feedaxis.kernel_build) take."""
+    namespace = {**run_loop.__globals__, "npid_gain": numba.njit(cache=True)(npid_gain)}
+    return types.FunctionType(run_loop.__code__, namespace, run_loop.__name__)
+
+
 @lru_cache(maxsize=1)
 def compiled_loop():
-    """:func:`run_loop` compiled by numba (cached on disk): the same code object, its call
-    of :func:`npid_gain` bound to a compiled :func:`npid_gain`; about 40x faster.
+    """:func:`run_loop` compiled by numba's JIT (cached on disk); about 40x faster.
 
     numba is imported here, not with the module: the FMU and the CLI's quick commands do
     without it.
     """
     import numba
 
-    namespace = {**run_loop.__globals__, "npid_gain": numba.njit(cache=True)(npid_gain)}
-    loop = types.FunctionType(run_loop.__code__, namespace, run_loop.__name__)
-    return numba.njit(cache=True, nogil=True)(loop)
+    return numba.njit(cache=True, nogil=True)(numba_ready_loop(numba))
+
+
+@lru_cache(maxsize=1)
+def shipped_loop():
+    """(:func:`run_loop` compiled ahead of time, or None; why it did not load, or None).
+
+    The NpidServo FMU carries the compiled module beside this file (feedaxis.kernel_build);
+    feedaxis's own copy of the physics has none (None, None). A module that is there but
+    does not load (another Python or numpy than the one that built it) gives its reason.
+    """
+    try:
+        from .servo_kernel import run_loop as compiled
+    except ModuleNotFoundError as error:
+        if error.name == f"{__package__}.servo_kernel":
+            return None, None
+        return None, str(error)
+    except ImportError as error:
+        return None, str(error)
+    return compiled, None
 
 
 def whole_steps(pending_s, duration_s, time_step_s):
@@ -266,23 +319,41 @@ class Servo:
     communication step (first-order hold), so a sampled reference is followed smoothly;
     this delays the reference by one communication step and leaves the loop's tracking
     error unchanged.
+
+    ``loop`` is the implementation of :func:`run_loop` to step: by default the compiled one
+    an FMU carries (:func:`shipped_loop`), which then runs every controller mode; without
+    it, :func:`run_loop` itself, and a linear loop (PID, no Coulomb friction) advances by
+    one propagator matrix per communication step instead (:func:`loop_propagator`).
     """
 
-    def __init__(self, params: ServoParams, initial_reference_mm=0.0):
+    def __init__(self, params: ServoParams, initial_reference_mm=0.0, loop=None):
         self.params = params
-        self._coefficients = loop_coefficients(params).tolist()
-        self._propagators = {} if is_linear(self._coefficients) else None
+        self._compiled = loop if loop is not None else shipped_loop()[0]
+        coefficients = loop_coefficients(params)
+        if self._compiled is None:
+            self._coefficients = coefficients.tolist()
+            linear = is_linear(self._coefficients)
+        else:
+            self._coefficients = coefficients
+            # the samples of one call: steps, reference, force, position (and their views)
+            self._steps, self._references = np.zeros(1, dtype=np.int64), np.zeros(1)
+            self._forces, self._positions = np.zeros(1), np.zeros(1)
+            self._inputs = (memoryview(self._steps), memoryview(self._references),
+                            memoryview(self._forces))
+            linear = False
+        self._propagators = {} if linear else None
         self._size = 5 + params.buffer_size
         self._vector = self._spare = self._spare_view = None
         self.restore({"loop": [float(initial_reference_mm), 0.0, 0.0, 0.0,
                                float(initial_reference_mm), 0.0],
                       "commands_V": [0.0] * params.buffer_size, "pending_s": 0.0})
 
-    # The loop state is held in one of two forms: lists for run_loop (self._state with the
-    # head, self._buffer), or one float64 vector in the propagator's order for the linear
-    # path (z, reference_mm, force_V; delay line read from its head). Both keep position,
-    # velocity, integral, previous error and reference at indices 0-4; self._loop is the
-    # form in use (the list, or a memoryview of the vector: both index to Python floats).
+    # The loop state is held in one of two forms: run_loop's (self._state with the head,
+    # self._buffer; lists for the Python loop, float64 arrays for the compiled one), or one
+    # float64 vector in the propagator's order for the linear path (z, reference_mm,
+    # force_V; delay line read from its head). Both keep position, velocity, integral,
+    # previous error and reference at indices 0-4; self._loop is the form in use (the list,
+    # or a memoryview of the array or vector: all index to Python floats).
 
     @property
     def position_mm(self):
@@ -303,15 +374,14 @@ class Servo:
 
     def state(self):
         """All internal state as plain Python values (for FMU get/set state)."""
-        self._to_lists()
-        return {"loop": list(self._state), "commands_V": list(self._buffer),
-                "pending_s": self.pending_s}
+        self._to_loop_form()
+        return {"loop": [float(v) for v in self._state],
+                "commands_V": [float(v) for v in self._buffer], "pending_s": self.pending_s}
 
     def restore(self, state):
         """Restore what :meth:`state` returned."""
-        self._state = [float(v) for v in state["loop"]]
-        self._buffer = [float(v) for v in state["commands_V"]]
-        self._loop, self._vector = self._state, None
+        self._set_loop_form([float(v) for v in state["loop"]],
+                            [float(v) for v in state["commands_V"]])
         self.pending_s = float(state["pending_s"])
 
     def advance(self, duration_s, reference_mm, disturbance_N=0.0):
@@ -327,20 +397,34 @@ class Servo:
         if n_steps == 0:  # run_loop leaves the state as it is
             return self.position_mm
         force_V = disturbance_N / self.params.force_constant_N_per_V
-        if self._propagators is None:
-            self._to_lists()
+        if self._compiled is not None:
+            steps, references, forces = self._inputs
+            steps[0], references[0], forces[0] = n_steps, reference_mm, force_V
+            self._compiled(self._coefficients, self._steps, self._references, self._forces,
+                           self._state, self._buffer, self._positions)
+        elif self._propagators is None:
+            self._to_loop_form()
             run_loop(self._coefficients, [n_steps], [float(reference_mm)], [force_V],
                      self._state, self._buffer, [0.0])
         else:
             self._propagate(n_steps, float(reference_mm), force_V)
         return self.position_mm
 
-    def _to_lists(self):
-        """Put the state in list form (delay line re-headed) if it is a vector."""
+    def _set_loop_form(self, state, buffer):
+        """Hold ``state`` and ``buffer`` (lists) in run_loop's form."""
+        if self._compiled is None:
+            self._state, self._buffer = state, buffer
+            self._loop = self._state
+        else:
+            self._state, self._buffer = np.array(state), np.array(buffer)
+            self._loop = memoryview(self._state)
+        self._vector = None
+
+    def _to_loop_form(self):
+        """Put the state in run_loop's form (delay line re-headed) if it is a vector."""
         if self._vector is not None:
             values = self._vector[:self._size].tolist()
-            self._state, self._buffer = values[:5] + [0.0], values[5:]
-            self._loop, self._vector = self._state, None
+            self._set_loop_form(values[:5] + [0.0], values[5:])
 
     def _to_vector(self):
         """Put the state in vector form (propagator order) if it is in lists."""
