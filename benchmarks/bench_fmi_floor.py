@@ -84,7 +84,7 @@ def start(path, parameters):
                       modelIdentifier=description.coSimulation.modelIdentifier,
                       instanceName="start")
     variables = {v.name: v for v in description.modelVariables}
-    started = time.perf_counter()
+    started = time.perf_counter(), time.process_time()
     slave.instantiate()
     for name, value in parameters.items():
         setter = slave.setBoolean if isinstance(value, bool) else slave.setReal
@@ -92,10 +92,10 @@ def start(path, parameters):
     slave.setupExperiment(startTime=0.0)
     slave.enterInitializationMode()
     slave.exitInitializationMode()
-    return time.perf_counter() - started
+    return time.perf_counter() - started[0], time.process_time() - started[1]
 
 start(sys.argv[1], {})
-print(start(sys.argv[2], eval(sys.argv[3])))
+print(*start(sys.argv[2], eval(sys.argv[3])))
 '''
 
 
@@ -242,15 +242,16 @@ def print_floor_tables(runs, repeats, n_steps):
 
 
 def first_start_ms(fmu_paths, other, starts):
-    """{label: [ms, ...]} of the first instantiate + initialisation of each FMU (and the
-    servo in NPID) in ``starts`` fresh processes each, after ``other`` was loaded."""
+    """{label: [(wall ms, CPU ms), ...]} of the first instantiate + initialisation of each
+    FMU (and the servo in NPID) in ``starts`` fresh processes each, after ``other`` was
+    loaded."""
     cases = [(name, fmu_paths[name], {}) for name in FMU_NAMES]
     cases.append(("NpidServo NPID", fmu_paths["NpidServo"], MODES["NPID"]))
     times = {label: [] for label, _, _ in cases}
     for _, (label, path, parameters) in itertools.product(range(starts), cases):
         run = subprocess.run([sys.executable, "-c", FIRST_START, str(other), str(path),
                               repr(parameters)], capture_output=True, text=True, check=True)
-        times[label].append(1e3 * float(run.stdout.split()[-1]))
+        times[label].append(tuple(1e3 * float(s) for s in run.stdout.split()[-2:]))
     return times
 
 
@@ -275,10 +276,12 @@ def main(argv=None):
             empty_stepper = sets["empty"][0]["StepperError"]
             times = first_start_ms(full, empty_stepper, args.starts)
             print(f"\nfirst instantiate + initialisation, ms (median and range of "
-                  f"{args.starts} fresh processes, after the first import)")
+                  f"{args.starts} fresh processes, after the first import): wall, CPU")
             for label, values in times.items():
-                print(f"  {label:<16}{statistics.median(values):>8.1f}  "
-                      f"({min(values):.1f}-{max(values):.1f})")
+                wall, cpu = ([v[i] for v in values] for i in (0, 1))
+                print(f"  {label:<16}{statistics.median(wall):>8.1f} ({min(wall):.1f}-"
+                      f"{max(wall):.1f}){statistics.median(cpu):>8.1f} ({min(cpu):.1f}-"
+                      f"{max(cpu):.1f})")
 
 
 if __name__ == "__main__":

@@ -119,6 +119,20 @@ BAD_PARAMETERS = [
     ("NpidServo", {"time_step_s": -1e-4}, "time_step_s"),
     ("NpidServo", {"e_max_mm": 0.0}, "e_max_mm"),
     ("GeometricError", {"support": "floating"}, "support"),
+    # values each in range whose derived quantities are beyond a float's (issue 26)
+    ("NpidServo", {"time_step_s": 1e-300}, "time_step_s"),
+    ("NpidServo", {"plant_stiffness_per_s2": 1e300}, "plant_stiffness_per_s2"),
+    ("NpidServo", {"force_constant_N_per_V": 5e-324}, "force_constant_N_per_V"),
+    ("GeometricError", {"length_m": 1e300}, "length_m"),
+    ("GeometricError", {"diameter_m": 1e-300}, "diameter_m"),
+    ("GeometricError", {"diameter_m": 1e300}, "diameter_m"),
+    ("GeometricError", {"youngs_modulus_Pa": 5e-324}, "youngs_modulus_Pa"),
+    ("StepperError", {"lead_mm": 5e-324}, "lead_mm"),
+    ("ThermalScrew", {"length_m": 1e300}, "length_m"),
+    ("ThermalScrew", {"diameter_m": 1e300}, "diameter_m"),
+    ("ThermalScrew", {"density_kg_m3": 5e-324}, "density_kg_m3"),
+    ("ThermalScrew", {"nut_length_m": 5e-324}, "nut_length_m"),
+    ("ThermalScrew", {"time_step_s": 5e-324}, "time_step_s"),
 ]
 
 
@@ -128,8 +142,110 @@ def test_bad_parameter_gives_fmi_error_with_message(loaded_fmus, capsys, name, p
         run_fmu(loaded_fmus[name], STEP_SIZE_S[name], 3, scripted_inputs(name), parameters,
                 OUTPUTS[name])
     assert failure.value.status == ERROR
-    assert named in capsys.readouterr().out
+    errors = [line for line in capsys.readouterr().out.splitlines() if "[ERROR]" in line]
+    assert len(errors) == 1 and named in errors[0] and "internal error" not in errors[0]
     assert np.isfinite(run_scripted(loaded_fmus[name], name)[OUTPUTS[name][0]]).all()
+
+
+def initialised(loaded, instance_name="refusals"):
+    slave = loaded.instantiate(instance_name)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    return slave
+
+
+def refused(call, capsys):
+    """The one error message of a call that must end in fmi2Error (issue 26: it was
+    fmi2Fatal, which leaves the instance dead)."""
+    with pytest.raises(FMICallException) as failure:
+        call()
+    assert failure.value.status == ERROR
+    errors = [line for line in capsys.readouterr().out.splitlines() if "[ERROR]" in line]
+    assert len(errors) == 1, errors
+    return errors[0]
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_an_unknown_or_mistyped_value_reference_is_an_error_not_fatal(loaded_fmus, capsys, name):
+    """fmi2Get/SetX with a reference that is no variable, or a variable of another type: an
+    error naming the reference; the instance still steps."""
+    loaded = loaded_fmus[name]
+    slave = initialised(loaded)
+    real = loaded.variables[OUTPUTS[name][0]].valueReference
+    try:
+        assert "fmi2GetReal: value reference 9999 is not a variable of this FMU" in refused(
+            lambda: slave.getReal([9999]), capsys)
+        assert "fmi2SetReal: value reference 9999 is not" in refused(
+            lambda: slave.setReal([9999], [1.0]), capsys)
+        assert f"value reference {real} is {OUTPUTS[name][0]}, a Real variable, not an Integer" \
+            in refused(lambda: slave.getInteger([real]), capsys)
+        assert "not a Boolean" in refused(lambda: slave.setBoolean([real], [True]), capsys)
+        assert "fmi2GetString: value reference 9999" in refused(
+            lambda: slave.getString([9999]), capsys)
+        slave.doStep(0.0, STEP_SIZE_S[name])
+        assert np.isfinite(loaded.get_reals(slave, OUTPUTS[name])).all()
+    finally:
+        slave.freeInstance()
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_a_corrupt_state_buffer_is_an_error_and_a_good_one_still_restores(loaded_fmus, capsys,
+                                                                           name):
+    """fmi2DeSerializeFMUstate of an empty, 1-byte, truncated or foreign buffer, one with a
+    wrong type or a changed fixed parameter: an error saying why (was fmi2Fatal); then the
+    instance's own state still restores and the run continues as saved."""
+    loaded = loaded_fmus[name]
+    other = loaded_fmus[FMU_NAMES[(FMU_NAMES.index(name) + 1) % len(FMU_NAMES)]]
+    foreign_slave = initialised(other, "foreign")
+    foreign = foreign_slave.serializeFMUstate(foreign_slave.getFMUstate())
+    foreign_slave.freeInstance()
+    slave = initialised(loaded)
+    try:
+        good = slave.serializeFMUstate(slave.getFMUstate())
+        state = json.loads(good)
+        output = OUTPUTS[name][0]
+        fixed = next(v.name for v in loaded.description.modelVariables
+                     if v.variability == "fixed" and v.type == "Real")
+        corrupt = {
+            b"": "an empty buffer is not a state", b"{": "not a serialised state",
+            b"x": "not a serialised state", good[:len(good) // 2]: "not a serialised state",
+            b"[1, 2]": "a JSON list", b"[" * 100000: "not a serialised state",
+            foreign: "not a state of this FMU",
+            json.dumps({**state, output: "text"}).encode(): f"{output} holds 'text', not a Real",
+            json.dumps({**state, fixed: state[fixed] * 2 + 1}).encode():
+                f"fixed parameter {fixed} is",
+        }
+        for data, reason in corrupt.items():
+            assert reason in refused(lambda: slave.deSerializeFMUstate(data), capsys)
+        h = STEP_SIZE_S[name]
+        slave.doStep(0.0, h)
+        after_one = loaded.get_reals(slave, OUTPUTS[name])
+        slave.setFMUstate(slave.deSerializeFMUstate(good))
+        slave.doStep(0.0, h)
+        assert loaded.get_reals(slave, OUTPUTS[name]) == after_one
+    finally:
+        slave.freeInstance()
+
+
+def test_a_state_whose_model_part_does_not_restore_is_refused_and_rolled_back(loaded_fmus,
+                                                                              capsys):
+    """A well-formed state whose model part the physics cannot take (a temperature field of
+    text): fmi2SetFMUstate is an error naming it, and the instance keeps its own state."""
+    loaded = loaded_fmus["ThermalScrew"]
+    slave = initialised(loaded)
+    try:
+        slave.setReal([loaded.variables["velocity_mm_s"].valueReference], [100.0])
+        slave.doStep(0.0, 10.0)
+        before = loaded.get_reals(slave, OUTPUTS["ThermalScrew"])
+        state = json.loads(slave.serializeFMUstate(slave.getFMUstate()))
+        state["model_state"] = {"rise_K": "text"}
+        bad = slave.deSerializeFMUstate(json.dumps(state).encode())
+        assert "fmi2SetFMUstate refused, the instance is unchanged: its model state does not " \
+            "restore" in refused(lambda: slave.setFMUstate(bad), capsys)
+        assert loaded.get_reals(slave, OUTPUTS["ThermalScrew"]) == before
+    finally:
+        slave.freeInstance()
 
 
 @pytest.mark.parametrize("name", FMU_NAMES)

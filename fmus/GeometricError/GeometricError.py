@@ -57,4 +57,6 @@ class GeometricError(AxisSlave):
         return {"direction": self.direction}
 
     def restore_model_state(self, state):
+        if state["direction"] not in (1.0, -1.0):
+            raise ValueError(f"direction must be 1.0 or -1.0, got {state['direction']!r}")
         self.direction = float(state["direction"])

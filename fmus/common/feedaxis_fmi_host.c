@@ -292,6 +292,43 @@ static int settable(Guard *g, const fmi2ValueReference vr[], size_t nvr)
     return 1;
 }
 
+/* ---- value references: a host's bad reference is refused here (pythonfmu raises, which
+ * is fmi2Fatal) ------------------------------------------------------------------------ */
+
+static const char *type_name(char type)
+{
+    switch (type) {
+    case 'R': return "a Real";
+    case 'I': return "an Integer";
+    case 'B': return "a Boolean";
+    default: return "a String";
+    }
+}
+
+/* Whether every reference in ``vr`` is a variable of ``type``; refuses the call otherwise. */
+static int references_known(Guard *g, const char *function, char type,
+                            const fmi2ValueReference vr[], size_t nvr, const void *values)
+{
+    if (nvr > 0 && (!vr || !values)) {
+        refuse(g, "%s: NULL value reference or value array for %zu values", function, nvr);
+        return 0;
+    }
+    for (size_t i = 0; i < nvr; ++i) {
+        size_t k = 0;
+        while (k < FEEDAXIS_N_VARS && FEEDAXIS_VARS[k].vr != vr[i]) ++k;
+        if (k == FEEDAXIS_N_VARS) {
+            refuse(g, "%s: value reference %u is not a variable of this FMU", function, vr[i]);
+            return 0;
+        }
+        if (FEEDAXIS_VARS[k].type != type) {
+            refuse(g, "%s: value reference %u is %s, %s variable, not %s", function, vr[i],
+                   FEEDAXIS_VARS[k].name, type_name(FEEDAXIS_VARS[k].type), type_name(type));
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* ---- Real inputs and outputs kept here while stepping (item 5) ----------------------- */
 
 /* The Python C API, found with dlsym once Python runs (never linked: see the top). */
@@ -311,6 +348,7 @@ static struct {
     double (*as_double)(PyObject *);
     long (*as_long)(PyObject *);
     PyObject *(*from_string)(const char *);
+    PyObject *(*bytes_new)(const char *, Py_ssize_t);
     const char *(*as_utf8)(PyObject *);
     void (*decref)(PyObject *);
     PyObject *(*err_occurred)(void);
@@ -334,7 +372,7 @@ static void prepare_mirror(void)
     for (size_t k = 0; k < FEEDAXIS_N_VARS; ++k) {
         const FeedaxisVar *v = &FEEDAXIS_VARS[k];
         if (v->kind != 'u' && v->kind != 'o') continue;
-        if (!v->real) return;
+        if (v->type != 'R') return;
         if (v->kind == 'u') {
             if (n_inputs == MAX_MIRRORED) return;
             input_vr[n_inputs++] = v->vr;
@@ -351,6 +389,7 @@ static void prepare_mirror(void)
         && FIND(list_size, "PyList_Size") && FIND(from_double, "PyFloat_FromDouble")
         && FIND(as_double, "PyFloat_AsDouble") && FIND(as_long, "PyLong_AsLong")
         && FIND(from_string, "PyUnicode_FromString") && FIND(as_utf8, "PyUnicode_AsUTF8")
+        && FIND(bytes_new, "PyBytes_FromStringAndSize")
         && FIND(decref, "Py_DecRef") && FIND(err_occurred, "PyErr_Occurred")
         && FIND(err_fetch, "PyErr_Fetch") && FIND(err_clear, "PyErr_Clear")
         && FIND(str, "PyObject_Str") && FIND(is_initialized, "Py_IsInitialized")
@@ -780,52 +819,89 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     return status;
 }
 
-/* ``mirrored``: a statement that may answer the call from the mirror (item 5); a setter's
- * mirror takes inputs only, which are always settable, so it may come before the check. */
-#define GETTER(function, type, mirrored)                                                         \
+/* ``mirrored``: a statement that may answer the call from the mirror (item 5), which knows
+ * its references; a setter's mirror takes inputs only, which are always settable, so it
+ * may come before the checks. ``code``: the variable type (references_known). */
+#define GETTER(function, type, code, mirrored)                                                   \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                type value[])                                                    \
     {                                                                                           \
         Guard *guard = c;                                                                       \
         if (guard) { mirrored }                                                                 \
+        if (guard && guard->mode != DEAD && !references_known(guard, #function, code, vr, nvr,  \
+                                                              value)) return fmi2Error;         \
         FORWARD(function, 1, (fmi2Component, const fmi2ValueReference *, size_t, type *), vr,   \
                 nvr, value);                                                                    \
         return status;                                                                          \
     }
 
-GETTER(fmi2GetReal, fmi2Real,
-       if (fast(guard) && get_mirrored(guard, vr, nvr, value)) return fmi2OK;)
-GETTER(fmi2GetInteger, fmi2Integer, )
-GETTER(fmi2GetBoolean, fmi2Boolean, )
-GETTER(fmi2GetString, fmi2String, )
+GETTER(fmi2GetReal, fmi2Real, 'R',
+       if (fast(guard) && vr && value && get_mirrored(guard, vr, nvr, value)) return fmi2OK;)
+GETTER(fmi2GetInteger, fmi2Integer, 'I', )
+GETTER(fmi2GetBoolean, fmi2Boolean, 'B', )
+GETTER(fmi2GetString, fmi2String, 'S', )
 
-#define SETTER(function, type, mirrored)                                                         \
+#define SETTER(function, type, code, mirrored)                                                   \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                const type value[])                                              \
     {                                                                                           \
         Guard *guard = c;                                                                       \
         if (guard) { mirrored }                                                                 \
-        if (guard && guard->mode != DEAD && !settable(guard, vr, nvr)) return fmi2Error;        \
+        if (guard && guard->mode != DEAD && !(references_known(guard, #function, code, vr, nvr, \
+                                                               value)                           \
+                                              && settable(guard, vr, nvr))) return fmi2Error;   \
         FORWARD(function, 0, (fmi2Component, const fmi2ValueReference *, size_t, const type *), \
                 vr, nvr, value);                                                                \
         slave_changed(g);                                                                       \
         return status;                                                                          \
     }
 
-SETTER(fmi2SetReal, fmi2Real,
-       if (fast(guard) && set_mirrored(guard, vr, nvr, value)) return fmi2OK;)
-SETTER(fmi2SetInteger, fmi2Integer, )
-SETTER(fmi2SetBoolean, fmi2Boolean, )
-SETTER(fmi2SetString, fmi2String, )
+SETTER(fmi2SetReal, fmi2Real, 'R',
+       if (fast(guard) && vr && value && set_mirrored(guard, vr, nvr, value)) return fmi2OK;)
+SETTER(fmi2SetInteger, fmi2Integer, 'I', )
+SETTER(fmi2SetBoolean, fmi2Boolean, 'B', )
+SETTER(fmi2SetString, fmi2String, 'S', )
+
+/* ---- saved states: what a host got wrong is refused here (pythonfmu would dereference a
+ * NULL pointer, copy past a buffer's end, or make a corrupt buffer fmi2Fatal) ------------- */
+
+/* Why the slave cannot restore ``size`` bytes (AxisSlave.state_error, reached through the
+ * exchange function), as a message written to ``why``; 0 when it can. */
+static int state_refused(Guard *g, const fmi2Byte bytes[], size_t size, char *why, size_t n)
+{
+    if (!bytes || size == 0) {
+        snprintf(why, n, "an empty buffer is not a state");
+        return 1;
+    }
+    if (!g->exchange) return 0;  /* no adapter to ask: pythonfmu parses (the adapter never raises) */
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *check = py.get_attr(g->exchange, "state_error");
+    PyObject *args = check ? py.tuple_new(1) : NULL;
+    if (args) py.tuple_set(args, 0, py.bytes_new(bytes, (Py_ssize_t)size));
+    PyObject *answer = args ? py.call(check, args) : NULL;
+    int refused = answer != py.none;
+    if (refused) {
+        const char *text = answer && PyUnicode_Check(answer) ? py.as_utf8(answer) : NULL;
+        snprintf(why, n, "%s", text ? text : "the state could not be checked");
+    }
+    if (answer) py.decref(answer);
+    if (args) py.decref(args);
+    if (check) py.decref(check);
+    if (py.err_occurred()) py.err_clear();
+    py.gil_release(gil);
+    return refused;
+}
 
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
+    if (c && !state) return refuse(c, "fmi2GetFMUstate: NULL pointer for the state");
     FORWARD(fmi2GetFMUstate, 0, (fmi2Component, fmi2FMUstate *), state);
     return status;
 }
 
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
+    if (c && !state) return refuse(c, "fmi2SetFMUstate: NULL state");
     FORWARD(fmi2SetFMUstate, 0, (fmi2Component, fmi2FMUstate), state);
     slave_changed(g);
     return status;
@@ -833,12 +909,15 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
+    if (c && !state) return refuse(c, "fmi2FreeFMUstate: NULL pointer for the state");
+    if (c && !*state) return fmi2OK;  /* nothing to free */
     FORWARD(fmi2FreeFMUstate, 1, (fmi2Component, fmi2FMUstate *), state);
     return status;
 }
 
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
+    if (c && (!state || !size)) return refuse(c, "fmi2SerializedFMUstateSize: NULL state or size");
     FORWARD(fmi2SerializedFMUstateSize, 0, (fmi2Component, fmi2FMUstate, size_t *), state, size);
     return status;
 }
@@ -846,6 +925,12 @@ EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[],
                                         size_t size)
 {
+    size_t needed = 0;
+    if (c && (!state || !bytes)) return refuse(c, "fmi2SerializeFMUstate: NULL state or buffer");
+    if (c && ((Guard *)c)->mode != DEAD && fmi2SerializedFMUstateSize(c, state, &needed) == fmi2OK
+        && needed != size)
+        return refuse(c, "fmi2SerializeFMUstate: a buffer of %zu bytes for a state of %zu "
+                         "(fmi2SerializedFMUstateSize)", size, needed);
     FORWARD(fmi2SerializeFMUstate, 0, (fmi2Component, fmi2FMUstate, fmi2Byte *, size_t), state,
             bytes, size);
     return status;
@@ -854,6 +939,11 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                           fmi2FMUstate *state)
 {
+    char why[400];
+    Guard *guard = c;
+    if (guard && !state) return refuse(guard, "fmi2DeSerializeFMUstate: NULL pointer for the state");
+    if (guard && guard->mode != DEAD && state_refused(guard, bytes, size, why, sizeof why))
+        return refuse(guard, "fmi2DeSerializeFMUstate: %s", why);
     FORWARD(fmi2DeSerializeFMUstate, 0, (fmi2Component, const fmi2Byte *, size_t, fmi2FMUstate *),
             bytes, size, state);
     return status;

@@ -12,7 +12,13 @@ FMU's host layer (fmus/common/feedaxis_fmi_host.c) returns that status for the c
 While stepping, the host layer keeps the Real inputs and outputs itself and makes one call
 per doStep, to the function :func:`claim` returns (:meth:`AxisSlave.exchanger`), instead of
 pythonfmu's three (set_real, do_step, get_real, each building Python lists).
+
+A saved state is restored only if it is one this FMU could have saved (its variables with
+their types, the fixed parameters of an initialised instance unchanged, the model's state
+restorable); anything else is refused with an error naming what is wrong, the instance as
+it was. The host layer asks :meth:`AxisSlave.state_error` before a buffer reaches pythonfmu.
 """
+import json
 import math
 import operator
 import sys
@@ -26,7 +32,11 @@ from pythonfmu import Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
 _TYPES = {bool: Boolean, int: Integer, float: Real, str: String}
+# the Python values each variable type holds in a serialised state (JSON: bool is not int)
+_STATE_VALUES = {Real: (float, int), Integer: (int,), Boolean: (bool,), String: (str,)}
 HANDOFF_MODULE = "feedaxis_fmu_handoff"
+REFUSED = "feedaxis: refused"  # the key of a buffer that was not a state
+STATE_KEYS = {"initialised", "model_state"}  # a state's keys beside the variables
 
 
 def _handoff():
@@ -105,11 +115,12 @@ class AxisSlave(Fmi2Slave):
         raise NotImplementedError
 
     def model_state(self):
-        """Internal state beyond the FMI variables, as JSON-compatible values."""
+        """Internal state beyond the FMI variables, as JSON-compatible values (called once
+        the model is built)."""
         return None
 
     def restore_model_state(self, state):
-        """Restore what :meth:`model_state` returned."""
+        """Restore what :meth:`model_state` returned; raise ValueError if it is not one."""
 
     def exit_initialization_mode(self):
         try:
@@ -141,6 +152,7 @@ class AxisSlave(Fmi2Slave):
             messages = [(int(m.status), m.category, m.msg) for m in self.log_queue]
             self.log_queue.clear()
             return [read(self) if stepped else None, messages]
+        exchange.state_error = self.state_error  # the host layer's check of a state buffer
         return exchange
 
     def _advance(self, current_time, step_size, input_names, values):
@@ -173,11 +185,68 @@ class AxisSlave(Fmi2Slave):
 
     def _get_fmu_state(self):
         state = super()._get_fmu_state()
-        state["model_state"] = self.model_state()
+        state["initialised"] = self.model is not None
+        state["model_state"] = self.model_state() if state["initialised"] else None
         return state
 
     def _set_fmu_state(self, state):
+        problem = self._state_error(state)
+        if problem is None:
+            saved = self._get_fmu_state()
+            try:
+                self._restore(state)
+            except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+                self._restore(saved)
+                problem = f"its model state does not restore ({type(error).__name__}: {error})"
+        if problem is not None:
+            self.log(f"fmi2SetFMUstate refused, the instance is unchanged: {problem}",
+                     Fmi2Status.error, "logStatusError")
+
+    def _restore(self, state):
         state = dict(state)
-        model_state = state.pop("model_state", None)
+        initialised, model_state = state.pop("initialised"), state.pop("model_state")
         super()._set_fmu_state(state)
-        self.restore_model_state(model_state)
+        if initialised:
+            self.restore_model_state(model_state)
+
+    def state_error(self, data):
+        """Why the serialised ``data`` (bytes) is not a state of this FMU, or None."""
+        return self._state_error(self._fmu_state_from_bytes(data))
+
+    def _state_error(self, state):
+        """Why ``state`` (a deserialised state) is not one this FMU saved, or None."""
+        if not isinstance(state, dict):
+            return f"not a state: {type(state).__name__}"
+        if REFUSED in state:
+            return state[REFUSED]
+        variables = {variable.name: variable for variable in self.vars.values()}
+        unknown = sorted(set(state) - set(variables) - STATE_KEYS)
+        missing = sorted((set(variables) | STATE_KEYS) - set(state))
+        if unknown or missing:
+            return (f"not a state of this FMU (unknown: {', '.join(unknown) or 'none'}; "
+                    f"missing: {', '.join(missing) or 'none'})")
+        for name, variable in variables.items():
+            value = state[name]
+            allowed = _STATE_VALUES[type(variable)]
+            if not isinstance(value, allowed) or (bool not in allowed and isinstance(value, bool)):
+                return f"{name} holds {value!r}, not a {type(variable).__name__}"
+            fixed = variable.variability == Fmi2Variability.fixed
+            if fixed and self.model is not None and value != getattr(self, name):
+                return (f"fixed parameter {name} is {value!r} in the state, "
+                        f"{getattr(self, name)!r} in this initialised instance")
+        if state["initialised"] is not (self.model is not None):
+            return ("a state saved before initialisation restores only before it, and one "
+                    "saved after only after")
+        return None
+
+    @staticmethod
+    def _fmu_state_from_bytes(state):
+        """pythonfmu's parse of a serialised state, never raising (pythonfmu makes any
+        exception fmi2Fatal): a buffer that is no JSON object gives a :data:`REFUSED` entry."""
+        try:
+            parsed = json.loads(bytes(state).decode("utf-8"))
+        except (UnicodeDecodeError, ValueError, RecursionError) as error:
+            return {REFUSED: f"not a serialised state ({type(error).__name__}: {error})"}
+        if not isinstance(parsed, dict):
+            return {REFUSED: f"not a serialised state (a JSON {type(parsed).__name__})"}
+        return parsed

@@ -160,10 +160,10 @@ def _stage_package(sources, name, package_dir):
 
 def _compile_host_layer(sources, variables, work_dir):
     """Compile fmus/common/feedaxis_fmi_host.c for this FMU's variables; return the .so."""
-    rows = [f'    {{{vr}, \'{kind}\', {int(real)}, "{variable}"}},'
-            for vr, kind, real, variable in variables]
+    rows = [f'    {{{vr}, \'{kind}\', \'{type_code}\', "{variable}"}},'
+            for vr, kind, type_code, variable in variables]
     (work_dir / "feedaxis_fmi_vars.h").write_text(
-        "typedef struct { unsigned vr; char kind; int real; const char *name; } FeedaxisVar;\n"
+        "typedef struct { unsigned vr; char kind; char type; const char *name; } FeedaxisVar;\n"
         "static const FeedaxisVar FEEDAXIS_VARS[] = {\n" + "\n".join(rows) + "\n};\n"
         "#define FEEDAXIS_N_VARS (sizeof FEEDAXIS_VARS / sizeof FEEDAXIS_VARS[0])\n",
         encoding="utf-8")
@@ -217,11 +217,11 @@ def _forget_modules(staging, module_names):
 
 
 def _complete_model_description(fmu_path, slave):
-    """Add units, limits, dependencies and InitialUnknowns; return (vr, kind, real, name)
+    """Add units, limits, dependencies and InitialUnknowns; return (vr, kind, type, name)
     rows.
 
     kind (for the host layer): ``f`` fixed parameter, ``o`` output, ``u`` input, ``i``
-    anything else; ``real`` whether it is a Real.
+    anything else; type: ``R`` Real, ``I`` Integer, ``B`` Boolean, ``S`` String.
     Outputs are computed in doStep only (no direct feedthrough: ``dependencies=""``).
     """
     entries = _read_fmu(fmu_path)
@@ -244,7 +244,7 @@ def _complete_model_description(fmu_path, slave):
         if variable.get("causality") == "output":
             kind = "o"
             outputs.append(index)
-        rows.append((int(variable.get("valueReference")), kind, type_element.tag == "Real", name))
+        rows.append((int(variable.get("valueReference")), kind, type_element.tag[0], name))
     structure = root.find("ModelStructure")
     for unknown in structure.iter("Unknown"):
         unknown.set("dependencies", "")

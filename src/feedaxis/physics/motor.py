@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from .checks import require_positive
+from .checks import require_positive, require_representable
 from .scalar import array_module, values
 
 
@@ -23,7 +23,10 @@ def motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps):
     require_positive("lead_mm", lead_mm)
     require_positive("step_angle_deg", step_angle_deg)
     require_positive("error_period_steps", error_period_steps)
-    return error_period_steps * step_angle_deg / 360.0 * lead_mm
+    period_mm = error_period_steps * step_angle_deg / 360.0 * lead_mm
+    require_representable("the motor error period (mm)", period_mm, lead_mm=lead_mm,
+                          step_angle_deg=step_angle_deg, error_period_steps=error_period_steps)
+    return period_mm
 
 
 def angular_to_axial_um(angle_error_deg, lead_mm):

@@ -30,10 +30,17 @@ from functools import lru_cache
 
 import numpy as np
 
-from .checks import require_finite, require_non_negative, require_positive
+from .checks import (ParameterError, require_finite, require_non_negative, require_positive,
+                     require_representable)
 
 FRICTION_SMOOTHING_MM_S = 0.1
 STATE_SIZE = 6  # position_mm, velocity_mm_s, integral_V, previous_error_mm, reference_mm, head
+# The delay line holds delay_s / time_step_s commands: 10^6 (8 MB) covers the tracking
+# fit's widest case, a 20 ms delay at the shortest loop step a case may have (1e-7 s).
+MAX_DELAY_STEPS = 1_000_000
+# A linear loop without the compiled kernel advances by a propagator of (delay steps + 7)²
+# entries, built by as many runs of the loop: beyond this delay it steps the loop instead.
+MAX_PROPAGATOR_DELAY_STEPS = 64
 
 
 @dataclass(frozen=True)
@@ -67,6 +74,11 @@ class ServoParams:
                 require_non_negative(field.name, value)
             elif field.name != "nonlinear":
                 require_positive(field.name, value)
+        if not self.delay_s / self.time_step_s <= MAX_DELAY_STEPS:
+            raise ParameterError(
+                f"delay_s / time_step_s = {self.delay_s} / {self.time_step_s} s is "
+                f"{self.delay_s / self.time_step_s:.3g} internal steps of delay, at most "
+                f"{MAX_DELAY_STEPS} (raise time_step_s or shorten delay_s)", "time_step_s")
 
     @property
     def delay_steps(self):
@@ -150,13 +162,28 @@ def discrete_plant(params):
 
 def loop_coefficients(params):
     """The flat coefficient vector :func:`run_loop` reads (plant, controller, friction)."""
-    transition, late, early = discrete_plant(params)
+    with np.errstate(over="ignore", invalid="ignore"):  # checked below
+        transition, late, early = discrete_plant(params)
+    require_representable("a discrete plant (e^{A·h} and its input columns)",
+                          np.abs(np.concatenate((transition.ravel(), late, early))).sum(), False,
+                          plant_gain_mm_per_Vs2=params.plant_gain_mm_per_Vs2,
+                          plant_damping_per_s=params.plant_damping_per_s,
+                          plant_stiffness_per_s2=params.plant_stiffness_per_s2,
+                          time_step_s=params.time_step_s)
     volts_per_N = 1.0 / params.force_constant_N_per_V
+    require_representable("the command per newton 1 / force_constant (V/N)", volts_per_N,
+                          force_constant_N_per_V=params.force_constant_N_per_V)
+    friction_V = params.friction_N * volts_per_N
+    damping_V_s_per_mm = params.damping_N_s_per_mm * volts_per_N
+    require_representable("friction forces as commands (V, V·s/mm)",
+                          friction_V + damping_V_s_per_mm, False,
+                          force_constant_N_per_V=params.force_constant_N_per_V,
+                          friction_N=params.friction_N,
+                          damping_N_s_per_mm=params.damping_N_s_per_mm)
     return np.array([*transition.ravel(), *late, *early, params.kp_V_per_mm,
                      params.ki_V_per_mm_s, params.kd_V_s_per_mm, params.ko_per_mm,
-                     params.e_max_mm, float(params.nonlinear), params.friction_N * volts_per_N,
-                     params.damping_N_s_per_mm * volts_per_N, params.time_step_s,
-                     float(params.delay_steps)])
+                     params.e_max_mm, float(params.nonlinear), friction_V,
+                     damping_V_s_per_mm, params.time_step_s, float(params.delay_steps)])
 
 
 def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, positions_mm):
@@ -332,7 +359,8 @@ class Servo:
         coefficients = loop_coefficients(params)
         if self._compiled is None:
             self._coefficients = coefficients.tolist()
-            linear = is_linear(self._coefficients)
+            linear = (is_linear(self._coefficients)
+                      and params.delay_steps <= MAX_PROPAGATOR_DELAY_STEPS)
         else:
             self._coefficients = coefficients
             # the samples of one call: steps, reference, force, position (and their views)
@@ -379,10 +407,20 @@ class Servo:
                 "commands_V": [float(v) for v in self._buffer], "pending_s": self.pending_s}
 
     def restore(self, state):
-        """Restore what :meth:`state` returned."""
-        self._set_loop_form([float(v) for v in state["loop"]],
-                            [float(v) for v in state["commands_V"]])
-        self.pending_s = float(state["pending_s"])
+        """Restore what :meth:`state` returned (ValueError if it is not one of this loop's:
+        the compiled loop indexes the delay line by the stored head unchecked)."""
+        loop = [float(v) for v in state["loop"]]
+        commands_V = [float(v) for v in state["commands_V"]]
+        pending_s = float(state["pending_s"])
+        if (len(loop) != STATE_SIZE or len(commands_V) != self.params.buffer_size
+                or loop[5] not in range(self.params.buffer_size)
+                or not math.isfinite(sum(loop) + sum(commands_V))
+                or not 0.0 <= pending_s < self.params.time_step_s):
+            raise ValueError(f"not a state of this loop: {STATE_SIZE} finite loop values with "
+                             f"a delay-line head, {self.params.buffer_size} finite commands and "
+                             f"0 <= pending_s < time_step_s are needed")
+        self._set_loop_form(loop, commands_V)
+        self.pending_s = pending_s
 
     def advance(self, duration_s, reference_mm, disturbance_N=0.0):
         """Run the loop for ``duration_s`` toward ``reference_mm`` under ``disturbance_N``.
