@@ -5,7 +5,8 @@ reuse ``<cache>/feedaxis/fmus-<version>-<hash>/``, where the hash covers every f
 goes into an FMU (the slave scripts, the adapter, the host layer, the physics package, the
 build script):
 a changed source builds a new folder, never a stale FMU. FMUs built without the C host
-layer (no compiler here) go to a folder of their own, so installing a compiler rebuilds. The folder is built in a staging
+layer (no compiler here) or the compiled servo loop go to a folder of their own, so
+installing a compiler rebuilds. The folder is built in a staging
 folder and renamed into place, so a crash or Ctrl-C never leaves half a cache.
 """
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
+from ..kernel_build import kernel_missing
 
 
 def source_hash():
@@ -25,7 +27,8 @@ def source_hash():
     digest = hashlib.sha256()
     sources = fmu_sources()
     files = sorted([*sources.glob("*/*.py"), *sources.glob("common/*.c"),
-                    *(SOURCE_DIR / "physics").glob("*.py"), SOURCE_DIR / "fmu_build.py"])
+                    *(SOURCE_DIR / "physics").glob("*.py"), SOURCE_DIR / "fmu_build.py",
+                    SOURCE_DIR / "kernel_build.py"])
     for path in files:
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
@@ -41,7 +44,9 @@ def cache_root():
 def cache_folder(root=None):
     """The cache folder of this version's FMUs (``root`` defaults to :func:`cache_root`)."""
     python_only = "-python-hosts" if host_layer_missing() else ""
-    return Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{python_only}"
+    python_loop = "-python-loop" if kernel_missing() else ""  # no compiled servo loop
+    return (Path(root or cache_root())
+            / f"fmus-{__version__}-{source_hash()}{python_only}{python_loop}")
 
 
 def cached_fmus(root=None):
