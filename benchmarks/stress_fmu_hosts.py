@@ -20,7 +20,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from feedaxis.cosim.fmu_runner import LoadedFmu
+from feedaxis.cosim.fmu_runner import LoadedFmu, run_fmu
 from feedaxis.fmu_build import build_fmus
 
 FMU_CHECK = Path(__file__).resolve().parents[2] / "shared" / "tools" / "fmi" / "fmuCheck.linux64"
@@ -35,21 +35,6 @@ for path in sys.argv[1:]:
 def resident_kB():
     """Resident set size of this process (kB)."""
     return int(Path("/proc/self/statm").read_text().split()[1]) * 4
-
-
-def load_from_fresh_folder(fmu_path):
-    """Unpack, instantiate, initialise, step, free and delete, as fmpy.simulate_fmu does."""
-    loaded = LoadedFmu(fmu_path)
-    try:
-        slave = loaded.instantiate("fresh")
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
-        slave.exitInitializationMode()
-        slave.doStep(0.0, 1e-3)
-        slave.terminate()
-        slave.freeInstance()
-    finally:
-        loaded.close()
 
 
 def count_failures(commands):
@@ -87,10 +72,10 @@ def main():
         print(f"instantiate/free x {args.cycles}: resident memory +{resident_kB() - before} kB")
         loaded.close()
         for _ in range(args.cycles // 10):  # warm-up
-            load_from_fresh_folder(paths["StepperError"])
+            run_fmu(paths["StepperError"], 1e-3, 1)
         before = resident_kB()
         for _ in range(args.cycles):
-            load_from_fresh_folder(paths["StepperError"])
+            run_fmu(paths["StepperError"], 1e-3, 1)
         print(f"load from a fresh folder x {args.cycles}: resident memory "
               f"+{resident_kB() - before} kB")
 

@@ -274,20 +274,10 @@ def test_loading_from_fresh_folders_again_and_again_keeps_nothing(fmu_paths, tmp
     FMU now frees its pooled instances and unloads pythonfmu's library."""
     import gc
 
-    from feedaxis.cosim.fmu_runner import LoadedFmu
+    from feedaxis.cosim.fmu_runner import run_fmu
 
-    def cycle():
-        loaded = LoadedFmu(fmu_paths["NpidServo"])
-        try:
-            slave = loaded.instantiate("fresh")
-            slave.setupExperiment(startTime=0.0)
-            slave.enterInitializationMode()
-            slave.exitInitializationMode()
-            slave.doStep(0.0, 1e-3)
-            slave.terminate()
-            slave.freeInstance()
-        finally:
-            loaded.close()
+    def cycle():  # unpack, instantiate, initialise, step, free, delete the folder
+        run_fmu(fmu_paths["NpidServo"], 1e-3, 1)
 
     cycle()
     gc.collect()

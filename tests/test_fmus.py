@@ -268,19 +268,28 @@ def test_zero_communication_step_is_refused(loaded_fmus, capsys):
     assert "communication step size must be finite and > 0" in capsys.readouterr().out
 
 
+def build_without(monkeypatch, tmp_path, name, module, check, error, warning):
+    """Build FMU ``name`` with ``module.check`` saying what is missing: ``error`` under CI,
+    else ``warning`` and the FMU's path."""
+    from feedaxis import fmu_build
+
+    monkeypatch.setattr(module, check, lambda: "missing (test)")
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(error, match="CI requires"):
+        fmu_build.build_fmu(name, tmp_path / "ci")
+    monkeypatch.delenv("CI")
+    with pytest.warns(UserWarning, match=warning):
+        return fmu_build.build_fmu(name, tmp_path)
+
+
 def test_without_a_compiler_the_fmus_still_run_in_python_hosts(tmp_path, monkeypatch,
                                                                 loaded_fmus):
     """A bare pip machine (no cc, no Python headers): pythonfmu's own library, a warning,
     and the same results in fmpy as the FMU with the host layer; under CI it is an error."""
     from feedaxis import fmu_build
 
-    monkeypatch.setattr(fmu_build, "host_layer_missing", lambda: "no C compiler (test)")
-    monkeypatch.setenv("CI", "true")
-    with pytest.raises(fmu_build.HostLayerUnavailable, match="CI requires"):
-        fmu_build.build_fmu("StepperError", tmp_path / "ci")
-    monkeypatch.delenv("CI")
-    with pytest.warns(UserWarning, match="Python hosts only"):
-        path = fmu_build.build_fmu("StepperError", tmp_path)
+    path = build_without(monkeypatch, tmp_path, "StepperError", fmu_build, "host_layer_missing",
+                         fmu_build.HostLayerUnavailable, "Python hosts only")
     with zipfile.ZipFile(path) as archive:
         assert "binaries/linux64/libpythonfmu-export.so" not in archive.namelist()
     from feedaxis.cosim.fmu_runner import LoadedFmu
@@ -335,15 +344,10 @@ def test_without_the_servo_kernel_the_fmu_steps_python_with_the_same_results(
         tmp_path, monkeypatch, fmu_paths):
     """Where the kernel cannot be compiled (no numba.pycc, no compiler): a warning at the build,
     no kernel in the FMU, the Python loop with the same results; under CI it is an error."""
-    from feedaxis import fmu_build, kernel_build
+    from feedaxis import kernel_build
 
-    monkeypatch.setattr(kernel_build, "kernel_missing", lambda: "no setuptools (test)")
-    monkeypatch.setenv("CI", "true")
-    with pytest.raises(kernel_build.KernelUnavailable, match="CI requires"):
-        fmu_build.build_fmu("NpidServo", tmp_path / "ci")
-    monkeypatch.delenv("CI")
-    with pytest.warns(UserWarning, match="steps NPID and friction in Python"):
-        path = fmu_build.build_fmu("NpidServo", tmp_path)
+    path = build_without(monkeypatch, tmp_path, "NpidServo", kernel_build, "kernel_missing",
+                         kernel_build.KernelUnavailable, "steps NPID and friction in Python")
     assert kernels_in(path) == []
     python_loop, log = npid_scenario_in_fresh_process(path)
     compiled, _ = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])

@@ -65,11 +65,16 @@ class HostLayerUnavailable(RuntimeError):
     """This machine cannot compile the C host layer (no compiler, no Python headers)."""
 
 
+def c_compiler():
+    """The machine's C compiler: ``$CC``, else cc or gcc on the PATH (None without one)."""
+    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+
+
 def host_layer_missing():
     """Why the host layer cannot be compiled here (None when it can)."""
     if not sys.platform.startswith("linux"):
         return f"the host layer is built for Linux only, not {sys.platform}"
-    if not (os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")):
+    if not c_compiler():
         return "no C compiler (cc or gcc, or set CC)"
     if not (Path(sysconfig.get_paths()["include"]) / "Python.h").is_file():
         return "no Python headers (Debian: apt-get install python3-dev)"
@@ -171,8 +176,7 @@ def _compile_host_layer(sources, variables, work_dir):
         "#define FEEDAXIS_N_VARS (sizeof FEEDAXIS_VARS / sizeof FEEDAXIS_VARS[0])\n",
         encoding="utf-8")
     output = work_dir / "host.so"
-    compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
-    command = [compiler, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-Wall",
+    command = [c_compiler(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-Wall",
                f"-I{sysconfig.get_paths()['include']}", f"-I{work_dir}",
                f'-DFEEDAXIS_PYTHON="{sys.executable}"', f'-DFEEDAXIS_LIBPYTHON="{_libpython()}"',
                "-o", str(output), str(sources / "common" / "feedaxis_fmi_host.c"),

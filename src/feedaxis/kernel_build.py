@@ -54,9 +54,11 @@ class KernelUnavailable(RuntimeError):
 
 def kernel_missing():
     """Why the kernel cannot be compiled here (None when it can)."""
+    from .fmu_build import c_compiler
+
     if not sys.platform.startswith("linux"):
         return f"the servo kernel is built for Linux only, not {sys.platform}"
-    if not (os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")):
+    if not c_compiler():
         return "no C compiler (cc or gcc, or set CC)"
     for module in ("numba", "setuptools"):  # numba.pycc needs both; importing numba takes 0.3 s
         if importlib.util.find_spec(module) is None:
