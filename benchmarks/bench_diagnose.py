@@ -23,8 +23,8 @@ from feedaxis.fit import fit
 STAGES = {
     ("thermal.py", "duty_unit_fields"): "thermal field (duty_unit_fields)",
     ("_lsq/least_squares.py", "least_squares"): "least-squares fits (all, incl. model evaluations)",
-    ("diagnose/decision.py", "find_structures"): "unexplained-structure search",
-    ("diagnose/spectrum.py", "residual_spectrum"): "residual spectrum",
+    ("feedaxis/diagnose.py", "find_structures"): "unexplained-structure search",
+    ("stats/spectrum.py", "amplitude_spectrum"): "residual spectrum",
     ("_numdiff.py", "approx_derivative"): "finite-difference Jacobians",
 }
 

@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 import synthetic as syn  # noqa: E402
 from feedaxis.diagnose import diagnose  # noqa: E402
-from feedaxis.diagnose.judge import FAMILY_ALPHA  # noqa: E402
+from feedaxis.stats.judge import FAMILY_ALPHA  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
 
 LEAD = Model([CATALOG["lead_error"]])

@@ -33,7 +33,8 @@ from threadpoolctl import threadpool_limits
 from feedaxis.case import read_case
 from feedaxis.effects import CATALOG, Model
 from feedaxis.examples import write_table2_case
-from feedaxis.fit import _Layout, _with_starting_values, fit, measured_um
+from feedaxis.fit import ParameterLayout, fit, starting_values
+from feedaxis.measurement import Positioning
 from feedaxis.physics import geometry, thermal
 
 FEEDS_MM_MIN = (3000.0, 6000.0, 9000.0)
@@ -61,7 +62,7 @@ class Objective:
 
     def __init__(self, cases, layout, x0, simulate):
         self.cases, self.layout, self.x0, self.simulate = cases, layout, x0, simulate
-        self.measured = measured_um(cases)
+        self.measured = np.concatenate([c.positioning.error_um for c in cases])
         self.evaluations = 0
 
     def residual_um(self, x):
@@ -92,8 +93,8 @@ def slsqp(objective, layout, x0, max_iterations):
 
 
 def plain_trf(cases, layout, x0):
-    predictors = [layout.model.predictor(case) for case in cases]
-    measured = measured_um(cases)
+    predictors = [Positioning(case).predictor(layout.model) for case in cases]
+    measured = np.concatenate([case.positioning.error_um for case in cases])
     result = least_squares(
         lambda x: measured - np.concatenate([p(layout.values(x)) for p in predictors]),
         x0, bounds=layout.bounds(), x_scale="jac")
@@ -108,8 +109,8 @@ def main():
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         cases = table2_cases(folder)
-        start = _with_starting_values(MODEL, cases)
-        layout = _Layout(start, cases[0].axis)
+        start = starting_values(MODEL, [Positioning(case) for case in cases])
+        layout = ParameterLayout(start, cases[0].axis)
         x0 = layout.start()
         explicit = Objective(cases, layout, x0, thermal.explicit_duty)
         closed = Objective(cases, layout, x0, thermal.simulate_duty)

@@ -7,7 +7,7 @@ from feedaxis's linearised first step), minimising the same sum of squares. The 
 comes from the straightforward Runge-Kutta stepping of tests/tracking_synthetic.py (a plant
 unlike seed 002's, 1.5 N of friction, white + AR(1) noise).
 
-- feedaxis: ``feedaxis.fit.fit`` -> ``feedaxis.tracking.fit``: scipy TRF over the exact
+- feedaxis: ``feedaxis.fit.fit`` on the tracking measurement: scipy TRF over the exact
   zero-order-hold loop (fractional delay included) compiled by numba.
 - baseline: scipy ``least_squares`` (TRF, default finite differences) over the same loop
   stepped in plain Python (the Runge-Kutta stepping, the reference itself).
@@ -37,11 +37,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from feedaxis.case import read_case  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
-from feedaxis.fit import _Layout, fit  # noqa: E402
+from feedaxis.diagnose import diagnose  # noqa: E402
+from feedaxis.fit import ParameterLayout, fit, starting_values  # noqa: E402
+from feedaxis.measurement import Tracking  # noqa: E402
 from feedaxis.physics.servo import ServoParams, compiled_loop, simulate  # noqa: E402
-from feedaxis.tracking.diagnose import diagnose  # noqa: E402
-from feedaxis.tracking.fit import _with_starting_values  # noqa: E402
-from feedaxis.tracking.tests import nested_p_value, peak_p_value  # noqa: E402
+from feedaxis.stats.coloured import peak_p_value  # noqa: E402
+from feedaxis.stats.noise import Coloured  # noqa: E402
 from tracking_synthetic import noise_um, step_loop, two_sines, write_tracking_case  # noqa: E402
 
 PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
@@ -61,7 +62,7 @@ def timed(function, repeats):
 
 def baseline_fit(case, start_model):
     """Plain least squares over the Runge-Kutta stepping of the loop (reference in time)."""
-    layout = _Layout(start_model, case.axis)
+    layout = ParameterLayout(start_model, case.axis)
     tracking = case.tracking
     measured_mm = tracking.actual_mm
     evaluations = [0]
@@ -112,8 +113,7 @@ def calibration(seeds):
         p_values["periodic (whitened max periodogram)"].append(peak_p_value(residual, 1e-3)[1])
         for name, column in regressors.items():
             after = residual - column * (column @ residual) / (column @ column)
-            p_values[name].append(nested_p_value(residual @ residual, after @ after,
-                                                 residual.size, 0, 1, after))
+            p_values[name].append(Coloured().extra_ss_test(residual, after, 1, 1).p_value)
     return {name: (np.mean(np.array(p) < 0.01), np.mean(np.array(p) < 0.001))
             for name, p in p_values.items()}
 
@@ -130,7 +130,7 @@ def main():
         load_s = time.perf_counter() - start
         run = step_loop(two_sines, 5.0, plant=PLANT, friction_N=FRICTION_N)
         case = read_case(write_tracking_case(Path(folder) / "case", run, 7))
-        start_model = _with_starting_values(MODEL, [case])
+        start_model = starting_values(MODEL, [Tracking(case)])
         params = ServoParams(**PLANT, friction_N=FRICTION_N)
         one_fast_s, _ = timed(lambda: simulate(params, *run[:2]), args.repeats)
         one_plain_s, _ = timed(lambda: step_loop(two_sines, 5.0, plant=PLANT,

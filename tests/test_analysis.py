@@ -3,8 +3,10 @@ same analysis as computing it afresh."""
 import pytest
 
 import feedaxis.analysis
-import feedaxis.diagnose.decision
+import feedaxis.diagnose
 import feedaxis.fit
+import feedaxis.measurement
+import feedaxis.physics.servo
 from feedaxis.analysis import analyse, error_ladder
 from feedaxis.case import read_case
 from feedaxis.demo import improve, ladder_of
@@ -33,19 +35,43 @@ def test_the_demo_diagnosis_is_the_fresh_one(loop):
     assert fresh.diagnosis.to_json() == diagnosis.to_json()
 
 
-def test_the_report_computes_nothing(loop, tmp_path, monkeypatch):
-    case, model, rounds, diagnosis = loop
-    analysis = analyse(case, model, diagnosis=diagnosis, ladder=ladder_of(rounds))
-    analysis.ladder = [("measured", 123.456), *analysis.ladder[1:]]   # a number only it holds
+@pytest.fixture(scope="module")
+def tracking_analysis(tmp_path_factory):
+    from feedaxis.effects import CATALOG
+    from tracking_synthetic import step_loop, two_sines, write_tracking_case
+
+    folder = write_tracking_case(tmp_path_factory.mktemp("t") / "c",
+                                 step_loop(two_sines, 2.0, friction_N=1.0), 1)
+    case = read_case(folder)
+    return analyse(case, feedaxis.fit.fit(Model([CATALOG["coulomb_friction"]]), case).model)
+
+
+@pytest.mark.parametrize("kind", ["positioning", "tracking"])
+def test_the_report_computes_nothing(kind, loop, tracking_analysis, tmp_path, monkeypatch):
+    """The page formats an Analysis of either kind: every fit, diagnosis, prediction,
+    spectrum and figure refused, it still writes, with a number only the analysis holds."""
+    if kind == "positioning":
+        case, model, rounds, diagnosis = loop
+        analysis = analyse(case, model, diagnosis=diagnosis, ladder=ladder_of(rounds))
+    else:
+        analysis = tracking_analysis
+    label = analysis.ladder[0][0]
+    analysis.ladder = [(label, 123.456), *analysis.ladder[1:]]   # a number only it holds
 
     def refuse(*args, **kwargs):
         raise AssertionError("the report computed")
 
     for module, name in [(feedaxis.fit, "fit"), (feedaxis.fit, "evaluate"),
-                         (feedaxis.diagnose.decision, "diagnose"), (feedaxis.analysis, "fit"),
+                         (feedaxis.diagnose, "diagnose"), (feedaxis.analysis, "fit"),
                          (feedaxis.analysis, "diagnose"), (feedaxis.analysis, "compare"),
-                         (feedaxis.analysis, "compensate"), (feedaxis.analysis, "verify")]:
+                         (feedaxis.analysis, "compensate"), (feedaxis.analysis, "verify"),
+                         (feedaxis.analysis, "periodogram"),
+                         (feedaxis.analysis, "residual_spectrum"),
+                         (feedaxis.physics.servo, "simulate")]:
         monkeypatch.setattr(module, name, refuse)
+    for measurement in feedaxis.measurement.KINDS.values():
+        for name in ("predictor", "separable", "components", "figures", "core"):
+            monkeypatch.setattr(measurement, name, refuse)
     page = write_report(analysis, tmp_path / "r.html").read_text(encoding="utf-8")
     assert "123.5" in page
 
@@ -62,9 +88,9 @@ def test_a_thermal_case_is_drawn_run_by_run(tmp_path):
     from feedaxis.fit import fit
 
     analysis = analyse(case, fit(Model([CATALOG["lead_error"]]), case).model)
-    runs, target_mm = analysis.run_of_sample, case.positioning.target_mm
+    runs, target_mm = analysis.details.run_of_sample, case.positioning.target_mm
     for number in np.unique(runs):
         chosen = runs == number
         assert np.unique(target_mm[chosen]).size == chosen.sum()   # each target once a run
     assert runs.max() >= 20                     # the 28 passes of the Table 2 test
-    assert analyse(read_case(BUNDLED_CASE), Model()).run_of_sample is None
+    assert analyse(read_case(BUNDLED_CASE), Model()).details.run_of_sample is None

@@ -15,7 +15,8 @@ import pytest
 from feedaxis import cli
 from feedaxis.case import read_case, write_case
 from feedaxis.cli import main
-from feedaxis.diagnose.spectrum import MAX_FREQUENCIES, amplitude_spectrum
+from feedaxis.measurement import Positioning
+from feedaxis.stats.spectrum import MAX_FREQUENCIES, amplitude_spectrum
 from feedaxis.errors import InputError, json_safe
 from feedaxis.fit import NOISE_DOF, FitResult, Statistics, _check_finite
 from feedaxis.effects import Model
@@ -169,7 +170,7 @@ def test_a_bug_exits_1_with_one_line_and_debug_shows_the_traceback(tmp_path, cap
     def broken(*args, **kwargs):
         raise ValueError("a bug, not the user's input")
 
-    monkeypatch.setattr("feedaxis.iso230.compare", broken)
+    monkeypatch.setattr("feedaxis.analysis.compare", broken)
     err = assert_refused(capsys, ["compare", case], "internal error", "bug", "--debug",
                          "ValueError", code=1)
     assert "Traceback" not in err
@@ -179,7 +180,7 @@ def test_a_bug_exits_1_with_one_line_and_debug_shows_the_traceback(tmp_path, cap
 
 def test_a_bug_under_json_is_a_json_error_with_exit_1(tmp_path, capsys, monkeypatch):
     case = small_case(tmp_path / "c")
-    monkeypatch.setattr("feedaxis.iso230.compare", lambda *a: 1 / 0)
+    monkeypatch.setattr("feedaxis.analysis.compare", lambda *a: 1 / 0)
     code, out, _ = run(capsys, "compare", case, "--json")
     assert code == 1 and "ZeroDivisionError" in _strict(out)["error"]
 
@@ -265,7 +266,7 @@ def test_a_fit_that_is_not_finite_is_an_error_not_a_result(tmp_path):
     residual = np.zeros(3)
     result = FitResult(model, Statistics.of(np.ones(3), residual, 2), np.ones(3), residual)
     with pytest.raises(InputError, match="lead_error.offset_um"):
-        _check_finite(result, [case])
+        _check_finite(result, [Positioning(case)])
 
 
 # --- memory -----------------------------------------------------------------------------

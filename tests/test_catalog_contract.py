@@ -213,7 +213,8 @@ def test_the_fmu_map_refuses_two_screws():
 
 
 @pytest.mark.parametrize("module", ["feedaxis.effects.base", "feedaxis.effects.catalog",
-                                    "feedaxis.fmu_map", "feedaxis.tracking.model"])
+                                    "feedaxis.fmu_map", "feedaxis.measurement.tracking",
+                                    "feedaxis.measurement.positioning", "feedaxis.stats.noise"])
 def test_modules_import_first_without_a_cycle(module):
     done = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True,
                           text=True)

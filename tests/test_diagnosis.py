@@ -13,8 +13,9 @@ import synthetic as syn
 from feedaxis import fit as fit_module
 from feedaxis.case import write_case
 from feedaxis.cli import main
-from feedaxis.diagnose import diagnose, residual_spectrum
-from feedaxis.diagnose.spectrum import MAX_FREQUENCIES
+from feedaxis.diagnose import diagnose
+from feedaxis.stats.spectrum import residual_spectrum
+from feedaxis.stats.spectrum import MAX_FREQUENCIES
 from feedaxis.effects import CATALOG, Model
 from feedaxis.physics import geometry
 
@@ -211,7 +212,7 @@ def _model_file(tmp_path):
 def test_floating_mean_periodogram_matches_scipy_lombscargle():
     from scipy.signal import lombscargle
 
-    from feedaxis.diagnose.spectrum import floating_mean_amplitude
+    from feedaxis.stats.spectrum import floating_mean_amplitude
     rng = np.random.default_rng(21)
     position_mm = np.sort(rng.uniform(0.0, 100.0, 300))
     values_um = 0.3 * np.cos(2 * np.pi * position_mm / 7.0) + 1.0 + rng.normal(0, 0.1, 300)

@@ -2,8 +2,9 @@
 
 - any bytes in any case file: a :class:`Case` or one :class:`InputError` naming a file of
   the case (never another exception);
-- valid-format cases with random values through ``fit``, ``compare`` and ``diagnose``:
-  exit 0 or 2, stdout strict JSON, traced memory bounded.
+- valid-format cases with random values (positioning, and positioning with tracking
+  beside) through ``fit``, ``compare`` and ``diagnose``: exit 0 or 2, stdout strict JSON,
+  traced memory bounded.
 """
 import contextlib
 from collections import Counter
@@ -100,6 +101,22 @@ def positioning_cases(draw):
     return columns
 
 
+SERVO = {"controller": "pid", "kp_V_per_mm": 0.9, "ki_V_per_mm_s": 6e-4, "kd_V_s_per_mm": 5e-3,
+         "force_constant_N_per_V": 100.0}
+
+
+@st.composite
+def tracking_columns(draw):
+    """Valid-format tracking.csv columns (sizes 2-60, steps 0.1-10 ms) with random values."""
+    n = draw(st.integers(2, 60))
+    steps = draw(st.lists(st.floats(1e-4, 1e-2), min_size=n - 1, max_size=n - 1))
+    reference = draw(st.lists(st.floats(-50, 50), min_size=n, max_size=n))
+    offsets = draw(st.lists(st.one_of(st.floats(-1, 1), VALUES), min_size=n, max_size=n))
+    return {"time_s": np.concatenate(([0.0], np.cumsum(steps))),
+            "reference_mm": np.asarray(reference),
+            "actual_mm": np.clip(np.asarray(reference) + np.asarray(offsets) * 1e-3, -1e5, 1e5)}
+
+
 def _cli_json(argv):
     """Exit code and stdout of ``feedaxis argv`` (stderr swallowed) and traced peak bytes."""
     out, err = io.StringIO(), io.StringIO()
@@ -121,18 +138,25 @@ def _strict(text):
 
 @pytest.mark.parametrize("command, examples", [
     (["fit", "{case}", "--add", "lead_error", "--add", "backlash"], 150),
+    (["fit", "{case}", "--add", "coulomb_friction"], 40),
     (["compare", "{case}"], 150),
     (["diagnose", "{case}"], 60),
 ])
 def test_cli_on_random_values_exits_0_or_2_with_strict_json(tmp_path_factory, command,
                                                             examples):
+    """Positioning cases, and in about half of them a tracking.csv beside (a case holding
+    both measurements) with the [servo] table."""
     exits = Counter()
 
     @settings(FUZZ, max_examples=examples)
-    @given(columns=positioning_cases(), lead_mm=st.sampled_from([1.0, 5.0, 1e-3, 1e3]))
-    def check(columns, lead_mm):
+    @given(columns=positioning_cases(), lead_mm=st.sampled_from([1.0, 5.0, 1e-3, 1e3]),
+           tracking=st.one_of(st.none(), tracking_columns()))
+    def check(columns, lead_mm, tracking):
         folder = Path(tmp_path_factory.mktemp("cli")) / "c"
-        write_case(folder, {"name": "fuzz", "screw": {"lead_mm": lead_mm}},
+        axis = {"name": "fuzz", "screw": {"lead_mm": lead_mm}}
+        if tracking is not None:
+            axis["servo"] = SERVO
+        write_case(folder, axis, tracking=tracking,
                    positioning={k: np.asarray(v, dtype=float) for k, v in columns.items()})
         argv = [part.format(case=folder) for part in command] + ["--json"]
         code, out, peak = _cli_json(argv)

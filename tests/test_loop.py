@@ -146,11 +146,35 @@ def test_model_file_round_trip(tmp_path):
     np.testing.assert_array_equal(loaded.predict_um(case), model.predict_um(case))
 
 
+def test_model_file_keeps_the_fit_record(tmp_path):
+    """fit --out saves the covariance and what the data could not determine; the standard
+    uncertainties read back equal the fit's."""
+    case = syn.micro_case(tmp_path / "case", MICRO_ALL, seed=4)
+    out = tmp_path / "m.toml"
+    assert main(["fit", str(case), *[a for n in MICRO_ALL for a in ("--add", n)],
+                 "--out", str(out)]) == 0
+    result = fit(Model([CATALOG[name] for name in MICRO_ALL]), read_case(case))
+    from feedaxis.effects import load_model
+    record = load_model(out, CATALOG).record
+    assert record.parameters == result.model.parameter_keys
+    assert record.n_points == result.statistics.n_points and not record.undetermined
+    for effect, sigmas in result.uncertainties.items():
+        for name, sigma in sigmas.items():
+            assert record.standard_uncertainty(f"{effect}.{name}") == pytest.approx(sigma,
+                                                                                   rel=1e-9)
+
+
 @pytest.mark.parametrize("content, message", [
     ("[lead_eror]\noffset_um = 1\n", "unknown effect [lead_eror]"),
     ("[lead_error]\noffset_um = 1\n", "lacks slope_um_per_mm"),
     ("[lead_error]\noffset_um = 1\nslope_um_per_mm = 0\ngain = 2\n", "no parameter 'gain'"),
     ("[lead_error]\noffset_um = 'x'\nslope_um_per_mm = 0\n", "must be a finite number"),
+    ("[lead_error]\noffset_um = 1\nslope_um_per_mm = 0\n[fit]\nparameters = ['lead_error.offset_um']"
+     "\ncovariance = [[1.0]]\nundetermined = {}\nn_points = 9\nrms_um = 1.0\n",
+     "column 'fit.parameters'"),
+    ("[lead_error]\noffset_um = 1\nslope_um_per_mm = 0\n[fit]\nparameters = "
+     "['lead_error.offset_um', 'lead_error.slope_um_per_mm']\ncovariance = [[1.0, 0], [0, nan]]"
+     "\nundetermined = {}\nn_points = 9\nrms_um = 1.0\n", "column 'fit.covariance'"),
 ])
 def test_bad_model_file_exits_2(tmp_path, capsys, content, message):
     case = str(syn.micro_case(tmp_path / "case", MICRO_ALL, seed=4))

@@ -17,7 +17,8 @@ from feedaxis.compensate import compensate
 from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.effects import CATALOG, Model
 from feedaxis.examples import TABLE2_AXIS, write_table2_case
-from feedaxis.fit import _Layout, fit, measured_um
+from feedaxis.fit import ParameterLayout, fit
+from feedaxis.measurement import Positioning
 from feedaxis.physics import thermal
 
 FEEDS_MM_MIN = (3000.0, 6000.0, 9000.0)
@@ -96,9 +97,10 @@ def test_projected_fit_reaches_the_cost_of_a_plain_fit_from_the_truth(x_cases):
     start = MODEL.with_values({"lead_error": {"offset_um": 2.0, "slope_um_per_mm": -0.01},
                                "thermal_screw": {p.name: getattr(truth, p.name)
                                                  for p in CATALOG["thermal_screw"].parameters}})
-    layout = _Layout(start, cases[0].axis)
-    predictors = [start.predictor(c) for c in cases]
-    measured = measured_um(cases)
+    layout = ParameterLayout(start, cases[0].axis)
+    samples = [Positioning(c) for c in cases]
+    predictors = [m.predictor(start) for m in samples]
+    measured = np.concatenate([m.measured_um for m in samples])
     plain = least_squares(
         lambda x: measured - np.concatenate([p(layout.values(x)) for p in predictors]),
         layout.start(), bounds=layout.bounds(), x_scale="jac")

@@ -16,8 +16,8 @@ from feedaxis.cosim.fmu_runner import run_fmu
 from feedaxis.effects import CATALOG, Model
 from feedaxis.fit import fit
 from feedaxis.physics.servo import ServoParams, simulate
-from feedaxis.tracking.diagnose import diagnose
-from feedaxis.tracking.model import Record, servo_params
+from feedaxis.diagnose import diagnose
+from feedaxis.measurement import Tracking, servo_params
 from test_seed_reproduction import TABLE1_PID_MM
 from tracking_synthetic import (AXIS, SEED002, sine, step_loop, two_sines,
                                 write_tracking_case)
@@ -74,12 +74,13 @@ def test_bad_servo_table_names_file_row_column_and_exits_2(tmp_path, capsys, old
 
 
 def test_table1_pid_figures_through_the_fits_simulation():
-    """Seed 002 Table 1 PID column through Record.predicted_um (the fit's path)."""
+    """Seed 002 Table 1 PID column through the tracking measurement's prediction (the fit's
+    path)."""
     for (frequency_hz, amplitude_mm), expected_mm in TABLE1_PID_MM.items():
         t = np.arange(int((1.0 + 2.0 / frequency_hz) / 1e-3)) * 1e-3
         reference = amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
         case = _case_from_arrays(t, reference)
-        predicted_um = Record.of(case).predicted_um(servo_params(case.axis, Model()))
+        predicted_um = Tracking(case).predict_um(Model())
         last_two_periods = t > t[-1] - 2.0 / frequency_hz
         assert np.max(np.abs(predicted_um[last_two_periods])) * 1e-3 == pytest.approx(
             expected_mm, rel=0.02)
@@ -107,8 +108,7 @@ def test_npid_case_runs_the_nonlinear_loop(tmp_path):
     model = Model((CATALOG["servo_plant"], CATALOG["viscous_friction"]),
                   {"servo_plant": PLANT, "viscous_friction": {"damping_N_s_per_mm": 0.02}})
     assert servo_params(case.axis, model).nonlinear
-    predicted_mm = case.tracking.reference_mm + Record.of(case).predicted_um(
-        servo_params(case.axis, model)) * 1e-3
+    predicted_mm = case.tracking.reference_mm + Tracking(case).predict_um(model) * 1e-3
     assert np.max(np.abs(predicted_mm - run[2])) < 1e-6
 
 

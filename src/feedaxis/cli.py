@@ -42,6 +42,12 @@ def command(name, options=None, **parser_kwargs):
     return register
 
 
+def command_group(name, options, **parser_kwargs):
+    """Register ``feedaxis NAME`` whose subcommands (added by ``options``) carry the
+    handlers, as ``simulate`` and its scenarios."""
+    COMMANDS.append((name, parser_kwargs, options, None))
+
+
 def scenario(name, options=None, **parser_kwargs):
     """Register the decorated handler as ``feedaxis simulate NAME``."""
     def register(handler):
@@ -52,11 +58,17 @@ def scenario(name, options=None, **parser_kwargs):
 
 @contextmanager
 def _progress(label, unit):
-    """A tqdm counter on stderr that shows itself only when the work takes over a second."""
+    """A tqdm counter on stderr that shows itself only when the work takes over a second;
+    the callback takes an optional label of the step under way."""
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
-        yield lambda *_: bar.update()
+        def tick(step=None):
+            if step:
+                bar.set_postfix_str(str(step), refresh=False)
+            bar.update()
+
+        yield tick
 
 
 def _effects(args):
@@ -116,10 +128,15 @@ def _fit_options(parser):
 
 @command("fit", help="fit a model's effects to one or several cases",
          description="Bounded least squares over every parameter of the model's effects "
-                     "(and of --add EFFECT), jointly over all CASE folders.",
+                     "(and of --add EFFECT), jointly over all CASE folders, on the samples "
+                     "the effects act on (positioning.csv or tracking.csv); the parameters "
+                     "entering linearly are solved exactly (variable projection). Prints "
+                     "each parameter with its standard uncertainty and the parameters the "
+                     "data cannot determine.",
          options=_fit_options)
 def _cmd_fit(args):
     from .fit import check_available, evaluate, fit
+    from .measurement import kinds_for
 
     if args.out:
         check_writable_target(args.out)
@@ -127,28 +144,44 @@ def _cmd_fit(args):
     cases = [read_case(folder) for folder in args.cases]
     starting = _starting_model(args, effects)
     model = _with_added(starting, args.add, effects)
-    check_available(model, cases)
-    before = evaluate(starting, cases)
-    with _progress("fitting", "model evaluations") as tick:
-        result = fit(model, cases, progress=tick)
+    results = []
+    for kind in kinds_for(cases, model):
+        check_available(model, cases, kind)
+        before = evaluate(starting, cases, kind)
+        with _progress("fitting", " evaluations") as tick:
+            results.append((before, fit(model, cases, progress=tick, kind=kind)))
     if args.out:
-        write_atomically(args.out, result.model.to_toml())
-    payload = {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
-               "effects": list(result.model.names), "params": result.params(),
-               "uncertainties": result.uncertainties, "undetermined": result.undetermined,
-               "statistics": vars(result.statistics)}
-    _emit(args, payload, text.fit_lines(result, before.rms_um, args.out))
+        write_atomically(args.out, results[0][1].fitted_model().to_toml())
+    _emit_each(args, [(result.kind, {
+        "rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
+        "effects": list(result.model.names), "params": result.params(),
+        "uncertainties": result.uncertainties, "undetermined": result.undetermined,
+        "statistics": vars(result.statistics)}, text.fit_lines(result, before.rms_um, args.out))
+        for before, result in results])
 
 
 def _case_and_model(args):
-    """(effects, case, starting model, tracking): ``tracking`` when the case is compared as
-    a tracking case (tracking.csv), which the tracking package handles."""
-    from .tracking.model import is_tracking
+    """(effects, case, starting model, the kinds of measurement to compare it with)."""
+    from .measurement import kinds_for
 
     effects = _effects(args)
     case = read_case(args.case)
     model = _starting_model(args, effects)
-    return effects, case, model, is_tracking(case, model)
+    return effects, case, model, kinds_for([case], model)
+
+
+def _emit_each(args, outputs):
+    """Print [(kind, payload, text)], one per kind of measurement compared: one output as
+    it is (its JSON with ``measurement``), several under ``measurements``, each headed."""
+    from .measurement import KINDS
+
+    payloads = [{**payload, "measurement": kind} for kind, payload, _ in outputs]
+    if len(outputs) == 1:
+        _emit(args, payloads[0], outputs[0][2])
+        return
+    _emit(args, {"measurements": payloads},
+          "\n\n".join(f"== {kind} ({KINDS[kind].file}) ==\n{lines}"
+                       for kind, _, lines in outputs))
 
 
 def _diagnose_options(parser):
@@ -157,20 +190,25 @@ def _diagnose_options(parser):
 
 
 @command("diagnose", help="where the model fails and which effect is missing",
-         description="Refit the model, fit each missing effect on top and rank them by BIC, "
-                     "describe structure no effect explains, and give a verdict: adequate, "
-                     "missing_effect or unexplained.",
+         description="Refit the model, fit each missing effect on top and judge it by an F "
+                     "test against the noise the data support (the pure error of repeated "
+                     "samples, the residual mean square, or the effective sample count of a "
+                     "serially correlated trace), stepwise at a family-wise error rate of "
+                     "0.001 (Bonferroni); describe structure no effect explains by the same "
+                     "tests; give a verdict: adequate, missing_effect or unexplained. A case "
+                     "with positioning.csv and tracking.csv is diagnosed on the samples the "
+                     "model's effects act on, or on each in turn with an empty model.",
          options=_diagnose_options)
 def _cmd_diagnose(args):
     from .diagnose import diagnose
-    from .tracking import diagnose as tracking, text as tracking_text
 
-    effects, case, model, is_tracking = _case_and_model(args)
-    with _progress("diagnosing", "fits") as tick:
-        diagnosis = (tracking.diagnose if is_tracking else diagnose)(case, model, effects,
-                                                                      progress=tick)
-    _emit(args, diagnosis.to_json(),
-          (tracking_text if is_tracking else text).diagnosis_lines(diagnosis))
+    effects, case, model, kinds = _case_and_model(args)
+    outputs = []
+    for kind in kinds:
+        with _progress(f"diagnosing {kind}", " fits") as tick:
+            diagnosis = diagnose(case, model, effects, progress=tick, kind=kind)
+        outputs.append((kind, diagnosis.to_json(), text.diagnosis_lines(diagnosis)))
+    _emit_each(args, outputs)
 
 
 def _compare_options(parser):
@@ -178,42 +216,47 @@ def _compare_options(parser):
     _add_model_options(parser, "model (TOML) as fitted; without it the model is empty")
 
 
-@command("compare", help="ISO 230-2 figures of the measurement and of the residual",
-         description="ISO 230-2 accuracy, repeatability, reversal and systematic deviation of "
-                     "the measured runs and of what is left after the model, side by side.",
+@command("compare", help="the measurement's figures: measured against the model",
+         description="Positioning: ISO 230-2 accuracy, repeatability, reversal and systematic "
+                     "deviation of the measured runs and of what is left after the model, "
+                     "side by side. Tracking: seed 002's maximum and RMS tracking error "
+                     "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):
-    from .iso230 import compare
-    from .tracking import compare as tracking, text as tracking_text
+    from .analysis import compare
 
-    _, case, model, is_tracking = _case_and_model(args)
-    comparison = (tracking.compare if is_tracking else compare)(case, model)
-    _emit(args, comparison,
-          (tracking_text if is_tracking else text).comparison_lines(comparison))
+    _, case, model, kinds = _case_and_model(args)
+    outputs = []
+    for kind in kinds:
+        comparison = compare(case, model, kind)
+        outputs.append((kind, comparison, text.comparison_lines(comparison)))
+    _emit_each(args, outputs)
 
 
 def _report_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
-    _add_model_options(parser, "fitted model (TOML)", required=True)
+    _add_model_options(parser, "fitted model (TOML); without it the model is empty")
     parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
 
 
 @command("report", help="self-contained HTML page with the plots",
-         description="Measurement against model, residual with the marked wavelengths, "
-                     "spectrum, each effect's contribution, the error ladder, the diagnosis.",
+         description="The diagnosis, the measurement against the model, the residual and its "
+                     "spectrum, each effect's contribution, the error ladder, the figures of "
+                     "compare and the model's parameters, on one page (a case with both "
+                     "measurements: both).",
          options=_report_options)
 def _cmd_report(args):
     from .analysis import analyse
     from .report import write_report
-    from .tracking import report as tracking
 
-    effects, case, model, is_tracking = _case_and_model(args)
+    effects, case, model, kinds = _case_and_model(args)
     out = Path(args.out or f"{Path(args.case).resolve().name}-report.html")
     check_writable_target(out)
-    if is_tracking:
-        tracking.write_report(case, model, effects, out)
-    else:
-        write_report(analyse(case, model, effects), out)
+    analyses = []
+    for kind in kinds:
+        with _progress(f"analysing {kind}", " steps") as tick:
+            analyses.append(analyse(case, model, effects, kind=kind, progress=tick))
+    write_report(analyses, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
 
@@ -467,14 +510,14 @@ def _simulate_options(parser):
 
 
 # the scenarios below carry the handlers
-command("simulate", help="run a scenario on the co-simulated axis, write a case folder",
-        description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
-                    "scenario and write the result as a measurement case (data-format.md), "
-                    "ready for fit, diagnose and compare. iso230 and thermal run the servo "
-                    "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: seed 002's "
-                    "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
-                    "stops and keeps what was computed.",
-        options=_simulate_options)(None)
+command_group("simulate", help="run a scenario on the co-simulated axis, write a case folder",
+              description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
+                          "scenario and write the result as a measurement case (data-format.md), "
+                          "ready for fit, diagnose and compare. iso230 and thermal run the servo "
+                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: seed 002's "
+                          "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
+                          "stops and keeps what was computed.",
+              options=_simulate_options)
 
 
 def _simulate_iso230_options(parser):
@@ -726,14 +769,12 @@ def main(argv=None):
     anything else is a bug: exit 1 with one line (``--debug`` re-raises it for the
     traceback). With ``--json`` the message is a JSON object on stdout.
     """
-    from threadpoolctl import threadpool_limits
-
     argv = sys.argv[1:] if argv is None else list(argv)
     wants_json, debug = "--json" in argv, "--debug" in argv
     try:
         args = build_parser().parse_args(argv)
-        with threadpool_limits(limits=1, user_api="blas"), _one_line_warnings():
-            args.handler(args)  # BLAS on one thread: small matrices, threads only cost
+        with _one_line_warnings():
+            args.handler(args)
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
         message = str(stopped)
         return _fail(wants_json, message if message.startswith("interrupted") else

@@ -17,6 +17,7 @@ from .cosim.replay import POSITION_FMUS, replay_positioning
 from .diagnose import diagnose
 from .effects import CATALOG, Model
 from .examples import BUNDLED_CASE
+from .fit import fit
 from .fmu_build import build_fmus
 from .output import write_atomically
 from .report import write_report
@@ -67,7 +68,7 @@ def run_demo(out_dir, echo=print):
     echo(f"      {case.positioning.size} laser points, {case.positioning.target_mm.min():g} to "
          f"{case.positioning.target_mm.max():g} mm; model: empty")
     model, rounds, diagnosis = improve(case, Model(), echo=echo)
-    model_path = write_atomically(out_dir / "model.toml", model.to_toml())
+    model_path = write_atomically(out_dir / "model.toml", fit(model, case).fitted_model().to_toml())
     analysis = analyse(case, model, CATALOG, diagnosis=diagnosis, ladder=ladder_of(rounds))
     report_path = write_report(analysis, out_dir / "report.html")
     echo(f"fitted model: {model_path}")

@@ -1,7 +1,15 @@
-"""Bounded least squares over a model's effects, on one or several cases jointly.
+"""One fit engine for every kind of measurement: bounded least squares over a model's
+effects, on one or several cases jointly.
 
-One :class:`FitResult` carries the fitted model, the residual and its statistics
-(RMS, max, P-V, R², AIC, BIC) and each parameter's standard uncertainty.
+The measurement (:mod:`feedaxis.measurement`) says how a model predicts the samples; the
+engine never knows what made the residual, as lmfit's minimiser never knows its model.
+Where parameters enter linearly (``Effect.linear``), variable projection solves for them
+exactly by bounded linear least squares at every step of the optimiser over the others,
+and their Jacobian columns are the projection's columns, not finite differences. Where the
+prediction is not separable (the closed loop of a tracking case), the optimiser moves every
+parameter from a probed start. One :class:`FitResult` carries the fitted model, the
+residual and its statistics (RMS, max, P-V, R², AIC, BIC) and each parameter's standard
+uncertainty, widened where the measurement's residual is serially correlated.
 """
 from __future__ import annotations
 
@@ -9,17 +17,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
-from threadpoolctl import threadpool_limits
 
-from .effects import Model
+from .effects import FitRecord, Model
 from .errors import InputError
+from .measurement import Measurement, kinds_for, measurement_of
+from .physics.threads import one_blas_thread
 
 SINGULAR_RATIO = 1e-6
 # Residual degrees of freedom a fit must leave for the noise: with nu of them the noise
 # estimate s has a relative standard error of about 1/sqrt(2 nu) (chi-square with nu degrees
 # of freedom), 25 % at nu = 8; with fewer, BIC and the noise-based verdicts mean nothing.
 NOISE_DOF = 8
-SAME_TARGET_MM = 1e-4  # targets closer than 0.1 µm are one target (recorded jitter)
+FD_STEP = np.sqrt(np.finfo(float).eps)  # relative step of the finite differences
 
 
 @dataclass(frozen=True)
@@ -55,7 +64,11 @@ def rms(values):
 
 @dataclass
 class FitResult:
-    """A fitted model with its residual, statistics and parameter uncertainties."""
+    """A fitted model with its residual, statistics and parameter uncertainties.
+
+    ``measured_um`` is the measured deviation, ``residual_um`` measured - predicted, both
+    at the samples of ``measurements`` concatenated.
+    """
 
     model: Model
     statistics: Statistics
@@ -63,218 +76,199 @@ class FitResult:
     residual_um: np.ndarray
     uncertainties: dict = field(default_factory=dict)
     undetermined: dict = field(default_factory=dict)
+    covariance: np.ndarray | None = field(default=None, repr=False)
+    measurements: list = field(default_factory=list, repr=False)
 
     @property
     def rms_um(self):
         return self.statistics.rms_um
 
+    @property
+    def kind(self):
+        """The kind of measurement fitted (``"positioning"``, ``"tracking"``)."""
+        return self.measurements[0].kind
+
     def params(self):
         """{effect: {parameter: value}} of the fitted model."""
         return {name: dict(self.model.values[name]) for name in self.model.names}
 
+    def fitted_model(self):
+        """The fitted model carrying its :class:`~feedaxis.effects.FitRecord` (covariance,
+        undetermined parameters), as ``fit --out`` saves it."""
+        keys = self.model.parameter_keys
+        covariance = self.covariance if self.covariance is not None else np.zeros((len(keys),) * 2)
+        return self.model.with_record(FitRecord(keys, covariance, dict(self.undetermined),
+                                                self.statistics.n_points, self.rms_um))
 
-def _as_list(cases):
-    return list(cases) if isinstance(cases, (list, tuple)) else [cases]
+
+def measurements(model, data, kind=None):
+    """The samples ``model`` is fitted to: ``data`` is a Case or Measurement or a list of
+    either; cases give their samples of ``kind`` (default: the kind of the model's
+    effects, or the one kind every case holds)."""
+    items = list(data) if isinstance(data, (list, tuple)) else [data]
+    if all(isinstance(item, Measurement) for item in items):
+        return items
+    if kind is None:
+        kinds = kinds_for(items, model)
+        if len(kinds) > 1:
+            raise InputError(f"the cases hold {' and '.join(kinds)} samples and the model "
+                             "names no kind; choose one", path=items[0].folder)
+        kind = kinds[0]
+    return [measurement_of(case, kind) for case in items]
 
 
-def measured_um(cases):
-    """The measured deviations of one or several cases, concatenated (µm)."""
-    return np.concatenate([c.positioning.error_um for c in _as_list(cases)])
-
-
-def check_available(model, cases):
-    """Raise :class:`InputError` when an effect of ``model`` cannot be used on a case, when
-    cases fitted jointly describe different axes, or when the data are too few to fit."""
-    cases = _as_list(cases)
-    tracking = _tracking(model, cases)
-    if tracking:
-        return tracking.check_available(model, cases)
-    for case in cases[1:]:
-        if (case.axis.screw, case.axis.motor) != (cases[0].axis.screw, cases[0].axis.motor):
-            raise InputError(f"axis.toml differs from {cases[0].folder}; cases fitted "
-                             "together must describe the same axis", path=case.folder)
-    for case in cases:
-        if case.positioning is None:
-            raise InputError("the fit needs positioning.csv", path=case.folder)
-        for effect in model.effects:
-            reason = effect.unavailable(case)
-            if reason:
-                raise InputError(f"effect {effect.name} {reason}", path=case.folder)
-    shortfall = too_few_samples(model, cases)
+def check_available(model, data, kind=None):
+    """The measurements of ``data`` for ``model``; :class:`InputError` when an effect cannot
+    act on them, when cases fitted jointly describe different axes, or when the samples
+    are too few to fit. Nothing is fitted."""
+    found = measurements(model, data, kind)
+    first = found[0].case.axis
+    for measurement in found[1:]:
+        axis = measurement.case.axis
+        if (axis.screw, axis.motor, axis.servo) != (first.screw, first.motor, first.servo):
+            raise InputError(f"axis.toml differs from {found[0].case.folder}; cases fitted "
+                             "together must describe the same axis", path=measurement.case.folder)
+    for measurement in found:
+        measurement.check(model)
+    shortfall = too_few_samples(model, found)
     if shortfall:
-        raise InputError(shortfall, path=cases[0].folder / "positioning.csv")
+        raise InputError(shortfall, path=found[0].path)
+    return found
 
 
-def too_few_samples(model, cases):
-    """Why the cases' positioning samples cannot support a fit of ``model`` (None if they can).
-
-    A fit needs one sample per parameter plus :data:`NOISE_DOF` for the noise, and, unless
-    the samples are spread in time (a thermal test), at least two distinct targets.
-    """
-    cases = _as_list(cases)
-    n_samples = sum(case.positioning.size for case in cases)
+def too_few_samples(model, found):
+    """Why the samples of ``found`` (measurements) cannot support a fit of ``model``
+    (None if they can): it needs one sample per parameter plus :data:`NOISE_DOF` for the
+    noise, and samples the measurement can fit at all (two targets, say)."""
+    n_samples = sum(m.size for m in found)
     n_parameters = sum(len(effect.parameters) for effect in model.effects)
     needed = n_parameters + NOISE_DOF
     if n_samples < needed:
         return (f"{n_samples} samples; a fit of {' + '.join(model.names) or 'the empty model'} "
                 f"needs at least {needed} "
                 f"({n_parameters} parameters + {NOISE_DOF} degrees of freedom for the noise)")
-    targets = np.concatenate([case.positioning.target_mm for case in cases])
-    if np.ptp(targets) < SAME_TARGET_MM and not any(case.positioning.time_s is not None
-                                                     for case in cases):
-        return (f"every sample is at the one target {targets[0]:g} mm (within "
-                f"{SAME_TARGET_MM * 1e3:g} µm): a positioning test needs at least two targets")
-    return None
+    reasons = [m.degenerate() for m in found]
+    return None if any(r is None for r in reasons) else reasons[0]
 
 
-def _tracking(model, cases):
-    """The tracking fit module when every case is compared as a tracking case, else None."""
-    from .tracking.model import is_tracking
-
-    if all(is_tracking(case, model) for case in cases):
-        from .tracking import fit as tracking_fit
-        return tracking_fit
-    return None
-
-
-def evaluate(model, cases):
+def evaluate(model, data, kind=None):
     """Statistics and residual of ``model`` as it stands (no fitting)."""
-    cases = _as_list(cases)
-    tracking = _tracking(model, cases)
-    if tracking:
-        return tracking.evaluate(model, cases)
-    check_available(model, cases)
-    measured = measured_um(cases)
-    residual = measured - np.concatenate([model.predict_um(c) for c in cases])
-    return FitResult(model, Statistics.of(measured, residual, 0), measured, residual)
+    found = check_available(model, data, kind)
+    problem = Problem(model, found)
+    residual = problem.measured_um - problem.predicted_um(model.values)
+    return FitResult(model, Statistics.of(problem.measured_um, residual, 0),
+                     problem.measured_um, residual, measurements=found)
 
 
-def fit(model, cases, progress=None):
-    """Fit every parameter of ``model`` to the cases by bounded least squares.
+@one_blas_thread
+def fit(model, data, progress=None, kind=None):
+    """Fit every parameter of ``model`` to ``data`` by bounded least squares.
 
     Effects without values start from their :meth:`~feedaxis.effects.Effect.guess` on the
-    residual of the effects before them. Variable projection finds the optimum over the
-    nonlinear parameters with the linear ones solved exactly; a trust-region pass over all
-    parameters then confirms it and gives the Jacobian for the uncertainties. BLAS runs on
-    one thread: the matrices are small, and threads competing with other work on the machine
-    made fits up to 30x slower.
-
-    Tracking cases (tracking.csv, no positioning.csv or a model with tracking effects) go to
-    :func:`feedaxis.tracking.fit.fit`.
+    residual of the effects before them, then a linearised step for probed ones. Variable
+    projection finds the optimum over the nonlinear parameters with the linear ones solved
+    exactly; a trust-region pass over all parameters then confirms it and gives the
+    Jacobian for the uncertainties.
 
     Parameters
     ----------
     model : Model
-    cases : Case or list of Case
+    data : Case, Measurement or list of them
         Fitted jointly; their residuals are concatenated.
     progress : callable, optional
         Called once per model evaluation (for a progress bar).
+    kind : str, optional
+        The kind of measurement, where the model names none and a case holds several.
 
     Returns
     -------
     FitResult
     """
-    tracking = _tracking(model, _as_list(cases))
-    if tracking:
-        return tracking.fit(model, _as_list(cases), progress)
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _fit(model, _as_list(cases), progress)
-
-
-def _fit(model, cases, progress):
-    check_available(model, cases)
-    model = _with_starting_values(model, cases)
-    measured = measured_um(cases)
-    layout = _Layout(model, cases[0].axis)
-    predictors = [model.predictor(case) for case in cases]
-
-    def residual(x):
-        if progress:
-            progress()
-        values = layout.values(x)
-        return measured - np.concatenate([predict(values) for predict in predictors])
-
+    found = check_available(model, data, kind)
+    model = starting_values(model, found)
+    layout = ParameterLayout(model, found[0].case.axis)
     if layout.size == 0:
-        return evaluate(model, cases)
-    start = _variable_projection(model, cases, layout, measured, progress)
-    solution = least_squares(residual, start, bounds=layout.bounds(), x_scale="jac",
-                             method="trf")
+        return evaluate(model, found)
+    problem = Problem(model, found, progress)
+    start = variable_projection(problem, layout)
+    solution = least_squares(problem.residual(layout), start, jac=problem.jacobian(layout),
+                             bounds=layout.bounds(), x_scale="jac", method="trf")
+    inflation = found[0].uncertainty_inflation(solution.fun)
+    sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
+                                                    solution.active_mask, layout, inflation)
     fitted = model.with_values(layout.values(solution.x))
-    sigma, undetermined = _uncertainties(solution, layout, measured.size)
-    result = FitResult(fitted, Statistics.of(measured, solution.fun, layout.size), measured,
-                       solution.fun, sigma, undetermined)
-    _check_finite(result, cases)
+    if found[0].loose_share is not None:
+        flag_loose(fitted, sigma, undetermined, found[0].loose_share)
+    result = FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
+                       problem.measured_um, solution.fun, sigma, undetermined, covariance, found)
+    _check_finite(result, found)
     return result
 
 
-def _check_finite(result, cases):
-    """Raise :class:`InputError` unless the fitted values and residual are finite numbers."""
-    values = [(f"{e}.{p}", v) for e, params in result.params().items() for p, v in params.items()]
-    values.append(("the residual RMS", result.rms_um))
-    bad = [name for name, value in values if not np.isfinite(value)]
-    if bad:
-        raise InputError(f"the fit gives no finite value for {', '.join(bad)}; nothing was "
-                         "written (the data cannot determine the model)",
-                         path=", ".join(str(case.folder) for case in cases))
+class Problem:
+    """The measurements fitted jointly and the model's prediction of them.
 
-
-def _variable_projection(model, cases, layout, measured, progress=None):
-    """Starting vector at the optimum over the nonlinear parameters, the linear ones
-    (``Effect.linear``) solved exactly by bounded linear least squares at every step.
-
-    Fewer parameters for the optimiser and no poor start for the linear ones; with no
-    nonlinear parameter it is one linear solve.
+    The separable split (base and linear columns) at the last parameter vector is kept, so
+    the optimiser's residual and Jacobian at one point cost one evaluation.
     """
-    separators = [model.separable_predictor(case) for case in cases]
-    lower, upper = layout.bounds()
-    linear = layout.linear_index
-    nonlinear = np.setdiff1d(np.arange(layout.size), linear)
-    x = layout.start()
 
-    def project(x_nonlinear):
-        x[nonlinear] = x_nonlinear
-        parts = [separate(layout.values(x)) for separate in separators]
-        target_um = measured - np.concatenate([base_um for base_um, _ in parts])
-        columns_um = np.vstack([columns for _, columns in parts])
-        scale = np.linalg.norm(columns_um, axis=0)
-        scale[scale == 0.0] = 1.0
-        solution = lsq_linear(columns_um / scale, target_um, method="bvls",
-                              bounds=(lower[linear] * scale, upper[linear] * scale))
-        x[linear] = np.clip(solution.x / scale, lower[linear], upper[linear])
-        return target_um - columns_um @ x[linear]
+    def __init__(self, model, found, progress=None):
+        self.model, self.found, self.progress = model, found, progress
+        self.measured_um = np.concatenate([m.measured_um for m in found])
+        self.separators = [m.separable(model) for m in found]
+        self._last = (None, None)
 
-    def residual(x_nonlinear):
-        if progress:
-            progress()
-        return project(x_nonlinear)
+    def predicted_um(self, values):
+        base_um, columns_um = self.split(values)
+        linear = [values[e.name][p] for e in self.model.effects for p in e.linear]
+        return base_um + columns_um @ np.array(linear, dtype=float)
 
-    if nonlinear.size:
-        solution = least_squares(residual, x[nonlinear], bounds=(lower[nonlinear], upper[nonlinear]),
-                                 x_scale="jac", method="trf")
-        project(solution.x)
-    else:
-        project(x[nonlinear])
-    margin = 1e-9 * (upper - lower)
-    return np.clip(x, lower + margin, upper - margin)
+    def split(self, values):
+        """(base_um, columns_um) of every measurement, concatenated."""
+        if self.progress:
+            self.progress()
+        parts = [separate(values) for separate in self.separators]
+        return (np.concatenate([base for base, _ in parts]),
+                np.vstack([columns for _, columns in parts]))
+
+    def _split_at(self, layout, x):
+        key = x.tobytes()
+        if self._last[0] != key:
+            self._last = (key, self.split(layout.values(x)))
+        return self._last[1]
+
+    def residual(self, layout):
+        """``f(x) -> measured - predicted`` over the layout's parameter vector."""
+        def residual(x):
+            base_um, columns_um = self._split_at(layout, x)
+            return self.measured_um - base_um - columns_um @ x[layout.linear_index]
+        return residual
+
+    def jacobian(self, layout):
+        """``f(x) -> d residual / dx``: the linear parameters' columns exactly, the others
+        by forward differences stepped into the bounds."""
+        nonlinear = layout.nonlinear_index
+
+        def jacobian(x):
+            base_um, columns_um = self._split_at(layout, x)
+            here_um = base_um + columns_um @ x[layout.linear_index]
+            matrix = np.empty((here_um.size, layout.size))
+            matrix[:, layout.linear_index] = -columns_um
+            for index in nonlinear:
+                step = FD_STEP * max(1.0, abs(x[index]))
+                if x[index] + step > layout.upper[index]:
+                    step = -step
+                moved = x.copy()
+                moved[index] += step
+                moved_base_um, moved_columns_um = self.split(layout.values(moved))
+                moved_um = moved_base_um + moved_columns_um @ moved[layout.linear_index]
+                matrix[:, index] = -(moved_um - here_um) / step
+            return matrix
+
+        return jacobian
 
 
-def _with_starting_values(model, cases):
-    """Give each effect lacking values its guess on the residual of the effects before it."""
-    case = cases[0]
-    running = np.array(case.positioning.error_um, dtype=float)
-    values = {}
-    for effect in model.effects:
-        current = model.values[effect.name]
-        if not current and effect.parameters:
-            limits = effect.bounds(case.axis)
-            current = {name: float(np.clip(value, *limits[name]))
-                       for name, value in effect.guess(case, running).items()}
-            values[effect.name] = current
-        running = running - effect.prepare(case)(current)
-    return model.with_values(values)
-
-
-class _Layout:
+class ParameterLayout:
     """Where each effect's parameters sit in the flat vector the optimiser moves."""
 
     def __init__(self, model, axis):
@@ -282,6 +276,7 @@ class _Layout:
         self.slots = [(e.name, p.name) for e in model.effects for p in e.parameters]
         self.linear_index = np.array([self.slots.index((e.name, name)) for e in model.effects
                                       for name in e.linear], dtype=int)
+        self.nonlinear_index = np.setdiff1d(np.arange(len(self.slots)), self.linear_index)
         limits = {e.name: e.bounds(axis) for e in model.effects}
         self.lower = np.array([limits[e][p][0] for e, p in self.slots], dtype=float)
         self.upper = np.array([limits[e][p][1] for e, p in self.slots], dtype=float)
@@ -291,6 +286,7 @@ class _Layout:
         return len(self.slots)
 
     def start(self):
+        """The model's values as a vector, just inside the bounds."""
         x0 = np.array([self.model.values[e][p] for e, p in self.slots], dtype=float)
         margin = 1e-9 * (self.upper - self.lower)
         return np.clip(x0, self.lower + margin, self.upper - margin)
@@ -305,17 +301,93 @@ class _Layout:
         return values
 
 
-def _uncertainties(solution, layout, n_points):
-    """Standard uncertainties from the Jacobian at the optimum; flag what the data cannot fix.
+def variable_projection(problem, layout):
+    """Starting vector at the optimum over the nonlinear parameters, the linear ones
+    (``Effect.linear``) solved exactly by bounded linear least squares at every step.
+
+    Fewer parameters for the optimiser and no poor start for the linear ones; with no
+    nonlinear parameter it is one linear solve, with no linear one the start itself.
+    """
+    lower, upper = layout.bounds()
+    linear, nonlinear = layout.linear_index, layout.nonlinear_index
+    x = layout.start()
+    if linear.size == 0:
+        return x
+
+    def project(x_nonlinear):
+        x[nonlinear] = x_nonlinear
+        base_um, columns_um = problem.split(layout.values(x))
+        target_um = problem.measured_um - base_um
+        scale = np.linalg.norm(columns_um, axis=0)
+        scale[scale == 0.0] = 1.0
+        solution = lsq_linear(columns_um / scale, target_um, method="bvls",
+                              bounds=(lower[linear] * scale, upper[linear] * scale))
+        x[linear] = np.clip(solution.x / scale, lower[linear], upper[linear])
+        return target_um - columns_um @ x[linear]
+
+    if nonlinear.size:
+        solution = least_squares(project, x[nonlinear], bounds=(lower[nonlinear],
+                                                                upper[nonlinear]),
+                                 x_scale="jac", method="trf")
+        project(solution.x)
+    else:
+        project(x[nonlinear])
+    margin = 1e-9 * (upper - lower)
+    return np.clip(x, lower + margin, upper - margin)
+
+
+def starting_values(model, found):
+    """Give each effect lacking values its guess on the residual of the effects before it
+    (additive effects), then one linearised least-squares step for the probed parameters
+    of effects still at their neutral values (``Effect.probe``)."""
+    case = found[0].case
+    running = np.array(found[0].measured_um, dtype=float)
+    values = {}
+    for effect in model.effects:
+        current = model.values[effect.name]
+        if not current and effect.parameters:
+            limits = effect.bounds(case.axis)
+            current = {name: float(np.clip(value, *limits[name]))
+                       for name, value in effect.guess(case, running).items()}
+        values[effect.name] = current
+        if effect.additive:
+            running = running - effect.prepare(case)(current)
+    model = model.with_values(values)
+    probed = [(e, name, step) for e in model.effects if not any(model.values[e.name].values())
+              for name, step in e.probe.items()]
+    return _probed_step(model, found, probed) if probed else model
+
+
+def _probed_step(model, found, probed):
+    """One linearised least-squares step of the ``probed`` (effect, parameter, step)."""
+    problem = Problem(model, found)
+    base_um = problem.predicted_um(model.values)
+    columns = []
+    for effect, name, step in probed:
+        shifted = {**model.values, effect.name: {**model.values[effect.name], name: step}}
+        columns.append((problem.predicted_um(shifted) - base_um) / step)
+    steps = np.linalg.lstsq(np.column_stack(columns), problem.measured_um - base_um,
+                            rcond=None)[0]
+    values = {name: dict(v) for name, v in model.values.items()}
+    for (effect, name, _), value in zip(probed, steps):
+        lower, upper = effect.bounds(found[0].case.axis)[name]
+        values[effect.name][name] = float(np.clip(value, lower, upper))
+    return model.with_values(values)
+
+
+def uncertainties(jacobian, residual, active_mask, layout, inflation=1.0):
+    """(standard uncertainties, undetermined parameters, covariance) from the Jacobian at
+    the optimum; the covariance is in the order of ``layout.slots`` and multiplied by
+    ``inflation`` (a serially correlated residual's autocorrelation time).
 
     A parameter is undetermined when it has a share in a (nearly) singular direction of the
     Jacobian with its columns scaled to unit length (so units do not matter), or when it
     ends on a bound.
     """
-    variance = float(solution.fun @ solution.fun) / max(n_points - layout.size, 1)
-    scale = np.linalg.norm(solution.jac, axis=0)
+    variance = float(residual @ residual) / max(residual.size - layout.size, 1) * inflation
+    scale = np.linalg.norm(jacobian, axis=0)
     scale[scale == 0.0] = 1.0
-    _, singular, vt = np.linalg.svd(solution.jac / scale, full_matrices=False)
+    _, singular, vt = np.linalg.svd(jacobian / scale, full_matrices=False)
     strong = singular > SINGULAR_RATIO * max(singular[0], 1e-300)
     covariance = ((vt[strong].T / singular[strong] ** 2) @ vt[strong] * variance
                   / np.outer(scale, scale))
@@ -332,6 +404,31 @@ def _uncertainties(solution, layout, n_points):
             undetermined[key] = (f"the data cannot separate it from {', '.join(sorted(partners))}"
                                  if partners else "the data do not depend on it")
             sigma[effect_name][parameter_name] = float("nan")
-        elif solution.active_mask[index] != 0:
+        elif active_mask[index] != 0:
             undetermined[key] = "ended on its bound"
-    return sigma, undetermined
+    return sigma, undetermined, covariance
+
+
+def flag_loose(model, sigma, undetermined, share):
+    """Add to ``undetermined`` the parameters whose standard uncertainty exceeds ``share``
+    of their value: the data fix them only loosely (a single sine fixes only a loop's gain
+    and phase at its frequency)."""
+    for name in model.names:
+        for parameter, value in model.values[name].items():
+            key, spread = f"{name}.{parameter}", sigma[name][parameter]
+            if key not in undetermined and spread > share * abs(value):
+                undetermined[key] = (
+                    f"the data fix it only to ±{100 * spread / max(abs(value), 1e-300):.0f} %: "
+                    "the measurement does not excite it enough (a single sine fixes only the "
+                    "loop's gain and phase at its frequency)")
+
+
+def _check_finite(result, found):
+    """Raise :class:`InputError` unless the fitted values and residual are finite numbers."""
+    values = [(f"{e}.{p}", v) for e, params in result.params().items() for p, v in params.items()]
+    values.append(("the residual RMS", result.rms_um))
+    bad = [name for name, value in values if not np.isfinite(value)]
+    if bad:
+        raise InputError(f"the fit gives no finite value for {', '.join(bad)}; nothing was "
+                         "written (the data cannot determine the model)",
+                         path=", ".join(str(m.case.folder) for m in found))

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fit import SAME_TARGET_MM, evaluate
+SAME_TARGET_MM = 1e-4  # targets closer than 0.1 µm are one target (recorded jitter)
 
 
 def target_clusters(target_mm, tolerance_mm=SAME_TARGET_MM):
@@ -105,26 +105,3 @@ def target_groups(positioning):
     _, cluster = target_clusters(positioning.target_mm)
     keys = cluster * 2 + (positioning.direction > 0)
     return np.unique(keys, return_inverse=True)[1].ravel()
-
-
-def compare(case, model):
-    """ISO 230-2 figures of the measurement and of the residual after ``model``, side by side.
-
-    Returns {"figures": {key: {"measured_um", "residual_um", "explained"}}, "targets", ...};
-    ``explained`` = 1 - residual / measured, the share of the figure the model explains.
-    """
-    positioning = case.positioning
-    result = evaluate(model, case)
-    measured = iso230_figures(positioning.target_mm, result.measured_um, positioning.direction)
-    residual = iso230_figures(positioning.target_mm, result.residual_um, positioning.direction)
-    figures = {}
-    for key, name in FIGURE_NAMES.items():
-        if key in measured:
-            explained = 1 - residual[key] / measured[key] if measured[key] else None
-            figures[key] = {"name": name, "measured_um": measured[key],
-                            "residual_um": residual[key], "explained": explained}
-    return {"case": str(case.folder), "effects": list(model.names),
-            "targets": measured["targets"], "runs_up": measured.get("runs_up", 0),
-            "runs_down": measured.get("runs_down", 0), "bidirectional": positioning.bidirectional,
-            "rms_measured_um": result.statistics.rms_before_um,
-            "rms_residual_um": result.statistics.rms_um, "figures": figures}

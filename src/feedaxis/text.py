@@ -40,12 +40,12 @@ def diagnosis_lines(diagnosis):
         lines += [f"           {name} = {_number(value, 4)} ± {_number(error, 2)} {unit}"
                   for name, (value, error, unit) in candidate.sizes().items()]
     for structure in diagnosis.unexplained:
-        wavelength = "" if structure.wavelength_mm is None else \
-            f" at {structure.wavelength_mm:.4g} mm"
-        lines.append(f"  unexplained {structure.kind}{wavelength}, amplitude "
+        unit = structure.location_key.rsplit("_", 1)[1].replace("hz", "Hz")
+        where = "" if structure.location is None else f" at {structure.location:.4g} {unit}"
+        lines.append(f"  unexplained {structure.kind}{where}, amplitude "
                      f"{structure.amplitude_um:.3g} um: {structure.evidence}")
     if diagnosis.outlier_rows:
-        lines.append(f"  outliers kept out of the fit, rows of positioning.csv: "
+        lines.append(f"  outliers kept out of the fit, rows of {diagnosis.file}: "
                      f"{', '.join(map(str, diagnosis.outlier_rows))}")
     lines.append(f"  test: {diagnosis.test_used}")
     for name, reason in diagnosis.skipped.items():
@@ -54,6 +54,12 @@ def diagnosis_lines(diagnosis):
 
 
 def comparison_lines(comparison):
+    """The figures of ``compare``: ISO 230-2 (positioning) or seed 002's (tracking)."""
+    return (_tracking_comparison_lines if comparison["kind"] == "tracking"
+            else _iso_comparison_lines)(comparison)
+
+
+def _iso_comparison_lines(comparison):
     """ISO 230-2 figures, measured against the residual after the model."""
     lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
              f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
@@ -68,6 +74,19 @@ def comparison_lines(comparison):
     if not comparison["bidirectional"]:
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
     return "\n".join(lines)
+
+
+def _tracking_comparison_lines(comparison):
+    """Seed 002's figures after the first second: measured, predicted; then the residual."""
+    maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
+    return "\n".join([
+        f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
+        f"{', '.join(comparison['effects']) or '(seed 002 plant)'}",
+        f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
+        f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
+        f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
+        f"residual actual - predicted: max {comparison['residual_max_um']:.4g} um, RMS "
+        f"{comparison['residual_rms_um']:.4g} um"])
 
 
 def compensation_lines(result, out_path=None):

@@ -1,9 +1,10 @@
 """Effects and models: the shape every physical effect, built in or the user's own, takes.
 
-An :class:`Effect` names a physical cause of positioning error, its parameters (unit,
-bounds), a starting guess from the data, its evaluation at the samples of a case, and the
-FMU parameters it maps to. Effects compose into a :class:`Model` with ``+``, as lmfit
-models do: ``model = LeadError() + Backlash()``.
+An :class:`Effect` names a physical cause of error, the kind of measurement it acts on, its
+parameters (unit, bounds), a starting guess from the data, its evaluation at the samples
+of a case, and the FMU parameters it maps to. Effects compose into a :class:`Model` with
+``+``, as lmfit models do: ``model = LeadError() + Backlash()``. How a model predicts a
+case's samples is the measurement's business (:mod:`feedaxis.measurement`).
 """
 from __future__ import annotations
 
@@ -12,7 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 import tomli_w
 
+from ..errors import InputError
 from ..fmu_map import neutral_fmu_parameters
+
+FIT_TABLE = "fit"  # the model file's table holding its FitRecord: no effect may take the name
 
 
 @dataclass(frozen=True)
@@ -38,13 +42,20 @@ class Needs:
 
 
 class Effect:
-    """A physical effect that adds to the positioning error (µm) at each sample.
+    """A physical effect; by default one that adds to the positioning error (µm) at each
+    sample.
 
     Subclasses set ``name``, ``meaning``, ``parameters`` and ``needs`` and implement
     :meth:`prepare`; :meth:`guess`, :meth:`fmu_parameters`, :meth:`evidence` and
     :meth:`wavelength_mm` have sensible defaults. ``linear`` names the parameters the error
     is linear in (error = base + Σ value·column, base and columns set by the others); the fit
-    solves for them exactly at each step (variable projection).
+    solves for them exactly at each step (variable projection). ``measurement`` is the kind
+    of measurement the effect acts on (``"positioning"``, ``"tracking"``; None: any, as a
+    structure's basis); ``additive`` is False for an effect acting inside the measured
+    system (the tracking effects set the closed loop's parameters), whose prediction the
+    measurement computes from its values and, to take it out, its ``neutral`` values.
+    ``probe`` gives, per parameter, a step for a linearised first guess where the fit has no
+    better start (the prediction is not separable in it).
     """
 
     name = "effect"
@@ -53,6 +64,9 @@ class Effect:
     linear: tuple = ()
     needs = Needs()
     fmu = None
+    measurement = "positioning"
+    additive = True
+    probe: dict = {}
 
     def __add__(self, other):
         return Model((self,)) + other
@@ -163,16 +177,114 @@ def effect(name, meaning, parameters, needs=Needs(), wavelength_mm=None, guess=N
     return wrap
 
 
-class Model:
-    """An ordered set of effects with their parameter values; add effects with ``+``."""
+class BasisEffect(Effect):
+    """Fixed linear columns (samples x k) added to any measurement's prediction: a
+    structure found in the residual or a nuisance (a drift), refitted with the model."""
 
-    def __init__(self, effects=(), values=None):
+    measurement = None
+
+    def __init__(self, name, basis):
+        self.name, self.basis = name, basis
+        self.parameters = tuple(Parameter(f"c{i}_um", "um", -1e6, 1e6)
+                                for i in range(basis.shape[1]))
+        self.linear = self.parameter_names
+
+    def unavailable(self, case):
+        return None
+
+    def prepare(self, case):
+        return lambda v: self.basis @ np.array([v[p.name] for p in self.parameters])
+
+    def guess(self, case, residual_um):
+        coefficients = np.linalg.lstsq(self.basis, residual_um, rcond=None)[0]
+        return {p.name: float(c) for p, c in zip(self.parameters, coefficients)}
+
+
+@dataclass(frozen=True)
+class FitRecord:
+    """How a model's values were fitted, saved with the model in its ``[fit]`` table.
+
+    ``parameters`` are ``"effect.parameter"`` keys in the order of ``covariance`` (their
+    covariance matrix, in the products of their units); ``undetermined`` maps the keys the
+    data could not determine to why (their covariance rows mean nothing); ``rms_um`` and
+    ``n_points`` describe the residual of the fit.
+    """
+
+    parameters: tuple
+    covariance: np.ndarray
+    undetermined: dict
+    n_points: int
+    rms_um: float
+
+    def to_table(self):
+        """The record as a TOML table (plain lists and numbers)."""
+        return {"parameters": list(self.parameters),
+                "covariance": [[float(v) for v in row] for row in self.covariance],
+                "undetermined": dict(self.undetermined), "n_points": int(self.n_points),
+                "rms_um": float(self.rms_um)}
+
+    @classmethod
+    def from_table(cls, table, path, model_keys):
+        """The record read back from a model file's ``[fit]`` table, checked against the
+        model's parameter keys; :class:`InputError` names the file and key otherwise."""
+        def bad(message, key):
+            return InputError(message, path=path, column=f"{FIT_TABLE}.{key}")
+
+        expected = {"parameters", "covariance", "undetermined", "n_points", "rms_um"}
+        unknown = sorted(set(table) - expected)
+        if unknown:
+            raise bad(f"unknown key; expected {', '.join(sorted(expected))}", unknown[0])
+        missing = sorted(expected - set(table))
+        if missing:
+            raise bad("missing", missing[0])
+        parameters = table["parameters"]
+        if not (isinstance(parameters, list) and all(isinstance(k, str) for k in parameters)
+                and sorted(parameters) == sorted(model_keys)):
+            raise bad(f"must list the model's parameters: {', '.join(model_keys)}", "parameters")
+        size, rows = len(parameters), table["covariance"]
+        square = isinstance(rows, list) and len(rows) == size and all(
+            isinstance(row, list) and len(row) == size for row in rows)
+        try:
+            covariance = np.array(rows, dtype=float).reshape(size, size) if square else None
+        except (TypeError, ValueError):
+            covariance = None
+        if covariance is None or not np.all(np.isfinite(covariance)):
+            raise bad(f"must be a {size} x {size} matrix of finite numbers", "covariance")
+        undetermined = table["undetermined"]
+        if not isinstance(undetermined, dict) or not set(undetermined) <= set(parameters):
+            raise bad("must map parameters of the model to reasons", "undetermined")
+        n_points, rms_um = table["n_points"], table["rms_um"]
+        if isinstance(n_points, bool) or not isinstance(n_points, int) or n_points < 1:
+            raise bad("must be a positive integer", "n_points")
+        if isinstance(rms_um, bool) or not isinstance(rms_um, (int, float)) or not \
+                np.isfinite(rms_um) or rms_um < 0:
+            raise bad("must be a finite number >= 0", "rms_um")
+        return cls(tuple(parameters), covariance, {k: str(v) for k, v in undetermined.items()},
+                   n_points, float(rms_um))
+
+    def standard_uncertainty(self, key):
+        """Standard uncertainty of one parameter (its unit); NaN when undetermined."""
+        if key in self.undetermined:
+            return float("nan")
+        index = self.parameters.index(key)
+        return float(np.sqrt(max(self.covariance[index, index], 0.0)))
+
+
+class Model:
+    """An ordered set of effects with their parameter values; add effects with ``+``.
+
+    ``record`` (a :class:`FitRecord`) is how the values were fitted; a model with other
+    effects or values has none.
+    """
+
+    def __init__(self, effects=(), values=None, record=None):
         self.effects = tuple(effects)
         names = [e.name for e in self.effects]
         duplicated = {n for n in names if names.count(n) > 1}
         if duplicated:
             raise ValueError(f"effect {sorted(duplicated)[0]!r} appears twice in the model")
         self.values = {e.name: dict((values or {}).get(e.name, {})) for e in self.effects}
+        self.record = record
 
     def __add__(self, other):
         if isinstance(other, Effect):
@@ -189,42 +301,28 @@ class Model:
     def names(self):
         return tuple(e.name for e in self.effects)
 
+    @property
+    def parameter_keys(self):
+        """``"effect.parameter"`` of every parameter, in the model's order."""
+        return tuple(f"{e.name}.{p.name}" for e in self.effects for p in e.parameters)
+
     def with_values(self, values):
         """A copy with ``values`` ({effect: {parameter: value}}) replacing the current ones."""
         return Model(self.effects, {**self.values, **values})
 
-    def prepare(self, case):
-        """Per effect, its evaluation function on ``case``."""
-        return [(e, e.prepare(case)) for e in self.effects]
+    def predict_um(self, case):
+        """Total modelled deviation (µm) at the case's samples of the kind the model acts on
+        (:mod:`feedaxis.measurement`)."""
+        return self._measurement(case).predict_um(self)
 
     def components(self, case):
-        """{effect name: error_um contribution} at the case's positioning samples."""
-        return {e.name: f(self.values[e.name]) for e, f in self.prepare(case)}
+        """{effect name: its contribution (µm)} at the case's samples of the model's kind."""
+        return self._measurement(case).components(self)
 
-    def predictor(self, case):
-        """``f(values) -> total error_um`` at the case's samples, each effect prepared once."""
-        prepared, size = self.prepare(case), case.positioning.size
-        return lambda values: sum((f(values[e.name]) for e, f in prepared), np.zeros(size))
+    def _measurement(self, case):
+        from ..measurement import kinds_for, measurement_of  # SciPy-heavy: when predicting
 
-    def separable_predictor(self, case):
-        """``f(values) -> (base_um, columns_um)`` of the whole model on ``case``: the total
-        error is ``base_um + columns_um @ linear values``, columns in the order of
-        ``(effect, parameter) for effect in effects for parameter in effect.linear``."""
-        prepared, size = [(e, e.prepare_separable(case)) for e in self.effects], case.positioning.size
-
-        def separate(values):
-            base_um, columns = np.zeros(size), []
-            for e, f in prepared:
-                effect_base_um, effect_columns_um = f(values[e.name])
-                base_um = base_um + effect_base_um
-                columns.append(effect_columns_um)
-            return base_um, np.hstack(columns) if columns else np.zeros((size, 0))
-
-        return separate
-
-    def predict_um(self, case):
-        """Total modelled error (µm) at the case's positioning samples."""
-        return self.predictor(case)(self.values)
+        return measurement_of(case, kinds_for([case], self)[0])
 
     def fmu_parameters(self, axis):
         """{FMU name: {parameter: value}} for the co-simulated axis to reproduce the model."""
@@ -234,7 +332,15 @@ class Model:
                 parameters.setdefault(fmu, {}).update(values)
         return parameters
 
+    def with_record(self, record):
+        """This model carrying ``record`` (how its values were fitted)."""
+        return Model(self.effects, self.values, record)
+
     def to_toml(self):
-        """The model as TOML text: one table per effect holding its parameter values."""
+        """The model as TOML text: one table per effect holding its parameter values, then
+        the ``[fit]`` table of its :class:`FitRecord` when it has one."""
         header = "# feedaxis model: one table per effect, parameter values with units in names\n"
-        return header + tomli_w.dumps({name: self.values[name] for name in self.names})
+        tables = {name: self.values[name] for name in self.names}
+        if self.record is not None:
+            tables[FIT_TABLE] = self.record.to_table()
+        return header + tomli_w.dumps(tables)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, read_text
-from .base import Effect, Model
+from .base import FIT_TABLE, Effect, FitRecord, Model
 from .catalog import CATALOG
 
 if sys.version_info >= (3, 11):
@@ -37,9 +37,11 @@ def load_user_effects(path):
     if not found:
         raise InputError("defines no effect (an Effect instance or an @effect function)",
                          path=path)
-    clash = sorted(set(found) & set(CATALOG))
+    clash = sorted(set(found) & (set(CATALOG) | {FIT_TABLE}))
     if clash:
-        raise InputError(f"effect name '{clash[0]}' is taken by the catalog", path=path)
+        raise InputError(f"effect name '{clash[0]}' is taken by the catalog"
+                         if clash[0] in CATALOG else f"effect name '{clash[0]}' is reserved "
+                         "for the model file's fit record", path=path)
     for user_effect in found.values():
         user_effect.prepare = _checked_prepare(user_effect, path)
     return found
@@ -90,12 +92,14 @@ def available_effects(effect_files=()):
 
 
 def load_model(path, effects):
-    """Read a model TOML (one table per effect) against the ``effects`` known by name."""
+    """Read a model TOML (one table per effect, and the optional ``[fit]`` record of how
+    its values were fitted) against the ``effects`` known by name."""
     path = Path(path)
     try:
         data = tomllib.loads(read_text(path, "model file"))
     except tomllib.TOMLDecodeError as error:
         raise InputError(f"not valid TOML: {error}", path=path) from None
+    record = data.pop(FIT_TABLE, None)
     chosen, values = [], {}
     for name, table in data.items():
         if name not in effects or not isinstance(table, dict):
@@ -103,7 +107,12 @@ def load_model(path, effects):
                              "(load your own with --effects FILE.py)", path=path, column=name)
         chosen.append(effects[name])
         values[name] = _checked_values(path, effects[name], table)
-    return Model(chosen, values)
+    model = Model(chosen, values)
+    if record is None:
+        return model
+    if not isinstance(record, dict):
+        raise InputError("must be a table (the fit record)", path=path, column=FIT_TABLE)
+    return model.with_record(FitRecord.from_table(record, path, model.parameter_keys))
 
 
 def _checked_values(path, effect, table):

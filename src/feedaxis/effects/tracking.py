@@ -17,7 +17,8 @@ SEED002_PLANT = {f.name: f.default for f in fields(ServoParams)}
 
 
 class TrackingEffect(Effect):
-    """An effect on the closed loop: its values replace ``ServoParams`` fields.
+    """An effect on the closed loop: its values replace ``ServoParams`` fields
+    (:func:`feedaxis.measurement.servo_params`).
 
     ``neutral`` holds the values that switch the effect off (the starting model's values);
     ``probe`` the step per parameter used to guess a start by one linearised least-squares
@@ -25,8 +26,9 @@ class TrackingEffect(Effect):
     """
 
     fmu = "NpidServo"
+    measurement = "tracking"
+    additive = False
     neutral: dict = {}
-    probe: dict = {}
 
     def unavailable(self, case):
         if case.tracking is None:
@@ -34,9 +36,6 @@ class TrackingEffect(Effect):
         if not case.axis.servo:
             return "needs the [servo] table in axis.toml (the controller as set in the drive)"
         return None
-
-    def prepare(self, case):
-        raise TypeError(f"{self.name} acts on the closed loop; use feedaxis.tracking.model")
 
     def guess(self, case, residual_um):
         return dict(self.neutral)
@@ -109,6 +108,3 @@ class ViscousFriction(TrackingEffect):
 
 TRACKING_EFFECTS = (ServoPlant(), CoulombFriction(), ViscousFriction())
 
-
-def is_tracking_effect(effect):
-    return isinstance(effect, TrackingEffect)

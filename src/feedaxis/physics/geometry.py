@@ -30,19 +30,6 @@ def lead_error_um(position_mm, offset_um, slope_um_per_mm):
     return offset_um + slope_um_per_mm * values(position_mm)
 
 
-def eccentricity_amplitude_um(offset_um, tilt_rad):
-    """Axial amplitude δ·tanθ of the assembly-eccentricity oscillation (seed 000 Eq. 1-2).
-
-    Parameters
-    ----------
-    offset_um : float
-        δ, radial offset of the bearing contact point from the screw axis (µm).
-    tilt_rad : float
-        θ, tilt of the contact interface (rad).
-    """
-    return offset_um * np.tan(tilt_rad)
-
-
 def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
     """Assembly eccentricity f2(y) = a2·cos(ωy) + b2·sin(ωy), ω = 2π/lead (seed 000 Eq. 1-2).
 

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from .checks import require_positive, require_representable
 from .scalar import array_module, values
 
@@ -23,15 +21,15 @@ def motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps):
     require_positive("lead_mm", lead_mm)
     require_positive("step_angle_deg", step_angle_deg)
     require_positive("error_period_steps", error_period_steps)
-    period_mm = error_period_steps * step_angle_deg / 360.0 * lead_mm
+    period_mm = angular_to_axial_um(error_period_steps * step_angle_deg, lead_mm) * 1e-3
     require_representable("the motor error period (mm)", period_mm, lead_mm=lead_mm,
                           step_angle_deg=step_angle_deg, error_period_steps=error_period_steps)
     return period_mm
 
 
-def angular_to_axial_um(angle_error_deg, lead_mm):
-    """Axial displacement error Δφ/2π × p (seed 000 Eq. 9) of a rotor angle error (µm)."""
-    return np.asarray(angle_error_deg, dtype=float) / 360.0 * lead_mm * 1e3
+def angular_to_axial_um(angle_deg, lead_mm):
+    """Axial displacement Δφ/2π × p (seed 000 Eq. 9) of a rotor angle Δφ (deg), in µm."""
+    return values(angle_deg) / 360.0 * lead_mm * 1e3
 
 
 def motor_step_error_um(position_mm, lead_mm, step_angle_deg, error_period_steps,

@@ -32,6 +32,7 @@ import numpy as np
 
 from .checks import (ParameterError, require_finite, require_non_negative, require_positive,
                      require_representable)
+from .threads import one_blas_thread
 
 FRICTION_SMOOTHING_MM_S = 0.1
 STATE_SIZE = 6  # position_mm, velocity_mm_s, integral_V, previous_error_mm, reference_mm, head
@@ -321,6 +322,7 @@ def step_counts(time_s, time_step_s):
     return counts
 
 
+@one_blas_thread
 def simulate(params, time_s, reference_mm, disturbance_N=None, counts=None):
     """Position (mm) at each sample of a tracking record, the loop starting at rest on the
     first reference; the same loop as :class:`Servo` stepped with the sample intervals.

@@ -28,6 +28,7 @@ from .checks import (ParameterError, require_finite, require_non_negative, requi
                      require_representable)
 from .mounting import axis_sign, screw_coordinate_m
 from .scalar import is_scalar, values
+from .threads import one_blas_thread
 
 
 class CellTerms(NamedTuple):
@@ -39,7 +40,7 @@ class CellTerms(NamedTuple):
     conductance_W_K: float  # λ·A_s/dx between neighbours
     neighbours_W_K: np.ndarray  # conduction to the neighbours per cell (one at either end)
     exposed_area_m2: np.ndarray  # lateral surface not under the bearing (Eq. 7)
-    bearing_source_W_per_mm_min: np.ndarray  # k3·dx/L_B on the bearing's cells (Eq. 18)
+    bearing_share: np.ndarray  # dx/L_B on the bearing's cells: the share of Q_B each takes (Eq. 10)
 
 
 # Cells of the finite-difference screw: a 100 m screw (the longest a case may describe) in
@@ -139,8 +140,7 @@ class ThermalScrewParams:
         neighbours_W_K[[0, -1]] = conductance_W_K
         return CellTerms(lower_m, upper_m, bearing, conductance_W_K, neighbours_W_K,
                          np.pi * self.diameter_m * self.cell_length_m * (1.0 - bearing),
-                         self.k3_W_per_mm_min * self.cell_length_m / self.bearing_length_m
-                         * bearing)
+                         self.cell_length_m / self.bearing_length_m * bearing)
 
 
 def bearing_cells(params):
@@ -213,11 +213,12 @@ def convective_loss_W_K(params, feed_mm_min, nut_fraction):
 def source_rate(params, feed_mm_min, nut_fraction):
     """Source vector s (K/s): Q_B/L_B and Q_N/L_N per cell length (Eq. 7, 10, 18, 19);
     one row per step for an array of feeds."""
-    speed_mm_min = abs(values(feed_mm_min))
-    per_feed_W = (params.cells.bearing_source_W_per_mm_min + params.k4_W_per_mm_min
-                  * params.cell_length_m / params.nut_length_m * nut_fraction)
-    per_cell_K_s = speed_mm_min / params.cell_heat_capacity_J_K
-    return (per_cell_K_s if is_scalar(per_cell_K_s) else per_cell_K_s[..., None]) * per_feed_W
+    feed_mm_min = values(feed_mm_min)
+    bearing_W, nut_W = params.bearing_heat_W(feed_mm_min), params.nut_heat_W(feed_mm_min)
+    if not is_scalar(feed_mm_min):
+        bearing_W, nut_W = bearing_W[..., None], nut_W[..., None]
+    return (bearing_W * params.cells.bearing_share + nut_W * params.cell_length_m
+            / params.nut_length_m * nut_fraction) / params.cell_heat_capacity_J_K
 
 
 def unit_source_rates(params, feed_mm_min, nut_fraction):
@@ -427,6 +428,7 @@ def table2_cycle(feed_mm_min, from_mm=0.0, to_mm=500.0):
             DutySegment(126 * 60.0, 42 * 60.0, feed_mm_min, from_mm, to_mm)]
 
 
+@one_blas_thread
 def simulate_duty(params, segments, times_s):
     """Temperature rise at ``times_s`` for a duty cycle, in closed form per segment.
 
@@ -442,6 +444,7 @@ def simulate_duty(params, segments, times_s):
     return params.k3_W_per_mm_min * unit_K[0] + params.k4_W_per_mm_min * unit_K[1]
 
 
+@one_blas_thread
 def duty_unit_fields(params, segments, times_s):
     """Temperature rise per unit k3 and per unit k4 at ``times_s``, in closed form per segment.
 
@@ -514,6 +517,7 @@ def _powers(growth, steps):
     return powers
 
 
+@one_blas_thread
 def explicit_duty(params, segments, times_s, block=4096):
     """Temperature rise at ``times_s`` by stepping Eq. 10 explicitly with the nut moving.
 

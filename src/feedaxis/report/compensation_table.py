@@ -15,7 +15,8 @@ def compensation_table_html(analysis, image, table):
 
     ``image`` and ``table`` are the page's helpers for a PNG and an HTML table.
     """
-    comp, check, spacing_mm = analysis.comp_table, analysis.comp_check, analysis.comp_spacing_mm
+    details = analysis.details
+    comp, check, spacing_mm = details.comp_table, details.comp_check, details.comp_spacing_mm
     if comp is None:
         return []
     model, positioning = analysis.model, analysis.case.positioning

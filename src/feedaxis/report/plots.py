@@ -120,18 +120,19 @@ def spectrum(residual, measured, marks, structures=()):
     return _finish(figure, axes, "wavelength (mm)", "amplitude (µm)", title, grid="both")
 
 
-def contributions(position_mm, components):
-    """Each effect's contribution against position, one panel per effect."""
+def contributions(coordinate, components, xlabel, style="."):
+    """Each effect's contribution against ``coordinate`` (position or time), one panel per
+    effect; ``style`` "." for samples at targets, "-" for a record in time."""
     count = max(len(components), 1)
     figure, axes_list = plt.subplots(count, 1, figsize=(9, 1.8 * count + 0.6), sharex=True,
                                      squeeze=False)
-    order = np.argsort(position_mm, kind="stable")
+    order = np.argsort(coordinate, kind="stable")
     for axes, (name, values_um) in zip(axes_list[:, 0], components.items()):
-        axes.plot(position_mm[order], values_um[order], ".", ms=1.5)
+        axes.plot(coordinate[order], values_um[order], style, ms=1.5, lw=0.8)
         axes.set_ylabel("µm")
         axes.set_title(name, fontsize=9, loc="left")
         axes.grid(alpha=0.3)
-    axes_list[-1, 0].set_xlabel("target position (mm)")
+    axes_list[-1, 0].set_xlabel(xlabel)
     figure.suptitle("Each effect's contribution")
     return _png(figure)
 
@@ -207,3 +208,38 @@ def compensation_table(target_mm, means_um, table_mm, table_um):
                   if len(means_um) == 1 else colour, zorder=3, label=f"table, {label} direction")
     return _finish(figure, axes, "position (mm)", "deviation removed (µm)",
                    "Compensation table over the measured means")
+
+
+def error_against_time(time_s, measured_um, predicted_um, reversals_s):
+    """Tracking deviation measured and predicted against time, reversals marked."""
+    figure, axes = plt.subplots(figsize=(9, 3.6))
+    axes.plot(time_s, measured_um, color="0.55", lw=0.8, label="measured")
+    axes.plot(time_s, predicted_um, color="tab:blue", lw=0.8, label="model")
+    for index, t in enumerate(reversals_s):
+        axes.axvline(t, color="tab:red", lw=0.5, alpha=0.5,
+                     label="velocity reversal" if index == 0 else None)
+    return _finish(figure, axes, "time (s)", "actual - reference (µm)",
+                   "Tracking deviation against time")
+
+
+def error_against_velocity(velocity_mm_s, measured_um, residual_um):
+    """Deviation and residual against the reference velocity: friction shows as a jump at 0."""
+    figure, axes = plt.subplots(figsize=(9, 3.6))
+    axes.plot(velocity_mm_s, measured_um, ".", ms=1.5, color="0.55", label="measured")
+    axes.plot(velocity_mm_s, residual_um, ".", ms=1.5, color="tab:orange",
+              label="residual after the model")
+    axes.axvline(0.0, color="tab:red", lw=0.8, label="reversal (v = 0)")
+    return _finish(figure, axes, "reference velocity (mm/s)", "µm",
+                   "Tracking deviation against velocity")
+
+
+def frequency_spectrum(frequency_hz, amplitude_um, structures):
+    """Amplitude spectrum of the residual in Hz, unexplained frequencies marked."""
+    figure, axes = plt.subplots(figsize=(9, 3.4))
+    axes.loglog(frequency_hz, np.maximum(amplitude_um, 1e-12), lw=0.8, label="residual")
+    for structure in structures:
+        if structure.frequency_hz:
+            axes.axvline(structure.frequency_hz, color="tab:red", ls="--",
+                         label=f"unexplained {structure.frequency_hz:.4g} Hz")
+    return _finish(figure, axes, "frequency (Hz)", "amplitude (µm)", "Residual spectrum",
+                   grid="both")

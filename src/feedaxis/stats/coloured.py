@@ -1,15 +1,15 @@
-"""The significance tests of the tracking diagnosis, for strongly coloured residuals.
+"""Significance under serially correlated (coloured) noise.
 
 Tracking residuals are far from white (encoder and servo noise is low-pass, a model error
 is smooth in time), so a white-noise F test on 5,000 samples names effects that are not
 there. Two tests allow for the colour:
 
-- nested models (an effect or a time-domain structure with ``k`` more parameters): the F
-  test on the drop of the residual sum of squares with the sample count replaced by the
-  effective count n / τ, τ the integrated autocorrelation time of the larger model's
-  residual (Sokal's adaptive window; for a smooth regressor the variance of a least-squares
-  coefficient grows by the factor τ under coloured noise: the noise's long-run variance
-  is τ·σ²);
+- nested models (an effect or a structure with ``k`` more parameters): the F test on the
+  drop of the residual sum of squares with the sample count replaced by the effective count
+  n / τ (:class:`feedaxis.stats.noise.Coloured`), τ the integrated autocorrelation time of
+  the larger model's residual (:func:`autocorrelation_time`, Sokal's adaptive window; for a
+  smooth regressor the variance of a least-squares coefficient grows by the factor τ under
+  coloured noise: the noise's long-run variance is τ·σ²);
 - a sinusoid of unknown frequency: the residual is first whitened by an autoregressive
   filter (Yule-Walker, order by AIC up to ``MAX_AR_ORDER``) fitted to the autocovariance of
   the periodogram with its lines cut out (ordinates over ``LINE_RATIO`` times the running
@@ -22,7 +22,6 @@ there. Two tests allow for the colour:
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
 from scipy.linalg import solve_toeplitz
 from scipy.ndimage import median_filter
 
@@ -52,16 +51,6 @@ def autocorrelation_time(residual):
     lags = np.arange(1, n)
     stop = np.flatnonzero(lags >= SOKAL_WINDOW * tau)
     return float(max(tau[stop[0]] if stop.size else tau[-1], 1.0))
-
-
-def nested_p_value(rss_before, rss_after, n_points, n_before, n_added, residual_after):
-    """p-value of the F test of ``n_added`` parameters with the effective sample count."""
-    n_effective = n_points / autocorrelation_time(residual_after)
-    dof = n_effective - n_before - n_added
-    if dof < 1 or rss_after <= 0.0:
-        return 0.0 if rss_after <= 0.0 < rss_before else 1.0
-    f_value = max(rss_before - rss_after, 0.0) / n_added / (rss_after / dof)
-    return float(stats.f.sf(f_value, n_added, dof))
 
 
 def _noise_autocovariance(centred):

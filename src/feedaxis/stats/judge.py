@@ -1,16 +1,15 @@
-"""The tests the diagnosis decides by: pure error, extra-sum-of-squares F, outliers, clock.
+"""The tests the diagnosis decides by: the family-wise policy, lack of fit, serial
+correlation, outliers, repeat groups and the test's clock.
 
 - Repeat groups are samples at one target and one approach direction
-  (:func:`feedaxis.iso230.target_groups`). Their within-group scatter is the *pure error*; when it has at least
-  ``MIN_PURE_DOF`` degrees of freedom a term is judged by the extra-sum-of-squares F test
-  against it (Draper & Smith, Applied Regression Analysis, 3rd ed., §2.1 and §6.1): the
-  sum of squares the term removes per parameter, over the pure-error mean square. A large
-  effect is then named however much unmodelled per-target shape is left. Without repeats
-  the denominator is the larger model's residual mean square (the partial F test).
+  (:func:`feedaxis.iso230.target_groups`); their within-group scatter is the *pure error*
+  (:class:`feedaxis.stats.noise.PureError` tests against it).
 - ``FAMILY_ALPHA`` is the family-wise error rate of a whole diagnosis under the complete
-  null. It is split equally over its ``STAGES`` (drift, effects, structures, lack of fit);
-  at each selection step the best of the m terms tried is accepted when
-  p < FAMILY_ALPHA / STAGES / m (Bonferroni). Later steps only run once an earlier one has
+  null, for every kind of measurement. It is split equally over the stages the
+  measurement's diagnosis runs (positioning: drift, effects, structures, lack of fit;
+  tracking: effects, structures); at each selection step the best of the m terms tried is
+  accepted when p < FAMILY_ALPHA / stages / m (Bonferroni; a search whose p-value is already
+  family-wise over its trials counts once). Later steps only run once an earlier one has
   passed, so they add nothing to the error under the complete null.
 - The clock is ``time_s`` (hours) when present, else run number plus the sample's place in
   its run: a drift across the test is tested even without time stamps.
@@ -32,14 +31,11 @@ from ..iso230 import target_groups
 
 
 FAMILY_ALPHA = 0.001
-STAGES = 4
 OUTLIER_ALPHA = 0.001
 MIN_PURE_DOF = 10
 MAX_OUTLIER_PASSES = 5
 MAD_TO_SIGMA = 1.4826
 TINY_UM = 1e-12  # far below any measurement (1 fm): a scale under it is rounding
-PURE_ERROR = "F test against the pure error of repeated samples"
-RESIDUAL_MEAN_SQUARE = "partial F test against the residual mean square (no repeats)"
 
 
 @dataclass(frozen=True)
@@ -120,30 +116,14 @@ class Test:
                 "dof": list(self.dof), "p_value": self.p_value}
 
     def describe(self):
+        """The test in one phrase, e.g. ``F(2, 2497) = 2.78e+03, p < 1e-300``."""
         p_value = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
         if self.symbol == "F":
-            return f"F({self.dof[0]}, {self.dof[1]}) = {self.statistic:.3g}, {p_value}"
+            return (f"F({self.dof[0]:.4g}, {self.dof[1]:.4g}) = {self.statistic:.3g}, "
+                    f"{p_value}")
+        if self.symbol == "ratio":
+            return f"{p_value}, family-wise over the frequencies searched"
         return f"{self.symbol} = {self.statistic:.3g} over {self.dof[1]} samples, {p_value}"
-
-
-def extra_ss_test(layout, residual_before_um, residual_after_um, extra, n_free_after):
-    """F test of ``extra`` parameters that took the residual from before to after.
-
-    With repeats the denominator is the pure error of the larger model, its degrees of
-    freedom reduced by that model's parameters (some may vary within a group); otherwise
-    the larger model's residual mean square.
-    """
-    rss_before = float(residual_before_um @ residual_before_um)
-    rss_after = float(residual_after_um @ residual_after_um)
-    extra = max(int(extra), 1)
-    if layout.has_repeats:
-        dof = max(layout.pure_dof - n_free_after, 1)
-        denominator, name = layout.pure_error_ss(residual_after_um) / dof, PURE_ERROR
-    else:
-        dof = max(residual_after_um.size - n_free_after, 1)
-        denominator, name = rss_after / dof, RESIDUAL_MEAN_SQUARE
-    statistic = max(rss_before - rss_after, 0.0) / extra / max(denominator, 1e-300)
-    return Test(float(statistic), (extra, dof), float(stats.f.sf(statistic, extra, dof)), name)
 
 
 def lack_of_fit_test(layout, residual_um, n_between, n_within):
@@ -173,9 +153,10 @@ def serial_correlation_test(position_mm, residual_um):
                 "von Neumann ratio test along the travel (no repeats)", "z")
 
 
-def accepts(p_value, tried, alpha=FAMILY_ALPHA):
-    """Bonferroni at one selection step of one stage: the best of ``tried`` terms passes."""
-    return p_value < alpha / STAGES / max(tried, 1)
+def accepts(p_value, tried, stages, alpha=FAMILY_ALPHA):
+    """Bonferroni at one selection step of one of ``stages`` stages: the best of ``tried``
+    terms passes."""
+    return p_value < alpha / max(stages, 1) / max(tried, 1)
 
 
 def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):

@@ -1,0 +1,336 @@
+"""Where the model fails and what is missing: one diagnosis for every kind of measurement.
+
+The measurement (:mod:`feedaxis.measurement`) supplies what differs between kinds: its
+noise model, its outliers, its nuisances, its shapes of structure; the decision is this:
+
+1. The model is refitted; the outliers the measurement finds are reported by row and kept
+   out of everything that follows.
+2. The nuisances the measurement models with every fit (a drift along a positioning
+   test's clock, so it never aliases into backlash) are added; each is reported when its
+   test passes.
+3. Stepwise selection: every available effect acting on the measurement and not yet in the
+   model is fitted on top and judged by the extra-sum-of-squares F test of the
+   measurement's noise model (:mod:`feedaxis.stats.noise`). The best (smallest p-value) is
+   accepted by the one family-wise policy (:func:`feedaxis.stats.judge.accepts`:
+   ``FAMILY_ALPHA`` split over the measurement's stages, Bonferroni over the effects
+   tried), added, and the others re-tested on top of it, until none passes.
+4. What is left is searched for structure no effect explains, with the measurement's
+   shapes and the same policy (Bonferroni over every shape tried, a free-frequency search
+   counting its resolvable frequencies); each structure found is added as a linear basis
+   and the model refitted. Then the measurement's last test for an irregular lack of fit.
+5. Verdict: ``missing_effect`` when an effect is named, ``unexplained`` when structure (or
+   a nuisance) is left, ``adequate`` when the residual is consistent with the noise.
+
+Structure and effects below ``RESOLUTION_UM`` are rounding, never named.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .effects import CATALOG, BasisEffect, Model
+from .fit import FitResult, fit, too_few_samples
+from .measurement import kinds_for, measurement_of
+from .physics.threads import one_blas_thread
+from .stats.judge import FAMILY_ALPHA, Test, accepts
+
+MAX_STRUCTURES = 5
+RESOLUTION_UM = 1e-3  # 1 nm: an effect or structure smaller is rounding, not a measurement
+
+
+@dataclass
+class Candidate:
+    """An effect that, fitted on top, explains part of the residual."""
+
+    effect: str
+    rms_after_um: float
+    delta_bic: float
+    test: Test
+    evidence: str
+    meaning: str
+    result: FitResult = field(repr=False)
+    error_scale: float = 1.0
+
+    def sizes(self):
+        """{parameter: (value, standard error, unit)} of the named effect; the standard
+        errors rest on the noise model's scale (the pure error where there are repeats)."""
+        effect = self.result.model.effects[self.result.model.names.index(self.effect)]
+        values = self.result.model.values[self.effect]
+        sigma = self.result.uncertainties.get(self.effect, {})
+        return {p.name: (values[p.name], self.error_scale * sigma.get(p.name, float("nan")),
+                         p.unit) for p in effect.parameters}
+
+    def to_json(self):
+        sizes = {name: {"value": value, "standard_error": None if np.isnan(error) else error,
+                        "unit": unit} for name, (value, error, unit) in self.sizes().items()}
+        return {"effect": self.effect, "rms_after_um": self.rms_after_um,
+                "delta_bic": self.delta_bic, "evidence": self.evidence, "parameters": sizes,
+                **self.test.to_json()}
+
+
+@dataclass
+class Structure:
+    """A structure found in the residual, with its test; ``location`` (a wavelength in mm
+    along the travel, a frequency in Hz in time, or None) under ``location_key``."""
+
+    kind: str
+    location_key: str
+    location: float | None
+    amplitude_um: float
+    test: Test
+    evidence: str
+    fitted_um: np.ndarray = field(repr=False)
+    basis: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def wavelength_mm(self):
+        return self.location if self.location_key == "wavelength_mm" else None
+
+    @property
+    def frequency_hz(self):
+        return self.location if self.location_key == "frequency_hz" else None
+
+    def to_json(self):
+        return {"kind": self.kind, self.location_key: self.location,
+                "amplitude_um": self.amplitude_um, "evidence": self.evidence,
+                **self.test.to_json()}
+
+
+@dataclass
+class Diagnosis:
+    """Everything :func:`diagnose` found on the samples of one kind of measurement (read
+    from ``file``): the refit of the model (``base``), the noise and where it comes from,
+    the verdict, the missing effects, the unexplained structure, what was passed over, the
+    outliers left out, the test that decided, the last fit."""
+
+    measurement: str
+    file: str
+    base: FitResult
+    noise_um: float
+    noise_source: str
+    verdict: str
+    candidates: list
+    unexplained: list
+    skipped: dict
+    outlier_rows: list
+    test_used: str
+    final: FitResult = field(repr=False)
+
+    @property
+    def rms_um(self):
+        return self.base.rms_um
+
+    def to_json(self):
+        return {"measurement": self.measurement, "rms_um": self.rms_um,
+                "noise_um": self.noise_um, "verdict": self.verdict,
+                "candidates": [c.to_json() for c in self.candidates],
+                "unexplained": [s.to_json() for s in self.unexplained],
+                "noise_source": self.noise_source, "skipped": self.skipped,
+                "outlier_rows": self.outlier_rows, "test": self.test_used,
+                "family_alpha": FAMILY_ALPHA}
+
+
+@one_blas_thread
+def diagnose(case, model, effects=None, progress=None, kind=None):
+    """Diagnose ``model`` on ``case``: refit, name missing effects, describe the rest.
+
+    Parameters
+    ----------
+    case : Case
+    model : Model
+    effects : dict, optional
+        Effects to try by name (default: the catalog; add user effects to it).
+    progress : callable, optional
+        Called with a label before each fit.
+    kind : str, optional
+        The kind of measurement (default: the model's, else the first the case holds).
+    """
+    effects = CATALOG if effects is None else effects
+    notify = progress or (lambda label: None)
+    measurement = measurement_of(case, kind or kinds_for([case], model)[0])
+    notify("model")
+    first = fit(model, measurement)
+    outliers = measurement.outliers(first.residual_um)
+    if outliers.size:
+        keep = np.ones(measurement.size, dtype=bool)
+        keep[outliers] = False
+        measurement = measurement.subset(keep)
+        first = fit(model, measurement)
+    stages = len(measurement.stages)
+    pending, skipped = _available(measurement, model, effects)
+    left = _with_nuisances(measurement, first, notify)
+    candidates, left = _select(measurement, left, pending, skipped, stages, notify)
+    unexplained = _nuisance_findings(measurement, left, stages, notify)
+    structures, final = find_structures(measurement, left, measurement.shapes(effects), stages,
+                                        notify)
+    unexplained += structures
+    noise_um, noise_source = measurement.noise.estimate_um(final.residual_um)
+    verdict = "missing_effect" if candidates else "unexplained" if unexplained else "adequate"
+    test_used = (f"{measurement.noise.name}, family-wise error rate {FAMILY_ALPHA:g} over the "
+                 f"diagnosis (Bonferroni over its {stages} stages and the terms tried)")
+    return Diagnosis(measurement.kind, measurement.file, first, noise_um, noise_source, verdict, candidates,
+                     unexplained, skipped, measurement.rows(outliers), test_used, final)
+
+
+def _available(measurement, model, effects):
+    """({name: effect} to try, {name: reason} passed over)."""
+    pending, skipped = {}, {}
+    for name, effect in effects.items():
+        if name in model:
+            continue
+        reason = measurement.unavailable(effect) or measurement.unresolvable(effect)
+        if reason:
+            skipped[name] = reason
+        else:
+            pending[name] = effect
+    return pending, skipped
+
+
+def _with_nuisances(measurement, first, notify):
+    """The model with the measurement's nuisances, when the samples can carry them."""
+    nuisances = measurement.nuisances()
+    if not nuisances:
+        return first
+    model = first.model
+    for name, _, basis in nuisances:
+        model = model + BasisEffect(name, basis)
+    if too_few_samples(model, [measurement]):
+        return first
+    notify("nuisances")
+    return fit(model, measurement)
+
+
+def _explained_um(before, after):
+    return float(np.sqrt(max(before.rms_um ** 2 - after.rms_um ** 2, 0.0)))
+
+
+def _select(measurement, left, pending, skipped, stages, notify):
+    """Stepwise: (candidates, final fit). An effect the samples cannot carry on top of the
+    model so far goes to ``skipped``."""
+    candidates = []
+    while pending:
+        tested = []
+        for effect in list(pending.values()):
+            shortfall = too_few_samples(left.model + effect, [measurement])
+            if shortfall:
+                skipped[effect.name] = shortfall
+                del pending[effect.name]
+                continue
+            notify(effect.name)
+            result = fit(left.model + effect, measurement)
+            tested.append((measurement.noise.extra_ss_test(
+                left.residual_um, result.residual_um, len(effect.parameters),
+                result.statistics.n_free), effect, result))
+        if not tested:
+            break
+        test, effect, result = min(tested, key=lambda item: item[0].p_value)
+        if not accepts(test.p_value, len(tested), stages) or \
+                _explained_um(left, result) < RESOLUTION_UM:
+            break
+        candidates.append(_candidate(measurement, left, effect, result, test))
+        del pending[effect.name]
+        left = result
+    return candidates, left
+
+
+def _candidate(measurement, left, effect, result, test):
+    """The named effect, its result's model without nuisances (so it can be used as is)."""
+    scale = measurement.noise.error_scale(result)
+    clean = [e for e in result.model.effects if not isinstance(e, BasisEffect)]
+    if len(clean) < len(result.model.effects):
+        values = {e.name: result.model.values[e.name] for e in clean}
+        result = replace(result, model=Model(clean, values))
+    contribution = measurement.components(result.model)[effect.name]
+    evidence = effect.evidence(measurement.case, result.model.values[effect.name], contribution)
+    return Candidate(effect.name, result.rms_um,
+                     float(result.statistics.bic - left.statistics.bic), test,
+                     f"{evidence} ({test.describe()})", effect.meaning, result, scale)
+
+
+def _nuisance_findings(measurement, left, stages, notify):
+    """Each nuisance in the final model, reported when its test passes."""
+    found = []
+    for name, shape, _ in measurement.nuisances():
+        if name not in left.model:
+            continue
+        notify(name)
+        nuisance = left.model.effects[left.model.names.index(name)]
+        others = [e for e in left.model.effects if e is not nuisance]
+        without = fit(Model(others, left.model.values), measurement)
+        test = measurement.noise.extra_ss_test(without.residual_um, left.residual_um,
+                                               shape.extra, left.statistics.n_free)
+        if not accepts(test.p_value, 1, stages):
+            continue
+        fitted = nuisance.prepare(measurement.case)(left.model.values[name])
+        trial = shape.trial(measurement, left)
+        found.append(Structure(shape.kind, measurement.location_key, None,
+                               shape.amplitude_um(measurement, fitted, None), test,
+                               f"{shape.describe(measurement, trial, fitted)} "
+                               f"({test.describe()})", fitted, nuisance.basis))
+    return found
+
+
+def _least_squares_fit(residual_um, basis):
+    coefficients = np.linalg.lstsq(basis, residual_um, rcond=None)[0]
+    return basis @ coefficients
+
+
+def find_structures(measurement, left, shapes, stages, notify=None):
+    """(structures, final fit): structure in the residual of ``left`` that no effect
+    explains, strongest first.
+
+    At each step every shape is fitted to the residual and tested; the best is accepted by
+    the family-wise policy with Bonferroni over all shapes tried (a free-frequency search
+    counts every resolvable frequency), added to the model as a linear basis, the model
+    refitted and the search repeated (a shape with a location may be found again
+    elsewhere). Then the measurement's test for an irregular lack of fit.
+    """
+    structures, current, shapes = [], left, list(shapes)
+    for _ in range(MAX_STRUCTURES):
+        best = _best_shape(measurement, current, shapes)
+        if best is None or not accepts(best[0].p_value, best[-1], stages):
+            break
+        test, shape, trial, fitted, amplitude_um, _ = best
+        structures.append(Structure(shape.kind, measurement.location_key, trial.location,
+                                    amplitude_um, test,
+                                    f"{shape.describe(measurement, trial, fitted)} "
+                                    f"({test.describe()})", fitted, trial.basis))
+        if trial.location is None:
+            shapes.remove(shape)
+        model = current.model + BasisEffect(f"structure_{len(structures)}", trial.basis)
+        if too_few_samples(model, [measurement]):
+            break
+        if notify:
+            notify("structures")
+        current = fit(model, measurement)
+    irregular = measurement.irregular(current)
+    if irregular:
+        kind, test, fitted, what = irregular
+        if accepts(test.p_value, 1, stages):
+            structures.append(Structure(kind, measurement.location_key, None,
+                                        float(np.ptp(fitted) / 2), test,
+                                        f"{what} ({test.describe()})", fitted))
+    return structures, current
+
+
+def _best_shape(measurement, current, shapes):
+    """(test, shape, trial, fitted, amplitude, shapes tried) of the shape with the smallest
+    p-value at the residual of ``current``, or None."""
+    residual, options, tried = current.residual_um, [], 0
+    for shape in shapes:
+        trials = shape.trials(measurement)
+        trial = shape.trial(measurement, current) if trials else None
+        if trial is None:
+            continue
+        tried += trials
+        fitted = _least_squares_fit(residual, trial.basis)
+        amplitude_um = shape.amplitude_um(measurement, fitted, trial.location)
+        if amplitude_um < RESOLUTION_UM:
+            continue
+        test = trial.test or measurement.noise.extra_ss_test(
+            residual, residual - fitted, shape.extra, current.statistics.n_free + shape.extra)
+        options.append((test, shape, trial, fitted, amplitude_um))
+    if not options:
+        return None
+    return (*min(options, key=lambda option: option[0].p_value), tried)

@@ -1,0 +1,231 @@
+"""What every kind of measurement provides to the fit, the diagnosis and the analysis.
+
+A :class:`Measurement` holds one case's samples of one kind (read from its ``file``), the
+measured deviation ``measured_um`` at each, and the answers to what the one fit engine and
+the one diagnosis ask: how a model predicts the samples, which noise model the layout of
+the samples supports, which shapes of unexplained structure can show in them, and the
+figures ``compare`` gives.
+
+A model's prediction is the sum of two parts. *Additive* effects (``Effect.additive``: the
+positioning catalog, a user's effect, a structure's basis) add an error at each sample,
+``base_um + columns_um @ linear values``. The others act inside the measured system (the
+tracking effects set the closed loop's parameters); the kind's :meth:`Measurement.core`
+predicts the deviation they give.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+
+class Measurement:
+    """One case's samples of one kind; subclasses set the class attributes and the hooks.
+
+    ``kind`` is the name effects give in ``Effect.measurement``; ``location_key`` is the
+    JSON key placing a structure (``wavelength_mm``, ``frequency_hz``) and
+    ``location_unit`` its unit; ``coordinate`` is what the samples are taken along
+    (positions, times) and ``coordinate_label`` its axis label; ``reference_label`` names the prediction of a model with no
+    effect (the error ladder's first rung); ``stages`` are the diagnosis's stages, over
+    which the family-wise error rate is split; ``loose_share``, when set, is the relative
+    standard uncertainty beyond which a fitted parameter is reported undetermined.
+    """
+
+    kind = ""
+    file = ""
+    location_key = ""
+    location_unit = ""
+    coordinate_label = ""
+    reference_label = ""
+    stages = ()
+    loose_share = None
+
+    def __init__(self, case):
+        self.case = case
+        self.measured_um = np.zeros(0)
+        self.coordinate = np.zeros(0)
+
+    @classmethod
+    def holds(cls, case):
+        """True when ``case`` holds samples of this kind."""
+        return getattr(case, cls.kind, None) is not None
+
+    @property
+    def size(self):
+        return int(self.measured_um.size)
+
+    @property
+    def path(self):
+        """The samples' file (for messages)."""
+        folder = getattr(self.case, "folder", None)
+        return Path(folder) / self.file if folder is not None else Path(self.file)
+
+    def __repr__(self):
+        return f"<{type(self).__name__} {self.size} samples of {self.path}>"
+
+    # -- model and prediction -----------------------------------------------------------
+
+    def unavailable(self, effect):
+        """Why ``effect`` cannot act on these samples (None when it can)."""
+        if effect.measurement not in (None, self.kind):
+            return f"acts on {effect.measurement}.csv; this diagnosis compares {self.file}"
+        return effect.unavailable(self.case)
+
+    def unresolvable(self, effect):
+        """Why the samples cannot show ``effect`` apart from the noise even though it can act
+        on them (a wavelength the targets alias), None when they can: the diagnosis passes
+        over such an effect; a fit asked for it reports its parameters undetermined."""
+        return None
+
+    def check(self, model):
+        """Raise :class:`InputError` naming the first effect of ``model`` that cannot act
+        on these samples."""
+        for effect in model.effects:
+            reason = self.unavailable(effect)
+            if reason:
+                raise InputError(f"effect {effect.name} {reason}", path=self.case.folder)
+
+    def degenerate(self):
+        """Why the samples cannot support any fit beyond their count (None when they can)."""
+        return None
+
+    def core(self, model):
+        """``f(values) -> predicted_um`` of the effects that are not additive, or None when
+        the model has none (their prediction is 0)."""
+        return None
+
+    def separable(self, model):
+        """``f(values) -> (base_um, columns_um)``: the prediction is ``base_um + columns_um
+        @ linear values``, columns in the order ``(effect, parameter) for effect in
+        model.effects for parameter in effect.linear``."""
+        core = self.core(model)
+        additive = [(e, e.prepare_separable(self.case)) for e in model.effects if e.additive]
+        size = self.size
+
+        def separate(values):
+            base_um = core(values) if core else np.zeros(size)
+            columns = [np.zeros((size, 0))]
+            for effect, split in additive:
+                effect_base_um, effect_columns_um = split(values[effect.name])
+                base_um = base_um + effect_base_um
+                columns.append(effect_columns_um)
+            return base_um, np.hstack(columns)
+
+        return separate
+
+    def predictor(self, model):
+        """``f(values) -> predicted_um`` with every effect prepared once."""
+        core = self.core(model)
+        additive = [(e, e.prepare(self.case)) for e in model.effects if e.additive]
+        size = self.size
+
+        def predict(values):
+            total_um = core(values) if core else np.zeros(size)
+            for effect, evaluate in additive:
+                total_um = total_um + evaluate(values[effect.name])
+            return total_um
+
+        return predict
+
+    def predict_um(self, model):
+        """The deviation (µm) ``model`` predicts at the samples, with its own values."""
+        return self.predictor(model)(model.values)
+
+    def components(self, model):
+        """{effect: its contribution (µm) to the prediction}: an additive effect's error;
+        for an effect acting inside the system, the full prediction less the prediction
+        with that effect at its neutral values."""
+        core = self.core(model)
+        full_um = core(model.values) if core else None
+        parts = {}
+        for effect in model.effects:
+            if effect.additive:
+                parts[effect.name] = effect.prepare(self.case)(model.values[effect.name])
+            else:
+                neutral = {**model.values, effect.name: dict(effect.neutral)}
+                parts[effect.name] = full_um - core(neutral)
+        return parts
+
+    # -- fit ------------------------------------------------------------------------------
+
+    def uncertainty_inflation(self, residual_um):
+        """Factor on the fit's covariance for the residual's serial correlation (1: none)."""
+        return 1.0
+
+    # -- diagnosis ------------------------------------------------------------------------
+
+    @property
+    def noise(self):
+        """The noise model the samples support (:mod:`feedaxis.stats.noise`)."""
+        raise NotImplementedError
+
+    def outliers(self, residual_um):
+        """Indices (0-based) of samples to keep out as outliers."""
+        return np.zeros(0, dtype=int)
+
+    def rows(self, indices):
+        """The 1-based data rows of the file (header = row 1) of sample ``indices``."""
+        return [int(i) + 2 for i in indices]
+
+    def subset(self, keep):
+        """These samples without those where ``keep`` (boolean mask) is False."""
+        raise NotImplementedError
+
+    def nuisances(self):
+        """[(name, shape, basis)] fitted with every model before the selection (a drift
+        along the test's clock): measurement artefacts, not effects."""
+        return []
+
+    def shapes(self, effects):
+        """The shapes of unexplained structure to search, for the ``effects`` known."""
+        return ()
+
+    def irregular(self, current):
+        """A last structure no shape describes (lack of fit beyond the noise), or None:
+        (kind, test, fitted_um, evidence)."""
+        return None
+
+    def figures(self, result):
+        """The figures ``compare`` prints for the model of ``result`` (a FitResult on
+        these samples), measured against predicted or residual."""
+        raise NotImplementedError
+
+    def describe(self):
+        """One line: the samples (for headers)."""
+        return f"{self.size} samples ({self.file})"
+
+
+class Shape:
+    """A shape of structure the residual may show: ``kind``, ``extra`` parameters it adds,
+    how many distinct shapes its search tries (counted in the family-wise correction),
+    its basis at the current fit and what it says.
+
+    :meth:`trial` returns a :class:`Trial` or None when the samples cannot show it.
+    """
+
+    kind = ""
+    extra = 1
+
+    def trials(self, measurement):
+        return 1
+
+    def trial(self, measurement, current):
+        raise NotImplementedError
+
+    def amplitude_um(self, measurement, fitted_um, location):
+        """The size of the structure: half its peak to valley."""
+        return float(np.ptp(fitted_um) / 2)
+
+    def describe(self, measurement, trial, fitted_um):
+        raise NotImplementedError
+
+
+class Trial:
+    """A shape fitted at the current residual: its ``basis`` (samples x columns), where it
+    sits (``location``: a wavelength or frequency, or None) and, for a search whose
+    significance is family-wise over its own trials, its ``test``."""
+
+    def __init__(self, basis, location=None, test=None, extra=None):
+        self.basis, self.location, self.test, self.extra = basis, location, test, extra

@@ -1,0 +1,126 @@
+"""Checks on the codebase itself: no import cycle among feedaxis's modules (function-level
+imports included), and the floors of the import graph stay layered (run this file as a
+script to print them)."""
+import ast
+import sys
+from pathlib import Path
+
+SOURCE = Path(__file__).resolve().parents[1] / "src" / "feedaxis"
+
+
+def module_name(path):
+    parts = ["feedaxis", *path.relative_to(SOURCE).with_suffix("").parts]
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _package(name, path):
+    return name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+
+
+def import_graph():
+    """{module: {feedaxis modules it imports}}, every import statement counted.
+
+    Importing ``feedaxis.a.b`` from outside package ``feedaxis.a`` runs ``feedaxis.a``
+    (its ``__init__``) first, so that is an edge too; ``from package import name`` is an
+    edge to the submodule when ``name`` is one.
+    """
+    paths = {module_name(p): p for p in SOURCE.rglob("*.py")}
+    graph = {}
+    for name, path in paths.items():
+        package, targets = _package(name, path), set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                found = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    anchor = package.split(".")[:len(package.split(".")) - node.level + 1]
+                    base = ".".join(anchor + ([base] if base else []))
+                found = [base] + [f"{base}.{alias.name}" for alias in node.names]
+            else:
+                continue
+            for target in found:
+                if target in paths:
+                    targets.add(target)
+                    parent = target.rsplit(".", 1)[0]
+                    while parent != "feedaxis" and not name.startswith(parent + "."):
+                        targets.add(parent)
+                        parent = parent.rsplit(".", 1)[0]
+        targets.discard(name)
+        graph[name] = {t for t in targets if not name.startswith(t + ".")}
+    return graph
+
+
+def cycles(graph):
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10_000))
+
+    def visit(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for target in graph.get(node, ()):
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in on_stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            component = set()
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.add(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return found
+
+
+def floors(graph):
+    """{module: floor}: 0 for a module importing no feedaxis module, else one above the
+    highest floor it imports (defined when the graph has no cycle)."""
+    result = {}
+
+    def floor(node):
+        if node not in result:
+            result[node] = 1 + max((floor(t) for t in graph[node]), default=-1)
+        return result[node]
+
+    for node in graph:
+        floor(node)
+    return result
+
+
+def test_no_import_cycle_among_feedaxis_modules():
+    assert cycles(import_graph()) == []
+
+
+def test_the_checker_finds_a_cycle():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_the_leaves_stay_leaves():
+    """The ISO 230-2 figures, the physics and the statistics import nothing above them."""
+    graph, floor = import_graph(), floors(import_graph())
+    assert graph["feedaxis.iso230"] == set()
+    for name in graph:
+        if name.startswith(("feedaxis.physics", "feedaxis.stats")):
+            assert all(t.startswith(("feedaxis.physics", "feedaxis.stats", "feedaxis.iso230",
+                                     "feedaxis.errors")) for t in graph[name]), name
+    assert floor["feedaxis.fit"] < floor["feedaxis.diagnose"] < floor["feedaxis.analysis"] \
+        < floor["feedaxis.cli"]
+
+
+if __name__ == "__main__":
+    by_floor = {}
+    for name, level in floors(import_graph()).items():
+        by_floor.setdefault(level, []).append(name.removeprefix("feedaxis."))
+    for level in sorted(by_floor):
+        print(f"{level:2d}  {', '.join(sorted(by_floor[level]))}")
