@@ -56,5 +56,6 @@ def motor_error_um(position_mm, period_mm, cos_um, sin_um):
     phase_rad = 2.0 * math.pi * values(position_mm) / period_mm
     error_um = 0.0 * phase_rad
     for k, (a_um, b_um) in enumerate(zip(cos_um, sin_um), start=1):
-        error_um = error_um + a_um * xp.cos(k * phase_rad) + b_um * xp.sin(k * phase_rad)
+        if a_um or b_um:  # a harmonic left at zero adds nothing: skip its cos and sin
+            error_um = error_um + a_um * xp.cos(k * phase_rad) + b_um * xp.sin(k * phase_rad)
     return error_um

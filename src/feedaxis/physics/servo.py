@@ -309,8 +309,9 @@ def shipped_loop():
 def whole_steps(pending_s, duration_s, time_step_s):
     """Internal steps that fit in ``pending_s + duration_s``, and the remainder carried (s)."""
     elapsed_steps = (pending_s + duration_s) / time_step_s
-    n_steps = int(math.floor(elapsed_steps + 1e-9))
-    return n_steps, max(0.0, (elapsed_steps - n_steps) * time_step_s)
+    n_steps = int(elapsed_steps + 1e-9)  # floor: elapsed_steps >= 0
+    remainder_s = (elapsed_steps - n_steps) * time_step_s
+    return n_steps, remainder_s if remainder_s > 0.0 else 0.0
 
 
 def step_counts(time_s, time_step_s):
