@@ -20,7 +20,6 @@ it was. The host layer asks :meth:`AxisSlave.state_error` before a buffer reache
 """
 import json
 import math
-import operator
 import sys
 import threading
 import traceback
@@ -32,6 +31,22 @@ from pythonfmu import Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
 _TYPES = {bool: Boolean, int: Integer, float: Real, str: String}
+# AxisSlave.exchanger's function for one FMU's inputs and outputs: the fast path takes the
+# checks of AxisSlave._advance when they pass, written out; every other case goes through it
+EXCHANGE = """
+def exchange(current_time, step_size, {values}):
+{assignments}    if slave.model is not None and 0.0 < step_size < inf and isfinite({total}):
+        try:
+            step(step_size)
+        except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+            slave._report(f"at t = {{current_time}} s", error)
+            return drained(None)
+        if not slave.log_queue:
+            return ({outputs})
+        return drained(({outputs}))
+    stepped = advance(current_time, step_size, INPUTS, {values_tuple})
+    return drained(({outputs}) if stepped else None)
+"""
 # the Python values each variable type holds in a serialised state (JSON: bool is not int)
 _STATE_VALUES = {Real: (float, int), Integer: (int,), Boolean: (bool,), String: (str,)}
 HANDOFF_MODULE = "feedaxis_fmu_handoff"
@@ -137,23 +152,38 @@ class AxisSlave(Fmi2Slave):
         """``exchange(current_time, step_size, *inputs)``: set the inputs (in the order of
         ``input_names``), do the step as :meth:`do_step`, and return the outputs (in the
         order of ``output_names``) as a tuple; when the step failed or logged, return
-        ``[outputs or None, [(status, category, message), ...]]`` and empty the log queue."""
-        names = tuple(output_names)
-        read = operator.attrgetter(*names) if len(names) > 1 else (
-            lambda slave: (getattr(slave, names[0]),))
-        inputs = tuple(input_names)
-        set_inputs = vars(self).update  # the inputs are plain attributes (AxisSlave.input)
+        ``[outputs or None, [(status, category, message), ...]]`` and empty the log queue.
 
-        def exchange(current_time, step_size, *values):
-            set_inputs(zip(inputs, values))
-            stepped = self._advance(current_time, step_size, inputs, values)
-            if stepped and not self.log_queue:
-                return read(self)
-            messages = [(int(m.status), m.category, m.msg) for m in self.log_queue]
-            self.log_queue.clear()
-            return [read(self) if stepped else None, messages]
+        It runs at every doStep, so it is written out for these variables (see
+        :data:`EXCHANGE`): when the inputs are finite, the step size valid and the model
+        built, it steps at once; anything else goes through :meth:`_advance`, which says what
+        is wrong. A loop over the names and the checks cost a quarter of an FMU's Python work
+        per step (5,800 of 21,800 instructions for StepperError, callgrind).
+        """
+        inputs, outputs = tuple(input_names), tuple(output_names)
+        declared = {variable.name for variable in self.vars.values()}
+        for name in (*inputs, *outputs):
+            if not (name.isidentifier() and name in declared):
+                raise ValueError(f"{name!r} is not a variable of {type(self).__name__}")
+        values = ", ".join(inputs)
+        source = EXCHANGE.format(
+            values=values, values_tuple=f"({values},)" if inputs else "()",
+            assignments="".join(f"    slave.{name} = {name}\n" for name in inputs),
+            total=" + ".join(inputs) or "0.0",
+            outputs=", ".join(f"slave.{name}" for name in outputs) + ",")
+        namespace = {"slave": self, "step": self.step, "advance": self._advance,
+                     "drained": self._drained, "INPUTS": inputs, "inf": math.inf,
+                     "isfinite": math.isfinite}
+        exec(compile(source, f"<{type(self).__name__} exchange>", "exec"), namespace)
+        exchange = namespace["exchange"]
         exchange.state_error = self.state_error  # the host layer's check of a state buffer
         return exchange
+
+    def _drained(self, outputs):
+        """``[outputs, [(status, category, message), ...]]`` of the log queue, emptied."""
+        messages = [(int(m.status), m.category, m.msg) for m in self.log_queue]
+        self.log_queue.clear()
+        return [outputs, messages]
 
     def _advance(self, current_time, step_size, input_names, values):
         """The checked step, the inputs ``input_names`` holding ``values``: True, or False

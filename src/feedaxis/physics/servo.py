@@ -15,11 +15,13 @@ friction of the guideways and the nut, a Coulomb force ``friction_N`` opposing t
 (smoothed linearly over |v| < ``FRICTION_SMOOTHING_MM_S``) plus a viscous force
 ``damping_N_s_per_mm``·v, both from the velocity at the start of the step.
 
-One kernel, :func:`run_loop`, advances the loop for the FMU (:class:`Servo`, plain Python)
-and for the fit (:func:`simulate`, the same function compiled by numba): the two agree to
-rounding. A PID loop without Coulomb friction is linear, so :class:`Servo` advances it over
-a whole communication step with one matrix (:func:`loop_propagator`, built by running the
-kernel on unit vectors): the FMU's cost no longer grows with the steps in the interval.
+One kernel, :func:`run_loop`, advances the loop for the FMU (:class:`Servo`) and for the fit
+(:func:`simulate`, the same function compiled by numba's JIT): they agree to rounding. The
+NpidServo FMU carries it compiled ahead of time (feedaxis.kernel_build; loaded by
+:func:`shipped_loop`), so every controller mode costs the same there. Without that module
+:class:`Servo` runs it in Python, and advances a linear loop (PID without Coulomb friction)
+over a whole communication step with one matrix instead (:func:`loop_propagator`, built by
+running the kernel on unit vectors).
 """
 from __future__ import annotations
 
