@@ -73,10 +73,8 @@ class NpidServo(AxisSlave):
             raise ValueError(f"a communication step of {step_size_s} s needs {internal_steps:.3g} "
                              f"internal steps of time_step_s = {self.time_step_s} s; at most "
                              f"{MAX_INTERNAL_STEPS} are taken in one doStep (split the step)")
-        model = self.model
-        self.position_mm = model.advance(step_size_s, self.position_ref_mm, self.disturbance_N)
-        self.velocity_mm_s = model.velocity_mm_s
-        self.tracking_error_mm = model.tracking_error_mm
+        self.model.advance(step_size_s, self.position_ref_mm, self.disturbance_N)
+        self.position_mm, self.velocity_mm_s, self.tracking_error_mm = self.model.outputs()
 
     def model_state(self):
         return self.model.state()

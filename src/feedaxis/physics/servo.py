@@ -368,11 +368,10 @@ class Servo:
                       and params.delay_steps <= MAX_PROPAGATOR_DELAY_STEPS)
         else:
             self._coefficients = coefficients
-            # the samples of one call: steps, reference, force, position (and their views)
-            self._steps, self._references = np.zeros(1, dtype=np.int64), np.zeros(1)
-            self._forces, self._positions = np.zeros(1), np.zeros(1)
-            self._inputs = (memoryview(self._steps), memoryview(self._references),
-                            memoryview(self._forces))
+            # one call's samples: steps, reference, force (written through views), position
+            self._samples = (np.zeros(1, dtype=np.int64), np.zeros(1), np.zeros(1))
+            self._inputs = tuple(memoryview(array) for array in self._samples)
+            self._positions = np.zeros(1)
             linear = False
         self._propagators = {} if linear else None
         self._size = 5 + params.buffer_size
@@ -403,7 +402,12 @@ class Servo:
     @property
     def tracking_error_mm(self):
         """Reference minus position at the end of the last step (mm)."""
-        return self.reference_mm - self.position_mm
+        return self.outputs()[2]
+
+    def outputs(self):
+        """(position_mm, velocity_mm_s, tracking_error_mm) at the end of the last step."""
+        loop = self._loop
+        return loop[0], loop[1], loop[4] - loop[0]
 
     def state(self):
         """All internal state as plain Python values (for FMU get/set state)."""
@@ -418,7 +422,7 @@ class Servo:
         commands_V = [float(v) for v in state["commands_V"]]
         pending_s = float(state["pending_s"])
         if (len(loop) != STATE_SIZE or len(commands_V) != self.params.buffer_size
-                or loop[5] not in range(self.params.buffer_size)
+                or not (0 <= loop[5] < self.params.buffer_size and loop[5] == int(loop[5]))
                 or not math.isfinite(sum(loop) + sum(commands_V))
                 or not 0.0 <= pending_s < self.params.time_step_s):
             raise ValueError(f"not a state of this loop: {STATE_SIZE} finite loop values with "
@@ -443,8 +447,7 @@ class Servo:
         if self._compiled is not None:
             steps, references, forces = self._inputs
             steps[0], references[0], forces[0] = n_steps, reference_mm, force_V
-            self._compiled(self._coefficients, self._steps, self._references, self._forces,
-                           self._state, self._buffer, self._positions)
+            self._compiled(*self._kernel_arguments)
         elif self._propagators is None:
             self._to_loop_form()
             run_loop(self._coefficients, [n_steps], [float(reference_mm)], [force_V],
@@ -461,6 +464,8 @@ class Servo:
         else:
             self._state, self._buffer = np.array(state), np.array(buffer)
             self._loop = memoryview(self._state)
+            self._kernel_arguments = (self._coefficients, *self._samples, self._state,
+                                      self._buffer, self._positions)
         self._vector = None
 
     def _to_loop_form(self):
