@@ -1,7 +1,7 @@
 """The FMUs' cost against the FMI floor: per FMU and for the axis, in each controller mode.
 
 Run: ``python benchmarks/bench_fmi_floor.py [--repeats 15] [--steps 2000] [--starts 5]
-[--fmus DIR]``. It builds the four feedaxis FMUs (or takes them from ``--fmus``) and two
+[--instructions] [--fmus DIR]``. It builds the four feedaxis FMUs (or takes them from ``--fmus``) and two
 sets of FMUs with the same interface (the same variables, names, types, causalities and
 value references) and no physics:
 
@@ -13,18 +13,27 @@ All are driven by the same raw fmpy ctypes calls (``fmi2SetReal`` of the inputs,
 ``fmi2DoStep``, ``fmi2GetReal`` of the outputs; preallocated arrays, as
 feedaxis.cosim.master does) on the default axis schedule: servo, motor and geometric error
 every 1 ms macro step, the thermal screw every 0.1 s. The feedaxis set runs in each
-controller mode of the servo (PID; NPID, seed 002 Eq. 8; PID with Coulomb friction). One
-repeat runs every set once, in an order rotated from repeat to repeat; a ratio is taken
-within each repeat (the machine is shared: a busy moment slows the repeat it falls on), and
-the table gives the median of the per-repeat ratios with their quartiles.
+controller mode of the servo (PID; NPID, seed 002 Eq. 8; PID with Coulomb friction). Each
+FMU is driven alone on its schedule and the four together (the axis); the cost is the CPU
+time of this process per macro step (a busy machine delays the process, which wall time
+would count). One repeat runs every set once, in an order rotated from repeat to repeat; a
+ratio is taken within each repeat (the machine is shared: a busy moment slows the repeat it
+falls on, also in CPU time, through the caches), and the table gives the median of the
+per-repeat ratios with their quartiles.
+
+``--instructions`` also counts the instructions per macro step of the axis under valgrind's
+callgrind (two runs of each set, the difference per step: start-up cancels), a figure the
+machine's load does not move; valgrind must be installed. It takes minutes per set.
 
 ``--starts`` times the first instantiate + initialisation of each freshly extracted FMU in
 fresh processes, after the first import (numpy, fmpy and pythonfmu imported, one other FMU
 loaded: what every FMU but the first in a process pays).
 """
 import argparse
+import ast
 import ctypes
 import itertools
+import os
 import shutil
 import statistics
 import subprocess
@@ -255,6 +264,33 @@ def first_start_ms(fmu_paths, other, starts):
     return times
 
 
+def instructions_per_macro_step(paths, servo_parameters, n_steps):
+    """Instructions per macro step of the axis: callgrind's total for ``n_steps`` and for
+    ``n_steps // 5`` steps, the difference per step (hash seed fixed: the runs repeat)."""
+    totals = []
+    for steps in (n_steps // 5, n_steps):
+        run = subprocess.run(
+            ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable,
+             __file__, "--drive", repr(({k: str(v) for k, v in paths.items()},
+                                        servo_parameters, steps))],
+            capture_output=True, text=True, check=True, env={**os.environ, "PYTHONHASHSEED": "0"})
+        totals.append(int(run.stderr.split("Collected : ")[1].split()[0]))
+    return (totals[1] - totals[0]) / (n_steps - n_steps // 5)
+
+
+def print_instruction_table(sets, n_steps):
+    """Instructions per macro step of the axis for every set, and the feedaxis ratios."""
+    counts = {name: instructions_per_macro_step(paths, parameters, n_steps)
+              for name, (paths, parameters) in sets.items()}
+    print(f"\ninstructions per 1 ms macro step of the axis (callgrind, {n_steps} steps "
+          f"less {n_steps // 5})")
+    print(f"  native {counts['native']:,.0f}, empty pythonfmu {counts['empty']:,.0f}")
+    for mode in MODES:
+        print(f"  {mode:<9}{counts[mode]:>10,.0f}  feedaxis/native "
+              f"{counts[mode] / counts['native']:.2f}  feedaxis/empty "
+              f"{counts[mode] / counts['empty']:.2f}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15,
@@ -263,7 +299,15 @@ def main(argv=None):
     parser.add_argument("--starts", type=int, default=5,
                         help="fresh processes per FMU for the first-start times (default 5)")
     parser.add_argument("--fmus", type=Path, help="take the feedaxis FMUs from this folder")
+    parser.add_argument("--instructions", action="store_true",
+                        help="also count instructions per macro step under callgrind")
+    parser.add_argument("--drive", help=argparse.SUPPRESS)  # one axis run, for callgrind
     args = parser.parse_args(argv)
+    if args.drive:
+        paths, servo_parameters, n_steps = ast.literal_eval(args.drive)
+        cpu_us_per_macro_step({k: Path(v) for k, v in paths.items()}, FMU_NAMES, n_steps,
+                              servo_parameters)
+        return 0
     with tempfile.TemporaryDirectory() as folder:
         full = ({name: args.fmus / f"{name}.fmu" for name in FMU_NAMES} if args.fmus else
                 {p.stem: p for p in build_fmus(Path(folder) / "full")})
@@ -272,6 +316,8 @@ def main(argv=None):
         sets.update({mode: (full, parameters) for mode, parameters in MODES.items()})
         runs = interleaved_runs(sets, args.repeats, args.steps)
         print_floor_tables(runs, args.repeats, args.steps)
+        if args.instructions:
+            print_instruction_table(sets, args.steps)
         if args.starts:
             empty_stepper = sets["empty"][0]["StepperError"]
             times = first_start_ms(full, empty_stepper, args.starts)
