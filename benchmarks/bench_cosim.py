@@ -30,6 +30,8 @@ from feedaxis.fmu_build import build_fmus
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from libcosim_driver import simulate_ssp_with_libcosim  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
 
 OUTPUTS = ("NpidServo.position_mm", "NpidServo.velocity_mm_s", "NpidServo.tracking_error_mm",
            "StepperError.error_um", "GeometricError.error_um", "ThermalScrew.error_um",
@@ -78,11 +80,11 @@ def describe(values, unit="s"):
             f"(range {min(values):.3f}-{max(values):.3f}, n = {len(values)})")
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--stop-s", type=float, default=10.0)
-    args = parser.parse_args()
+    args = arguments(parser, argv, repeats=1, stop_s=0.05)
     system = default_axis()
     with tempfile.TemporaryDirectory() as folder:
         fmu_paths = {p.stem: p for p in build_fmus(Path(folder) / "fmus")}

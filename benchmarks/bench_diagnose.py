@@ -9,6 +9,7 @@ import argparse
 import cProfile
 import pstats
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -18,6 +19,9 @@ from feedaxis.diagnose import diagnose
 from feedaxis.effects import CATALOG, Model
 from feedaxis.examples import BUNDLED_CASE, write_table2_case
 from feedaxis.fit import fit
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
 
 # where the time goes: function name (file suffix, function) -> label
 STAGES = {
@@ -54,10 +58,10 @@ def breakdown(case, model):
     return shares
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
-    args = parser.parse_args()
+    args = arguments(parser, argv, repeats=1)
     with tempfile.TemporaryDirectory() as folder:
         subjects = cases(folder)
         times = {label: [] for label in subjects}

@@ -1,17 +1,17 @@
-"""Diagnosis at scale (issue 10): ``diagnose`` and ``report`` on 10^5 samples whose recorded
-targets carry jitter, against the targets of 5 s and 500 MB.
+"""Analysis at scale: diagnose and report on large cases against 5 s and 500 MB.
 
-Cases (lead error + 0.5 µm backlash + 0.3 µm noise, model: lead_error):
-- ISO-like: 1,000 targets x 50 bidirectional runs, recorded targets jittered by ±1 nm;
-- the same with ±0.01 µm of jitter;
-- a dense single pass over 100,000 uneven positions (no repeats).
+Cases (model: lead error, fitted first):
+- positioning, 10^6 samples: 1,000 targets x 500 bidirectional runs, recorded targets
+  jittered by ±1 nm (lead error, 0.5 µm backlash, 0.3 µm noise);
+- a single pass over 10^5 uneven positions (lead error, 0.3 µm noise): diagnose and report;
+- tracking, 500 s at 1 ms (500,000 samples, 5·10^6 loop steps per simulation) of seed 002's
+  loop on another plant, white + AR(1) noise; model servo_plant at the truth.
 Wall time: median of ``--repeats`` runs; memory: peak of NumPy and Python allocations
-(tracemalloc) during one more run, imports excluded.
+(tracemalloc) during one more run, the case's own arrays excluded.
 
 Run: ``python benchmarks/bench_diagnose_scale.py [--repeats 3]``.
 """
 import argparse
-import resource
 import statistics
 import sys
 import tempfile
@@ -22,36 +22,56 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import synthetic as syn  # noqa: E402
+from common import arguments  # noqa: E402
+from feedaxis.analysis import analyse  # noqa: E402
+from feedaxis.case import Axis, Case, Tracking  # noqa: E402
 from feedaxis.diagnose import diagnose  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
 from feedaxis.fit import fit  # noqa: E402
+from feedaxis.fmu_map import servo_to_fmu  # noqa: E402
+from feedaxis.physics.servo import ServoParams, simulate  # noqa: E402
 from feedaxis.report import write_report  # noqa: E402
+from tracking_synthetic import AXIS, noise_um  # noqa: E402
 
 TIME_TARGET_S = 5.0
 MEMORY_TARGET_MB = 500.0
 LEAD = Model([CATALOG["lead_error"]])
+PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
+         "plant_stiffness_per_s2": 250.0, "delay_s": 0.0015}
 
 
-def iso_like(jitter_mm, seed=1, n_targets=1000, runs=50):
+def iso_like(samples, seed=1, n_targets=1000):
     rng = np.random.default_rng(seed)
+    runs = max(samples // (2 * n_targets), 1)
     targets = np.arange(n_targets) * 0.5 + rng.uniform(-0.1, 0.1, n_targets)
     run = np.repeat(np.arange(1, runs + 1), 2 * n_targets)
     target_mm = np.tile(np.concatenate((targets, targets[::-1])), runs)
     direction = np.tile(np.repeat([1.0, -1.0], n_targets), runs)
-    target_mm = target_mm + rng.uniform(-jitter_mm, jitter_mm, target_mm.size)
+    target_mm = target_mm + rng.uniform(-1e-6, 1e-6, target_mm.size)
     error_um = (1.5 - 0.012 * target_mm + 0.25 * direction
                 + rng.normal(0.0, 0.3, target_mm.size))
     return syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=error_um,
                               direction=direction, run=run)
 
 
-def single_pass(seed=2, n=100_000):
+def single_pass(samples, seed=2):
     rng = np.random.default_rng(seed)
-    target_mm = np.sort(rng.uniform(0.0, 500.0, n))
-    error_um = 1.5 - 0.012 * target_mm + rng.normal(0.0, 0.3, n)
+    target_mm = np.sort(rng.uniform(0.0, 500.0, samples))
+    error_um = 1.5 - 0.012 * target_mm + rng.normal(0.0, 0.3, samples)
     return syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=error_um)
+
+
+def tracking_trace(duration_s, seed=3):
+    time_s = np.arange(0.0, duration_s, 1e-3)
+    reference_mm = 10 * np.sin(np.pi * time_s) + 0.3 * np.sin(2 * np.pi * 7 * time_s)
+    position_mm = simulate(ServoParams(**{**servo_to_fmu(AXIS["servo"]), **PLANT}), time_s,
+                           reference_mm)
+    actual_mm = position_mm + noise_um(time_s.size, seed) * 1e-3
+    return Case(Path("generated"), Axis("trace", {"lead_mm": 10.0}, {}, dict(AXIS["servo"])),
+                tracking=Tracking(time_s, reference_mm, actual_mm))
 
 
 def measure(job, repeats):
@@ -64,33 +84,44 @@ def measure(job, repeats):
     job()
     peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
-    return statistics.median(times), peak_mb
+    return statistics.median(times), min(times), max(times), peak_mb
 
 
-def main():
+def jobs(args, folder):
+    """{(case label, job): callable}."""
+    positioning, single = iso_like(args.samples), single_pass(args.single_pass)
+    trace = tracking_trace(args.tracking_s)
+    positioning_model, single_model = (fit(LEAD, case).model for case in (positioning, single))
+    plant = Model([CATALOG["servo_plant"]], {"servo_plant": PLANT})
+    report = Path(folder) / "report.html"
+    return {
+        (f"positioning, {positioning.positioning.size:,} samples", "diagnose"):
+            lambda: diagnose(positioning, positioning_model),
+        (f"single pass, {single.positioning.size:,} samples", "diagnose"):
+            lambda: diagnose(single, single_model),
+        (f"single pass, {single.positioning.size:,} samples", "report"):
+            lambda: write_report(analyse(single, single_model), report),
+        (f"tracking, {args.tracking_s:g} s at 1 ms", "diagnose"):
+            lambda: diagnose(trace, plant),
+    }
+
+
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per job (default 3)")
-    args = parser.parse_args()
-    cases = {"ISO-like, ±1 nm jitter": iso_like(1e-6),
-             "ISO-like, ±0.01 µm jitter": iso_like(1e-5),
-             "single pass, 10^5 uneven positions": single_pass()}
-    diagnose(cases["ISO-like, ±1 nm jitter"], LEAD)  # warm imports
-    print(f"{'case':36s} {'job':9s} {'time (s)':>9s} {'/ 5 s':>6s} {'peak MB':>8s} "
-          f"{'/ 500 MB':>8s}")
+    parser.add_argument("--samples", type=int, default=1_000_000)
+    parser.add_argument("--single-pass", type=int, default=100_000)
+    parser.add_argument("--tracking-s", type=float, default=500.0)
+    args = arguments(parser, argv, repeats=1, samples=4_000, single_pass=2_000, tracking_s=3.0)
     with tempfile.TemporaryDirectory() as folder:
-        for label, case in cases.items():
-            model = fit(LEAD, case).model
-            jobs = {"diagnose": lambda case=case, model=model: diagnose(case, model),
-                    "report": lambda case=case, model=model: write_report(
-                        case, model, CATALOG, Path(folder) / "report.html")}
-            for job_name, job in jobs.items():
-                seconds, peak_mb = measure(job, args.repeats)
-                print(f"{label:36s} {job_name:9s} {seconds:9.2f} {seconds / TIME_TARGET_S:6.2f} "
-                      f"{peak_mb:8.0f} {peak_mb / MEMORY_TARGET_MB:8.2f}")
-    print(f"({cases['ISO-like, ±1 nm jitter'].positioning.size} samples each; verdict on the "
-          f"first: {diagnose(cases['ISO-like, ±1 nm jitter'], LEAD).verdict}; peak resident "
-          f"memory of this whole process, imports and all cases included: "
-          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB)")
+        work = jobs(args, folder)
+        print(f"{'case':36s} {'job':9s} {'time (s)':>9s} {'(min-max)':>13s} {'/ 5 s':>6s} "
+              f"{'peak MB':>8s} {'/ 500 MB':>8s}")
+        for (label, name), job in work.items():
+            seconds, low, high, peak_mb = measure(job, args.repeats)
+            print(f"{label:36s} {name:9s} {seconds:9.2f} {f'({low:.2f}-{high:.2f})':>13s} "
+                  f"{seconds / TIME_TARGET_S:6.2f} {peak_mb:8.0f} {peak_mb / MEMORY_TARGET_MB:8.2f}",
+                  flush=True)
 
 
 if __name__ == "__main__":

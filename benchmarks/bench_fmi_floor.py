@@ -1,7 +1,7 @@
 """The FMUs' cost against the FMI floor: per FMU and for the axis, in each controller mode.
 
 Run: ``python benchmarks/bench_fmi_floor.py [--repeats 15] [--steps 2000] [--starts 5]
-[--instructions] [--fmus DIR]``. It builds the four feedaxis FMUs (or takes them from ``--fmus``) and two
+[--instructions] [--fmus DIR] [--smoke]``. It builds the four feedaxis FMUs (or takes them from ``--fmus``) and two
 sets of FMUs with the same interface (the same variables, names, types, causalities and
 value references) and no physics:
 
@@ -46,7 +46,10 @@ from pathlib import Path
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from feedaxis.fmu_build import FMU_NAMES, build_fmus
+from feedaxis.fmu_build import FMU_NAMES, build_fmus, c_compiler
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
 
 MACRO_STEP_S = 1e-3
 EVERY = {"NpidServo": 1, "StepperError": 1, "GeometricError": 1, "ThermalScrew": 100}
@@ -123,9 +126,9 @@ def build_empty_fmus(fmu_paths, out_dir):
 
 def build_native_fmus(fmu_paths, out_dir):
     """{name: path} of C FMUs with the model description of ``fmu_paths`` (native_fmu.c)."""
-    compiler = shutil.which("cc") or shutil.which("gcc")
+    compiler = c_compiler()
     if compiler is None:
-        raise SystemExit("the native floor needs a C compiler (cc or gcc)")
+        raise SystemExit("the native floor needs a C compiler (cc or gcc, or set CC)")
     native = {}
     for name, path in fmu_paths.items():
         description = read_model_description(str(path))
@@ -302,7 +305,9 @@ def main(argv=None):
     parser.add_argument("--instructions", action="store_true",
                         help="also count instructions per macro step under callgrind")
     parser.add_argument("--drive", help=argparse.SUPPRESS)  # one axis run, for callgrind
-    args = parser.parse_args(argv)
+    # smoke: two repeats (the ratios' spread), 200 steps (the thermal screw steps twice), one
+    # fresh process per first start; --instructions stays opt-in (valgrind, minutes per set)
+    args = arguments(parser, argv, repeats=2, steps=200, starts=1)
     if args.drive:
         paths, servo_parameters, n_steps = ast.literal_eval(args.drive)
         cpu_us_per_macro_step({k: Path(v) for k, v in paths.items()}, FMU_NAMES, n_steps,

@@ -30,6 +30,9 @@ import numpy as np
 from feedaxis.fmu_build import build_fmus
 from feedaxis.physics import geometry, motor, mounting, servo, thermal
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
+
 INPUTS = {"position_ref_mm": 5.0, "disturbance_N": 0.0, "position_mm": 5.0,
           "velocity_mm_s": 50.0, "ambient_C": 20.0}
 STEP_S = {"NpidServo": 1e-3, "StepperError": 1e-3, "GeometricError": 1e-3, "ThermalScrew": 0.1}
@@ -128,12 +131,12 @@ def thermal_paths():
     return fast, reference
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7, help="repeats, median taken (default 7)")
     parser.add_argument("--number", type=int, default=2000,
                         help="calls per repeat (default 2000; a tenth for the thermal screw)")
-    args = parser.parse_args()
+    args = arguments(parser, argv, repeats=1, number=20)
     servo_fast, servo_stepped, servo_compiled = servo_paths()
     paths = {"NpidServo": (servo_fast, servo_stepped), "StepperError": stepper_paths(),
              "GeometricError": geometric_paths(), "ThermalScrew": thermal_paths()}

@@ -5,14 +5,19 @@ of interleaved repeats measured in this one run, printed as a ratio.
 """
 import argparse
 import statistics
+import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.fmu_build import build_fmus
 from feedaxis.physics import geometry, motor, mounting, servo, thermal
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
 
 N_CALLS = 2000
 
@@ -64,10 +69,13 @@ def time_bare(call):
     return (time.perf_counter() - start) / N_CALLS
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats (default 5)")
-    repeats = parser.parse_args().repeats
+    parser.add_argument("--minutes", type=float, default=168.0,
+                        help="length of the Table 2 cycle simulated (default: all of it, 168)")
+    args = arguments(parser, argv, repeats=1, minutes=6.0)
+    repeats = args.repeats
 
     print(f"FMU call overhead: setReal+doStep+getReal through fmpy vs the bare physics call "
           f"(median of {repeats} x {N_CALLS} calls)")
@@ -88,9 +96,9 @@ def main():
     print("\nThermal, seed 003 Table 2 cycle (168 min), samples every 60 s: closed form vs "
           "straightforward explicit dt = 0.1 s")
     params = thermal.ThermalScrewParams()
-    times = np.arange(0.0, 168 * 60.0 + 1.0, 60.0)
+    times = np.arange(0.0, args.minutes * 60.0 + 1.0, 60.0)
     for feed in (3000.0, 6000.0, 9000.0):
-        segments = thermal.table2_cycle(feed)
+        segments = [s for s in thermal.table2_cycle(feed) if s.start_s < times[-1]]
         fast_s, slow_s = [], []
         for _ in range(max(1, repeats // 2)):
             start = time.perf_counter()

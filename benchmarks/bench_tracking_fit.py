@@ -45,6 +45,9 @@ from feedaxis.stats.coloured import peak_p_value  # noqa: E402
 from feedaxis.stats.noise import Coloured  # noqa: E402
 from tracking_synthetic import noise_um, step_loop, two_sines, write_tracking_case  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
+
 PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
          "plant_stiffness_per_s2": 250.0, "delay_s": 0.0015}
 FRICTION_N = 1.5
@@ -118,22 +121,24 @@ def calibration(seeds):
             for name, p in p_values.items()}
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--baseline-repeats", type=int, default=1)
     parser.add_argument("--seeds", type=int, default=100)
-    args = parser.parse_args()
+    parser.add_argument("--record-s", type=float, default=5.0,
+                        help="length of the fitted record (default 5 s)")
+    args = arguments(parser, argv, repeats=1, baseline_repeats=1, seeds=2, record_s=0.5)
     with tempfile.TemporaryDirectory() as folder, threadpool_limits(limits=1, user_api="blas"):
         start = time.perf_counter()
         compiled_loop()
         load_s = time.perf_counter() - start
-        run = step_loop(two_sines, 5.0, plant=PLANT, friction_N=FRICTION_N)
+        run = step_loop(two_sines, args.record_s, plant=PLANT, friction_N=FRICTION_N)
         case = read_case(write_tracking_case(Path(folder) / "case", run, 7))
         start_model = starting_values(MODEL, [Tracking(case)])
         params = ServoParams(**PLANT, friction_N=FRICTION_N)
         one_fast_s, _ = timed(lambda: simulate(params, *run[:2]), args.repeats)
-        one_plain_s, _ = timed(lambda: step_loop(two_sines, 5.0, plant=PLANT,
+        one_plain_s, _ = timed(lambda: step_loop(two_sines, args.record_s, plant=PLANT,
                                                  friction_N=FRICTION_N), args.repeats)
         fast_s, result = timed(lambda: fit(MODEL, case), args.repeats)
         plain_s, (plain_values, evaluations, plain_rms) = timed(

@@ -23,6 +23,9 @@ from pathlib import Path
 from feedaxis.cosim.fmu_runner import LoadedFmu, run_fmu
 from feedaxis.fmu_build import build_fmus
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments  # noqa: E402
+
 FMU_CHECK = Path(__file__).resolve().parents[2] / "shared" / "tools" / "fmi" / "fmuCheck.linux64"
 HOST = """
 import sys
@@ -48,11 +51,11 @@ def count_failures(commands):
     return failures
 
 
-def main():
+def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--processes", type=int, default=200)
     parser.add_argument("--cycles", type=int, default=1000)
-    args = parser.parse_args()
+    args = arguments(parser, argv, processes=2, cycles=5)
     with tempfile.TemporaryDirectory() as folder:
         paths = {p.stem: str(p) for p in build_fmus(folder)}
         failed = count_failures([sys.executable, "-c", HOST, *paths.values()]

@@ -1,4 +1,7 @@
-"""Shared fixtures: the four FMUs are built once per test session."""
+"""Shared fixtures (the four FMUs are built once per test session) and the one rule for a
+test that needs something outside pip: it skips with the reason on a developer's machine
+and fails under CI (``CI=true``), whose ``.ci/run`` installs it."""
+import ctypes
 import importlib.machinery
 import importlib.util
 import os
@@ -10,6 +13,27 @@ from feedaxis import kernel_build
 from feedaxis.cosim.fmu_cache import cache_folder, cache_root
 from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.fmu_build import FMU_NAMES, build_fmus
+
+# System libraries tests load, and how to install them (Debian 12, as .ci/run does).
+SYSTEM_LIBRARIES = {"libtbb.so.12": "apt-get install libtbb12 (ecospy's ecos needs it)"}
+
+
+def unavailable(reason):
+    """Skip the calling test with ``reason``; under CI (``CI=true``) fail it instead: CI
+    installs everything the suite needs, so a missing piece there is an error."""
+    if os.environ.get("CI") == "true":
+        pytest.fail(f"{reason}; CI must provide it (.ci/run installs it)")
+    pytest.skip(reason)
+
+
+def require_system_library(soname):
+    """Skip (fail under CI) unless the dynamic loader finds the system library ``soname``,
+    naming how to install it (``SYSTEM_LIBRARIES``)."""
+    try:
+        ctypes.CDLL(soname)
+    except OSError as error:
+        unavailable(f"the system library {soname} cannot be loaded ({error}); install: "
+                    f"{SYSTEM_LIBRARIES.get(soname, 'the package providing it')}")
 
 
 @pytest.fixture(scope="session")
@@ -45,9 +69,7 @@ def compiled_servo_loop():
     (feedaxis.kernel_build, the user cache); skips without a compiler, fails under CI."""
     missing = kernel_build.kernel_missing()
     if missing is not None:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI requires the compiled servo kernel: {missing}")
-        pytest.skip(f"the servo kernel cannot be compiled here: {missing}")
+        unavailable(f"the servo kernel cannot be compiled here: {missing}")
     path = kernel_build.cached_kernel(cache_root())
     loader = importlib.machinery.ExtensionFileLoader(kernel_build.MODULE_NAME, str(path))
     module = importlib.util.module_from_spec(

@@ -61,7 +61,7 @@ def direct(name, inputs, parameters, step_size_s=None):
                                           (p["harmonic1_sin_um"], p["harmonic2_sin_um"]))
         rows = error[:, None]
     elif name == "GeometricError":
-        rows = _geometric(inputs, parameters)
+        rows = _geometric(inputs, parameters, step_size_s)
     else:
         rows = _thermal(inputs, parameters, step_size_s)
     return np.asarray(rows, dtype=float)
@@ -72,7 +72,7 @@ def _only(cls, parameters):
     return {k: v for k, v in parameters.items() if k in names}
 
 
-def _geometric(inputs, parameters):
+def _geometric(inputs, parameters, step_size_s):
     p = {"lead_mm": 1.0, "offset_um": 0.2515, "slope_um_per_mm": -0.5084,
          "eccentricity_cos_um": 0.2005, "eccentricity_sin_um": 0.1504, "backlash_um": 0.0,
          "length_m": 0.8, "diameter_m": 0.034, "density_kg_m3": 7800.0,
@@ -83,8 +83,9 @@ def _geometric(inputs, parameters):
     position = np.concatenate(([inputs["position_mm"][0]], inputs["position_mm"]))
     velocity = np.concatenate(([inputs["velocity_mm_s"][0]], inputs["velocity_mm_s"]))
     direction, rows = 1.0, []
-    for x, v in zip(position, velocity):
-        direction = np.sign(v) if v != 0 else direction
+    for k, (x, v) in enumerate(zip(position, velocity)):
+        direction = geometry.play_engagement(direction, v * step_size_s * (k > 0),
+                                             p["backlash_um"])
         sag = geometry.gravity_sag_error_um(mounting.screw_coordinate_m(x, p["fixed_end_mm"]), table)
         rows.append([geometry.transmission_error_um(
             x, direction, p["lead_mm"], p["offset_um"], p["slope_um_per_mm"],

@@ -167,6 +167,65 @@ def paired_t_p_value(case):
     return float(stats.ttest_rel(p.error_um[up][key_up], p.error_um[down][key_down]).pvalue)
 
 
+def noise_um(rng, size, kind, sigma_um=ISO_NOISE_UM):
+    """Measurement noise of one null family in the order taken (µm): ``white`` Gaussian,
+    ``ar0.5`` / ``ar0.9`` / ``ar0.95`` AR(1) with that correlation between neighbouring
+    samples (marginal σ), ``t3`` Student-t with 3 degrees of freedom scaled to σ,
+    ``quantised`` Gaussian rounded to 0.1 µm."""
+    if kind.startswith("ar"):
+        rho = float(kind[2:])
+        innovations = rng.normal(0.0, sigma_um * np.sqrt(1 - rho ** 2), size)
+        noise = np.empty(size)
+        noise[0] = rng.normal(0.0, sigma_um)
+        for i in range(1, size):
+            noise[i] = rho * noise[i - 1] + innovations[i]
+        return noise
+    if kind == "t3":
+        return sigma_um * rng.standard_t(3, size) / np.sqrt(3.0)
+    noise = rng.normal(0.0, sigma_um, size)
+    return np.round(noise, 1) if kind == "quantised" else noise
+
+
+def null_trial(rng, layout, noise="white", drift=False, outliers=0):
+    """A null case of ``layout`` ("iso": 21 targets x 5 bidirectional runs; "scan": a dense
+    single pass every 1 mm over 500 mm, with time stamps) whose model is the truth (lead
+    error), with the noise family ``noise`` in the order taken, optionally a drift along
+    the test's clock and ``outliers`` spikes of ±3 µm; (case, spike indices)."""
+    if layout == "iso":
+        target_mm, direction, run = iso_layout()
+        columns = {"direction": direction, "run": run}
+        clock = run_clock(run) - 1.0
+        drift_um = 0.05 * clock
+    else:
+        target_mm = np.arange(0.0, 501.0, 1.0)
+        columns = {"time_s": target_mm * 0.5}
+        drift_um = 1.0 * target_mm / target_mm[-1]
+    error_um = (geometry.lead_error_um(target_mm, 1.5, -0.012)
+                + noise_um(rng, target_mm.size, noise) + (drift_um if drift else 0.0))
+    spikes = rng.choice(target_mm.size, outliers, replace=False)
+    error_um[spikes] += 3.0 * rng.choice((-1.0, 1.0), outliers)
+    return in_memory_case(ISO_AXIS, target_mm=target_mm, error_um=error_um, **columns), \
+        np.sort(spikes)
+
+
+NULL_FAMILIES = {f"{layout}, {label}": (layout, options)
+                 for layout in ("iso", "scan")
+                 for label, options in (("white", {}), ("AR(1) 0.5", {"noise": "ar0.5"}),
+                                        ("AR(1) 0.9", {"noise": "ar0.9"}),
+                                        ("AR(1) 0.95", {"noise": "ar0.95"}),
+                                        ("Student-t 3", {"noise": "t3"}),
+                                        ("quantised 0.1 um", {"noise": "quantised"}),
+                                        ("drifting", {"drift": True}),
+                                        ("2 outliers", {"outliers": 2}))}
+
+
+def names_something(diagnosis, drift_allowed=False):
+    """A false alarm on a null: an effect named, or a structure (a drift only where the
+    null drifts); outliers, transients and an ``undetermined`` verdict are not alarms."""
+    return bool(diagnosis.candidates) or any(
+        not (drift_allowed and s.kind == "drift") for s in diagnosis.unexplained)
+
+
 NULL_LAYOUTS = {
     "ISO 230-2 repeats": lambda rng: iso_trial(rng, drift_um_per_run=0.05, outliers=2),
     "dense single-pass scan": lambda rng: scan_trial(rng, drift_um=1.0, outliers=2),

@@ -4,7 +4,8 @@ Every fenced block in README.md and docs/ carries a marker comment on the line a
 how it is kept true (a block without one fails :func:`test_every_code_block_is_kept_true`):
 
 - ``<!-- snippet: NAME -->``: Python run by a test (here, or tests/test_docs_cosim.py);
-- ``<!-- example: examples/FILE -->``: the block is that file, verbatim;
+- ``<!-- example: examples/FILE -->`` (or a file of ``src/feedaxis/data/``, shipped with the
+  package): the block is that file, verbatim;
 - ``<!-- transcript -->``: a console session; the ``$`` lines are run in one folder per page
   (holding a copy of ``examples/``) and their output must match the lines below them (a
   ``...`` line stands for any lines, numbers agree to 0.1 %;
@@ -23,6 +24,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from conftest import unavailable
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -54,9 +57,7 @@ def mkdocs_build(config, site):
 def mkdocs():
     if shutil.which("mkdocs") is None and subprocess.run(
             [sys.executable, "-c", "import mkdocs"], capture_output=True).returncode:
-        if os.environ.get("CI"):
-            pytest.fail("mkdocs is in the test extra but not installed")
-        pytest.skip("mkdocs is not installed (pip install '.[test]' brings it)")
+        unavailable("mkdocs is not installed (pip install '.[test]' brings it)")
 
 
 def test_docs_build_strict(mkdocs, tmp_path):
@@ -77,7 +78,8 @@ def test_every_code_block_is_kept_true():
     loose = [f"{page.relative_to(ROOT)} block {i}: {body[:60]!r}"
              for page in PAGES for i, (marker, language, body) in enumerate(blocks(page))
              if language != "text" and not body.startswith("pip install") and not re.match(
-                 r"(snippet: [\w-]+|example: examples/\S+|transcript|commands: tests/\S+::\w+)$",
+                 r"(snippet: [\w-]+|example: (examples|src/feedaxis/data)/\S+|transcript|"
+                 r"commands: tests/\S+::\w+)$",
                  marker)]
     assert not loose, "blocks without a marker:\n" + "\n".join(loose)
 
@@ -176,11 +178,9 @@ def test_loop_commands_run_on_the_demo_case(tmp_path):
 
 
 def test_comp_table_commands_run_on_an_rtl_export(tmp_path):
-    from feedaxis.importers.rtl import rtl_text
-    from test_import import AXIS, TARGETS_MM, generated_runs
-    (tmp_path / "X-axis.rtl").write_text(rtl_text(TARGETS_MM, generated_runs(), {}, {}),
-                                         encoding="utf-8")
-    (tmp_path / "axis.toml").write_text(AXIS, encoding="utf-8")
+    from feedaxis.examples import LASER_EXAMPLE
+    for name in ("X-axis.rtl", "axis.toml"):   # the laser example shipped with the package
+        shutil.copy2(LASER_EXAMPLE / name, tmp_path / name)
     marker = "commands: tests/test_docs.py::test_comp_table_commands_run_on_an_rtl_export"
     for line in commands("docs/compensation-tables.md", marker):
         run_line(line, tmp_path)

@@ -31,7 +31,10 @@ def test_every_example_is_run_here():
 @pytest.mark.parametrize("script", sorted(PROMISES))
 def test_example_runs(script, user_fmu_cache, tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
-    done = subprocess.run([sys.executable, str(EXAMPLES / script)], cwd=tmp_path, env=env,
+    here = tmp_path / "run"   # where the user runs it (tmp_path holds the user cache)
+    here.mkdir()
+    done = subprocess.run([sys.executable, str(EXAMPLES / script)], cwd=here, env=env,
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert re.search(PROMISES[script], done.stdout, re.M), done.stdout
+    assert not list(here.iterdir()), "an example leaves files where it is run"

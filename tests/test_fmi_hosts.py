@@ -20,6 +20,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 from fmpy.util import read_csv
 
+from conftest import require_system_library, unavailable
 from feedaxis.fmu_build import FMU_NAMES
 from feedaxis.physics import thermal
 
@@ -27,14 +28,24 @@ ROOT = Path(__file__).resolve().parents[1]
 FMU_SOURCES = ROOT / "fmus"
 FMU_CHECK = ROOT.parent / "shared" / "tools" / "fmi" / "fmuCheck.linux64"
 ERROR = 3
+ECOS_LIBRARY = "libtbb.so.12"   # ecospy's binaries (ecos, libecosc.so) link it
 
 
 def require_tool(path):
     """Skip outside CI when ``path`` is missing; fail in CI."""
     if not Path(path).exists():
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"{path} is missing in CI")
-        pytest.skip(f"{path} is missing (the FMI tools of ../shared/tools/fmi)")
+        unavailable(f"{path} is missing (the FMI tools of ../shared/tools/fmi)")
+
+
+def require_ecospy():
+    """ecospy's folder; skip (fail in CI) when ecospy or the libtbb its binaries need is
+    missing."""
+    import importlib.util
+    require_system_library(ECOS_LIBRARY)
+    spec = importlib.util.find_spec("ecospy")
+    if spec is None:
+        unavailable("ecospy is not installed (pip install '.[test]' brings it)")
+    return Path(spec.origin).parent
 
 
 def cross_check_options(name):
@@ -349,12 +360,8 @@ def test_omsimulator_python_api_and_ecospy_run_the_ssp_alike(portable_ssp, fmu_p
            (("NpidServo", "position_mm"), ("GeometricError", "error_um"))]
     instance.terminate()
     instance.delete()
-    try:
-        from ecospy import EcosSimulation
-    except OSError as error:  # libtbb.so.12 missing
-        if os.environ.get("CI") == "true":
-            raise
-        pytest.skip(f"ecospy cannot load ({error}): apt-get install libtbb12")
+    require_ecospy()
+    from ecospy import EcosSimulation
     with EcosSimulation(step_size=1e-3, ssp_path=str(ssp_path)) as simulation:
         simulation.init(parameter_set=system.name)
         simulation.set_real("NpidServo::disturbance_N", 300.0)
@@ -376,13 +383,9 @@ def test_fmu_readme_tables_every_variable(loaded_fmus, name):
 
 def test_ecos_program_runs_the_ssp(portable_ssp, tmp_path):
     """ecos (ecospy's own C++ program, multi-threaded): a host that is not a Python process."""
-    import importlib.util
     import shutil
-    spec = importlib.util.find_spec("ecospy")
-    if spec is None:
-        require_tool(tmp_path / "ecospy")  # skips, or fails in CI
     program = tmp_path / "ecos"
-    shutil.copy(Path(spec.origin).parent / "binaries" / "ecos", program)  # shipped without +x
+    shutil.copy(require_ecospy() / "binaries" / "ecos", program)  # shipped without +x
     program.chmod(0o755)
     run = subprocess.run([str(program), "simulate", "--path", str(portable_ssp[1]),
                           "--stopTime", "0.2", "--stepSize", "0.001", "--parameterSet",

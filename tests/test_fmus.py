@@ -248,6 +248,24 @@ def test_a_state_whose_model_part_does_not_restore_is_refused_and_rolled_back(lo
         slave.freeInstance()
 
 
+@pytest.mark.parametrize("engagement", [2.0, "text", None])
+def test_a_backlash_engagement_outside_the_play_is_refused(loaded_fmus, capsys, engagement):
+    """GeometricError's model state is the nut's engagement in its play, -1 to +1: a state
+    with another is refused and the instance keeps its own."""
+    loaded = loaded_fmus["GeometricError"]
+    slave = initialised(loaded)
+    try:
+        before = loaded.get_reals(slave, OUTPUTS["GeometricError"])
+        state = json.loads(slave.serializeFMUstate(slave.getFMUstate()))
+        state["model_state"] = {"engagement": engagement}
+        bad = slave.deSerializeFMUstate(json.dumps(state).encode())
+        assert "engagement must be a number from -1 to 1" in refused(
+            lambda: slave.setFMUstate(bad), capsys)
+        assert loaded.get_reals(slave, OUTPUTS["GeometricError"]) == before
+    finally:
+        slave.freeInstance()
+
+
 @pytest.mark.parametrize("name", FMU_NAMES)
 def test_nan_input_gives_fmi_error_with_message(loaded_fmus, capsys, name):
     inputs = scripted_inputs(name)

@@ -83,8 +83,34 @@ def test_rtl_round_trips_a_generated_case_exactly(tmp_path, axis, capsys):
     assert_same_case(out, runs)
     assert read_case(out).name == "VMC-800 axis X"
     report = capsys.readouterr().out
-    assert "USER-TEXT.DATE = 2026-11-02" in report and "Air temp 20.3" in report
-    assert read_case(out).positioning.bidirectional
+    assert "USER-TEXT.DATE = 2026-11-02" in report and "Mat temp 1 20.1" in report
+    assert "Air temp" not in report and "air temperature as positioning.csv ambient_C, 20.3" \
+        in report
+    positioning = read_case(out).positioning
+    assert positioning.bidirectional and np.all(positioning.ambient_C == 20.3)
+
+
+def test_rtl_air_temperature_per_run_becomes_ambient_c(tmp_path, axis, capsys):
+    runs = generated_runs()
+    per_run = [20.1 + 0.1 * k for k in range(len(runs))]
+    text = rtl_text(TARGETS_MM, runs, {}, {"Air temp": " ".join(map(str, per_run))})
+    code, out = run_import(tmp_path, axis, "x.rtl", text)
+    assert code == 0
+    positioning = read_case(out).positioning
+    rtl_run = np.repeat(np.arange(len(runs)), TARGETS_MM.size)   # the file's run order
+    np.testing.assert_array_equal(positioning.ambient_C, np.array(per_run)[rtl_run])
+
+
+@pytest.mark.parametrize("value, phrase", [("20.1 20.2", "2 air temperatures: expected one "
+                                            "for the test or one per run (Run-count 6)"),
+                                           ("250", "air temperature 250 °C is beyond"),
+                                           ("warm", "not a number")])
+def test_rtl_bad_air_temperature_is_refused(tmp_path, axis, capsys, value, phrase):
+    text = rtl_text(TARGETS_MM, generated_runs(), {}, {"Air temp": value})
+    code, out = run_import(tmp_path, axis, "x.rtl", text)
+    message = capsys.readouterr().err
+    assert code == 2 and not out.exists()
+    assert phrase in message and "field 'Air temp'" in message and "line " in message
 
 
 def test_axis_toml_name_wins_and_the_files_name_is_reported(tmp_path, capsys):

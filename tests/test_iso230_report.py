@@ -101,6 +101,15 @@ def test_report_is_one_self_contained_html_page(tmp_path, capsys):
     assert 'src="http' not in page
 
 
+def test_report_defaults_to_the_empty_model_like_fit_and_diagnose(tmp_path, capsys):
+    folder = syn.iso_case(tmp_path / "case", seed=33, backlash_um=-4.0)
+    out = tmp_path / "report.html"
+    assert main(["report", str(folder), "--out", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == {"report": str(out)}
+    page = out.read_text()
+    assert "verdict: missing_effect" in page and "lead_error" in page
+
+
 def test_report_names_what_a_metrologist_signs(tmp_path):
     """Date, version, case and model on the page; uncertainties in the parameter table,
     which are the fit's own; µm, never um."""
@@ -168,6 +177,38 @@ def test_demo_runs_the_loop_to_adequate(tmp_path, capsys):
     assert summary["rounds"][-1]["rms_um"] < 1.3 * 0.05
     assert summary["fmu_max_difference_um"] < 1e-9
     assert (tmp_path / "report.html").exists() and (tmp_path / "model.toml").exists()
+    # the case and the laser example are copied where the demo says
+    assert summary["case"] == str(tmp_path / "case")
+    assert read_case(tmp_path / "case").positioning.size == 2501
+    assert sorted(p.name for p in (tmp_path / "laser-example").iterdir()) == [
+        "X-axis.rtl", "axis.toml"]
+    readme_says_how_far_the_fit_is_from_the_truth(read_case(tmp_path / "case"),
+                                                  tmp_path / "model.toml")
+
+
+def readme_says_how_far_the_fit_is_from_the_truth(case, model_path):
+    """The README's sentence on the demo's fitted values gives each one's distance from the
+    value the case was generated from, in standard uncertainties, as the fit has it."""
+    import re
+    from pathlib import Path
+
+    from feedaxis.effects import CATALOG, load_model
+    from feedaxis.examples import SEED001_ECCENTRICITY, SEED001_LEAD, SEED001_MOTOR
+    from feedaxis.fit import fit
+
+    result = fit(load_model(model_path, CATALOG), case)
+    truth = [("lead_error", "slope_um_per_mm", SEED001_LEAD["slope_um_per_mm"]),
+             ("assembly_eccentricity", "cos_um", SEED001_ECCENTRICITY["cos_um"]),
+             ("assembly_eccentricity", "sin_um", SEED001_ECCENTRICITY["sin_um"]),
+             ("motor_step_error", "harmonic1_cos_um", SEED001_MOTOR["cos_um"]),
+             ("motor_step_error", "harmonic1_sin_um", SEED001_MOTOR["sin_um"])]
+    distances = [f"{abs(result.model.values[e][p] - t) / result.uncertainties[e][p]:.1f}"
+                 for e, p, t in truth]
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
+    sentence = re.sub(r"\s+", " ", readme.split("The fitted values come back", 1)[1]
+                      .split("The demo leaves", 1)[0])
+    quoted = re.findall(r"(\d\.\d)(?= standard uncertainties off| and | off)", sentence)
+    assert quoted == distances, sentence
 
 
 def test_bundled_case_is_the_documented_reconstruction(tmp_path):

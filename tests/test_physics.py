@@ -305,3 +305,20 @@ def test_thermal_outputs_of_one_point_equal_the_array_path():
                 arrays_um[k], rel=1e-12, abs=1e-12)
             assert thermal.screw_elongation_um(params, rise_K, float(screw_m[k])) == \
                 pytest.approx(along_um[k], rel=1e-12, abs=1e-12)
+
+
+def test_play_crosses_the_backlash_over_b_of_travel_back():
+    """The nut crosses its play of B over B of reversed travel (the error from +B/2 to
+    -B/2); creep inside it changes nothing (the ISO samples of a settling servo); B = 0
+    follows every reversal. Scalar and array errors agree, ±1 gives ±B/2."""
+    engagement = geometry.play_engagement(1.0, -0.0025, 10.0)  # 2.5 µm back of a 10 µm play
+    assert engagement == pytest.approx(0.5)
+    assert geometry.backlash_error_um(engagement, 10.0) == pytest.approx(2.5)
+    engagement = geometry.play_engagement(engagement, -0.0100, 10.0)
+    assert engagement == -1.0 and geometry.backlash_error_um(engagement, 10.0) == -5.0
+    assert geometry.play_engagement(1.0, -1e-12, 10.0) == pytest.approx(1.0, abs=1e-9)
+    assert geometry.play_engagement(1.0, -1e-12, 0.0) == -1.0
+    assert geometry.play_engagement(-1.0, 0.0, 0.0) == -1.0
+    directions = np.array([1.0, -1.0, 0.5, 0.0])
+    np.testing.assert_array_equal(geometry.backlash_error_um(directions, 4.0), [2, -2, 1, 0])
+    assert [geometry.backlash_error_um(float(d), 4.0) for d in directions] == [2, -2, 1, 0]

@@ -60,6 +60,19 @@ def test_iso230_case_loads_back_with_the_iso_layout(tmp_path, fmu_dir):
                     for x, d, s in zip(p.target_mm, p.direction, sag_um)]
     motor_um = motor.motor_step_error_um(p.target_mm, 1.0, 0.72, 10, (0.08, 0.0), (0.06, 0.0))
     np.testing.assert_allclose(p.error_um, geometric_um + motor_um, atol=0.02)
+    assert_duty_is_the_motion(case)
+
+
+def assert_duty_is_the_motion(case):
+    """duty.csv holds the motion simulated: every sample's time lies within it, and the
+    duty puts the axis at the sample's target then (data-format.md: time_s counts from the
+    duty's first row)."""
+    assert case.is_thermal and case.positioning.time_s[-1] <= case.duty.end_s
+    segments = case.duty.segments
+    starts_s = np.array([segment.start_s for segment in segments])
+    for time_s, target_mm in zip(case.positioning.time_s, case.positioning.target_mm):
+        segment = segments[np.searchsorted(starts_s, time_s, side="left") - 1]
+        assert segment.nut_position_mm(time_s) == pytest.approx(target_mm, abs=1e-9)
 
 
 def test_thermal_case_has_duty_and_timed_samples_that_drift_with_heat(tmp_path, fmu_dir):
@@ -115,6 +128,8 @@ def test_ctrl_c_writes_the_samples_computed_so_far(tmp_path, master):
     assert partial.positioning.size % 6 == 0  # whole runs only: 3 targets x 2 directions
     runs = partial.positioning.size // 6
     assert partial.name == f"simulated ISO 230-2 test (interrupted: {runs} of 5 runs)"
+    assert partial.duty.end_s == pytest.approx(partial.positioning.time_s[-1])
+    assert_duty_is_the_motion(partial)
 
 
 @pytest.mark.parametrize("args, message", [

@@ -19,7 +19,7 @@ class GeometricError(AxisSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.input("position_mm", 0.0, "Axis position", "mm")
-        self.input("velocity_mm_s", 0.0, "Axis velocity; its sign sets the approach direction", "mm/s")
+        self.input("velocity_mm_s", 0.0, "Axis velocity; velocity x step moves the nut through its backlash play", "mm/s")
         self.output("error_um", "Positioning deviation, actual - nominal (ISO 230-2 sign)", "um")
         self.parameter("lead_mm", 1.0, "Screw lead, axial travel per revolution", "mm", (0, None))
         self.parameter("offset_um", 0.2515, "Lead error b1 at position 0 (seed 001)", "um")
@@ -34,7 +34,7 @@ class GeometricError(AxisSlave):
         self.parameter("youngs_modulus_Pa", 2.1e11, "Screw Young's modulus", "Pa", (0, None))
         self.parameter("support", "fixed-free", "fixed-free | fixed-fixed | supported-supported")
         self.parameter("fixed_end_mm", -141.0, "Axis coordinate P_f of the fixed end (seed 003 Eq. 15-16)", "mm")
-        self.direction = 1.0
+        self.engagement = 1.0  # in the backlash play: -1 to +1 (geometry.play_engagement)
 
     def build(self):
         if self.support not in geometry.SUPPORTS:
@@ -43,20 +43,22 @@ class GeometricError(AxisSlave):
                                           self.youngs_modulus_Pa, self.support)
 
     def step(self, step_size_s):
-        if self.velocity_mm_s != 0.0:
-            self.direction = 1.0 if self.velocity_mm_s > 0 else -1.0
+        self.engagement = geometry.play_engagement(
+            self.engagement, self.velocity_mm_s * step_size_s, self.backlash_um)
         sag_um = 0.0
         if self.sag_enabled:
             screw_m = mounting.screw_coordinate_m(self.position_mm, self.fixed_end_mm)
             sag_um = geometry.gravity_sag_error_um(screw_m, self.model)
         self.error_um = float(geometry.transmission_error_um(
-            self.position_mm, self.direction, self.lead_mm, self.offset_um, self.slope_um_per_mm,
+            self.position_mm, self.engagement, self.lead_mm, self.offset_um, self.slope_um_per_mm,
             self.eccentricity_cos_um, self.eccentricity_sin_um, self.backlash_um, sag_um))
 
     def model_state(self):
-        return {"direction": self.direction}
+        return {"engagement": self.engagement}
 
     def restore_model_state(self, state):
-        if state["direction"] not in (1.0, -1.0):
-            raise ValueError(f"direction must be 1.0 or -1.0, got {state['direction']!r}")
-        self.direction = float(state["direction"])
+        engagement = state["engagement"]
+        if (isinstance(engagement, bool) or not isinstance(engagement, (int, float))
+                or not -1.0 <= engagement <= 1.0):  # NaN fails the range test too
+            raise ValueError(f"engagement must be a number from -1 to 1, got {engagement!r}")
+        self.engagement = float(engagement)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .compensate import THERMAL_EFFECTS, Compensation, compensate, visits
-from .comptable import default_spacing_mm, from_model, grid_mm, verify
+from .comptable import default_spacing_mm, grid_mm, safe_table, verify
 from .comptable.table import CompTable
 from .diagnose import Diagnosis, diagnose
 from .effects import CATALOG, Model
@@ -144,7 +144,7 @@ def _positioning_details(measurement, model, effects, result):
     case, positioning = measurement.case, measurement.samples
     target_mm = positioning.target_mm
     spacing_mm = default_spacing_mm(case, None)
-    table = from_model(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
+    table = safe_table(case, model, grid_mm(target_mm.min(), target_mm.max(), spacing_mm))
     thermal = case.is_thermal and any(name in model for name in THERMAL_EFFECTS)
     residual = residual_spectrum(case, result.residual_um, effects)
     trend_um = np.polyval(np.polyfit(target_mm, result.measured_um, 1), target_mm)

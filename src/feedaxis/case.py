@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .errors import InputError, finite_float, read_text
+from .errors import InputError, finite_float, read_text, toml_key_line
 from .output import umask_mode
 from .physics.geometry import SUPPORTS
 from .physics.thermal import DutySegment
@@ -206,13 +206,13 @@ def read_axis(path):
     for key, value in data.items():
         if key == "name":
             if not isinstance(value, str):
-                raise CaseError(path, "name must be a string", _key_line(text, key), key)
+                raise CaseError(path, "name must be a string", toml_key_line(text, key), key)
         elif key in TABLES and isinstance(value, dict):
             tables[key] = _check_table(path, text, key, value)
         else:
             raise CaseError(path, _unknown_key_message(key, ["name", "[screw]", "[motor]",
                                                              "[servo]"]),
-                            _key_line(text, key), key)
+                            toml_key_line(text, key), key)
     if "screw" not in tables or "lead_mm" not in tables["screw"]:
         raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
                         column="screw.lead_mm")
@@ -226,7 +226,7 @@ def _check_servo(path, text, servo):
     for key in required:
         if key not in servo:
             raise CaseError(path, f"[servo] {key} is required for a {servo.get('controller')} "
-                                  "controller", _key_line(text, "servo"), f"servo.{key}")
+                                  "controller", toml_key_line(text, "servo"), f"servo.{key}")
     return {"loop_step_s": DEFAULT_LOOP_STEP_S, **servo}
 
 
@@ -241,7 +241,7 @@ def _read_text(path):
 def _check_table(path, text, table, values):
     known = TABLES[table]
     for key, value in values.items():
-        row, column = _key_line(text, key, table), f"{table}.{key}"
+        row, column = toml_key_line(text, key, table), f"{table}.{key}"
         if key not in known:
             raise CaseError(path, _unknown_key_message(key, list(known)), row, column)
         problem = _value_problem(known[key], key, value)
@@ -279,23 +279,6 @@ def _range_problem(key, value):
     if low <= value <= high:
         return None
     return f"is beyond any physical axis: expected {low:g} to {high:g}"
-
-
-def _key_line(text, key, table=None):
-    """1-based line of ``key = ...`` (inside ``[table]`` when given), or of ``[key]``."""
-    current = None
-    for number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        header = re.match(r"\[\s*([A-Za-z0-9_.-]+)\s*\]", stripped)
-        if header:
-            current = header.group(1)
-            if table is None and current == key:
-                return number
-        elif current == table and re.match(rf"{re.escape(key)}\s*=", stripped):
-            return number
-        elif table and re.match(rf"{re.escape(table)}\.{re.escape(key)}\s*=", stripped):
-            return number
-    return None
 
 
 def _read_csv(path, spec):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import warnings
 from contextlib import contextmanager
@@ -22,9 +21,10 @@ from .case import read_case
 from .errors import InputError, check_writable_target, json_safe
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
+from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
+from .uncertainty.correction import corrected_case, temperature_option
 
 COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
-DEFAULT_THERMAL_STEP_S = 0.1
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
              "+ tracking.csv; see data-format.md")
 
@@ -32,6 +32,7 @@ CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.tom
 # options=FUNCTION adding its arguments); build_parser adds them in this file's order.
 COMMANDS = []
 SCENARIOS = []
+SCENARIO_ARGUMENTS = {}  # scenario name -> args -> its keyword arguments (simulate and sweep)
 
 
 def command(name, options=None, **parser_kwargs):
@@ -53,6 +54,14 @@ def scenario(name, options=None, **parser_kwargs):
     def register(handler):
         SCENARIOS.append((name, parser_kwargs, options, handler))
         return handler
+    return register
+
+
+def scenario_arguments(name):
+    """Register the decorated ``args -> keyword arguments`` of scenario NAME's run."""
+    def register(function):
+        SCENARIO_ARGUMENTS[name] = function
+        return function
     return register
 
 
@@ -124,6 +133,7 @@ def _fit_options(parser):
     parser.add_argument("--add", metavar="EFFECT", action="append",
                         help="add an effect by name (repeatable); see `feedaxis effects`")
     parser.add_argument("--out", metavar="M2.toml", help="write the fitted model here")
+    _add_correction_option(parser)
 
 
 @command("fit", help="fit a model's effects to one or several cases",
@@ -135,13 +145,13 @@ def _fit_options(parser):
                      "data cannot determine.",
          options=_fit_options)
 def _cmd_fit(args):
-    from .fit import check_available, evaluate, fit
+    from .fit import check_available, evaluate, fit_with_artefacts
     from .measurement import kinds_for
 
     if args.out:
         check_writable_target(args.out)
     effects = _effects(args)
-    cases = [read_case(folder) for folder in args.cases]
+    cases = [corrected_case(read_case(folder), args.correct_to_20C) for folder in args.cases]
     starting = _starting_model(args, effects)
     model = _with_added(starting, args.add, effects)
     results = []
@@ -149,23 +159,32 @@ def _cmd_fit(args):
         check_available(model, cases, kind)
         before = evaluate(starting, cases, kind)
         with _progress("fitting", " evaluations") as tick:
-            results.append((before, fit(model, cases, progress=tick, kind=kind)))
+            results.append((before, fit_with_artefacts(model, cases, progress=tick, kind=kind)))
     if args.out:
         write_atomically(args.out, results[0][1].fitted_model().to_toml())
-    _emit_each(args, [(result.kind, {
-        "rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
-        "effects": list(result.model.names), "params": result.params(),
-        "uncertainties": result.uncertainties, "undetermined": result.undetermined,
-        "statistics": vars(result.statistics)}, text.fit_lines(result, before.rms_um, args.out))
-        for before, result in results])
+    _emit_each(args, [(result.kind, _fit_payload(before, result),
+                       text.fit_lines(result, before.rms_um, args.out))
+                      for before, result in results])
+
+
+def _fit_payload(before, result):
+    """The --json of a fit: the model's parameters, and the measurement's artefacts apart."""
+    fitted = result.fitted_model()
+    keys = set(fitted.parameter_keys)
+    return {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
+            "effects": list(fitted.names), "params": fitted.values,
+            "uncertainties": {name: result.uncertainties[name] for name in fitted.names},
+            "undetermined": {k: v for k, v in result.undetermined.items() if k in keys},
+            "artefacts": fitted.record.artefacts, "statistics": vars(result.statistics)}
 
 
 def _case_and_model(args):
-    """(effects, case, starting model, the kinds of measurement to compare it with)."""
+    """(effects, case (corrected to 20 °C when asked), starting model, the kinds of
+    measurement to compare it with)."""
     from .measurement import kinds_for
 
     effects = _effects(args)
-    case = read_case(args.case)
+    case = corrected_case(read_case(args.case), args.correct_to_20C)
     model = _starting_model(args, effects)
     return effects, case, model, kinds_for([case], model)
 
@@ -187,6 +206,7 @@ def _emit_each(args, outputs):
 def _diagnose_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser)
+    _add_correction_option(parser)
 
 
 @command("diagnose", help="where the model fails and which effect is missing",
@@ -214,6 +234,7 @@ def _cmd_diagnose(args):
 def _compare_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "model (TOML) as fitted; without it the model is empty")
+    _add_correction_option(parser)
 
 
 @command("compare", help="the measurement's figures: measured against the model",
@@ -237,6 +258,7 @@ def _report_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "fitted model (TOML); without it the model is empty")
     parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
+    _add_correction_option(parser)
 
 
 @command("report", help="self-contained HTML page with the plots",
@@ -319,9 +341,14 @@ def _cmd_import(args):
     payload = {"case": str(folder), "samples": int(measurement.error_um.size),
                "targets": int(len(set(measurement.target_mm))),
                "runs": int(measurement.run.max()), "directions": directions,
-               "name": read_case(folder).name, "dropped": dropped}
+               "name": read_case(folder).name, "dropped": dropped,
+               "ambient_C": None if measurement.ambient_C is None else
+               [float(measurement.ambient_C.min()), float(measurement.ambient_C.max())]}
     lines = [f"{folder}: {payload['samples']} samples, {payload['targets']} targets, "
              f"{payload['runs']} runs, directions {', '.join(f'{d:+d}' for d in directions)}"]
+    if payload["ambient_C"]:
+        lines.append("  kept: the air temperature as positioning.csv ambient_C, "
+                     + " to ".join(f"{t:g}" for t in sorted(set(payload["ambient_C"]))) + " °C")
     lines += [f"  dropped (the case format has no place for it): {key} = {value}"
               for key, value in dropped.items()]
     _emit(args, payload, "\n".join(lines))
@@ -342,6 +369,12 @@ def _comp_table_options(parser):
     parser.add_argument("--axis-id", metavar="ID",
                         help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
                              "axis number 1, fanuc axis 1: the defaults)")
+    parser.add_argument("--force", action="store_true",
+                        help="write the table even when it is refused (it had to leave out "
+                             "effects the data cannot determine, or it is expected to raise A, "
+                             "E or the error between the targets), with warnings saying what "
+                             "it risks")
+    _add_correction_option(parser)
 
 
 @command("comp-table", help="pitch-error compensation table for a CNC controller",
@@ -352,7 +385,10 @@ def _comp_table_options(parser):
                      "--from-measurement: the classical table of the measured means. Then "
                      "read the file back as the controller does and print the ISO 230-2 "
                      "figures expected after it on the measured case, next to those before, "
-                     "with a warning when a table cannot help. See docs/compensation-tables.md.",
+                     "with a warning when a table cannot help. A table is refused (exit 2, "
+                     "nothing written) when it would have to use an effect the data cannot "
+                     "determine or is expected to make the axis worse; --force writes it "
+                     "anyway. See docs/compensation-tables.md.",
          options=_comp_table_options)
 def _cmd_comp_table(args):
     from .comptable import comp_table, summary_lines
@@ -360,15 +396,80 @@ def _cmd_comp_table(args):
     case = read_case(args.case)
     if case.positioning is None:
         raise InputError("a compensation table needs positioning.csv", path=case.folder)
+    case = corrected_case(case, args.correct_to_20C)
     if not (args.model or args.from_measurement):
         raise InputError("give the fitted model (--model M.toml) or --from-measurement",
                          parameter="--model")
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
-                               args.from_measurement, args.axis_id)
+                               args.from_measurement, args.axis_id, args.force)
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
+
+
+def _uncertainty_options(parser):
+    from .uncertainty.engine import DEFAULT_TRIALS
+
+    parser.add_argument("case", metavar="CASE", help="case folder with positioning.csv")
+    _add_model_options(parser, "fitted model (TOML): refitted on the case, then its "
+                               "parameters and compensation table get their uncertainty too")
+    parser.add_argument("--budget", metavar="BUDGET.toml",
+                        help="the uncertainty budget (ISO 230-2 Annex A): the contributions "
+                             "it changes, each with its distribution; the others keep the "
+                             "defaults of docs/uncertainty.md")
+    size = parser.add_mutually_exclusive_group()
+    size.add_argument("--trials", type=int, default=DEFAULT_TRIALS, metavar="N",
+                      help=f"Monte Carlo trials (default {DEFAULT_TRIALS}: JCGM 101 §7.2)")
+    size.add_argument("--tolerance-um", type=float, metavar="T",
+                      help="adaptive instead (JCGM 101 §7.9): blocks of 10^4 trials until "
+                           "every figure's mean, u and interval ends are stable to T µm")
+    parser.add_argument("--seed", type=int, metavar="S",
+                        help="random seed: the same seed gives the same intervals (default: "
+                             "a fresh one, printed)")
+    _add_correction_option(parser)
+    parser.add_argument("--html", metavar="PAGE.html",
+                        help="also write the results as a page with histograms")
+
+
+@command("uncertainty", help="Monte Carlo uncertainty of the ISO 230-2 figures (JCGM 101)",
+         description="The measurement uncertainty of the ISO 230-2 figures (A, E, M, R, B, "
+                     "B̄ per direction), of the fitted model's parameters and of the "
+                     "compensation table's values, by the Monte Carlo method of JCGM 101 "
+                     "over a budget in the structure of ISO 230-2 Annex A (laser "
+                     "calibration, temperature and expansion coefficient of the 20 °C "
+                     "correction, misalignment, set-up/Abbe, EVE) with the repeatability "
+                     "from the case's own runs: 95 % coverage intervals (symmetric and "
+                     "shortest), standard uncertainties and each input's share. See "
+                     "docs/uncertainty.md.",
+         options=_uncertainty_options)
+def _cmd_uncertainty(args):
+    from tqdm import tqdm
+
+    from .uncertainty.budget import default_budget, read_budget
+    from .uncertainty.evaluation import evaluate
+    from .uncertainty.text import uncertainty_lines
+
+    if args.html:
+        check_writable_target(args.html)
+    case = read_case(args.case)
+    model = load_model(args.model, _effects(args)) if args.model else None
+    budget = read_budget(args.budget) if args.budget else default_budget()
+    with tqdm(desc="Monte Carlo", unit="trial", unit_scale=True, delay=1.0, leave=False,
+              file=sys.stderr) as bar:
+        def tick(trials, planned):
+            bar.total = planned
+            bar.update(trials)
+
+        result = evaluate(case, model, budget, args.trials, args.tolerance_um, args.seed,
+                          args.correct_to_20C, progress=tick)
+    payload = result.to_json()
+    if args.html:
+        from .uncertainty.page import write_page
+
+        payload["html"] = str(write_page(result, args.html))
+    _emit(args, payload, uncertainty_lines(result)
+          + (f"\npage: {args.html}" if args.html else ""))
 
 
 def _effects_options(parser):
@@ -402,85 +503,31 @@ def _cmd_build_fmus(args):
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
 
 
-def _parameter_value(text):
-    """``--set`` value: true/false, an integer, a number, else the text."""
-    if text.lower() in ("true", "false"):
-        return text.lower() == "true"
-    for convert in (int, float):
-        try:
-            return convert(text)
-        except ValueError:
-            pass
-    return text
-
-
-def _axis_overrides(args):
-    """{component: {parameter: value}} from --model/--axis and --set, --set last."""
-    overrides = {}
-    if args.model:
-        if not args.axis:
-            raise InputError("needs --axis (the axis.toml or case folder it was fitted on): "
-                             "the FMU parameters depend on the axis", parameter="--model")
-        from .case import read_axis
-
-        axis_path = Path(args.axis)
-        axis = read_axis(axis_path / "axis.toml" if axis_path.is_dir() else axis_path)
-        overrides = load_model(args.model, _effects(args)).fmu_parameters(axis)
-    for item in args.set or ():
-        name, _, value = item.partition("=")
-        component, _, parameter = name.partition(".")
-        if not (component and parameter and value):
-            raise InputError("expected COMPONENT.PARAMETER=VALUE, e.g. NpidServo.nonlinear=true",
-                             parameter=f"--set {item}")
-        overrides.setdefault(component, {})[parameter] = _parameter_value(value)
-    return overrides
-
-
 def _axis_system(args):
-    """The default axis at ``--step-ms`` (and ``--thermal-step-s``) with the overrides.
+    """The default axis from the command's axis options (--step-ms, --thermal-step-s,
+    --model/--axis, --set): :func:`feedaxis.cosim.system.axis_from_options`."""
+    from .cosim.system import axis_from_options
 
-    Without ``--thermal-step-s`` ThermalScrew steps every 0.1 s rounded up to a whole
-    number of macro steps, so any ``--step-ms`` works.
-    """
-    from .cosim.system import default_axis, whole_ratio
-
-    thermal_step_s = getattr(args, "thermal_step_s", None)
-    for option, value in (("--step-ms", args.step_ms), ("--thermal-step-s", thermal_step_s)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise InputError(f"must be > 0, got {value:g}", parameter=option)
-    step_s = args.step_ms * 1e-3
-    if thermal_step_s is None:
-        thermal_step_s = step_s * math.ceil(DEFAULT_THERMAL_STEP_S / step_s - 1e-9)
-    elif whole_ratio(thermal_step_s, step_s) is None:
-        raise InputError(f"{thermal_step_s:g} s must be a whole multiple of the macro step "
-                         f"--step-ms {args.step_ms:g}", parameter="--thermal-step-s")
-    return default_axis(step_s, step_s, thermal_step_s).with_parameters(_axis_overrides(args))
+    return axis_from_options(args.step_ms, getattr(args, "thermal_step_s", None), args.model,
+                             args.axis, args.set, _effects(args))
 
 
 def _fmu_paths(args):
-    if args.fmus:
-        from .fmu_build import FMU_NAMES
+    from .cosim.fmu_cache import fmu_paths
 
-        paths = {name: Path(args.fmus) / f"{name}.fmu" for name in FMU_NAMES}
-        missing = [str(p) for p in paths.values() if not p.exists()]
-        if missing:
-            raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {args.fmus}")
-        return paths
-    from .cosim.fmu_cache import cached_fmus
-
-    return cached_fmus()
+    return fmu_paths(args.fmus)
 
 
 @contextmanager
-def _step_progress():
-    """A tqdm bar over macro steps on stderr, shown when the run takes over a second."""
+def _counter_progress(label, unit, unit_scale=False):
+    """A tqdm bar of ``progress(done, total)`` calls on stderr, shown after a second."""
     from tqdm import tqdm
 
-    with tqdm(desc="simulating", unit="step", unit_scale=True, delay=1.0, leave=False,
+    with tqdm(desc=label, unit=unit, unit_scale=unit_scale, delay=1.0, leave=False,
               file=sys.stderr) as bar:
-        def update(done_steps, total_steps):
-            bar.total = total_steps
-            bar.update(done_steps - bar.n)
+        def update(done, total):
+            bar.total = total
+            bar.update(done - bar.n)
 
         yield update
 
@@ -494,19 +541,27 @@ def _simulate(args, run):
     check_writable_target(args.out, "folder")
     system = _axis_system(args)
     with Master(system, _fmu_paths(args)) as master:
-        with _step_progress() as progress:
+        with _counter_progress("simulating", "step", True) as progress:
             return run(master, progress)
 
 
 def _simulate_options(parser):
+    _scenario_parsers(parser, "case folder to create (must not exist)")
+
+
+def _scenario_parsers(parser, out_help, more_options=None, handler=None):
+    """One subparser per scenario: its options, OUT, ``more_options``, the axis options;
+    run by ``handler`` (default: the scenario's own)."""
     scenarios = parser.add_subparsers(dest="scenario", required=True, metavar="SCENARIO")
-    for name, parser_kwargs, options, handler in SCENARIOS:
+    for name, parser_kwargs, options, scenario_handler in SCENARIOS:
         sub = scenarios.add_parser(name, **parser_kwargs)
         options(sub)
-        sub.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
+        sub.add_argument("out", metavar="OUT", help=out_help)
+        if more_options:
+            more_options(sub)
         _add_axis_options(sub)
         _add_common_options(sub)
-        sub.set_defaults(handler=handler)
+        sub.set_defaults(handler=handler or scenario_handler)
 
 
 # the scenarios below carry the handlers
@@ -530,21 +585,30 @@ def _simulate_iso230_options(parser):
     _add_motion_options(parser)
 
 
-@scenario("iso230", help="ISO 230-2 positioning test -> axis.toml + positioning.csv",
+@scenario("iso230", help="ISO 230-2 positioning test -> positioning.csv + duty.csv",
           description="Targets P_i = (i-1) p + r_i (r_i a different small offset at each), "
                       "RUNS runs approaching every target in + and in -, overrun beyond the "
-                      "end targets, dwell, then the deviation table position - target.",
+                      "end targets, dwell, then the deviation table position - target; "
+                      "duty.csv holds the motion simulated (it warms the screw), "
+                      "positioning.csv the samples with their time.",
           options=_simulate_iso230_options)
 def _cmd_simulate_iso230(args):
-    from .cosim.scenarios import iso230_targets, simulate_iso230
+    from .cosim.scenarios import simulate_iso230
 
-    targets = iso230_targets(args.targets, args.spacing_mm, args.first_mm)
     summary = _simulate(args, lambda master, progress: simulate_iso230(
-        args.out, master, targets, args.runs, args.feed_mm_min, args.dwell_s, args.overrun_mm,
-        progress=progress))
+        args.out, master, **_iso230_arguments(args), progress=progress))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples, {args.targets} targets x "
                          f"{args.runs} runs each direction; deviation "
                          f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} um")
+
+
+@scenario_arguments("iso230")
+def _iso230_arguments(args):
+    from .cosim.scenarios import iso230_targets
+
+    return {"targets_mm": iso230_targets(args.targets, args.spacing_mm, args.first_mm),
+            "runs": args.runs, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s,
+            "overrun_mm": args.overrun_mm}
 
 
 def _simulate_thermal_options(parser):
@@ -563,17 +627,21 @@ def _simulate_thermal_options(parser):
                       "positioning.csv.",
           options=_simulate_thermal_options)
 def _cmd_simulate_thermal(args):
-    from .case import read_duty
     from .cosim.scenarios import simulate_thermal
 
-    duty = read_duty(args.duty)
-    targets = _numbers(args.targets, "--targets")
     summary = _simulate(args, lambda master, progress: simulate_thermal(
-        args.out, master, duty, targets, args.every_s, args.feed_mm_min, args.dwell_s,
-        progress=progress))
+        args.out, master, **_thermal_arguments(args), progress=progress))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples (duty.csv + "
                          f"positioning.csv); deviation {summary['error_min_um']:.3f} to "
                          f"{summary['error_max_um']:.3f} um")
+
+
+@scenario_arguments("thermal")
+def _thermal_arguments(args):
+    from .case import read_duty
+
+    return {"duty": read_duty(args.duty), "targets_mm": _numbers(args.targets, "--targets"),
+            "every_s": args.every_s, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s}
 
 
 def _simulate_tracking_options(parser):
@@ -598,10 +666,8 @@ def _simulate_tracking_options(parser):
 def _cmd_simulate_tracking(args):
     from .cosim.scenarios import simulate_tracking
 
-    force = {} if args.force_N is None else {"force_N": args.force_N}
     summary = _simulate(args, lambda master, progress: simulate_tracking(
-        args.out, master, args.frequency_hz, args.amplitude_mm, args.duration_s,
-        args.controller, args.spindle_rpm, progress=progress, **force))
+        args.out, master, **_tracking_arguments(args), progress=progress))
     _emit(args, summary, f"{args.out}/tracking.csv: {args.controller.upper()}, "
                          f"{args.frequency_hz:g} Hz, {args.amplitude_mm:g} mm"
                          + (f", cutting force at {args.spindle_rpm:g} rpm"
@@ -609,6 +675,14 @@ def _cmd_simulate_tracking(args):
                          + f"; after the first second: max tracking error "
                            f"{summary['max_tracking_error_mm']:.4f} mm, RMS "
                            f"{summary['rms_tracking_error_mm']:.4f} mm")
+
+
+@scenario_arguments("tracking")
+def _tracking_arguments(args):
+    force = {} if args.force_N is None else {"force_N": args.force_N}
+    return {"frequency_hz": args.frequency_hz, "amplitude_mm": args.amplitude_mm,
+            "duration_s": args.duration_s, "controller": args.controller,
+            "spindle_rpm": args.spindle_rpm, **force}
 
 
 def _numbers(text, option):
@@ -676,11 +750,90 @@ def _cmd_export_fmu(args):
                                     f"FMUs, one {args.step_ms:g} ms step for all)")
 
 
+def _sweep_options(parser):
+    _scenario_parsers(parser, "folder to create (must not exist unless --resume): "
+                              "trials.parquet, summary.json, summary.txt, report.html",
+                      _add_sweep_options, _cmd_sweep)
+
+
+def _add_sweep_options(sub):
+    sub.add_argument("--vary", metavar="NAME=SPEC", action="append", default=[],
+                     help="vary an FMU parameter (repeatable): COMPONENT.PARAMETER= "
+                          "grid(a,b,n) | uniform(a,b) | normal(mu,sigma) | "
+                          "truncnormal(mu,sigma,lo,hi) | triangular(a,mode,b); "
+                          "A.x,B.y=mvnormal([mu1,mu2],[[c11,c12],[c21,c22]]) for a "
+                          "correlated normal")
+    sub.add_argument("--trials", type=int, metavar="N",
+                     help="draws of the sampled specs and of --from-model (each grid "
+                          "point gets N); grids alone set their own count")
+    sub.add_argument("--seed", type=int, default=0,
+                     help="trial k draws from the stream (seed, k) (default 0)")
+    sub.add_argument("--from-model", metavar="M.toml",
+                     help="draw the model's parameters from the covariance its fit saved "
+                          "([fit] table, `feedaxis fit --out`); needs --axis")
+    sub.add_argument("--hold-undetermined", action="store_true",
+                     help="hold the parameters the fit could not determine at their "
+                          "fitted values (without it such a model is refused)")
+    sub.add_argument("--workers", type=int, metavar="N",
+                     help="local Dask worker processes (default: one per core; 0 runs "
+                          "in this process)")
+    sub.add_argument("--scheduler", metavar="ADDRESS",
+                     help="run on the Dask cluster of this scheduler (tcp://host:8786) "
+                          "instead of a local one")
+    sub.add_argument("--resume", action="store_true",
+                     help="run only the trials an interrupted sweep into OUT has not "
+                          "finished")
+
+
+# the scenarios of simulate, each swept by the one handler below
+command("sweep", help="many co-simulations of a scenario with varied FMU parameters (Dask)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Run a scenario once per trial, each with its own FMU parameter values "
+                    "(--vary specs, or a fitted model's parameters drawn from its fit's\n"
+                    "covariance with --from-model), on a local Dask cluster, a remote one "
+                    "(--scheduler) or in this process\n(--workers 0). Writes OUT/"
+                    "trials.parquet (one row per trial: its inputs, the scenario's figures, "
+                    "its curve),\nand the summary (quantiles, sensitivities, prediction "
+                    "bands) as summary.txt, summary.json and report.html.\nThe file is the "
+                    "same whatever runs it. Ctrl-C keeps the finished trials; --resume runs "
+                    "the rest. See docs/sweep.md.",
+        epilog="examples:\n"
+               "  feedaxis sweep iso230 out --vary GeometricError.backlash_um=grid(0,10,11) "
+               "--targets 3 --runs 2\n"
+               "  feedaxis sweep tracking out --vary NpidServo.friction_N=uniform(0,2) "
+               "--trials 200\n"
+               "  feedaxis sweep thermal out --duty duty.csv --targets 50,250 --from-model "
+               "thermal.toml --axis CASE --trials 500",
+        options=_sweep_options)(None)
+
+
+def _cmd_sweep(args):
+    from .cosim.sweep import sweep
+    from .cosim.sweep_summary import summary_lines
+
+    with _counter_progress("sweeping", "trial") as progress:
+        sweep(args.scenario, args.vary, args.trials, args.seed, args.out,
+              from_model=args.from_model, axis=args.axis,
+              hold_undetermined=args.hold_undetermined, step_ms=args.step_ms,
+              thermal_step_s=args.thermal_step_s, model=args.model, set_items=args.set or (),
+              effects=_effects(args), fmus=args.fmus,
+              workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+              progress=progress, **SCENARIO_ARGUMENTS[args.scenario](args))
+    summary = json.loads((Path(args.out) / "summary.json").read_text())
+    _emit(args, summary, summary_lines(summary) + f"\nfiles: {args.out}/trials.parquet, "
+                                                  "summary.json, summary.txt, report.html")
+
+
 def _add_model_options(sub, model_help="starting model (TOML); without it the model is empty",
                        required=False):
     sub.add_argument("--model", metavar="M.toml", help=model_help, required=required)
     sub.add_argument("--effects", metavar="F.py", action="append",
                      help="Python file with your own effects (repeatable); see the README")
+
+
+def _add_correction_option(sub):
+    sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T",
+                     type=temperature_option, help=CORRECTION_HELP)
 
 
 def _add_motion_options(sub):

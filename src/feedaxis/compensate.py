@@ -111,11 +111,17 @@ def compensate(case, model):
         raise InputError("no target is measured twice; the thermal error is the drift of a "
                          "target from its first visit", path=case.folder)
     predicted_um = thermal.predict_um(case)
-    measured_um = positioning.error_um
-    thermal_error_um = measured_um - measured_um[reference]
+    drift_um = thermal_error_um(positioning)
     return Compensation(positioning.time_s, positioning.target_mm, positioning.direction, visit,
-                        measured_um, thermal_error_um, -predicted_um,
-                        thermal_error_um - (predicted_um - predicted_um[reference]))
+                        positioning.error_um, drift_um, -predicted_um,
+                        drift_um - (predicted_um - predicted_um[reference]))
+
+
+def thermal_error_um(positioning):
+    """The thermal error a thermal test measures: each sample's deviation minus that of the
+    first visit of its target and direction (µm; seed 003 Fig. 9-13)."""
+    _, reference = visits(positioning)
+    return positioning.error_um - positioning.error_um[reference]
 
 
 def visits(positioning):

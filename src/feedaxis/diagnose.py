@@ -3,11 +3,12 @@
 The measurement (:mod:`feedaxis.measurement`) supplies what differs between kinds: its
 noise model, its outliers, its nuisances, its shapes of structure; the decision is this:
 
-1. The model is refitted; the outliers the measurement finds are reported by row and kept
-   out of everything that follows.
-2. The nuisances the measurement models with every fit (a drift along a positioning
-   test's clock, so it never aliases into backlash) are added; each is reported when its
-   test passes.
+1. The model is refitted as ``feedaxis fit`` fits it (:func:`feedaxis.fit.fit_with_artefacts`):
+   the outliers the measurement finds are reported by row (those following the motion's
+   start or stop as transients) and kept out of everything that follows; the nuisances
+   the measurement models with every fit (a drift along a positioning test's clock, so it
+   never aliases into backlash) are fitted beside the effects, each reported when its test
+   passes. So ``fit`` saves what the diagnosis estimates.
 3. Stepwise selection: every available effect acting on the measurement and not yet in the
    model is fitted on top and judged by the extra-sum-of-squares F test of the
    measurement's noise model (:mod:`feedaxis.stats.noise`). The best (smallest p-value) is
@@ -18,8 +19,12 @@ noise model, its outliers, its nuisances, its shapes of structure; the decision 
    shapes and the same policy (Bonferroni over every shape tried, a free-frequency search
    counting its resolvable frequencies); each structure found is added as a linear basis
    and the model refitted. Then the measurement's last test for an irregular lack of fit.
+   A significant effect the data show to be something else (a catalog wavelength standing
+   in for a periodic error at another wavelength) is passed over with the reason.
 5. Verdict: ``missing_effect`` when an effect is named, ``unexplained`` when structure (or
-   a nuisance) is left, ``adequate`` when the residual is consistent with the noise.
+   a nuisance) is left, ``undetermined`` when the samples cannot tell noise from structure
+   (one pass without replicates: the reason is given), ``adequate`` when the residual is
+   consistent with the noise model, which every verdict names.
 
 Structure and effects below ``RESOLUTION_UM`` are rounding, never named.
 """
@@ -30,7 +35,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .effects import CATALOG, BasisEffect, Model
-from .fit import FitResult, fit, too_few_samples
+from .fit import (FD_STEP, FitResult, ParameterLayout, Problem, fit, fit_with_artefacts,
+                  too_few_samples)
 from .measurement import kinds_for, measurement_of
 from .physics.threads import one_blas_thread
 from .stats.judge import FAMILY_ALPHA, Test, accepts
@@ -101,8 +107,9 @@ class Structure:
 class Diagnosis:
     """Everything :func:`diagnose` found on the samples of one kind of measurement (read
     from ``file``): the refit of the model (``base``), the noise and where it comes from,
-    the verdict, the missing effects, the unexplained structure, what was passed over, the
-    outliers left out, the test that decided, the last fit."""
+    the verdict (and, when ``undetermined``, why), the missing effects, the unexplained
+    structure, what was passed over, the outliers and transients left out, the axis's
+    repeatability against its systematic error, the test that decided, the last fit."""
 
     measurement: str
     file: str
@@ -116,6 +123,9 @@ class Diagnosis:
     outlier_rows: list
     test_used: str
     final: FitResult = field(repr=False)
+    transient_rows: list = field(default_factory=list)
+    undetermined_reason: str | None = None
+    repeatability: dict | None = None
 
     @property
     def rms_um(self):
@@ -124,10 +134,12 @@ class Diagnosis:
     def to_json(self):
         return {"measurement": self.measurement, "rms_um": self.rms_um,
                 "noise_um": self.noise_um, "verdict": self.verdict,
+                "undetermined_reason": self.undetermined_reason,
                 "candidates": [c.to_json() for c in self.candidates],
                 "unexplained": [s.to_json() for s in self.unexplained],
                 "noise_source": self.noise_source, "skipped": self.skipped,
-                "outlier_rows": self.outlier_rows, "test": self.test_used,
+                "outlier_rows": self.outlier_rows, "transient_rows": self.transient_rows,
+                "repeatability": self.repeatability, "test": self.test_used,
                 "family_alpha": FAMILY_ALPHA}
 
 
@@ -148,29 +160,26 @@ def diagnose(case, model, effects=None, progress=None, kind=None):
     """
     effects = CATALOG if effects is None else effects
     notify = progress or (lambda label: None)
-    measurement = measurement_of(case, kind or kinds_for([case], model)[0])
     notify("model")
-    first = fit(model, measurement)
-    outliers = measurement.outliers(first.residual_um)
-    if outliers.size:
-        keep = np.ones(measurement.size, dtype=bool)
-        keep[outliers] = False
-        measurement = measurement.subset(keep)
-        first = fit(model, measurement)
+    base = fit_with_artefacts(model, measurement_of(case, kind or kinds_for([case], model)[0]))
+    measurement = base.measurements[0]
     stages = len(measurement.stages)
     pending, skipped = _available(measurement, model, effects)
-    left = _with_nuisances(measurement, first, notify)
-    candidates, left = _select(measurement, left, pending, skipped, stages, notify)
+    candidates, left = _select(measurement, base, pending, skipped, stages, notify)
     unexplained = _nuisance_findings(measurement, left, stages, notify)
     structures, final = find_structures(measurement, left, measurement.shapes(effects), stages,
                                         notify)
     unexplained += structures
+    reason = None if candidates or unexplained else measurement.undetermined(final, stages)
     noise_um, noise_source = measurement.noise.estimate_um(final.residual_um)
-    verdict = "missing_effect" if candidates else "unexplained" if unexplained else "adequate"
+    verdict = ("missing_effect" if candidates else "unexplained" if unexplained
+               else "undetermined" if reason else "adequate")
     test_used = (f"{measurement.noise.name}, family-wise error rate {FAMILY_ALPHA:g} over the "
                  f"diagnosis (Bonferroni over its {stages} stages and the terms tried)")
-    return Diagnosis(measurement.kind, measurement.file, first, noise_um, noise_source, verdict, candidates,
-                     unexplained, skipped, measurement.rows(outliers), test_used, final)
+    return Diagnosis(measurement.kind, measurement.file, base, noise_um, noise_source, verdict,
+                     candidates, unexplained, skipped, base.artefacts["outlier_rows"],
+                     test_used, final, base.artefacts["transient_rows"], reason,
+                     measurement.repeatability())
 
 
 def _available(measurement, model, effects):
@@ -185,20 +194,6 @@ def _available(measurement, model, effects):
         else:
             pending[name] = effect
     return pending, skipped
-
-
-def _with_nuisances(measurement, first, notify):
-    """The model with the measurement's nuisances, when the samples can carry them."""
-    nuisances = measurement.nuisances()
-    if not nuisances:
-        return first
-    model = first.model
-    for name, _, basis in nuisances:
-        model = model + BasisEffect(name, basis)
-    if too_few_samples(model, [measurement]):
-        return first
-    notify("nuisances")
-    return fit(model, measurement)
 
 
 def _explained_um(before, after):
@@ -218,20 +213,66 @@ def _select(measurement, left, pending, skipped, stages, notify):
                 del pending[effect.name]
                 continue
             notify(effect.name)
-            result = fit(left.model + effect, measurement)
+            result = fit(left.model + effect, measurement) if effect.additive else None
+            after_um = (result.residual_um if result else
+                        _screened_residual(measurement, left, effect))
             tested.append((measurement.noise.extra_ss_test(
-                left.residual_um, result.residual_um, len(effect.parameters),
-                result.statistics.n_free), effect, result))
-        if not tested:
+                left.residual_um, after_um, len(effect.parameters),
+                left.statistics.n_free + len(effect.parameters)), effect, result))
+        named = _best_candidate(measurement, left, tested, pending, skipped, stages)
+        if named is None:
             break
-        test, effect, result = min(tested, key=lambda item: item[0].p_value)
-        if not accepts(test.p_value, len(tested), stages) or \
-                _explained_um(left, result) < RESOLUTION_UM:
-            break
+        test, effect, result = named
         candidates.append(_candidate(measurement, left, effect, result, test))
         del pending[effect.name]
         left = result
     return candidates, left
+
+
+def _screened_residual(measurement, left, effect):
+    """The residual of ``left`` after one Gauss-Newton step with ``effect`` added at its
+    neutral values (the score test's linearisation): the step over the model's Jacobian
+    at its optimum and the effect's columns by differences (its ``probe`` steps, else
+    relative ones). An effect acting inside the system costs a simulation per parameter
+    so, not a fit (on a 500 s trace a fit of the loop took seconds); the effect the
+    screening ranks first is then fitted in full and tested again."""
+    model = left.model + effect
+    start = {**left.model.values, effect.name: dict(effect.neutral)}
+    problem = Problem(model, [measurement])
+    base_um = problem.predicted_um(start)
+    columns = []
+    for parameter in effect.parameters:
+        value = start[effect.name][parameter.name]
+        step = effect.probe.get(parameter.name) or FD_STEP * max(1.0, abs(value))
+        shifted = {**start, effect.name: {**start[effect.name], parameter.name: value + step}}
+        columns.append((problem.predicted_um(shifted) - base_um) / step)
+    jacobian = left.jacobian if left.jacobian is not None else Problem(
+        left.model, [measurement]).jacobian(ParameterLayout(left.model, measurement.case.axis))(
+        ParameterLayout(left.model, measurement.case.axis).start())
+    design = np.column_stack([-jacobian, *columns])
+    residual = measurement.measured_um - base_um
+    return residual - design @ np.linalg.lstsq(design, residual, rcond=None)[0]
+
+
+def _best_candidate(measurement, left, tested, pending, skipped, stages):
+    """The (test, effect, result) with the smallest p-value that passes the policy and is
+    what the data show (a rival shape passes it over, with the reason), or None. A
+    screened candidate (no result yet) is fitted in full before it is judged."""
+    for test, effect, result in sorted(tested, key=lambda item: item[0].p_value):
+        if result is None and accepts(test.p_value, len(tested), stages):
+            result = fit(left.model + effect, measurement)
+            test = measurement.noise.extra_ss_test(left.residual_um, result.residual_um,
+                                                   len(effect.parameters),
+                                                   result.statistics.n_free)
+        if not accepts(test.p_value, len(tested), stages) or \
+                _explained_um(left, result) < RESOLUTION_UM:
+            return None
+        rival = measurement.rival(effect, left, result)
+        if rival is None:
+            return test, effect, result
+        skipped[effect.name] = rival
+        del pending[effect.name]
+    return None
 
 
 def _candidate(measurement, left, effect, result, test):
@@ -328,7 +369,7 @@ def _best_shape(measurement, current, shapes):
         amplitude_um = shape.amplitude_um(measurement, fitted, trial.location)
         if amplitude_um < RESOLUTION_UM:
             continue
-        test = trial.test or measurement.noise.extra_ss_test(
+        test = trial.test or measurement.noise.shape_test(
             residual, residual - fitted, shape.extra, current.statistics.n_free + shape.extra)
         options.append((test, shape, trial, fitted, amplitude_um))
     if not options:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 
 
@@ -134,3 +135,20 @@ def finite_float(text):
     if not math.isfinite(value):
         raise ValueError(f"must be finite, got {text!r}")
     return value
+
+
+def toml_key_line(text, key, table=None):
+    """1-based line of ``key = ...`` (inside ``[table]`` when given), or of ``[key]``."""
+    current = None
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        header = re.match(r"\[\s*([A-Za-z0-9_.-]+)\s*\]", stripped)
+        if header:
+            current = header.group(1)
+            if table is None and current == key:
+                return number
+        elif current == table and re.match(rf"{re.escape(key)}\s*=", stripped):
+            return number
+        elif table and re.match(rf"{re.escape(table)}\.{re.escape(key)}\s*=", stripped):
+            return number
+    return None

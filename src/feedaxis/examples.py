@@ -10,6 +10,10 @@ short-wave ripple is about the paper's 0.5 µm) and 0.05 µm Gaussian measuremen
 
 Seed 003 thermal tests: the X axis of Table 1 + Table 3 under a Table 2 loading (stroke
 0-500 mm assumed), with a lead error and 1 µm noise, sampled by + runs over 11 targets.
+
+The laser example (``data/laser_example``, shipped for ``feedaxis import``): a Renishaw
+``.rtl`` of an ISO 230-2 test of a 500 mm axis with a 10 mm lead, generated from a known
+lead error and backlash, and the ``axis.toml`` it is imported with.
 """
 from __future__ import annotations
 
@@ -31,6 +35,12 @@ SEED001_MOTOR = {"cos_um": 0.12, "sin_um": 0.09}
 SEED001_NOISE_UM = 0.05
 SEED001_SEED = 2023
 BUNDLED_CASE = Path(__file__).resolve().parent / "data" / "micro_bms_seed001"
+LASER_EXAMPLE = Path(__file__).resolve().parent / "data" / "laser_example"
+LASER_LEAD_MM = 10.0
+LASER_LEAD = {"offset_um": 1.5, "slope_um_per_mm": -0.02}
+LASER_BACKLASH_UM = 3.0
+LASER_NOISE_UM = 0.4
+LASER_SEED = 230
 
 
 def seed001_error_um(position_mm):
@@ -97,3 +107,30 @@ def write_table2_case(folder, feed_mm_min, params=None, noise_um=1.0, seed=0, ru
     return write_case(folder, axis, duty=duty, positioning={
         "target_mm": target_mm, "error_um": error_um, "direction": np.ones_like(target_mm),
         "time_s": time_s})
+
+
+def laser_example_rtl(seed=LASER_SEED):
+    """The text of the shipped ``X-axis.rtl``: 11 targets P_i = (i - 1)·50 mm + r_i (ISO 230-2,
+    r_i as ``feedaxis simulate iso230``), 5 cycles of a + and a - run, deviation = lead error
+    ``LASER_LEAD`` + backlash ``LASER_BACKLASH_UM`` + Gaussian noise ``LASER_NOISE_UM``,
+    rounded to 0.1 nm as a laser system writes it; air temperature 20.4 °C."""
+    from .cosim.scenarios import iso230_targets
+    from .importers.rtl import rtl_text
+
+    rng = np.random.default_rng(seed)
+    target_mm = np.round(iso230_targets(11, 50.0), 4)
+    runs = []
+    for _ in range(5):
+        for direction in (1.0, -1.0):
+            error_um = (geometry.lead_error_um(target_mm, **LASER_LEAD)
+                        + geometry.backlash_error_um(direction, LASER_BACKLASH_UM)
+                        + rng.normal(0.0, LASER_NOISE_UM, target_mm.size))
+            runs.append((direction, np.round(error_um, 4)))
+    user_text = {"Machine": "VMC-500", "Serial No": "example", "Date": "2026-01-15",
+                 "By": "feedaxis", "Axis": "X", "Location": "generated",
+                 "TITLE": f"feedaxis example: lead error {LASER_LEAD['offset_um']} um "
+                          f"{LASER_LEAD['slope_um_per_mm']:+} um/mm, backlash "
+                          f"{LASER_BACKLASH_UM} um, noise {LASER_NOISE_UM} um (seed {seed})"}
+    environment = {"Air temp": "20.4", "Air Press": "1013.2", "Air Humid": "45",
+                   "Mat temp 1": "20.6", "Exp coeff": "11.7"}
+    return rtl_text(target_mm, runs, user_text, environment)

@@ -14,11 +14,12 @@ uncertainty, widened where the measurement's residual is serially correlated.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
-from .effects import FitRecord, Model
+from .effects import BasisEffect, FitRecord, Model
 from .errors import InputError
 from .measurement import Measurement, kinds_for, measurement_of
 from .physics.threads import one_blas_thread
@@ -67,7 +68,9 @@ class FitResult:
     """A fitted model with its residual, statistics and parameter uncertainties.
 
     ``measured_um`` is the measured deviation, ``residual_um`` measured - predicted, both
-    at the samples of ``measurements`` concatenated.
+    at the samples of ``measurements`` concatenated; ``jacobian`` d residual / d parameters
+    at the optimum (samples x parameters in the model's order), kept where the model has
+    parameters that enter nonlinearly (for the diagnosis's linearised screening).
     """
 
     model: Model
@@ -78,6 +81,8 @@ class FitResult:
     undetermined: dict = field(default_factory=dict)
     covariance: np.ndarray | None = field(default=None, repr=False)
     measurements: list = field(default_factory=list, repr=False)
+    artefacts: dict = field(default_factory=dict)
+    jacobian: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def rms_um(self):
@@ -93,12 +98,22 @@ class FitResult:
         return {name: dict(self.model.values[name]) for name in self.model.names}
 
     def fitted_model(self):
-        """The fitted model carrying its :class:`~feedaxis.effects.FitRecord` (covariance,
-        undetermined parameters), as ``fit --out`` saves it."""
-        keys = self.model.parameter_keys
-        covariance = self.covariance if self.covariance is not None else np.zeros((len(keys),) * 2)
-        return self.model.with_record(FitRecord(keys, covariance, dict(self.undetermined),
-                                                self.statistics.n_points, self.rms_um))
+        """The fitted model as ``fit --out`` saves it: its effects (the measurement
+        artefacts fitted beside them, a drift, left out: they are not the machine's) with
+        the :class:`~feedaxis.effects.FitRecord` of their covariance, the undetermined
+        parameters and the artefacts."""
+        kept = [e for e in self.model.effects if not isinstance(e, BasisEffect)]
+        model = Model(kept, {e.name: self.model.values[e.name] for e in kept})
+        keys, every = model.parameter_keys, self.model.parameter_keys
+        index = [every.index(key) for key in keys]
+        covariance = (self.covariance[np.ix_(index, index)] if self.covariance is not None
+                      else np.zeros((len(keys),) * 2))
+        nuisances = {e.name: dict(self.model.values[e.name]) for e in self.model.effects
+                     if isinstance(e, BasisEffect)}
+        artefacts = {**self.artefacts, **({"nuisances": nuisances} if nuisances else {})}
+        return model.with_record(FitRecord(
+            keys, covariance, {k: v for k, v in self.undetermined.items() if k in keys},
+            self.statistics.n_points, self.rms_um, artefacts))
 
 
 def measurements(model, data, kind=None):
@@ -157,7 +172,8 @@ def evaluate(model, data, kind=None):
     problem = Problem(model, found)
     residual = problem.measured_um - problem.predicted_um(model.values)
     return FitResult(model, Statistics.of(problem.measured_um, residual, 0),
-                     problem.measured_um, residual, measurements=found)
+                     problem.measured_um, residual, measurements=found,
+                     jacobian=np.zeros((residual.size, 0)))
 
 
 @one_blas_thread
@@ -191,17 +207,47 @@ def fit(model, data, progress=None, kind=None):
         return evaluate(model, found)
     problem = Problem(model, found, progress)
     start = variable_projection(problem, layout)
-    solution = least_squares(problem.residual(layout), start, jac=problem.jacobian(layout),
-                             bounds=layout.bounds(), x_scale="jac", method="trf")
-    inflation = found[0].uncertainty_inflation(solution.fun)
+    solution = (_linear_solution(problem, layout, start) if layout.nonlinear_index.size == 0
+                else least_squares(problem.residual(layout), start, bounds=layout.bounds(),
+                                   jac=problem.jacobian(layout), x_scale="jac", method="trf"))
     sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
-                                                    solution.active_mask, layout, inflation)
+                                                    solution.active_mask, layout, found)
     fitted = model.with_values(layout.values(solution.x))
     if found[0].loose_share is not None:
         flag_loose(fitted, sigma, undetermined, found[0].loose_share)
     result = FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
-                       problem.measured_um, solution.fun, sigma, undetermined, covariance, found)
+                       problem.measured_um, solution.fun, sigma, undetermined, covariance, found,
+                       jacobian=solution.jac if layout.nonlinear_index.size else None)
     _check_finite(result, found)
+    return result
+
+
+def fit_with_artefacts(model, data, progress=None, kind=None):
+    """:func:`fit` with what the measurement says about its own samples fitted too, as the
+    diagnosis does: its outliers kept out (refitted without them), its nuisances (a drift
+    along a positioning test's clock) fitted beside the effects as measurement artefacts.
+    ``artefacts`` lists the outlier and transient rows and the nuisances; the measurement
+    fitted is ``result.measurements[0]``. Cases fitted jointly get the plain fit."""
+    found = check_available(model, data, kind)
+    if len(found) > 1:
+        return fit(model, found, progress)
+    measurement = found[0]
+    result = fit(model, measurement, progress)
+    outliers = measurement.outliers(result.residual_um)
+    transients = measurement.transients(outliers)
+    artefacts = {"outlier_rows": measurement.rows(np.setdiff1d(outliers, transients)),
+                 "transient_rows": measurement.rows(transients)}
+    if outliers.size:
+        keep = np.ones(measurement.size, dtype=bool)
+        keep[outliers] = False
+        measurement = measurement.subset(keep)
+        result = fit(model, measurement, progress)
+    with_nuisances = model
+    for name, _, basis in measurement.nuisances():
+        with_nuisances = with_nuisances + BasisEffect(name, basis)
+    if with_nuisances is not model and not too_few_samples(with_nuisances, [measurement]):
+        result = fit(with_nuisances, measurement, progress)
+    result.artefacts = artefacts
     return result
 
 
@@ -228,6 +274,8 @@ class Problem:
         if self.progress:
             self.progress()
         parts = [separate(values) for separate in self.separators]
+        if len(parts) == 1:
+            return parts[0]
         return (np.concatenate([base for base, _ in parts]),
                 np.vstack([columns for _, columns in parts]))
 
@@ -318,11 +366,7 @@ def variable_projection(problem, layout):
         x[nonlinear] = x_nonlinear
         base_um, columns_um = problem.split(layout.values(x))
         target_um = problem.measured_um - base_um
-        scale = np.linalg.norm(columns_um, axis=0)
-        scale[scale == 0.0] = 1.0
-        solution = lsq_linear(columns_um / scale, target_um, method="bvls",
-                              bounds=(lower[linear] * scale, upper[linear] * scale))
-        x[linear] = np.clip(solution.x / scale, lower[linear], upper[linear])
+        x[linear] = bounded_linear_solve(columns_um, target_um, lower[linear], upper[linear])
         return target_um - columns_um @ x[linear]
 
     if nonlinear.size:
@@ -334,6 +378,32 @@ def variable_projection(problem, layout):
         project(x[nonlinear])
     margin = 1e-9 * (upper - lower)
     return np.clip(x, lower + margin, upper - margin)
+
+
+def bounded_linear_solve(columns, target, lower, upper):
+    """Least-squares coefficients of ``columns`` (samples x k) for ``target`` within the
+    bounds: the normal equations of the unit-scaled columns (a k x k solve, minimum norm
+    where the columns are dependent) when that solution is inside the bounds, else
+    bounded-variable least squares (scipy's BVLS)."""
+    scale = np.linalg.norm(columns, axis=0)
+    scale[scale == 0.0] = 1.0
+    scaled = columns / scale
+    free = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ target, rcond=None)[0] / scale
+    if np.all((free >= lower) & (free <= upper)):
+        return free
+    solution = lsq_linear(scaled, target, method="bvls", bounds=(lower * scale, upper * scale))
+    return np.clip(solution.x / scale, lower, upper)
+
+
+def _linear_solution(problem, layout, x):
+    """The optimum of a model whose parameters all enter linearly: the projection's bounded
+    linear solve is exact, so its residual, Jacobian (the columns) and active bounds stand
+    for the trust-region pass (which on 10^6 samples cost seconds per iteration)."""
+    lower, upper = layout.bounds()
+    margin = 2e-9 * (upper - lower)
+    active = np.where(x <= lower + margin, -1, np.where(x >= upper - margin, 1, 0))
+    return SimpleNamespace(x=x, fun=problem.residual(layout)(x),
+                           jac=problem.jacobian(layout)(x), active_mask=active)
 
 
 def starting_values(model, found):
@@ -375,38 +445,77 @@ def _probed_step(model, found, probed):
     return model.with_values(values)
 
 
-def uncertainties(jacobian, residual, active_mask, layout, inflation=1.0):
+def uncertainties(jacobian, residual, active_mask, layout, found):
     """(standard uncertainties, undetermined parameters, covariance) from the Jacobian at
-    the optimum; the covariance is in the order of ``layout.slots`` and multiplied by
-    ``inflation`` (a serially correlated residual's autocorrelation time).
+    the optimum, the covariance in the order of ``layout.slots``: the sandwich
+    (J'J)⁺ J'ΣJ (J'J)⁺ with each measurement's J'ΣJ for the noise its residual shows
+    (:meth:`~feedaxis.measurement.Measurement.noise_gram`: σ² J'J for white noise, which
+    gives the usual σ² (J'J)⁺).
 
-    A parameter is undetermined when it has a share in a (nearly) singular direction of the
-    Jacobian with its columns scaled to unit length (so units do not matter), or when it
-    ends on a bound.
+    A parameter is undetermined when :func:`inseparable` finds it in a (nearly) singular
+    direction of the Jacobian, when its standard uncertainty exceeds the whole range its
+    bounds allow (a column of rounding noise, as the sine of a once-per-revolution error at
+    targets that are all whole leads, escapes the singular-direction test once scaled to
+    unit length), or when it ends on a bound.
     """
-    variance = float(residual @ residual) / max(residual.size - layout.size, 1) * inflation
-    scale = np.linalg.norm(jacobian, axis=0)
-    scale[scale == 0.0] = 1.0
-    _, singular, vt = np.linalg.svd(jacobian / scale, full_matrices=False)
-    strong = singular > SINGULAR_RATIO * max(singular[0], 1e-300)
-    covariance = ((vt[strong].T / singular[strong] ** 2) @ vt[strong] * variance
-                  / np.outer(scale, scale))
-    in_weak_direction = np.abs(vt[~strong]) > 0.1
+    variance = float(residual @ residual) / max(residual.size - layout.size, 1)
+    scale, singular, vt, strong = _unit_column_svd(jacobian)
+    inverse = (vt[strong].T / singular[strong] ** 2) @ vt[strong]
+    bounds = np.cumsum([0] + [m.size for m in found])
+    scaled = jacobian / scale
+    gram = sum(m.noise_gram(scaled[start:stop], residual[start:stop], variance)
+               for m, start, stop in zip(found, bounds[:-1], bounds[1:]))
+    covariance = inverse @ gram @ inverse / np.outer(scale, scale)
     keys = [f"{effect_name}.{parameter_name}" for effect_name, parameter_name in layout.slots]
+    undetermined = _inseparable(vt, strong, keys)
     sigma = {name: {} for name in layout.model.names}
-    undetermined = {}
     for index, (effect_name, parameter_name) in enumerate(layout.slots):
         key = keys[index]
-        sigma[effect_name][parameter_name] = float(np.sqrt(covariance[index, index]))
-        partners = {keys[j] for row in in_weak_direction if row[index]
-                    for j in np.flatnonzero(row) if j != index}
-        if in_weak_direction[:, index].any():
-            undetermined[key] = (f"the data cannot separate it from {', '.join(sorted(partners))}"
-                                 if partners else "the data do not depend on it")
+        sigma[effect_name][parameter_name] = float(np.sqrt(max(covariance[index, index], 0.0)))
+        if key in undetermined:
             sigma[effect_name][parameter_name] = float("nan")
+        elif sigma[effect_name][parameter_name] > layout.upper[index] - layout.lower[index]:
+            undetermined[key] = ("the data do not determine it: its standard uncertainty "
+                                 "exceeds the whole range of its bounds")
         elif active_mask[index] != 0:
             undetermined[key] = "ended on its bound"
     return sigma, undetermined, covariance
+
+
+def inseparable(jacobian, keys):
+    """{key: why} of the parameters (the columns of ``jacobian``, named by ``keys``) that
+    the data cannot determine at this point: with a share over 0.1 in a (nearly) singular
+    direction of the Jacobian with its columns scaled to unit length (singular value below
+    ``SINGULAR_RATIO`` of the largest), so units do not matter."""
+    _, _, vt, strong = _unit_column_svd(np.asarray(jacobian, dtype=float))
+    return _inseparable(vt, strong, list(keys))
+
+
+def _unit_column_svd(jacobian):
+    """(column norms, singular values, right singular vectors, strong mask) of
+    ``jacobian`` with unit columns, from the eigen-decomposition of its Gram matrix (a
+    parameters x parameters problem, where an SVD of samples x parameters costs seconds at
+    10^6 samples; SINGULAR_RATIO squared stays far above the Gram matrix's rounding)."""
+    scale = np.linalg.norm(jacobian, axis=0)
+    scale[scale == 0.0] = 1.0
+    scaled = jacobian / scale
+    eigenvalues, vectors = np.linalg.eigh(scaled.T @ scaled)
+    order = np.argsort(eigenvalues)[::-1]
+    singular, vt = np.sqrt(np.maximum(eigenvalues[order], 0.0)), vectors[:, order].T
+    strong = singular > SINGULAR_RATIO * max(singular[0] if singular.size else 0.0, 1e-300)
+    return scale, singular, vt, strong
+
+
+def _inseparable(vt, strong, keys):
+    in_weak_direction = np.abs(vt[~strong]) > 0.1
+    undetermined = {}
+    for index, key in enumerate(keys):
+        if in_weak_direction[:, index].any():
+            partners = sorted({keys[j] for row in in_weak_direction if row[index]
+                               for j in np.flatnonzero(row) if j != index})
+            undetermined[key] = (f"the data cannot separate it from {', '.join(partners)}"
+                                 if partners else "the data do not depend on it")
+    return undetermined
 
 
 def flag_loose(model, sigma, undetermined, share):

@@ -6,6 +6,9 @@ B_i = x̄_i↑ - x̄_i↓, B = max|B_i|, B̄ = mean B_i; R_i↑ = 4 s_i↑;
 R_i = max(2 s_i↑ + 2 s_i↓ + |B_i|, R_i↑, R_i↓); E↑ = max x̄_i↑ - min x̄_i↑;
 E = max(x̄↑, x̄↓) - min(x̄↑, x̄↓); M = max x̄_i - min x̄_i;
 A = max(x̄↑ + 2s↑, x̄↓ + 2s↓) - min(x̄↑ - 2s↑, x̄↓ - 2s↓). All in µm.
+
+The figures of one set of deviations and of many Monte Carlo trials at once (a leading
+trials axis, feedaxis.uncertainty) come from the same functions.
 """
 from __future__ import annotations
 
@@ -29,35 +32,56 @@ def target_clusters(target_mm, tolerance_mm=SAME_TARGET_MM):
 def per_target(target_mm, error_um, direction, sign):
     """Targets, mean, sample standard deviation (NaN for one run) and run count of one
     direction; the targets are :func:`target_clusters` of both directions together, so
-    the two directions share them."""
+    the two directions share them. ``error_um`` may carry leading trial axes
+    (``(..., samples)``, a Monte Carlo's trials): the mean and standard deviation then
+    carry them too (``(..., targets)``)."""
     return _per_cluster(target_clusters(target_mm), error_um, direction, sign)
 
 
 def _per_cluster(clusters, error_um, direction, sign):
-    """:func:`per_target` from the :func:`target_clusters` of all samples."""
+    """:func:`per_target` from the :func:`target_clusters` of all samples: the samples of
+    one direction sorted by target once, then summed per target over the last axis, for
+    one set of deviations or many trials' at once."""
     centres_mm, cluster = clusters
-    chosen = direction == sign
-    used, index = np.unique(cluster[chosen], return_inverse=True)
-    unique_mm = centres_mm[used]
-    counts = np.bincount(index)
-    mean = np.bincount(index, error_um[chosen]) / counts
-    squares = np.bincount(index, (error_um[chosen] - mean[index]) ** 2)
+    chosen = np.flatnonzero(direction == sign)
+    order = chosen[np.argsort(cluster[chosen], kind="stable")]
+    sorted_cluster = cluster[order]
+    starts = np.flatnonzero(np.concatenate(([True], np.diff(sorted_cluster) != 0)))
+    counts = np.diff(np.append(starts, order.size))
+    values = np.asarray(error_um, dtype=float)[..., order]
+    if counts.max() == 1:  # one run: each target's mean is its one reading
+        return (centres_mm[sorted_cluster], values,
+                np.full(values.shape, np.nan), counts)
+    mean = np.add.reduceat(values, starts, axis=-1) / counts
+    squares = np.add.reduceat((values - np.repeat(mean, counts, axis=-1)) ** 2, starts,
+                              axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
         std = np.where(counts > 1, np.sqrt(squares / (counts - 1)), np.nan)
-    return unique_mm, mean, std, counts
+    return centres_mm[sorted_cluster[starts]], mean, std, counts
 
 
-def _unidirectional(mean, std):
-    figures = {"E": float(np.ptp(mean))}
-    if not np.any(np.isnan(std)):
-        figures["R"] = float(np.max(4 * std))
-        figures["A"] = float(np.max(mean + 2 * std) - np.min(mean - 2 * std))
+def _figure(value):
+    """A figure as a float for one set of deviations, an array over trials for many."""
+    return float(value) if np.ndim(value) == 0 else value
+
+
+def _unidirectional(mean, std, counts):
+    figures = {"E": _figure(np.ptp(mean, axis=-1))}
+    if np.all(counts > 1):
+        figures["R"] = _figure(np.max(4 * std, axis=-1))
+        figures["A"] = _figure(np.max(mean + 2 * std, axis=-1)
+                               - np.min(mean - 2 * std, axis=-1))
     return figures
 
 
 def iso230_figures(target_mm, error_um, direction):
     """ISO 230-2 figures (µm) keyed ``E_up_um``, ``B_um``, ``A_um``, ...; absent when the
-    data cannot give them (one direction only, or one run per target)."""
+    data cannot give them (one direction only, or one run per target).
+
+    ``error_um`` is one set of deviations (``(samples,)``: each figure a float) or many
+    trials' (``(trials, samples)``: each figure an array over the trials), computed by the
+    same formulas.
+    """
     target_mm, error_um = np.asarray(target_mm, float), np.asarray(error_um, float)
     direction = np.asarray(direction, float)
     clusters = target_clusters(target_mm)
@@ -66,27 +90,32 @@ def iso230_figures(target_mm, error_um, direction):
     for label, sign in (("up", 1.0), ("down", -1.0)):
         if np.any(direction == sign):
             sides[label] = _per_cluster(clusters, error_um, direction, sign)
-            for name, value in _unidirectional(*sides[label][1:3]).items():
+            for name, value in _unidirectional(*sides[label][1:]).items():
                 figures[f"{name}_{label}_um"] = value
             figures[f"runs_{label}"] = int(np.min(sides[label][3]))
     if len(sides) == 2 and np.array_equal(sides["up"][0], sides["down"][0]):
-        figures.update(_bidirectional(sides["up"][1:3], sides["down"][1:3]))
+        figures.update(_bidirectional(sides["up"][1:], sides["down"][1:]))
     figures["targets"] = int(clusters[0].size)
     return figures
 
 
 def _bidirectional(up, down):
-    (mean_up, std_up), (mean_down, std_down) = up, down
+    (mean_up, std_up, counts_up), (mean_down, std_down, counts_down) = up, down
     reversal = mean_up - mean_down
-    both = np.concatenate((mean_up, mean_down))
-    figures = {"B_um": float(np.max(np.abs(reversal))), "B_mean_um": float(np.mean(reversal)),
-               "E_um": float(np.ptp(both)), "M_um": float(np.ptp((mean_up + mean_down) / 2))}
-    if not (np.any(np.isnan(std_up)) or np.any(np.isnan(std_down))):
+    both = np.concatenate((mean_up, mean_down), axis=-1)
+    figures = {"B_um": _figure(np.max(np.abs(reversal), axis=-1)),
+               "B_mean_um": _figure(np.mean(reversal, axis=-1)),
+               "E_um": _figure(np.ptp(both, axis=-1)),
+               "M_um": _figure(np.ptp((mean_up + mean_down) / 2, axis=-1))}
+    if np.all(counts_up > 1) and np.all(counts_down > 1):
         r_i = np.maximum.reduce([2 * std_up + 2 * std_down + np.abs(reversal),
                                  4 * std_up, 4 * std_down])
-        figures["R_um"] = float(np.max(r_i))
-        figures["A_um"] = float(max(np.max(mean_up + 2 * std_up), np.max(mean_down + 2 * std_down))
-                                - min(np.min(mean_up - 2 * std_up), np.min(mean_down - 2 * std_down)))
+        figures["R_um"] = _figure(np.max(r_i, axis=-1))
+        highest = np.maximum(np.max(mean_up + 2 * std_up, axis=-1),
+                             np.max(mean_down + 2 * std_down, axis=-1))
+        lowest = np.minimum(np.min(mean_up - 2 * std_up, axis=-1),
+                            np.min(mean_down - 2 * std_down, axis=-1))
+        figures["A_um"] = _figure(highest - lowest)
     return figures
 
 
@@ -99,9 +128,9 @@ FIGURE_NAMES = {
 }
 
 
-def target_groups(positioning):
+def target_groups(positioning, clusters=None):
     """Group index of each sample: one group per (target, approach direction), the targets
-    from :func:`target_clusters`."""
-    _, cluster = target_clusters(positioning.target_mm)
+    from :func:`target_clusters` (``clusters``, when already computed)."""
+    _, cluster = clusters or target_clusters(positioning.target_mm)
     keys = cluster * 2 + (positioning.direction > 0)
     return np.unique(keys, return_inverse=True)[1].ravel()

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import math
 
+from .effects.base import BasisEffect
+
 
 def _number(value, digits=4):
     return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) \
@@ -10,28 +12,47 @@ def _number(value, digits=4):
 
 
 def fit_lines(result, rms_before_um, out_path=None):
-    """Statistics, then one line per parameter with its uncertainty."""
+    """Statistics, then one line per parameter with its uncertainty; the measurement's
+    artefacts (a drift fitted beside the effects, outliers left out) said apart."""
     s = result.statistics
-    lines = [f"effects: {', '.join(result.model.names) or '(none)'}",
+    effects = [e for e in result.model.effects if not isinstance(e, BasisEffect)]
+    lines = [f"effects: {', '.join(e.name for e in effects) or '(none)'}",
              f"RMS {rms_before_um:.4g} um -> {s.rms_um:.4g} um   max {s.max_um:.4g} um   "
              f"P-V {s.pv_um:.4g} um   R2 {s.r2:.4f}   AIC {s.aic:.1f}   BIC {s.bic:.1f}   "
              f"({s.n_points} points, {s.n_free} parameters)"]
-    for effect in result.model.effects:
+    for effect in effects:
         for parameter in effect.parameters:
             value = result.model.values[effect.name][parameter.name]
             sigma = result.uncertainties.get(effect.name, {}).get(parameter.name)
             note = result.undetermined.get(f"{effect.name}.{parameter.name}", "")
             lines.append(f"  {effect.name + '.' + parameter.name:44s} {value:12.6g} +/- "
                          f"{_number(sigma, 2):8s} {parameter.unit:8s} {note}".rstrip())
+    lines += _artefact_lines(result)
     if out_path:
         lines.append(f"model written to {out_path}")
     return "\n".join(lines)
+
+
+def _artefact_lines(result):
+    """The measurement's artefacts of a fit: nuisances fitted beside the effects (not saved
+    as effects, never in a table) and the rows left out."""
+    lines = [f"  measurement artefact {e.name} fitted beside the effects (not the machine's): "
+             + ", ".join(f"{name} {value:.4g}" for name, value in result.model.values[e.name].items())
+             for e in result.model.effects if isinstance(e, BasisEffect)]
+    for key, what in (("outlier_rows", "outliers"), ("transient_rows", "transients")):
+        if result.artefacts.get(key):
+            lines.append(f"  {what} left out, rows {', '.join(map(str, result.artefacts[key]))}")
+    return lines
 
 
 def diagnosis_lines(diagnosis):
     """Verdict, candidates best first, unexplained structure, passed-over effects."""
     lines = [f"residual RMS {diagnosis.rms_um:.4g} um, noise {diagnosis.noise_um:.3g} um "
              f"({diagnosis.noise_source})", f"verdict: {diagnosis.verdict}"]
+    if diagnosis.undetermined_reason:
+        lines.append(f"  undetermined: {diagnosis.undetermined_reason}")
+    if diagnosis.repeatability and not diagnosis.repeatability["repeatable"]:
+        lines.append(f"  the axis does not repeat: {repeatability_text(diagnosis.repeatability)}")
     for candidate in diagnosis.candidates:
         lines.append(f"  missing: {candidate.effect:22s} RMS after {candidate.rms_after_um:.4g} um"
                      f"   p {candidate.test.p_value:.2g}")
@@ -47,10 +68,23 @@ def diagnosis_lines(diagnosis):
     if diagnosis.outlier_rows:
         lines.append(f"  outliers kept out of the fit, rows of {diagnosis.file}: "
                      f"{', '.join(map(str, diagnosis.outlier_rows))}")
+    if diagnosis.transient_rows:
+        lines.append(f"  transients after the motion's start or stop kept out of the fit, rows "
+                     f"of {diagnosis.file}: {', '.join(map(str, diagnosis.transient_rows))}")
     lines.append(f"  test: {diagnosis.test_used}")
     for name, reason in diagnosis.skipped.items():
         lines.append(f"  passed over {name}: {reason}")
     return "\n".join(lines)
+
+
+def repeatability_text(repeatability):
+    """Repeatability R against the systematic deviation E, in words."""
+    r_um, e_um = repeatability["R_um"], repeatability["E_um"]
+    if repeatability["repeatable"]:
+        return f"repeatability R = {r_um:.3g} um within the systematic deviation E = {e_um:.3g} um"
+    return (f"repeatability R = {r_um:.3g} um exceeds the systematic deviation E = {e_um:.3g} um "
+            "(what varies from run to run is larger than what repeats: slip, a loose coupling "
+            "or the set-up; no model or table removes it)")
 
 
 def comparison_lines(comparison):

@@ -8,12 +8,14 @@ convention (``SIGN``) and how to load the file (``LOAD``).
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..iso230 import target_clusters
-from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
+from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, safety, siemens
 from .base import reference_index
 from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
                     from_measurement, from_model, grid_mm)
@@ -44,6 +46,15 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
     return from_model(case, model, _grid(module, first_mm, last_mm, spacing_mm))
 
 
+def safe_table(case, model, position_mm):
+    """The table of ``model`` at ``position_mm`` (:func:`.table.from_model`) without the
+    effects a table must not use (:func:`.safety.unsafe_effects`), which ``excluded`` names
+    with why."""
+    unsafe = safety.unsafe_effects(case, model)
+    table = from_model(case, safety.usable_model(model, unsafe), position_mm)
+    return replace(table, excluded={**safety.reasons_by_effect(unsafe), **table.excluded})
+
+
 def _span_mm(module, target_mm):
     """(first, last) position the table covers: the targets, and 0 mm for a controller that
     counts its points from the reference position there (``GRID_THROUGH_ZERO``)."""
@@ -62,16 +73,39 @@ def _grid(module, first_mm, last_mm, spacing_mm):
     return grid_mm(first_mm, last_mm, spacing_mm)
 
 
+class RefusedTable(InputError):
+    """A table that is not safe to load (exit 2, nothing written): ``reasons`` say why,
+    ``report`` holds the figures."""
+
+    def __init__(self, out_path, reasons, report, left_out=()):
+        lines = [*reasons, f"the table {'without them ' if left_out else ''}would give:",
+                 *_figure_lines(report)]
+        lines.append("fit a model the data determine (feedaxis diagnose CASE names what they "
+                     "support), or add --force to write the table anyway")
+        super().__init__(f"refused, nothing written to {out_path}:\n  " + "\n  ".join(lines))
+        self.reasons, self.report = reasons, report
+
+    def as_json(self):
+        return {**super().as_json(), "refused": self.reasons, "report": self.report}
+
+
 def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured=False,
-               axis_id=None):
+               axis_id=None, force=False):
     """The ``controller`` file for ``out_path``, read back as the controller does and verified.
+
+    Effects a table must not use (:func:`.safety.unsafe_effects`) are left out. The table is
+    refused with :class:`RefusedTable` when that left something out or when its verification
+    expects it to make the axis worse (:func:`.safety.refusals`); ``force`` returns it anyway,
+    with warnings saying what it risks.
 
     Returns ({path: text} of the files to write, ``out_path`` and any companion such as
     Heidenhain's ``.CMA``; the report dict for printing and ``--json``).
     """
     module = CONTROLLERS[controller]
     axis_id = axis_id or module.DEFAULT_AXIS_ID
-    table = build_table(case, model, controller, spacing_mm, from_measured)
+    unsafe = safety.unsafe_effects(case, model)
+    usable = safety.usable_model(model, unsafe)
+    table = build_table(case, usable, controller, spacing_mm, from_measured)
     text = module.write(table, axis_id)
     applied = module.read(text)
     out_path = Path(out_path)
@@ -79,14 +113,22 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     report = {"controller": controller, "source": table.source, "points": table.size,
               "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),
               "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
-              "included": list(table.included), "excluded": dict(table.excluded),
+              "included": list(table.included),
+              "excluded": {} if from_measured else {**safety.reasons_by_effect(unsafe),
+                                                    **table.excluded},
               "sign": module.SIGN, "load": module.LOAD, **verify(case, applied),
-              "between_targets": between_targets(case, model, applied),
+              "between_targets": between_targets(case, usable, applied),
               "files": [str(path) for path in files]}
     report["notes"] = _notes(case, table, module, spacing_mm)
-    if not from_measured:
-        report["excluded"].update({name: reason for name, reason in NEVER_IN_TABLE.items()
-                                   if name not in report["excluded"]})
+    if from_measured and unsafe:
+        report["notes"].append(f"the model's view between the targets leaves out "
+                               f"{', '.join(unsafe)}: the data cannot determine them")
+        unsafe = {}
+    reasons = safety.refusals(report, unsafe)
+    if reasons and not force:
+        raise RefusedTable(out_path, reasons, {**report, "files": []}, list(unsafe))
+    if force:
+        report["warnings"] += safety.forced_warnings(report, unsafe)
     return files, report
 
 
@@ -125,14 +167,21 @@ def summary_lines(report):
              f"  in the table: {', '.join(report['included']) or '(nothing)'}"]
     lines += [f"  left out {name}: {reason}" for name, reason in report["excluded"].items()]
     lines += [f"  sign: {report['sign']}", f"  load: {report['load']}", "",
-              f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
+              *_figure_lines(report)]
+    lines += [f"note: {note}" for note in report["notes"]]
+    lines += [f"warning: {warning}" for warning in report["warnings"]]
+    lines += [f"written: {path}" for path in report["files"]]
+    return "\n".join(lines)
+
+
+def _figure_lines(report):
+    """The ISO 230-2 figures expected before and after the table, and the model's view
+    between the targets."""
+    lines = [f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
     lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
               for f in report["figures"].values()]
     between = report["between_targets"]
     if between:
         lines.append(f"{'between targets (model), P-V':34s} {between['pv_before_um']:9.3f} "
                      f"{between['pv_after_um']:9.3f}")
-    lines += [f"note: {note}" for note in report["notes"]]
-    lines += [f"warning: {warning}" for warning in report["warnings"]]
-    lines += [f"written: {path}" for path in report["files"]]
-    return "\n".join(lines)
+    return lines

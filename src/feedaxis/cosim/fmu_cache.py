@@ -18,6 +18,7 @@ import tempfile
 from pathlib import Path
 
 from .. import __version__
+from ..errors import InputError
 from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
 from ..kernel_build import kernel_missing
 
@@ -62,3 +63,14 @@ def cached_fmus(root=None):
         finally:
             shutil.rmtree(staging, ignore_errors=True)
     return {name: folder / f"{name}.fmu" for name in FMU_NAMES}
+
+
+def fmu_paths(folder=None):
+    """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``), else of the cache."""
+    if folder is None:
+        return cached_fmus()
+    paths = {name: Path(folder) / f"{name}.fmu" for name in FMU_NAMES}
+    missing = [str(p) for p in paths.values() if not p.exists()]
+    if missing:
+        raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {folder}")
+    return paths

@@ -62,13 +62,22 @@ def check_physics(component, variables):
         raise ParameterError(error.message, f"{component.name}.{error.parameter}") from None
 
 
-def check_parameters(system, fmu_paths):
+def check_parameters(system, fmu_paths, variables=None):
     """Raise :class:`ParameterError` unless every component's parameter values name its
-    FMU's parameters, have their types, lie within their bounds and pass the physics."""
+    FMU's parameters, have their types, lie within their bounds and pass the physics.
+
+    ``variables`` ({component: {name: model variable}}, :func:`fmu_variables`) saves
+    reading the FMUs' model descriptions again.
+    """
+    variables = variables or fmu_variables(system, fmu_paths)
+    for component in system.components:
+        check_parameter_values(component, variables[component.name])
+        check_physics(component, variables[component.name])
+
+
+def fmu_variables(system, fmu_paths):
+    """{component: {name: model variable}} from each component's FMU."""
     from fmpy import read_model_description
 
-    for component in system.components:
-        description = read_model_description(str(fmu_paths[component.fmu]))
-        variables = {v.name: v for v in description.modelVariables}
-        check_parameter_values(component, variables)
-        check_physics(component, variables)
+    return {c.name: {v.name: v for v in read_model_description(
+        str(fmu_paths[c.fmu])).modelVariables} for c in system.components}

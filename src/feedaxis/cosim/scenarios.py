@@ -4,6 +4,10 @@
 - :func:`simulate_thermal`: a duty cycle with measurement passes -> + ``duty.csv``;
 - :func:`simulate_tracking`: sinusoidal tracking (seed 002) -> ``axis.toml`` + ``tracking.csv``.
 
+Each writes what its in-memory twin (:func:`run_iso230`, :func:`run_thermal`,
+:func:`run_tracking`, by name in :data:`RUNS`) returns: a :class:`ScenarioRun` holding the
+case's columns, the scenario's figures and the curve a sweep bands (:mod:`.sweep`).
+
 Every motion is a sequence of :class:`~feedaxis.physics.thermal.DutySegment` (travel between
 two points at a feed, or standing still), the same segments duty.csv holds, so what the
 thermal scenario writes is exactly the motion it simulated. The servo's reference input
@@ -22,8 +26,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..case import PHYSICAL_RANGE, write_case
+from ..case import PHYSICAL_RANGE, Positioning, write_case
+from ..compensate import thermal_error_um
 from ..errors import ParameterError
+from ..iso230 import iso230_figures, per_target
 from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..physics.checks import require_positive
 from ..physics.thermal import DutySegment
@@ -45,6 +51,40 @@ CUTTING_FORCE_N = 1.4
 # target/364 (1.4 mm at 500 mm), which no CNC axis shows and which would swamp the errors
 # a positioning test is about. Tracking keeps the published plant; --set overrides both.
 POSITIONING_SERVO = {"NpidServo": {"plant_stiffness_per_s2": 0.0}}
+
+
+TRACKING_SERIES_POINTS = 200  # tracking-error samples a sweep keeps per trial for its bands
+
+
+@dataclass(frozen=True)
+class Series:
+    """The curve of one run that a sweep gives bands of: ``y`` against ``x``, one line per
+    value of ``group`` (approach direction, target, ...)."""
+
+    x_name: str
+    x: np.ndarray
+    y_name: str
+    y: np.ndarray
+    group: tuple
+
+
+@dataclass(frozen=True)
+class ScenarioRun:
+    """One scenario run in memory.
+
+    ``tables`` are the case's columns by file (``positioning``, ``duty``, ``tracking``),
+    ``figures`` the scenario's figures (µm or mm, named with their unit), ``summary`` what
+    ``feedaxis simulate`` reports, ``parameters`` the overrides it ran with; ``completed``
+    is False after Ctrl-C (the tables then hold what was reached).
+    """
+
+    name: str
+    parameters: dict
+    tables: dict
+    figures: dict
+    series: Series
+    summary: dict
+    completed: bool
 
 
 class ScenarioInterrupted(KeyboardInterrupt):
@@ -232,14 +272,13 @@ def run_motion(master, motion, parameters=None, progress=None):
     return rows[1:], completed
 
 
-def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5,
-                    overrun_mm=2.0, parameters=None, progress=None):
-    """Simulate an ISO 230-2 positioning test and write it as a case folder.
+def run_iso230(master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5, overrun_mm=2.0,
+               parameters=None, progress=None):
+    """Simulate an ISO 230-2 positioning test in memory: the samples (with ``time_s``) and
+    the motion simulated (moves and dwells, which warm the screw) as the duty.
 
     Parameters
     ----------
-    out : path
-        Case folder to create (it must not exist).
     master : Master
     targets_mm : array_like
         Target positions P_i (mm), e.g. from :func:`iso230_targets`.
@@ -254,14 +293,16 @@ def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s
 
     Returns
     -------
-    dict
-        Case folder, number of samples, and the deviation range (µm).
+    ScenarioRun
+        Figures: the ISO 230-2 figures (:func:`feedaxis.iso230.iso230_figures`) and the
+        deviation range; series: the mean deviation at each target per approach direction.
+        After Ctrl-C only the complete runs (ISO 230-2 statistics need equal runs).
     """
     parameters = _positioning_parameters(parameters)
     motion = iso230_motion(targets_mm, runs, feed_mm_min, dwell_s, overrun_mm)
     rows, completed = run_motion(master, motion, parameters, progress=progress)
     name = "simulated ISO 230-2 test"
-    if not completed:  # ISO 230-2 statistics need equal runs: keep the complete ones
+    if not completed:
         complete_runs = rows.size // (2 * len(targets_mm))
         if complete_runs == 0:
             raise ScenarioInterrupted("interrupted before the first complete run; nothing "
@@ -269,17 +310,33 @@ def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s
         rows = rows[:complete_runs * 2 * len(targets_mm)]
         name += f" (interrupted: {complete_runs} of {runs} runs)"
     positioning = _positioning_columns(motion.samples[:rows.size], rows, with_time=True)
-    write_case(out, axis_values(master, parameters, name), positioning=positioning)
-    return _finish(out, positioning, completed, motion.samples)
+    until_s = None if completed else float(positioning["time_s"][-1])
+    target_mm, error_um = positioning["target_mm"], positioning["error_um"]
+    direction = np.asarray(positioning["direction"], dtype=float)
+    figures = {**_numbers(iso230_figures(target_mm, error_um, direction)),
+               **_deviation_range(error_um)}
+    return ScenarioRun(name, parameters, {"positioning": positioning,
+                                          "duty": motion.duty_columns(until_s)}, figures,
+                       _mean_deviation_series(target_mm, error_um, direction),
+                       _positioning_summary(positioning, motion.samples), completed)
 
 
-def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
-                     dwell_s=0.5, parameters=None, progress=None):
-    """Simulate a thermal test: the duty with measurement passes; write duty + positioning.
+def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5,
+                    overrun_mm=2.0, parameters=None, progress=None):
+    """Simulate an ISO 230-2 positioning test (:func:`run_iso230`) and write it as a case
+    folder ``out`` (it must not exist); return the case folder, number of samples and the
+    deviation range (µm)."""
+    run = run_iso230(master, targets_mm, runs, feed_mm_min, dwell_s, overrun_mm, parameters,
+                     progress)
+    return write_run(out, master, run)
+
+
+def run_thermal(master, duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0.5,
+                parameters=None, progress=None):
+    """Simulate a thermal test in memory: the duty with measurement passes.
 
     Parameters
     ----------
-    out : path
     master : Master
     duty : feedaxis.case.Duty
         The heating duty (e.g. ``read_duty("duty.csv")``).
@@ -293,7 +350,10 @@ def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
 
     Returns
     -------
-    dict
+    ScenarioRun
+        Figures: the thermal error (each target's drift from its first visit, as
+        ``feedaxis compensate`` measures it) at its largest and as RMS, and the deviation
+        range; series: the thermal error against time, per target and direction.
     """
     if len(targets_mm) < 1:
         raise ParameterError("thermal needs at least one target", "targets")
@@ -304,9 +364,29 @@ def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
     until_s = None if completed else float(positioning["time_s"][-1])
     name = "simulated thermal test" + ("" if completed else
                                        f" (interrupted at t = {until_s:g} s)")
-    write_case(out, axis_values(master, parameters, name),
-               positioning=positioning, duty=motion.duty_columns(until_s))
-    return _finish(out, positioning, completed, motion.samples)
+    samples = Positioning(positioning["target_mm"], positioning["error_um"],
+                          np.asarray(positioning["direction"], dtype=float),
+                          time_s=np.asarray(positioning["time_s"]), has_direction=True)
+    drift_um = thermal_error_um(samples)
+    figures = {"max_thermal_error_um": float(np.max(np.abs(drift_um))),
+               "rms_thermal_error_um": float(np.sqrt(np.mean(drift_um ** 2))),
+               **_deviation_range(positioning["error_um"])}
+    series = Series("time_s", samples.time_s, "thermal_error_um", drift_um,
+                    tuple(f"{t:g} mm {'+' if d > 0 else '-'}"
+                          for t, d in zip(samples.target_mm, samples.direction)))
+    return ScenarioRun(name, parameters, {"positioning": positioning,
+                                          "duty": motion.duty_columns(until_s)},
+                       figures, series, _positioning_summary(positioning, motion.samples),
+                       completed)
+
+
+def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
+                     dwell_s=0.5, parameters=None, progress=None):
+    """Simulate a thermal test (:func:`run_thermal`) and write duty.csv + positioning.csv
+    into the case folder ``out``; return its summary."""
+    run = run_thermal(master, duty, targets_mm, every_s, feed_mm_min, dwell_s, parameters,
+                      progress)
+    return write_run(out, master, run)
 
 
 def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
@@ -320,14 +400,12 @@ def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
     return scale * 0.5 * (1.0 + np.sin(2 * np.pi * teeth * spindle_rpm / 60.0 * time_s))
 
 
-def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, controller="pid",
-                      spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
-    """Sinusoidal tracking (seed 002): write tracking.csv; return max and RMS error.
+def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid",
+                 spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
+    """Sinusoidal tracking (seed 002) in memory.
 
     Parameters
     ----------
-    out : path
-        Case folder to create (axis.toml + tracking.csv).
     master : Master
     frequency_hz, amplitude_mm, duration_s : float
         Reference A sin(2π f t) (mm) for ``duration_s`` seconds.
@@ -340,9 +418,10 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
 
     Returns
     -------
-    dict
-        ``max_tracking_error_mm`` and ``rms_tracking_error_mm`` over t > 1 s (after the
-        start-up transient, as the seed 002 Table 1 reproduction), the case folder.
+    ScenarioRun
+        Figures: ``max_tracking_error_mm`` and ``rms_tracking_error_mm`` over t > 1 s (after
+        the start-up transient, as the seed 002 Table 1 reproduction); series: the tracking
+        error against time at :data:`TRACKING_SERIES_POINTS` evenly spaced steps.
     """
     _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
                       duration_s=duration_s)
@@ -374,26 +453,60 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
     except SimulationInterrupted as stopped:
         rows, completed = stopped.partial, False
     rows = rows[1:]
+    if rows.size == 0:
+        raise ScenarioInterrupted("interrupted before the first step; nothing written")
     tracking = {"time_s": rows["time"], "reference_mm": reference_mm(rows["time"]),
                 "actual_mm": rows["NpidServo.position_mm"]}
     if spindle_rpm is not None:
         tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
-    if rows.size == 0:
-        raise ScenarioInterrupted("interrupted before the first step; nothing written")
     name = "simulated tracking test" + ("" if completed else
                                         f" (interrupted at t = {rows['time'][-1]:g} s)")
-    write_case(out, axis_values(master, overrides, name, with_servo=True), tracking=tracking)
     settled = rows["time"] > SETTLE_S
     error_mm = np.abs(rows["NpidServo.tracking_error_mm"][settled])
-    summary = {"case": str(out), "controller": controller, "frequency_hz": frequency_hz,
-               "amplitude_mm": amplitude_mm, "spindle_rpm": spindle_rpm,
-               "simulated_s": float(rows["time"][-1]),
-               "max_tracking_error_mm": float(error_mm.max()) if error_mm.size else math.nan,
+    figures = {"max_tracking_error_mm": float(error_mm.max()) if error_mm.size else math.nan,
                "rms_tracking_error_mm": float(np.sqrt(np.mean(error_mm**2)))
                if error_mm.size else math.nan}
-    if not completed:
-        raise ScenarioInterrupted(f"interrupted at t = {summary['simulated_s']:g} s; the "
-                                  f"partial tracking.csv is in {out}")
+    every = max(1, math.ceil(rows.size / TRACKING_SERIES_POINTS))
+    series = Series("time_s", rows["time"][every - 1::every], "tracking_error_mm",
+                    rows["NpidServo.tracking_error_mm"][every - 1::every], ("tracking",))
+    summary = {"controller": controller, "frequency_hz": frequency_hz,
+               "amplitude_mm": amplitude_mm, "spindle_rpm": spindle_rpm,
+               "simulated_s": float(rows["time"][-1]), **figures}
+    return ScenarioRun(name, overrides, {"tracking": tracking}, figures, series, summary,
+                       completed)
+
+
+def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, controller="pid",
+                      spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
+    """Sinusoidal tracking (:func:`run_tracking`) written as tracking.csv into the case
+    folder ``out``; return the case folder, the run's settings and its max and RMS
+    tracking error (mm)."""
+    run = run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller,
+                       spindle_rpm, force_N, parameters, progress)
+    return write_run(out, master, run)
+
+
+RUNS = {"iso230": run_iso230, "thermal": run_thermal, "tracking": run_tracking}
+
+
+def write_run(out, master, run):
+    """Write ``run`` as the case folder ``out``; return its summary with the folder.
+
+    Raises
+    ------
+    ScenarioInterrupted
+        After writing an interrupted run, saying what it holds.
+    """
+    with_servo = "tracking" in run.tables
+    write_case(out, axis_values(master, run.parameters, run.name, with_servo=with_servo),
+               **run.tables)
+    summary = {"case": str(out), **run.summary}
+    if not run.completed:
+        if with_servo:
+            raise ScenarioInterrupted(f"interrupted at t = {summary['simulated_s']:g} s; the "
+                                      f"partial tracking.csv is in {out}")
+        raise ScenarioInterrupted(f"interrupted: {summary['samples']} of "
+                                  f"{summary['planned_samples']} samples written to {out}")
     return summary
 
 
@@ -448,15 +561,32 @@ def _positioning_columns(samples, rows, with_time=False):
     return columns
 
 
-def _finish(out, positioning, completed, planned):
-    summary = {"case": str(out), "samples": len(positioning["target_mm"]),
-               "planned_samples": len(planned),
-               "error_min_um": float(np.min(positioning["error_um"])),
-               "error_max_um": float(np.max(positioning["error_um"]))}
-    if not completed:
-        raise ScenarioInterrupted(f"interrupted: {summary['samples']} of "
-                                  f"{summary['planned_samples']} samples written to {out}")
-    return summary
+def _positioning_summary(positioning, planned):
+    error_um = positioning["error_um"]
+    return {"samples": len(positioning["target_mm"]), "planned_samples": len(planned),
+            **_deviation_range(error_um)}
+
+
+def _deviation_range(error_um):
+    return {"error_min_um": float(np.min(error_um)), "error_max_um": float(np.max(error_um))}
+
+
+def _numbers(figures):
+    """The figures that are measurements (µm), not counts of targets or runs."""
+    return {name: value for name, value in figures.items() if name.endswith("_um")}
+
+
+def _mean_deviation_series(target_mm, error_um, direction):
+    """Mean deviation at each target (x̄_i↑ then x̄_i↓ of ISO 230-2) against the target."""
+    xs, ys, groups = [], [], []
+    for label, sign in (("+", 1.0), ("-", -1.0)):
+        if np.any(direction == sign):
+            targets, mean_um, _, _ = per_target(target_mm, error_um, direction, sign)
+            xs.append(targets)
+            ys.append(mean_um)
+            groups += [label] * targets.size
+    return Series("target_mm", np.concatenate(xs), "mean_deviation_um", np.concatenate(ys),
+                  tuple(groups))
 
 
 def _stop_time_s(duration_s, macro_step_s):

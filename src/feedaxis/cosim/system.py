@@ -20,8 +20,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
-from ..errors import ParameterError
+from ..errors import InputError, ParameterError
+
+DEFAULT_THERMAL_STEP_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -261,6 +264,80 @@ def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
                (("NpidServo.position_mm", 1.0),) + tuple((t, 1e-3) for t, _ in errors)),
     )
     return AxisSystem("FeedAxis", macro_step_s, inputs, components, connections, outputs)
+
+
+def axis_from_options(step_ms, thermal_step_s=None, model_path=None, axis_path=None,
+                      set_items=(), effects=None):
+    """The default axis at ``step_ms`` with a fitted model's and ``--set`` values over it.
+
+    Parameters
+    ----------
+    step_ms : float
+        Macro step = servo, motor and geometry step (ms).
+    thermal_step_s : float, optional
+        ThermalScrew step, a whole multiple of the macro step (s); default 0.1 s rounded up
+        to a whole number of macro steps, so any ``step_ms`` works.
+    model_path, axis_path : path, optional
+        A fitted model (TOML) and the axis.toml or case folder it was fitted on: the
+        model's FMU parameter values (:meth:`~feedaxis.effects.Model.fmu_parameters`).
+    set_items : sequence of str
+        ``COMPONENT.PARAMETER=VALUE`` items, applied last.
+    effects : dict, optional
+        Effects the model may name (default: the catalog).
+
+    Raises
+    ------
+    InputError
+        Naming the option (``--step-ms``, ``--thermal-step-s``, ``--model``, ``--set ...``).
+    """
+    for option, value in (("--step-ms", step_ms), ("--thermal-step-s", thermal_step_s)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise InputError(f"must be > 0, got {value:g}", parameter=option)
+    step_s = step_ms * 1e-3
+    if thermal_step_s is None:
+        thermal_step_s = step_s * math.ceil(DEFAULT_THERMAL_STEP_S / step_s - 1e-9)
+    elif whole_ratio(thermal_step_s, step_s) is None:
+        raise InputError(f"{thermal_step_s:g} s must be a whole multiple of the macro step "
+                         f"--step-ms {step_ms:g}", parameter="--thermal-step-s")
+    overrides = axis_overrides(model_path, axis_path, set_items, effects)
+    return default_axis(step_s, step_s, thermal_step_s).with_parameters(overrides)
+
+
+def axis_overrides(model_path=None, axis_path=None, set_items=(), effects=None):
+    """{component: {parameter: value}} from a fitted model on its axis and ``--set`` items,
+    the items last (see :func:`axis_from_options`)."""
+    overrides = {}
+    if model_path:
+        if not axis_path:
+            raise InputError("needs --axis (the axis.toml or case folder it was fitted on): "
+                             "the FMU parameters depend on the axis", parameter="--model")
+        from ..case import read_axis
+        from ..effects import CATALOG, load_model
+
+        axis_path = Path(axis_path)
+        axis = read_axis(axis_path / "axis.toml" if axis_path.is_dir() else axis_path)
+        overrides = load_model(model_path, CATALOG if effects is None else effects) \
+            .fmu_parameters(axis)
+    for item in set_items or ():
+        name, _, value = item.partition("=")
+        component, _, parameter = name.partition(".")
+        if not (component and parameter and value):
+            raise InputError("expected COMPONENT.PARAMETER=VALUE, e.g. NpidServo.nonlinear=true",
+                             parameter=f"--set {item}")
+        overrides.setdefault(component, {})[parameter] = parameter_value(value)
+    return overrides
+
+
+def parameter_value(text):
+    """A ``--set`` value: true/false, an integer, a number, else the text."""
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    for convert in (int, float):
+        try:
+            return convert(text)
+        except ValueError:
+            pass
+    return text
 
 
 def markdown_tables(system):

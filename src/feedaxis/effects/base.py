@@ -8,7 +8,7 @@ case's samples is the measurement's business (:mod:`feedaxis.measurement`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import tomli_w
@@ -106,7 +106,8 @@ class Effect:
 
         The error is ``base_um + columns_um @ [values[p] for p in linear]``; ``values`` of the
         linear parameters are ignored. By default built from :meth:`prepare` (one evaluation
-        with the linear parameters at 0, one more per linear parameter at 1).
+        with the linear parameters at 0, one more per linear parameter at 1), once for all
+        when every parameter is linear (the split then depends on no value).
         """
         evaluate = self.prepare(case)
 
@@ -116,7 +117,10 @@ class Effect:
             columns = [evaluate({**zero, name: 1.0}) - base_um for name in self.linear]
             return base_um, np.array(columns).reshape(len(self.linear), base_um.size).T
 
-        return separate
+        if set(self.linear) != set(self.parameter_names):
+            return separate
+        fixed = separate({})
+        return lambda values: fixed
 
     def bounds(self, axis):
         """{parameter: (lower, upper)} on this axis; by default the parameters' own bounds."""
@@ -207,7 +211,9 @@ class FitRecord:
     ``parameters`` are ``"effect.parameter"`` keys in the order of ``covariance`` (their
     covariance matrix, in the products of their units); ``undetermined`` maps the keys the
     data could not determine to why (their covariance rows mean nothing); ``rms_um`` and
-    ``n_points`` describe the residual of the fit.
+    ``n_points`` describe the residual of the fit; ``artefacts`` what was fitted or left
+    out as the measurement's, not the machine's: ``outlier_rows``, ``transient_rows``,
+    ``nuisances`` ({name: coefficients (µm)}, e.g. a drift along the test's clock).
     """
 
     parameters: tuple
@@ -215,13 +221,15 @@ class FitRecord:
     undetermined: dict
     n_points: int
     rms_um: float
+    artefacts: dict = field(default_factory=dict)
 
     def to_table(self):
         """The record as a TOML table (plain lists and numbers)."""
-        return {"parameters": list(self.parameters),
-                "covariance": [[float(v) for v in row] for row in self.covariance],
-                "undetermined": dict(self.undetermined), "n_points": int(self.n_points),
-                "rms_um": float(self.rms_um)}
+        table = {"parameters": list(self.parameters),
+                 "covariance": [[float(v) for v in row] for row in self.covariance],
+                 "undetermined": dict(self.undetermined), "n_points": int(self.n_points),
+                 "rms_um": float(self.rms_um)}
+        return {**table, "artefacts": self.artefacts} if self.artefacts else table
 
     @classmethod
     def from_table(cls, table, path, model_keys):
@@ -231,9 +239,13 @@ class FitRecord:
             return InputError(message, path=path, column=f"{FIT_TABLE}.{key}")
 
         expected = {"parameters", "covariance", "undetermined", "n_points", "rms_um"}
-        unknown = sorted(set(table) - expected)
+        unknown = sorted(set(table) - expected - {"artefacts"})
         if unknown:
-            raise bad(f"unknown key; expected {', '.join(sorted(expected))}", unknown[0])
+            raise bad(f"unknown key; expected {', '.join(sorted(expected))} (and artefacts)",
+                      unknown[0])
+        artefacts = table.get("artefacts", {})
+        if not isinstance(artefacts, dict):
+            raise bad("must be a table", "artefacts")
         missing = sorted(expected - set(table))
         if missing:
             raise bad("missing", missing[0])
@@ -260,7 +272,7 @@ class FitRecord:
                 np.isfinite(rms_um) or rms_um < 0:
             raise bad("must be a finite number >= 0", "rms_um")
         return cls(tuple(parameters), covariance, {k: str(v) for k, v in undetermined.items()},
-                   n_points, float(rms_um))
+                   n_points, float(rms_um), artefacts)
 
     def standard_uncertainty(self, key):
         """Standard uncertainty of one parameter (its unit); NaN when undetermined."""

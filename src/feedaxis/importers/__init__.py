@@ -25,7 +25,8 @@ else:
 @dataclass(frozen=True)
 class Measurement:
     """Deviations (µm) at targets (mm), approach direction ±1 and run (cycle) number;
-    ``name`` the axis name the file gives, ``dropped`` what the case format cannot hold."""
+    ``name`` the axis name the file gives, ``dropped`` what the case format cannot hold,
+    ``ambient_C`` the air temperature at each sample (°C) when the file gives it."""
 
     target_mm: np.ndarray
     error_um: np.ndarray
@@ -33,11 +34,13 @@ class Measurement:
     run: np.ndarray
     name: str = ""
     dropped: dict = field(default_factory=dict)
+    ambient_C: np.ndarray | None = None
 
     def columns(self):
         """positioning.csv columns."""
-        return {"target_mm": self.target_mm, "error_um": self.error_um,
-                "direction": self.direction, "run": self.run}
+        columns = {"target_mm": self.target_mm, "error_um": self.error_um,
+                   "direction": self.direction, "run": self.run}
+        return columns if self.ambient_C is None else {**columns, "ambient_C": self.ambient_C}
 
 
 def read_measurement(path):

@@ -15,11 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..case import PHYSICAL_RANGE
 from ..linefile import LineError, number
 from . import Measurement
 
 REQUIRED = ("TARGET DATA", "RUNS", "DEVIATIONS")
 KEPT = {"AXIS", "MACHINE"}
+AIR_TEMPERATURE = re.compile(r"air\s*temp\w*\s*:?\s*(.*)", re.I)
 
 
 def _decode(path):
@@ -152,7 +154,7 @@ def read_rtl(path):
     bidirectional = n_runs > 1 and any(
         runs[r][0][0] > runs[r][-1][0] for r in runs) and any(
         runs[r][0][0] < runs[r][-1][0] for r in runs)
-    columns = {"target_mm": [], "error_um": [], "direction": [], "run": []}
+    columns = {"target_mm": [], "error_um": [], "direction": [], "run": [], "rtl_run": []}
     for run in range(1, n_runs + 1):
         sign = _direction(path, run, runs[run], bidirectional)
         for target, deviation_um, _ in runs[run]:
@@ -160,8 +162,12 @@ def read_rtl(path):
             columns["error_um"].append(deviation_um)
             columns["direction"].append(sign)
             columns["run"].append((run + 1) // 2 if bidirectional else run)
+            columns["rtl_run"].append(run)
+    rtl_run = np.array(columns.pop("rtl_run"))
+    air_C = _air_temperature(path, sections.get("ENVIRONMENT", []), n_runs)
+    ambient_C = None if air_C is None else air_C[rtl_run - 1]
     return Measurement(*(np.array(columns[k], dtype=float) for k in columns),
-                       name=_name(sections), dropped=_dropped(sections))
+                       name=_name(sections), dropped=_dropped(sections), ambient_C=ambient_C)
 
 
 def _name(sections):
@@ -170,11 +176,33 @@ def _name(sections):
     return " axis ".join(parts)
 
 
+def _air_temperature(path, section, n_runs):
+    """The air temperature (°C) of each rtl run from the ENVIRONMENT line ``Air temp``: one
+    value for the whole test or one per run; None when the file gives none."""
+    for row, text in section:
+        match = AIR_TEMPERATURE.fullmatch(text)
+        if match:
+            values = np.array([number(word, path, row, "Air temp")
+                               for word in match.group(1).replace(",", " ").split()])
+            if values.size not in (1, n_runs):
+                raise LineError(path, f"{values.size} air temperatures: expected one for the "
+                                      f"test or one per run (Run-count {n_runs})", row,
+                                "Air temp")
+            low, high = PHYSICAL_RANGE["ambient_C"]
+            for value in values[(values < low) | (values > high)]:
+                raise LineError(path, f"air temperature {value:g} °C is beyond {low:g} to "
+                                      f"{high:g} °C", row, "Air temp")
+            return np.broadcast_to(values, (n_runs,)).astype(float)
+    return None
+
+
 def _dropped(sections):
-    """{section.key: value} of the metadata the case format cannot hold."""
+    """{section.key: value} of the metadata the case format cannot hold (the air
+    temperature it holds as ``ambient_C``)."""
     dropped = {}
     for section in ("HEADER", "USER-TEXT", "ENVIRONMENT"):
-        lines = sections.get(section, [])
+        lines = [(row, text) for row, text in sections.get(section, [])
+                 if not (section == "ENVIRONMENT" and AIR_TEMPERATURE.fullmatch(text))]
         for key, (value, _) in _fields(lines).items():
             if not (section == "USER-TEXT" and key in KEPT) and value:
                 dropped[f"{section}.{key}"] = value

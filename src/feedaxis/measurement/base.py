@@ -150,9 +150,11 @@ class Measurement:
 
     # -- fit ------------------------------------------------------------------------------
 
-    def uncertainty_inflation(self, residual_um):
-        """Factor on the fit's covariance for the residual's serial correlation (1: none)."""
-        return 1.0
+    def noise_gram(self, jacobian, residual_um, variance):
+        """J'ΣJ of a Jacobian block (these samples x parameters) under the noise the
+        residual shows: ``variance`` · J'J for white noise (the default); a serially
+        correlated measurement widens it (the sandwich covariance's middle)."""
+        return variance * (jacobian.T @ jacobian)
 
     # -- diagnosis ------------------------------------------------------------------------
 
@@ -163,6 +165,10 @@ class Measurement:
 
     def outliers(self, residual_um):
         """Indices (0-based) of samples to keep out as outliers."""
+        return np.zeros(0, dtype=int)
+
+    def transients(self, indices):
+        """Those of the outlier ``indices`` that follow the motion's start or stop."""
         return np.zeros(0, dtype=int)
 
     def rows(self, indices):
@@ -185,6 +191,20 @@ class Measurement:
     def irregular(self, current):
         """A last structure no shape describes (lack of fit beyond the noise), or None:
         (kind, test, fitted_um, evidence)."""
+        return None
+
+    def undetermined(self, current, stages):
+        """Why the data cannot tell the noise from structure in the residual of ``current``
+        (None when they can): the verdict is then ``undetermined``, not ``adequate``."""
+        return None
+
+    def rival(self, effect, left, result):
+        """Why ``effect``, significant on top of ``left`` (``result``), is not what the data
+        show (None when it is): it would only stand in for a structure of another shape."""
+        return None
+
+    def repeatability(self):
+        """Repeatability set against the systematic error (a dict for ``--json``), or None."""
         return None
 
     def figures(self, result):

@@ -1,12 +1,17 @@
 """Positioning deviations at targets (positioning.csv, laser-interferometer style).
 
 The model's effects add errors at each target (:attr:`feedaxis.effects.Effect.additive`).
-Samples repeated at one target and approach direction give the pure error; a dense scan
-without repeats is judged against the residual mean square. Structure is searched along
-the travel: a sinusoid of free wavelength, a reversal changing along the travel, a
-polynomial trend; a drift along the test's clock is a nuisance of every fit; what is left
-is tested for lack of fit (repeats) or serial correlation (no repeats). ``compare`` gives
-the ISO 230-2 figures of the measurement and of the residual.
+The noise model the samples support (:mod:`feedaxis.stats.noise`): replicates where
+samples repeat at a target and direction (the pure error); in a single pass each way, the
++ and - readings at a target with one constant reversal between them; otherwise the
+residual mean square; and wherever there are enough samples in the order they were taken,
+serially correlated noise estimated from the residual, used by every test when the data
+show it. Structure is searched along the travel: a sinusoid of free wavelength, a reversal
+changing along the travel, a trend; a drift along the test's clock is a nuisance of every
+fit; what is left is tested for lack of fit against the replicates. Without replicates the
+data cannot tell noise from an irregular error along the travel, and the diagnosis says so
+(``undetermined``). ``compare`` gives the ISO 230-2 figures of the measurement and of the
+residual.
 """
 from __future__ import annotations
 
@@ -18,13 +23,24 @@ from scipy.optimize import minimize_scalar
 
 from ..iso230 import FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, target_clusters
 from ..stats import judge
-from ..stats.judge import Layout, drift_basis
-from ..stats.noise import PureError, ResidualMeanSquare
+from ..stats.coloured import peak_p_value
+from ..stats.judge import Layout, Test, drift_basis
+from ..stats.noise import PureError, ResidualMeanSquare, Serial
 from ..stats.spectrum import amplitude_spectrum, marked_wavelengths, resolvable_band_per_mm
 from .base import Measurement, Shape, Trial
 
 MAX_TREND_DEGREE = 3
-MAX_PHASE_CONCENTRATION = 0.9
+MIN_TREND_TARGETS = 8  # a cubic through fewer targets follows any zig-zag
+# A periodic error is claimed only where it repeats at least this often over the travel:
+# fewer cycles are a trend or a drift, and under serially correlated noise the longest
+# wavelengths of one pass are the noise's own (they passed at p ~ 1e-6 on AR(1) nulls).
+MIN_CYCLES = 4
+MIN_PAIRED_DOF = 4
+SERIAL_MIN_SAMPLES = 30  # an autoregressive noise model needs this many samples in order
+# A catalog wavelength is resolvable when a sinusoid of any phase at the targets keeps at
+# least this share of its size apart from an offset and a slope (its amplitude's standard
+# error is then at most 1/0.3 = 3.3 times that of evenly spread phases).
+RESOLVABLE_SHARE = 0.3
 SAMPLE_COLUMNS = ("target_mm", "error_um", "direction", "run", "time_s", "ambient_C")
 
 
@@ -49,33 +65,41 @@ class Positioning(Measurement):
         self.marks = {}
 
     @cached_property
+    def clusters(self):
+        """(target positions, target index of each sample): :func:`target_clusters`."""
+        return target_clusters(self.position_mm)
+
+    @cached_property
     def layout(self):
         """Repeat groups and the test's clock."""
-        return Layout.of(self.samples)
+        return Layout.of(self.samples, self.clusters)
 
     def describe(self):
-        return (f"{self.size} samples at {target_clusters(self.position_mm)[0].size} targets, "
+        return (f"{self.size} samples at {self.clusters[0].size} targets, "
                 f"{self.position_mm.min():g} to {self.position_mm.max():g} mm")
 
     def unresolvable(self, effect):
-        """Why the targets cannot resolve a periodic effect's wavelength (None when they can)."""
+        """Why the targets cannot resolve a periodic effect's wavelength (None when they
+        can): its cosine and sine at the targets, taken apart from an offset and a slope
+        (the lead error every positioning model carries), keep less than
+        ``RESOLVABLE_SHARE`` of their size. Irregular targets resolve wavelengths far below
+        their spacing (ISO 230-2 staggers them for this); targets at whole multiples of the
+        wavelength resolve nothing."""
         try:
             wavelength_mm = effect.wavelength_mm(self.case.axis)
         except KeyError:
             return None
         if not wavelength_mm:
             return None
-        centres_mm, _ = target_clusters(self.position_mm)
-        if centres_mm.size < 3:
-            return f"its {wavelength_mm:.4g} mm wavelength needs at least 3 targets"
-        concentration = abs(np.mean(np.exp(2j * np.pi * centres_mm / wavelength_mm)))
-        if concentration > MAX_PHASE_CONCENTRATION:
-            return (f"all targets sit at nearly the same phase of its {wavelength_mm:.4g} mm "
-                    f"wavelength (phase concentration {concentration:.2f})")
-        spacing_mm = float(np.median(np.diff(centres_mm)))
-        if wavelength_mm < 2 * spacing_mm:
-            return (f"its {wavelength_mm:.4g} mm wavelength is shorter than twice the median "
-                    f"target spacing ({spacing_mm:.4g} mm): the targets alias it")
+        centres_mm, _ = self.clusters
+        if centres_mm.size < 4:
+            return f"its {wavelength_mm:.4g} mm wavelength needs at least 4 targets"
+        share = resolved_share(centres_mm, wavelength_mm)
+        if share < RESOLVABLE_SHARE:
+            return (f"the targets do not resolve its {wavelength_mm:.4g} mm wavelength: its "
+                    f"cosine and sine at the {centres_mm.size} targets keep {share:.2f} of "
+                    f"their size apart from an offset and a slope (at least "
+                    f"{RESOLVABLE_SHARE} needed)")
         return None
 
     def degenerate(self):
@@ -86,28 +110,104 @@ class Positioning(Measurement):
         return None
 
     @cached_property
-    def noise(self):
-        if self.layout.has_repeats:
-            return PureError(self.layout)
-        return ResidualMeanSquare(np.lexsort((self.position_mm, self._run_or_time())))
+    def order(self):
+        """Sample indices in the order taken: by the test's clock, else as the rows."""
+        clock = self.layout.clock
+        return np.arange(self.size) if clock is None else np.argsort(clock, kind="stable")
 
-    def _run_or_time(self):
-        if self.samples.time_s is not None:
-            return self.samples.time_s
-        return self.samples.run if self.samples.run is not None else np.zeros(self.size)
+    @cached_property
+    def replicates(self):
+        """The replicates the samples hold (:class:`PureError`), None without any: repeated
+        runs, else one pass each way read as pairs about a constant reversal."""
+        if self.layout.has_repeats:
+            return PureError(self.layout.groups)
+        if not self.bidirectional:
+            return None
+        _, target = self.clusters
+        pairs = PureError(target, within=self.direction, paired=True)
+        return pairs if pairs.dof >= MIN_PAIRED_DOF else None
+
+    @cached_property
+    def noise(self):
+        white = self.replicates or ResidualMeanSquare(self.order)
+        return Serial(self.order, white) if self.size >= SERIAL_MIN_SAMPLES else white
+
+    def noise_gram(self, jacobian, residual_um, variance):
+        if isinstance(self.noise, Serial):
+            return self.noise.gram(jacobian, residual_um, variance)
+        return super().noise_gram(jacobian, residual_um, variance)
 
     def outliers(self, residual_um):
         return judge.outlier_rows(self.layout, self.position_mm, residual_um)
+
+    def transients(self, indices):
+        """Those of ``indices`` that run without a gap from the first or the last sample of
+        a continuous scan (no repeat groups: taken on the fly) in the order taken: the
+        motion's start or stop, not isolated outliers."""
+        if self.layout.has_repeats:
+            return np.zeros(0, dtype=int)
+        flagged = np.zeros(self.size, dtype=bool)
+        flagged[indices] = True
+        runs = self.samples.run if self.samples.run is not None else np.zeros(self.size)
+        found = []
+        for run in np.unique(runs):
+            members = self.order[runs[self.order] == run]
+            for ends in (members, members[::-1]):
+                edge = np.argmin(flagged[ends]) if not flagged[ends].all() else ends.size
+                found.extend(ends[:edge])
+        return np.unique(np.asarray(found, dtype=int))
 
     def subset(self, keep):
         kept = {name: None if getattr(self.samples, name) is None else
                 getattr(self.samples, name)[keep] for name in SAMPLE_COLUMNS}
         return Positioning(replace(self.case, positioning=replace(self.samples, **kept)))
 
+    def rival(self, effect, left, result):
+        """Why a periodic catalog effect is not what the data show (None when it is): it
+        follows an irregular error from target to target (significant against the replicates
+        but not against the lack of fit left, the noise model's shape test at the policy's
+        level), or the data show the periodic error at another wavelength (the best free
+        sinusoid in the resolvable band, fitted to the residual before the effect, leaves
+        significantly less than the effect refitted with the model does: F test at
+        ``judge.FAMILY_ALPHA``). The structure is then described for what it is instead."""
+        try:
+            wavelength_mm = effect.wavelength_mm(self.case.axis)
+        except KeyError:
+            return None
+        if not wavelength_mm:
+            return None
+        shape = self.noise.shape_test(left.residual_um, result.residual_um,
+                                      len(effect.parameters), result.statistics.n_free)
+        if not judge.accepts(shape.p_value, 1, len(self.stages)):
+            return (f"it follows an irregular error from target to target: against the "
+                    f"lack of fit left it is not significant ({shape.describe()})")
+        free = Periodic().trial(self, left) if Periodic().trials(self) else None
+        if free is None:
+            return None
+        residual = left.residual_um
+        free_residual = residual - least_squares_fit(residual, free.basis)
+        test = self.noise.extra_ss_test(result.residual_um, free_residual, 1,
+                                        left.statistics.n_free + Periodic.extra)
+        if test.p_value >= judge.FAMILY_ALPHA:
+            return None
+        return (f"its {wavelength_mm:.4g} mm wavelength explains the periodic error less "
+                f"well than the data's own at {free.location:.4g} mm ({test.describe()})")
+
+    def even_step_mm(self):
+        """The step (mm) when the samples, in the order taken, are one evenly spaced pass
+        in one direction (within 1 %) of at least ``SERIAL_MIN_SAMPLES``; else None."""
+        if self.size < SERIAL_MIN_SAMPLES:
+            return None
+        steps = np.diff(self.position_mm[self.order])
+        step = float(np.median(steps))
+        uniform = step != 0 and np.max(np.abs(steps - step)) <= 0.01 * abs(step)
+        return abs(step) if uniform else None
+
     def nuisances(self):
-        """A drift along the clock, whenever repeats show one can be told from the targets:
-        in a bidirectional test + and - runs alternate, so an unmodelled drift would alias
-        into the reversal."""
+        """A drift along the clock, whenever repeated runs show one can be told from the
+        targets: in a bidirectional test + and - runs alternate, so an unmodelled drift
+        would alias into the reversal. (In one pass each way a drift linear in time equals
+        a reversal changing along the travel: the two cannot be told apart.)"""
         drift = Drift()
         if not drift.trials(self):
             return []
@@ -118,26 +218,49 @@ class Positioning(Measurement):
         return (Periodic(), Direction(), Trend())
 
     def irregular(self, current):
-        """An irregular error along the travel: lack of fit beyond the noise (repeats, the
-        group means against the pure error) or serial correlation along the travel."""
-        residual = current.residual_um
-        layout = self.layout
+        """An irregular error along the travel: the target means of the residual scatter
+        beyond the replicates (the lack-of-fit F test), None without replicates."""
+        replicates, residual = self.replicates, current.residual_um
         n_within = sum(len(e.parameters) for e in current.model.effects if e.name == "drift")
         n_between = current.statistics.n_free - n_within
-        if layout.has_repeats and layout.n_groups > n_between + 1:
-            test = judge.lack_of_fit_test(layout, residual, n_between, n_within)
-            means = layout.group_means(residual)
-            what = (f"the mean error at each target scatters {np.std(means):.3g} µm beyond the "
-                    f"repeatability")
-        elif not layout.has_repeats and residual.size >= 30:
-            test = judge.serial_correlation_test(self.position_mm, residual)
-            means = residual
-            what = (f"residual RMS {np.sqrt(np.mean(residual**2)):.3g} µm, neighbouring "
-                    "samples alike")
-        else:
+        if replicates is None or replicates.n_groups <= n_between + 1:
             return None
+        test = replicates.lack_of_fit_test(residual, n_between, n_within)
+        means = replicates.group_means(residual)
         return ("irregular", test, means,
-                f"{what}, irregularly along the travel: a lead-error table would capture it")
+                f"the mean error at each target scatters {np.std(means):.3g} µm beyond the "
+                f"{replicates.source}, irregularly along the travel: a lead-error table "
+                "would capture it")
+
+    def undetermined(self, current, stages):
+        """Why the data cannot tell noise from an irregular error along the travel (None
+        when they can): no replicates, and either too few samples or a residual serially
+        correlated in the order taken (the von Neumann ratio test)."""
+        if self.replicates is not None:
+            return None
+        if self.size < SERIAL_MIN_SAMPLES:
+            return (f"one pass at {self.clusters[0].size} targets without "
+                    "replicates: the scatter from target to target is the error itself or "
+                    "noise, and the data cannot tell which; repeat the runs (ISO 230-2: 5 each "
+                    "way) or measure both directions")
+        test = judge.serial_correlation_test(current.residual_um[self.order])
+        if not judge.accepts(test.p_value, 1, stages):
+            return None
+        return (f"the residual is serially correlated in the order taken ({test.describe()}): "
+                "slow noise (air, drift) or an irregular error along the travel, which one "
+                "pass cannot tell apart; repeat the run to decide")
+
+    def repeatability(self):
+        """ISO 230-2 repeatability R set against the systematic deviation E of the measured
+        runs (µm); None without repeated runs. The axis does not repeat when R > E: what
+        varies from run to run is larger than what a model or a table can remove."""
+        figures = iso230_figures(self.position_mm, self.measured_um, self.direction)
+        for r_key, e_key in (("R_um", "E_um"), ("R_up_um", "E_up_um"),
+                             ("R_down_um", "E_down_um")):
+            if r_key in figures:
+                r_um, e_um = figures[r_key], figures[e_key]
+                return {"R_um": r_um, "E_um": e_um, "repeatable": bool(r_um <= e_um)}
+        return None
 
     def figures(self, result):
         """ISO 230-2 figures of the measurement and of the residual after the model, side
@@ -159,10 +282,39 @@ class Positioning(Measurement):
                 "rms_residual_um": result.statistics.rms_um, "figures": figures}
 
 
+def resolved_share(position_mm, wavelength_mm):
+    """How well the targets ``position_mm`` resolve a sinusoid at ``wavelength_mm``, 1 fully,
+    0 not at all: the smallest singular value of its cosine and sine columns, after
+    projecting off an offset and a slope, over √(n/2), their size were the phases evenly
+    spread (a sinusoid of any phase keeps at least this share of its size)."""
+    phase = 2 * np.pi * position_mm / wavelength_mm
+    pair = np.column_stack((np.cos(phase), np.sin(phase)))
+    others = np.linalg.qr(np.column_stack((np.ones_like(position_mm),
+                                           _normalised(position_mm))))[0]
+    apart = pair - others @ (others.T @ pair)
+    return float(np.linalg.svd(apart, compute_uv=False).min() / np.sqrt(position_mm.size / 2))
+
+
 def least_squares_fit(residual_um, basis):
-    """Projection of the residual on the columns of ``basis``."""
-    coefficients = np.linalg.lstsq(basis, residual_um, rcond=None)[0]
-    return basis @ coefficients
+    """Projection of the residual on the few columns of ``basis`` (normal equations of the
+    unit-scaled columns: a k x k solve, where a QR of samples x k costs seconds at 10^6)."""
+    scale = np.linalg.norm(basis, axis=0)
+    scale[scale == 0.0] = 1.0
+    scaled = basis / scale
+    coefficients = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ residual_um, rcond=None)[0]
+    return scaled @ coefficients
+
+
+def _weighted_misfit(clusters, residual_um, frequency_per_mm):
+    """Sum of squares left by a sinusoid at ``frequency_per_mm`` fitted to the target means
+    of the residual, each weighted by its sample count: the fit to every sample, for a
+    basis constant at a target, at the cost of the targets."""
+    centres_mm, index = clusters
+    counts = np.bincount(index)
+    means = np.bincount(index, residual_um) / counts
+    weights = np.sqrt(counts)
+    basis = sinusoid(centres_mm, frequency_per_mm) * weights[:, None]
+    return _rss(means * weights - least_squares_fit(means * weights, basis))
 
 
 def _normalised(values):
@@ -181,32 +333,59 @@ def _rss(values):
 
 
 class Periodic(Shape):
-    """A sinusoid of free wavelength along the travel (cos, sin and the wavelength)."""
+    """A sinusoid of free wavelength along the travel (cos, sin and the wavelength).
+
+    On one evenly spaced pass the strongest line of the whitened periodogram along the pass
+    is tested by Fisher's maximum (:func:`feedaxis.stats.coloured.peak_p_value`, family-wise
+    over the wavelengths searched, calibrated under serially correlated noise); elsewhere
+    the least-squares spectrum of the target means is searched and each resolvable
+    frequency counted in the Bonferroni correction.
+    """
 
     kind = "periodic"
     extra = 3
 
     def trials(self, measurement):
-        """Independent frequencies in the resolvable band (Rayleigh spacing 1/span)."""
-        centres, _ = target_clusters(measurement.position_mm)
+        """1 on an even pass (its p-value is family-wise), else the independent frequencies
+        in the resolvable band (Rayleigh spacing 1/span)."""
+        if measurement.even_step_mm():
+            return 1
+        centres, _ = measurement.clusters
         if centres.size < 8:
             return 0
-        low, high = resolvable_band_per_mm(centres)
-        return max(int((high - low) * np.ptp(centres)), 1)
+        low, high = self.band_per_mm(centres)
+        return max(int((high - low) * np.ptp(centres)), 0)
+
+    @staticmethod
+    def band_per_mm(centres_mm):
+        """(lowest, highest) spatial frequency searched (1/mm): the resolvable band from
+        ``MIN_CYCLES`` cycles over the travel."""
+        low, high = resolvable_band_per_mm(centres_mm)
+        return MIN_CYCLES * low, high
 
     def trial(self, measurement, current):
         residual_um, position_mm = current.residual_um, measurement.position_mm
-        spectrum = amplitude_spectrum(position_mm, residual_um)
-        if spectrum is None or spectrum.amplitude_um.size == 0:
-            return None
-        peak = 1.0 / spectrum.wavelength_mm[int(np.argmax(spectrum.amplitude_um))]
-        centres, _ = target_clusters(position_mm)
-        step = 1.0 / (5 * np.ptp(centres))
-        best = minimize_scalar(
-            lambda f: _rss(residual_um - least_squares_fit(residual_um, sinusoid(position_mm, f))),
-            bounds=(max(peak - step, step / 2), peak + step), method="bounded",
-            options={"xatol": step * 1e-4})
-        return Trial(sinusoid(position_mm, best.x), float(1.0 / best.x))
+        step_mm, test = measurement.even_step_mm(), None
+        if step_mm:
+            peak, p_value, ratio = peak_p_value(residual_um[measurement.order], step_mm,
+                                                MIN_CYCLES)
+            width = 1.0 / (residual_um.size * step_mm)
+            test = Test(ratio, (1, residual_um.size), p_value,
+                        "whitened periodogram maximum along the pass, family-wise over the "
+                        "wavelengths searched", "ratio")
+        else:
+            spectrum = amplitude_spectrum(position_mm, residual_um, measurement.clusters)
+            low = self.band_per_mm(measurement.clusters[0])[0]
+            if spectrum is None or not np.any(1.0 / spectrum.wavelength_mm >= low):
+                return None
+            searched = 1.0 / spectrum.wavelength_mm >= low
+            peak = 1.0 / spectrum.wavelength_mm[searched][int(np.argmax(
+                spectrum.amplitude_um[searched]))]
+            width = 1.0 / (5 * np.ptp(measurement.clusters[0]))
+        best = minimize_scalar(lambda f: _weighted_misfit(measurement.clusters, residual_um, f),
+                               bounds=(max(peak - width, width / 2), peak + width),
+                               method="bounded", options={"xatol": width * 1e-4})
+        return Trial(sinusoid(position_mm, best.x), float(1.0 / best.x), test)
 
     def describe(self, measurement, trial, fitted_um):
         amplitude = np.ptp(fitted_um) / 2
@@ -265,20 +444,27 @@ class Drift(Shape):
 
 
 class Trend(Shape):
-    """A straight line, bow or S-shape along the travel."""
+    """A straight line, bow or S-shape along the travel (a polynomial up to cubic), over at
+    least ``MIN_TREND_TARGETS`` targets."""
 
     kind = "trend"
     extra = MAX_TREND_DEGREE
 
     def trials(self, measurement):
-        return MAX_TREND_DEGREE if target_clusters(measurement.position_mm)[0].size >= 4 else 0
+        targets = measurement.clusters[0].size
+        return MAX_TREND_DEGREE if targets >= MIN_TREND_TARGETS else 0
 
     def trial(self, measurement, current):
         return Trial(np.vander(_normalised(measurement.position_mm), MAX_TREND_DEGREE + 1))
 
     def describe(self, measurement, trial, fitted_um):
-        return (f"the residual follows a polynomial of degree up to {MAX_TREND_DEGREE} along "
-                f"the travel, {np.ptp(fitted_um):.3g} µm peak to valley")
+        centres, index = measurement.clusters
+        curve = np.bincount(index, fitted_um) / np.bincount(index)
+        turns = int(np.count_nonzero(np.diff(np.sign(np.diff(curve))) != 0))
+        shape = ("rises or falls steadily" if turns == 0 else "bows once" if turns == 1
+                 else "bends into an S")
+        return (f"the residual {shape} along the travel, {np.ptp(fitted_um):.3g} µm peak to "
+                "valley (a polynomial up to cubic)")
 
 
 def _compare_to_marks(wavelength_mm, marks):

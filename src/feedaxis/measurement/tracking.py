@@ -94,9 +94,10 @@ class Tracking(Measurement):
         params = self.params(model)
         return self.deviation_um(params, known + disturbance_N) - self.deviation_um(params)
 
-    def uncertainty_inflation(self, residual_um):
-        """τ, the residual's integrated autocorrelation time: n/τ samples are independent."""
-        return autocorrelation_time(residual_um)
+    def noise_gram(self, jacobian, residual_um, variance):
+        """τ · variance · J'J, τ the residual's integrated autocorrelation time: n/τ samples
+        are independent."""
+        return autocorrelation_time(residual_um) * variance * (jacobian.T @ jacobian)
 
     def shapes(self, effects):
         return (PeriodicForce(), ConstantForce(), Reversal(), TimeTrend())

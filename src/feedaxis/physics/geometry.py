@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .checks import ParameterError, require_positive, require_representable
-from .scalar import array_module, interp, sign, table, values
+from .scalar import array_module, interp, table, values
 
 GRAVITY_M_S2 = 9.80665
 SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
@@ -150,11 +150,31 @@ def backlash_error_um(direction, backlash_um):
     Parameters
     ----------
     direction : array_like
-        +1 when the position was approached moving in +, -1 moving in -.
+        +1 when the position was approached moving in +, -1 moving in -; a value in
+        between is the nut inside its play (:func:`play_engagement`), the error B/2 times it.
     backlash_um : float
         Reversal value B (µm).
     """
-    return 0.5 * backlash_um * sign(direction)
+    if isinstance(direction, (float, int)):  # scalar.is_scalar inlined: every FMU step
+        return 0.5 * backlash_um * min(1.0, max(-1.0, float(direction)))
+    return 0.5 * backlash_um * np.clip(values(direction), -1.0, 1.0)
+
+
+def play_engagement(engagement, travel_mm, backlash_um):
+    """Where the nut sits in its play of width B after the screw travels ``travel_mm``.
+
+    ``engagement`` runs from -1 (against the flank that drives in -) to +1 (in +): a play
+    operator of width B. A reversal crosses the play over B of travel, the reversal error
+    (:func:`backlash_error_um`) going from +B/2 to -B/2 on the way, so the nanometre creep
+    of a settling servo never turns the approach direction, and an overshoot of more than B
+    does. With B = 0 the engagement is the sign of the last travel. Scalars (the FMU's
+    step).
+    """
+    if travel_mm == 0.0:
+        return engagement
+    if backlash_um == 0.0:
+        return 1.0 if travel_mm > 0.0 else -1.0
+    return min(1.0, max(-1.0, engagement + 2e3 * travel_mm / abs(backlash_um)))
 
 
 def transmission_error_um(position_mm, direction, lead_mm, offset_um, slope_um_per_mm,

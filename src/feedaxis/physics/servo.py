@@ -271,22 +271,29 @@ def loop_propagator(coefficients, n_steps, buffer_size):
 
 def numba_ready_loop(numba):
     """:func:`run_loop`'s code with its call of :func:`npid_gain` bound to a numba-compiled
-    :func:`npid_gain` (numba compiles calls to compiled functions only): what numba's JIT
+    :func:`npid_gain` (numba compiles calls to compiled functions only; cached on disk also
+    where site-packages is read-only: :func:`.numba_cache.cached_njit`): what numba's JIT
     (:func:`compiled_loop`) and its ahead-of-time compiler (feedaxis.kernel_build) take."""
-    namespace = {**run_loop.__globals__, "npid_gain": numba.njit(cache=True)(npid_gain)}
+    from .numba_cache import cached_njit
+
+    namespace = {**run_loop.__globals__, "npid_gain": cached_njit(numba, npid_gain)}
     return types.FunctionType(run_loop.__code__, namespace, run_loop.__name__)
 
 
 @lru_cache(maxsize=1)
 def compiled_loop():
-    """:func:`run_loop` compiled by numba's JIT (cached on disk); about 40x faster.
+    """:func:`run_loop` compiled by numba (cached on disk, also where site-packages is
+    read-only: :func:`.numba_cache.cached_njit`): the same code object, its call of
+    :func:`npid_gain` bound to a compiled :func:`npid_gain`; about 40x faster.
 
     numba is imported here, not with the module: the FMU and the CLI's quick commands do
     without it.
     """
     import numba
 
-    return numba.njit(cache=True, nogil=True)(numba_ready_loop(numba))
+    from .numba_cache import cached_njit
+
+    return cached_njit(numba, numba_ready_loop(numba), nogil=True)
 
 
 @lru_cache(maxsize=1)

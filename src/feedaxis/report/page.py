@@ -14,6 +14,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..output import write_atomically
+from ..text import repeatability_text
 from . import plots
 from .compensation_table import compensation_table_html
 
@@ -62,6 +63,10 @@ def _diagnosis_html(analysis):
     parts = [f'<p class="verdict">verdict: {diagnosis.verdict}</p>',
              f"<p>residual RMS {diagnosis.rms_um:.4g} µm; noise {diagnosis.noise_um:.3g} µm "
              f"({html.escape(diagnosis.noise_source)})</p>"]
+    if diagnosis.undetermined_reason:
+        parts.append(f"<p>undetermined: {html.escape(diagnosis.undetermined_reason)}</p>")
+    if diagnosis.repeatability:
+        parts.append(f"<p>{html.escape(micro(repeatability_text(diagnosis.repeatability)))}</p>")
     if diagnosis.candidates:
         parts.append(table(("missing effect", "RMS after (µm)", "p-value", "meaning", "evidence"),
                            [(c.effect, f"{c.rms_after_um:.4g}", f"{c.test.p_value:.2g}",
@@ -74,6 +79,10 @@ def _diagnosis_html(analysis):
     if diagnosis.outlier_rows:
         parts.append(f"<p>outliers kept out of the fit, rows of {measurement.file}: "
                      f"{', '.join(map(str, diagnosis.outlier_rows))}</p>")
+    if diagnosis.transient_rows:
+        parts.append(f"<p>transients after the motion's start or stop kept out of the fit, "
+                     f"rows of {measurement.file}: "
+                     f"{', '.join(map(str, diagnosis.transient_rows))}</p>")
     parts.append(f"<p>{html.escape(diagnosis.test_used)}</p>")
     if diagnosis.skipped:
         parts.append(table(("passed over", "why"), diagnosis.skipped.items()))

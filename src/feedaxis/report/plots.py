@@ -21,6 +21,32 @@ def _finish(figure, axes, xlabel, ylabel, title, grid="major"):
     return _png(figure)
 
 
+MAX_PLOTTED = 4000  # points per series: beyond it the envelope (min and max per bin) is drawn
+
+
+def _plot(axes, x, y, *style, **options):
+    """``axes.plot`` of a series thinned to at most ``MAX_PLOTTED`` points: in order of x,
+    the smallest and the largest y of each of ``MAX_PLOTTED // 2`` bins, so every excursion
+    stays on the picture (a report of 10^5 samples drew for 20 s unthinned)."""
+    x, y = np.asarray(x), np.asarray(y)
+    if x.size > MAX_PLOTTED:
+        order = np.argsort(x, kind="stable")
+        starts = np.linspace(0, x.size, MAX_PLOTTED // 2, endpoint=False).astype(int)
+        bins = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, x.size]))
+        binned = y[order]
+        chosen = [order[_first_per_bin(binned == extreme.reduceat(binned, starts)[bins], bins)]
+                  for extreme in (np.fmin, np.fmax)]
+        chosen = np.unique(np.concatenate(chosen))
+        x, y = x[chosen], y[chosen]
+    return axes.plot(x, y, *style, **options)
+
+
+def _first_per_bin(mask, bins):
+    """Index of the first True of ``mask`` in each bin that has one."""
+    hits = np.flatnonzero(mask)
+    return hits[np.unique(bins[hits], return_index=True)[1]]
+
+
 def _png(figure):
     buffer = io.BytesIO()
     figure.tight_layout()
@@ -34,7 +60,7 @@ def measurement_vs_model(position_mm, measured_um, predicted_um, direction, run=
     approach direction, and per run when ``run`` is given (a time-dependent case, whose
     runs differ), so no line joins points of different runs."""
     figure, axes = plt.subplots(figsize=(9, 3.6))
-    axes.plot(position_mm, measured_um, ".", ms=2, color="0.55", label="measured")
+    _plot(axes, position_mm, measured_um, ".", ms=2, color="0.55", label="measured")
     runs = np.zeros_like(position_mm) if run is None else run
     order = np.argsort(position_mm, kind="stable")
     for sign, colour in ((1.0, "tab:blue"), (-1.0, "tab:orange")):
@@ -42,7 +68,7 @@ def measurement_vs_model(position_mm, measured_um, predicted_um, direction, run=
         for number in np.unique(runs):
             chosen = order[(direction[order] == sign) & (runs[order] == number)]
             if chosen.size:
-                axes.plot(position_mm[chosen], predicted_um[chosen], "-", lw=1.0, color=colour,
+                _plot(axes, position_mm[chosen], predicted_um[chosen], "-", lw=1.0, color=colour,
                           alpha=0.8, label=label)
                 label = None
     return _finish(figure, axes, "target position (mm)", "error (µm)",
@@ -57,11 +83,11 @@ def iso230_deviation(per_direction):
     figure, axes = plt.subplots(figsize=(9, 3.8))
     for (sign, (target_mm, mean_um, std_um)), colour in zip(per_direction.items(),
                                                            ("tab:blue", "tab:orange")):
-        axes.plot(target_mm, mean_um, "o-", ms=3, lw=1.2, color=colour,
-                  label=f"x̄{'↑' if sign == '+' else '↓'} ({sign} approach)")
+        _plot(axes, target_mm, mean_um, "o-" if target_mm.size <= MAX_PLOTTED else "-", ms=3,
+              lw=1.2, color=colour, label=f"x̄{'↑' if sign == '+' else '↓'} ({sign} approach)")
         if np.any(np.isfinite(std_um)):
             for bound_um in (mean_um + 2 * std_um, mean_um - 2 * std_um):
-                axes.plot(target_mm, bound_um, "--", lw=0.8, color=colour)
+                _plot(axes, target_mm, bound_um, "--", lw=0.8, color=colour)
             axes.plot([], [], "--", lw=0.8, color=colour, label=f"x̄ ± 2s ({sign})")
     return _finish(figure, axes, "target position (mm)", "deviation (µm)",
                    "ISO 230-2 deviation: mean ± 2s per approach direction")
@@ -70,7 +96,7 @@ def iso230_deviation(per_direction):
 def residual_vs_position(position_mm, residual_um, marks):
     """Residual against position; the catalog wavelengths as period grids and scale bars."""
     figure, axes = plt.subplots(figsize=(9, 3.6))
-    axes.plot(position_mm, residual_um, ".", ms=2, color="tab:blue", label="residual")
+    _plot(axes, position_mm, residual_um, ".", ms=2, color="tab:blue", label="residual")
     start, stop = float(np.min(position_mm)), float(np.max(position_mm))
     top = float(np.max(residual_um)) if residual_um.size else 1.0
     for (label, wavelength), colour in zip(marks.items(), MARK_COLOURS):
@@ -98,7 +124,8 @@ def spectrum(residual, measured, marks, structures=()):
                                                  (residual, dict(color="tab:blue", lw=0.8,
                                                                  label="residual"))):
         if wavelength_mm.size:
-            axes.semilogx(wavelength_mm, amplitude_um, **style)
+            _plot(axes, wavelength_mm, amplitude_um, **style)
+            axes.set_xscale("log")
             top = max(top, float(np.max(amplitude_um)))
     outside = []
     for (label, wavelength), colour in zip(marks.items(), MARK_COLOURS):
@@ -128,7 +155,7 @@ def contributions(coordinate, components, xlabel, style="."):
                                      squeeze=False)
     order = np.argsort(coordinate, kind="stable")
     for axes, (name, values_um) in zip(axes_list[:, 0], components.items()):
-        axes.plot(coordinate[order], values_um[order], style, ms=1.5, lw=0.8)
+        _plot(axes, coordinate[order], values_um[order], style, ms=1.5, lw=0.8)
         axes.set_ylabel("µm")
         axes.set_title(name, fontsize=9, loc="left")
         axes.grid(alpha=0.3)
@@ -156,7 +183,7 @@ def residual_against(panels):
     figure, axes_list = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 3),
                                      squeeze=False)
     for axes, (label, values, residual_um) in zip(axes_list[0], panels):
-        axes.plot(values, residual_um, ".", ms=2)
+        _plot(axes, values, residual_um, ".", ms=2)
         axes.set(xlabel=label, ylabel="residual (µm)")
         axes.grid(alpha=0.3)
     return _png(figure)
@@ -213,8 +240,8 @@ def compensation_table(target_mm, means_um, table_mm, table_um):
 def error_against_time(time_s, measured_um, predicted_um, reversals_s):
     """Tracking deviation measured and predicted against time, reversals marked."""
     figure, axes = plt.subplots(figsize=(9, 3.6))
-    axes.plot(time_s, measured_um, color="0.55", lw=0.8, label="measured")
-    axes.plot(time_s, predicted_um, color="tab:blue", lw=0.8, label="model")
+    _plot(axes, time_s, measured_um, color="0.55", lw=0.8, label="measured")
+    _plot(axes, time_s, predicted_um, color="tab:blue", lw=0.8, label="model")
     for index, t in enumerate(reversals_s):
         axes.axvline(t, color="tab:red", lw=0.5, alpha=0.5,
                      label="velocity reversal" if index == 0 else None)
@@ -225,8 +252,8 @@ def error_against_time(time_s, measured_um, predicted_um, reversals_s):
 def error_against_velocity(velocity_mm_s, measured_um, residual_um):
     """Deviation and residual against the reference velocity: friction shows as a jump at 0."""
     figure, axes = plt.subplots(figsize=(9, 3.6))
-    axes.plot(velocity_mm_s, measured_um, ".", ms=1.5, color="0.55", label="measured")
-    axes.plot(velocity_mm_s, residual_um, ".", ms=1.5, color="tab:orange",
+    _plot(axes, velocity_mm_s, measured_um, ".", ms=1.5, color="0.55", label="measured")
+    _plot(axes, velocity_mm_s, residual_um, ".", ms=1.5, color="tab:orange",
               label="residual after the model")
     axes.axvline(0.0, color="tab:red", lw=0.8, label="reversal (v = 0)")
     return _finish(figure, axes, "reference velocity (mm/s)", "µm",
@@ -243,3 +270,39 @@ def frequency_spectrum(frequency_hz, amplitude_um, structures):
                          label=f"unexplained {structure.frequency_hz:.4g} Hz")
     return _finish(figure, axes, "frequency (Hz)", "amplitude (µm)", "Residual spectrum",
                    grid="both")
+
+
+def uncertainty_histograms(panels):
+    """A small histogram per ISO 230-2 figure: the Monte Carlo values (their central
+    99.8 %, so a long tail does not squeeze the rest), the figure of the data (line) and
+    the 95 % coverage interval (shaded). ``panels`` is
+    [(title, values_um, value_um, (low_um, high_um))]."""
+    columns = min(3, len(panels))
+    rows = -(-len(panels) // columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.4 * rows),
+                                squeeze=False)
+    for axis, (title, values, value, (low, high)) in zip(axes.flat, panels):
+        axis.hist(values, bins=60, range=tuple(np.quantile(values, (0.001, 0.999))),
+                  color="tab:blue", alpha=0.7)
+        axis.axvspan(low, high, color="tab:orange", alpha=0.2, label="95 % interval")
+        axis.axvline(value, color="black", lw=1, label="value")
+        axis.set_title(title, fontsize=9)
+        axis.set_xlabel("µm", fontsize=8)
+        axis.tick_params(labelsize=7)
+        axis.set_yticks([])
+    for axis in list(axes.flat)[len(panels):]:
+        axis.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    return _png(figure)
+
+
+def table_with_uncertainty(position_mm, sides):
+    """The compensation table's values against position with their 95 % coverage band,
+    per direction; ``sides`` is [(label, value_um, low_um, high_um)]."""
+    figure, axes = plt.subplots(figsize=(9, 3.4))
+    for (label, value, low, high), colour in zip(sides, ("tab:blue", "tab:orange")):
+        axes.plot(position_mm, value, color=colour, lw=1, label=label)
+        axes.fill_between(position_mm, low, high, color=colour, alpha=0.25,
+                          label=f"{label}: 95 % interval")
+    return _finish(figure, axes, "position (mm)", "table value (µm)",
+                   "compensation table and its 95 % coverage interval")

@@ -48,8 +48,8 @@ class Layout:
     clock_unit: str | None
 
     @classmethod
-    def of(cls, positioning):
-        groups = target_groups(positioning)
+    def of(cls, positioning, clusters=None):
+        groups = target_groups(positioning, clusters)
         clock, unit = test_clock(positioning)
         return cls(groups, int(groups.max()) + 1, clock, unit)
 
@@ -68,11 +68,6 @@ class Layout:
     def group_means(self, values):
         """Mean of ``values`` in each sample's group, per sample."""
         return (np.bincount(self.groups, values, self.n_groups) / self.sizes)[self.groups]
-
-    def pure_error_ss(self, residual_um):
-        """Sum of squares of the residual within the repeat groups (µm²)."""
-        within = residual_um - self.group_means(residual_um)
-        return float(within @ within)
 
     def subset(self, keep):
         """The layout of the samples ``keep`` (boolean mask), groups renumbered."""
@@ -126,31 +121,20 @@ class Test:
         return f"{self.symbol} = {self.statistic:.3g} over {self.dof[1]} samples, {p_value}"
 
 
-def lack_of_fit_test(layout, residual_um, n_between, n_within):
-    """Lack-of-fit F test: the group means of the residual against the pure error, with
-    ``n_between`` parameters fitted to the group means and ``n_within`` (a drift) within."""
-    means = layout.group_means(residual_um)
-    lof_dof = max(layout.n_groups - n_between, 1)
-    pure_dof = max(layout.pure_dof - n_within, 1)
-    statistic = (float(means @ means) / lof_dof) / max(layout.pure_error_ss(residual_um) / pure_dof,
-                                                       1e-300)
-    return Test(statistic, (lof_dof, pure_dof), float(stats.f.sf(statistic, lof_dof, pure_dof)),
-                "lack-of-fit F test against the pure error")
-
-
-def serial_correlation_test(position_mm, residual_um):
-    """Von Neumann ratio test along the travel (no repeats): smooth structure left in the
-    residual makes successive differences small against its variance.
+def serial_correlation_test(residual_um):
+    """Von Neumann ratio test of a residual in the order the samples were taken: smooth
+    structure or correlated noise left in it makes successive differences small against
+    its variance.
 
     The ratio η = Σ(Δr)² / Σ(r - r̄)² is 2 for white noise with variance 4/n asymptotically
     (von Neumann 1941, Ann. Math. Stat. 12:367); reported as a z statistic.
     """
-    residual = residual_um[np.argsort(position_mm, kind="stable")]
+    residual = np.asarray(residual_um, dtype=float)
     centred = residual - residual.mean()
     ratio = float(np.sum(np.diff(residual) ** 2) / max(centred @ centred, 1e-300))
     z = (2.0 - ratio) / (2.0 / np.sqrt(residual.size))
     return Test(float(z), (1, residual.size), float(stats.norm.sf(z)),
-                "von Neumann ratio test along the travel (no repeats)", "z")
+                "von Neumann ratio test in the order taken (no replicates)", "z")
 
 
 def accepts(p_value, tried, stages, alpha=FAMILY_ALPHA):

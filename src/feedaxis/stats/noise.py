@@ -1,14 +1,29 @@
 """Noise models: what a term's reduction of the residual is judged against, named in every
-verdict. One per layout of the samples; the measurement chooses the one its data support.
+verdict. The measurement chooses the one its samples support.
 
-- :class:`PureError`: repeated samples (target x direction groups with at least
-  ``judge.MIN_PURE_DOF`` degrees of freedom). The extra-sum-of-squares F test against their
+- :class:`PureError`: repeated samples. The extra-sum-of-squares F test against their
   within-group scatter (Draper & Smith, Applied Regression Analysis, 3rd ed., §2.1 and
-  §6.1): a large effect is named however much unmodelled per-target shape is left.
-- :class:`ResidualMeanSquare`: no repeats; the larger model's residual mean square (the
-  partial F test); the noise is estimated from the scatter between neighbouring samples.
-- :class:`Coloured`: a serially correlated residual (tracking traces): the F test with the
-  sample count replaced by the effective count n / τ (:mod:`feedaxis.stats.coloured`).
+  §6.1): a large effect is named however much unmodelled per-target shape is left. The
+  groups are the repeat groups (target x direction) of a test with repeated runs, or, in a
+  single pass each way, the targets, with one reversal common to all of them allowed: the
+  + and - readings at a target are then replicates of each other.
+- :class:`ResidualMeanSquare`: no replicates; the larger model's residual mean square (the
+  partial F test), the noise estimated from the scatter between neighbouring samples.
+- :class:`Serial`: noise correlated along the test (air turbulence and slow drift in laser
+  data, servo and encoder noise in a trace). Each test fits an autoregressive model to the
+  noise part of the larger model's residual (within the replicate groups where there are
+  replicates) in the order the samples were taken, when the Ljung-Box test rejects
+  whiteness at 1 % (over pairs of samples in different groups where there are replicates:
+  deviations from a group mean are correlated within the group by construction; the AR
+  model by conditional least squares, the order by BIC);
+  when it is white, the underlying model above decides; otherwise the term's explained sum of squares per parameter is set
+  against the noise power at the term's own frequencies, σ²_eff = Σ S(f)|C(f)|² / Σ|C(f)|²
+  (S the AR spectrum, C the spectrum of the fitted term): for a smooth term that is the
+  long-run variance S(0), for white noise σ² (the plain F test). The AR model's persistence
+  Σφ is raised two standard errors for these decisions, as its estimate from a few hundred
+  samples is biased low and the tests at low frequencies would be liberal.
+- :class:`Coloured`: a serially correlated trace judged with the effective sample count
+  n / τ (:mod:`feedaxis.stats.coloured`).
 """
 from __future__ import annotations
 
@@ -16,8 +31,13 @@ import numpy as np
 from scipy import stats
 
 from . import judge
-from .coloured import autocorrelation_time
+from .coloured import (Autoregression, autocorrelation_time, least_squares_autoregression,
+                       ljung_box_p_value)
 from .judge import Test
+
+SERIAL_MAX_ORDER = 5
+SERIAL_ALPHA = 0.01  # the Ljung-Box test over SERIAL_MAX_ORDER lags: white noise taken for
+#                      correlated in 1 % of tests, and only then an AR model of order >= 1
 
 
 def _rss(values):
@@ -26,60 +46,120 @@ def _rss(values):
 
 def _f_test(rss_before, rss_after, extra, denominator, dof, name):
     extra = max(int(extra), 1)
+    dof = max(dof, 1)
     statistic = max(rss_before - rss_after, 0.0) / extra / max(denominator, 1e-300)
     return Test(float(statistic), (extra, dof), float(stats.f.sf(statistic, extra, dof)), name)
 
 
 class PureError:
-    """The scatter of repeated samples: ``layout`` holds the repeat groups."""
+    """Replicates: ``groups`` (index per sample) and, optionally, ``within`` columns (samples
+    x k) fitted inside every group alike (a constant reversal between + and - readings)."""
 
-    name = "F test against the pure error of repeated samples"
-    source = "scatter of repeated samples"
+    def __init__(self, groups, within=None, paired=False):
+        self.groups = np.asarray(groups)
+        self.n_groups = int(self.groups.max()) + 1
+        self.sizes = np.bincount(self.groups, minlength=self.n_groups)
+        self.within = None if within is None else self._centred(
+            np.asarray(within, float).reshape(self.groups.size, -1))
+        rank = 0 if self.within is None else int(np.linalg.matrix_rank(self.within))
+        self.dof = int(self.groups.size - self.n_groups - rank)
+        self.paired = paired
+        self.name = ("F test against the scatter of the + and - readings at each target "
+                     "(one pass each way, a constant reversal allowed)" if paired else
+                     "F test against the pure error of repeated samples")
+        self.source = ("scatter of the + and - readings at each target about a constant "
+                       "reversal" if paired else "scatter of repeated samples")
 
-    def __init__(self, layout):
-        self.layout = layout
+    def group_means(self, values):
+        """Mean of ``values`` in each sample's group, per sample."""
+        return (np.bincount(self.groups, values, self.n_groups) / self.sizes)[self.groups]
+
+    def _centred(self, values):
+        if values.ndim == 1:
+            return values - self.group_means(values)
+        return np.column_stack([self._centred(column) for column in values.T])
+
+    def noise_part(self, residual_um):
+        """The residual within the groups, the within columns fitted: its noise alone,
+        whatever structure sits between the groups (µm, per sample)."""
+        within = self._centred(residual_um)
+        if self.within is not None:
+            within = within - self.within @ np.linalg.lstsq(self.within, within, rcond=None)[0]
+        return within
+
+    def pure_ss(self, residual_um):
+        """Sum of squares of the residual within the groups, the within columns fitted (µm²)."""
+        within = self.noise_part(residual_um)
+        return float(within @ within)
 
     def extra_ss_test(self, before_um, after_um, extra, n_free_after):
         """F test of ``extra`` parameters that took the residual from before to after: the
         pure error of the larger model, its degrees of freedom reduced by that model's
         parameters (some may vary within a group)."""
-        dof = max(self.layout.pure_dof - n_free_after, 1)
-        return _f_test(_rss(before_um), _rss(after_um), extra,
-                       self.layout.pure_error_ss(after_um) / dof, dof, self.name)
+        dof = max(self.dof - n_free_after, 1)
+        return _f_test(_rss(before_um), _rss(after_um), extra, self.pure_ss(after_um) / dof,
+                       dof, self.name)
+
+    def shape_test(self, before_um, after_um, extra, n_free_after):
+        """The test of a term with a shape of its own (a sinusoid, a trend): fitted to an
+        irregular error between the groups, any such shape explains some of it, so it must
+        stand out against the pure error and against the residual mean square (the lack of
+        fit included) alike: the larger p-value of the two."""
+        tests = (self.extra_ss_test(before_um, after_um, extra, n_free_after),
+                 ResidualMeanSquare(None).extra_ss_test(before_um, after_um, extra,
+                                                         n_free_after))
+        return max(tests, key=lambda test: test.p_value)
 
     def estimate_um(self, residual_um):
         """(σ (µm), source): the pooled standard deviation within the groups."""
-        return float(np.sqrt(self.layout.pure_error_ss(residual_um) / self.layout.pure_dof)), \
-            self.source
+        return float(np.sqrt(self.pure_ss(residual_um) / max(self.dof, 1))), self.source
 
     def error_scale(self, result):
         """√(pure-error variance / residual variance): turns the fit's standard errors (from
-        its residual, unmodelled shape included) into ones resting on the repeatability."""
+        its residual, unmodelled shape included) into ones resting on the replicates."""
         statistics = result.statistics
         residual_variance = (statistics.rms_um**2 * statistics.n_points
                              / max(statistics.n_points - statistics.n_free, 1))
-        pure_variance = (self.layout.pure_error_ss(result.residual_um)
-                         / max(self.layout.pure_dof - statistics.n_free, 1))
+        pure_variance = self.pure_ss(result.residual_um) / max(self.dof - statistics.n_free, 1)
         return float(np.sqrt(pure_variance / residual_variance)) if residual_variance > 0 else 1.0
+
+    def lack_of_fit_test(self, residual_um, n_between, n_within):
+        """Lack-of-fit F test: the group means of the residual against the pure error, with
+        ``n_between`` parameters fitted to the group means and ``n_within`` (a drift)
+        within."""
+        means = self.group_means(residual_um)
+        lof_dof = max(self.n_groups - n_between, 1)
+        pure_dof = max(self.dof - n_within, 1)
+        statistic = (float(means @ means) / lof_dof) / max(self.pure_ss(residual_um) / pure_dof,
+                                                           1e-300)
+        return Test(statistic, (lof_dof, pure_dof),
+                    float(stats.f.sf(statistic, lof_dof, pure_dof)),
+                    f"lack-of-fit F test against the {self.source}")
 
 
 class ResidualMeanSquare:
-    """No repeats: the residual mean square; ``order`` sorts the samples along the test
-    (run or time, then position) for the noise estimate."""
+    """No replicates: the residual mean square; ``order`` sorts the samples in the order they
+    were taken (run or time, then position) for the noise estimate."""
 
-    name = "partial F test against the residual mean square (no repeats)"
-    source = "point-to-point scatter along the travel"
+    name = "partial F test against the residual mean square (no replicates)"
+    source = "point-to-point scatter along the test (no replicates)"
 
     def __init__(self, order):
         self.order = order
+
+    def noise_part(self, residual_um):
+        """Without replicates the residual is all the data say of the noise."""
+        return residual_um
 
     def extra_ss_test(self, before_um, after_um, extra, n_free_after):
         dof = max(after_um.size - n_free_after, 1)
         return _f_test(_rss(before_um), _rss(after_um), extra, _rss(after_um) / dof, dof,
                        self.name)
 
+    shape_test = extra_ss_test
+
     def estimate_um(self, residual_um):
-        """(σ (µm), source): the median absolute successive difference along the test
+        """(σ (µm), source): the median absolute successive difference in the order taken
         (robust, scaled to a standard deviation); short-wave structure left in the residual
         makes it an upper bound."""
         steps = np.diff(residual_um[self.order])
@@ -88,6 +168,87 @@ class ResidualMeanSquare:
 
     def error_scale(self, result):
         return 1.0
+
+
+class Serial:
+    """Noise possibly correlated along the test: ``order`` sorts the samples in the order
+    they were taken; ``white`` decides where the residual shows no correlation."""
+
+    def __init__(self, order, white):
+        self.order, self.white = order, white
+        self.name = (f"{white.name}; where the residual is serially correlated, against the "
+                     "noise power at the term's frequencies (AR noise model, order by BIC)")
+
+    def autoregression(self, residual_um):
+        """The AR model of the residual's noise part (within the replicate groups where
+        there are replicates, so structure between targets is not taken for correlated
+        noise) in the order taken: white unless the Ljung-Box test rejects whiteness at
+        ``SERIAL_ALPHA``, then of order 1 to ``SERIAL_MAX_ORDER`` by conditional least
+        squares and BIC."""
+        ordered = self.white.noise_part(residual_um)[self.order]
+        groups = getattr(self.white, "groups", None)
+        if ljung_box_p_value(ordered, SERIAL_MAX_ORDER,
+                             None if groups is None else groups[self.order]) >= SERIAL_ALPHA:
+            variance = float(np.var(ordered))
+            return Autoregression(np.zeros(0), variance, variance)
+        return least_squares_autoregression(ordered, SERIAL_MAX_ORDER)
+
+    def extra_ss_test(self, before_um, after_um, extra, n_free_after):
+        """The white model's test where the noise part of the larger model's residual is
+        white, else the spectral test against its AR model with the persistence raised two
+        standard errors (:meth:`~feedaxis.stats.coloured.Autoregression.cautious`)."""
+        noise = self.autoregression(after_um)
+        if noise.order == 0:
+            return self.white.extra_ss_test(before_um, after_um, extra, n_free_after)
+        return self._spectral_test(noise.cautious(), before_um, after_um, extra, n_free_after)
+
+    def _spectral_test(self, noise, before_um, after_um, extra, n_free_after):
+        """F test of the term (before - after) against ``noise``'s power at its frequencies."""
+        fitted = (before_um - after_um)[self.order]
+        n_fft = 1 << int(np.ceil(np.log2(2 * fitted.size)))
+        power = np.abs(np.fft.rfft(fitted, n_fft)) ** 2
+        power[1:-1] *= 2.0
+        effective = float(noise.spectrum(n_fft) @ power / max(power.sum(), 1e-300))
+        return _f_test(_rss(before_um), _rss(after_um), extra, effective,
+                       after_um.size - n_free_after - noise.order,
+                       f"F test against the serially correlated noise at the term's "
+                       f"frequencies (AR({noise.order}), neighbours correlated "
+                       f"{noise.lag_one():.2f})")
+
+    def shape_test(self, before_um, after_um, extra, n_free_after):
+        """The white model's shape test where the noise is white, else the serial test."""
+        if self.autoregression(after_um).order == 0:
+            return self.white.shape_test(before_um, after_um, extra, n_free_after)
+        return self.extra_ss_test(before_um, after_um, extra, n_free_after)
+
+    def estimate_um(self, residual_um):
+        """(σ (µm), source): the white model's estimate, or the marginal standard deviation of
+        the correlated noise, its correlation named."""
+        noise = self.autoregression(residual_um)
+        if noise.order == 0:
+            return self.white.estimate_um(residual_um)
+        return (float(np.sqrt(noise.variance)),
+                f"serially correlated along the test: AR({noise.order}), neighbouring samples "
+                f"correlated {noise.lag_one():.2f}")
+
+    def error_scale(self, result):
+        if self.autoregression(result.residual_um).order == 0:
+            return self.white.error_scale(result)
+        return 1.0
+
+    def gram(self, jacobian, residual_um, variance):
+        """J'ΣJ of the Jacobian (samples x parameters) under the noise of ``residual_um``:
+        ``variance`` · J'J when it is white, else through the AR spectrum (the sandwich
+        covariance's middle; Σ circulant, evaluated by FFT)."""
+        noise = self.autoregression(residual_um)
+        if noise.order == 0:
+            return variance * (jacobian.T @ jacobian)
+        ordered = jacobian[self.order]
+        n_fft = 1 << int(np.ceil(np.log2(2 * ordered.shape[0])))
+        transform = np.fft.rfft(ordered, n_fft, axis=0)
+        weights = noise.spectrum(n_fft) / n_fft
+        weights[1:-1] *= 2.0
+        return np.real((transform.conj() * weights[:, None]).T @ transform)
 
 
 class Coloured:
@@ -108,6 +269,9 @@ class Coloured:
             return Test(float("inf") if p_value == 0.0 else 0.0, (extra, max(dof, 0.0)),
                         p_value, self.name)
         return _f_test(rss_before, rss_after, extra, rss_after / dof, float(dof), self.name)
+
+    def shape_test(self, before_um, after_um, extra, n_free_after):
+        return self.extra_ss_test(before_um, after_um, extra, n_free_after)
 
     def estimate_um(self, residual_um):
         """(σ (µm), source): the RMS of the residual left, its autocorrelation time named."""

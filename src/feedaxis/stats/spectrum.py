@@ -43,10 +43,11 @@ def frequency_grid(centres_mm):
     return np.linspace(low, high, count)
 
 
-def amplitude_spectrum(position_mm, residual_um):
+def amplitude_spectrum(position_mm, residual_um, clusters=None):
     """Least-squares amplitude spectrum of the cluster means; FFT on an even grid,
-    a floating-mean periodogram otherwise. None with fewer than ``MIN_CLUSTERS`` targets."""
-    centres_mm, index = target_clusters(position_mm)
+    a floating-mean periodogram otherwise. None with fewer than ``MIN_CLUSTERS`` targets.
+    ``clusters``: the :func:`target_clusters` of ``position_mm``, when already computed."""
+    centres_mm, index = clusters or target_clusters(position_mm)
     if centres_mm.size < MIN_CLUSTERS:
         return None
     means_um = np.bincount(index, residual_um) / np.bincount(index)

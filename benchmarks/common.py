@@ -1,0 +1,47 @@
+"""What every benchmark shares: the ``--smoke`` run for CI and the machine it ran on.
+
+Every benchmark script has ``main(argv=None)``; ``--smoke`` runs it at its smallest sizes
+(CI runs each so, ``tests/test_benchmarks.py``: it must finish, not meet a time).
+``python benchmarks/speed_page.py`` runs them all at full size and writes docs/speed.md from
+their output, with the machine and the date.
+"""
+from __future__ import annotations
+
+import os
+import platform
+import sys
+from datetime import datetime, timezone
+
+
+def arguments(parser, argv, **smoke):
+    """Parse ``argv`` with ``--smoke`` added: given, the ``smoke`` values replace the
+    parsed ones (the smallest sizes that still run every part of the benchmark)."""
+    parser.add_argument("--smoke", action="store_true",
+                        help="the smallest run, for CI: it must finish, not meet a time")
+    args = parser.parse_args(argv)
+    if args.smoke:
+        for name, value in smoke.items():
+            setattr(args, name, value)
+    return args
+
+
+def machine():
+    """One line: CPU model, cores, memory, load, Python and NumPy, the date (UTC)."""
+    import numpy
+
+    model = next((line.split(":", 1)[1].strip() for line in _lines("/proc/cpuinfo")
+                  if line.startswith("model name")), platform.processor() or "unknown CPU")
+    memory_kb = next((int(line.split()[1]) for line in _lines("/proc/meminfo")
+                      if line.startswith("MemTotal")), 0)
+    load = ", ".join(f"{value:.1f}" for value in os.getloadavg())
+    return (f"{model}, {os.cpu_count()} cores, {memory_kb / 2**20:.0f} GiB, load average "
+            f"{load}; Python {sys.version.split()[0]}, NumPy {numpy.__version__}; "
+            f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC")
+
+
+def _lines(path):
+    try:
+        with open(path, encoding="utf-8") as stream:
+            return stream.read().splitlines()
+    except OSError:
+        return []
