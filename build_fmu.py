@@ -1,4 +1,5 @@
-"""Build every feedaxis FMU: ``python build_fmu.py [--out DIR]`` (default build/fmus)."""
+"""Build every feedaxis FMU: ``python build_fmu.py [--out DIR] [--standalone]`` (default
+build/fmus; ``--standalone``: each FMU carries its Python, see docs/fmu-hosts.md)."""
 import argparse
 import sys
 from pathlib import Path
@@ -10,5 +11,8 @@ from feedaxis.fmu_build import build_fmus  # noqa: E402
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", default="build/fmus", help="output folder (default build/fmus)")
-    for path in build_fmus(parser.parse_args().out):
+    parser.add_argument("--standalone", action="store_true",
+                        help="each FMU carries the Python its physics needs")
+    args = parser.parse_args()
+    for path in build_fmus(args.out, standalone=args.standalone):
         print(path)

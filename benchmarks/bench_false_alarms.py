@@ -10,13 +10,20 @@ degrees of freedom, Gaussian quantised to 0.1 µm, a drift along the test's cloc
 ±3 µm outliers (σ = 0.3 µm). A false alarm is a catalog effect named or a periodic
 structure described (the issue's definition), counted apart from any other structure named
 (a drift where the null does not drift, a trend, an irregular error): both are printed.
-Tracking: 2 s records at 1 ms with white 0.1 µm + AR(1) 0.3 µm noise, model servo_plant.
+Tracking: 2 s records at 1 ms of the plant of ``tests/test_tracking_loop.py``, model
+servo_plant at the truth, with encoder noise (white 0.1 µm + AR(1) 0.3 µm) and each null
+family of ``tests/tracking_synthetic.NOISE_FAMILIES`` (white; AR(1) with ρ 0.5 and 0.95;
+Student-t with 3 degrees of freedom; quantised to 0.1 µm; a slow drift, the tracking
+diagnosis's nuisance; three single-sample spikes of 5-20 µm, its outliers); the share of
+nulls with outliers left out is printed and, for the spikes, the share where exactly the
+spikes were found.
 
 Power: ISO 230-2 cases with a backlash B (0.3 µm noise, 105 pairs): the share of trials in
 which ``diagnose`` names backlash first against the share in which a plain paired t-test
 of x(+) - x(-) gives p < 0.001, and the smallest B each finds with 95 % power.
 
-Run: ``python benchmarks/bench_false_alarms.py [--trials 200] [--power-trials 200]``; each
+Run: ``python benchmarks/bench_false_alarms.py [--trials 200] [--power-trials 200]
+[--only tracking]``; each
 rate with its 95 % Clopper-Pearson interval. ``--trials 2 --power-trials 2`` is the CI smoke
 run.
 """
@@ -37,8 +44,10 @@ from common import arguments  # noqa: E402
 from feedaxis.case import read_case  # noqa: E402
 from feedaxis.diagnose import diagnose  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
+from feedaxis.measurement import Tracking  # noqa: E402
 from feedaxis.stats.judge import FAMILY_ALPHA  # noqa: E402
-from tracking_synthetic import step_loop, two_sines, write_tracking_case  # noqa: E402
+from tracking_synthetic import (NOISE_FAMILIES, spike_indices, step_loop,  # noqa: E402
+                                two_sines, write_tracking_case)
 
 LEAD = Model([CATALOG["lead_error"]])
 PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
@@ -60,17 +69,31 @@ def positioning_alarms(family, trials, seed):
     return named, other
 
 
-def tracking_alarms(trials, seed, folder):
+def tracking_alarms(family, trials, seed, folder):
+    """(catalog effect or periodic structure named, other structure named, nulls with
+    outliers left out, nulls where exactly the spikes were found) of one noise family
+    (None: the encoder noise); a drift is the null's own only in the drifting family."""
     run = step_loop(two_sines, 2.0, plant=PLANT)
     model = Model([CATALOG["servo_plant"]], {"servo_plant": PLANT})
-    named = other = 0
+    named = other = with_outliers = spikes_found = 0
     for k in range(trials):
-        case = read_case(write_tracking_case(Path(folder) / f"n{k}", run, seed * 100_000 + k))
+        noise_seed = seed * 100_000 + k
+        case = read_case(write_tracking_case(Path(folder) / f"t{seed}-{k}", run, noise_seed,
+                                             family=family))
         found = diagnose(case, model)
-        named += bool(found.candidates) or any(s.kind == "periodic" for s in found.unexplained)
-        other += bool(found.unexplained) and not found.candidates and not any(
-            s.kind == "periodic" for s in found.unexplained)
-    return named, other
+        kinds = [s.kind for s in found.unexplained
+                 if not (family == "drifting" and s.kind == "drift")]
+        named += bool(found.candidates) or "periodic" in kinds
+        other += bool(kinds) and "periodic" not in kinds and not found.candidates
+        with_outliers += bool(found.outlier_rows)
+        if family == "spikes":
+            spikes = spike_indices(run[0].size, noise_seed)
+            compared = spikes[np.isin(spikes, Tracking(case).index)]
+            spikes_found += found.outlier_rows == (compared + 2).tolist()
+    return named, other, with_outliers, spikes_found
+
+
+TRACKING_FAMILIES = ("encoder (white + AR(1))", *NOISE_FAMILIES)
 
 
 def clopper_pearson(count, trials, level=0.95):
@@ -97,27 +120,46 @@ def smallest_with_power(grid, power, target=0.95):
     return float(np.interp(target, [power[i - 1], power[i]], [grid[i - 1], grid[i]]))
 
 
+PARTS = ("positioning", "tracking", "power")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--trials", type=int, default=200, help="nulls per family (default 200)")
     parser.add_argument("--power-trials", type=int, default=200,
                         help="trials per backlash of the power curve (default 200)")
+    parser.add_argument("--only", action="append", choices=PARTS,
+                        help="run only this part (repeatable; default all: "
+                             + ", ".join(PARTS) + ")")
     args = arguments(parser, argv, trials=2, power_trials=2)
+    parts = args.only or PARTS
     print(f"family-wise error rate of a whole diagnosis, every kind: {FAMILY_ALPHA:g}")
     print(f"{'null family':30s} {'effect or periodic named':>34s}   {'other structure named':>34s}")
-    for seed, family in enumerate(syn.NULL_FAMILIES):
+    for seed, family in enumerate(syn.NULL_FAMILIES if "positioning" in parts else ()):
         started = time.perf_counter()
         named, other = positioning_alarms(family, args.trials, seed)
         print(f"{family:30s} {rate(named, args.trials):>34s}   {rate(other, args.trials):>34s}"
               f"   {time.perf_counter() - started:.0f} s", flush=True)
     with tempfile.TemporaryDirectory() as folder:
-        named, other = tracking_alarms(args.trials, 99, folder)
-        print(f"{'tracking, white + AR(1)':30s} {rate(named, args.trials):>34s}   "
-              f"{rate(other, args.trials):>34s}")
+        for seed, family in enumerate(TRACKING_FAMILIES if "tracking" in parts else (),
+                                      start=99):
+            started = time.perf_counter()
+            named, other, outliers, spikes = tracking_alarms(
+                None if family.startswith("encoder") else family, args.trials, seed, folder)
+            found = f", the spikes exactly in {spikes}" if family == "spikes" else ""
+            print(f"{'tracking, ' + family:30s} {rate(named, args.trials):>34s}   "
+                  f"{rate(other, args.trials):>34s}   {time.perf_counter() - started:.0f} s "
+                  f"(outliers left out in {outliers}{found})", flush=True)
+    if "power" in parts:
+        backlash_power(args.power_trials)
+
+
+def backlash_power(trials):
+    """Print the power curve of naming a backlash against the paired t-test."""
     print(f"{'B (µm)':>8s} {'diagnose':>10s} {'paired t':>10s}")
     named, t_test = [], []
     for i, backlash_um in enumerate(BACKLASH_GRID_UM):
-        power = syn.backlash_power(diagnose, LEAD, backlash_um, args.power_trials, seed=100 + i)
+        power = syn.backlash_power(diagnose, LEAD, backlash_um, trials, seed=100 + i)
         named.append(power[0])
         t_test.append(power[1])
         print(f"{backlash_um:8.3f} {power[0]:10.3f} {power[1]:10.3f}", flush=True)

@@ -1,9 +1,9 @@
 """The FMUs' cost against the FMI floor: per FMU and for the axis, in each controller mode.
 
 Run: ``python benchmarks/bench_fmi_floor.py [--repeats 15] [--steps 2000] [--starts 5]
-[--instructions] [--fmus DIR] [--smoke]``. It builds the four feedaxis FMUs (or takes them from ``--fmus``) and two
-sets of FMUs with the same interface (the same variables, names, types, causalities and
-value references) and no physics:
+[--instructions] [--standalone] [--fmus DIR] [--smoke]``. It builds the four feedaxis FMUs
+(or takes them from ``--fmus``) and two sets of FMUs with the same interface (the same
+variables, names, types, causalities and value references) and no physics:
 
 - **native**: minimal C FMUs (``benchmarks/native_fmu.c`` compiled against the official
   FMI 2.0 headers, ``fmus/common/fmi2/``): the floor any FMU pays in this host;
@@ -28,6 +28,11 @@ machine's load does not move; valgrind must be installed. It takes minutes per s
 ``--starts`` times the first instantiate + initialisation of each freshly extracted FMU in
 fresh processes, after the first import (numpy, fmpy and pythonfmu imported, one other FMU
 loaded: what every FMU but the first in a process pays).
+
+``--standalone`` adds the standalone build (``feedaxis build-fmus --standalone``: each FMU
+carrying its Python; in this Python host it runs on the host's interpreter) to the
+interleaved sets, in the PID mode, and prints its cost and per-repeat ratio to the feedaxis
+FMUs.
 """
 import argparse
 import ast
@@ -253,6 +258,17 @@ def print_floor_tables(runs, repeats, n_steps):
         print(f"NpidServo {mode} / PID: {spread(ratios)}")
 
 
+def print_standalone(runs):
+    """The standalone FMUs against the feedaxis FMUs in the PID mode (same physics, same
+    host): CPU µs per macro step and the per-repeat ratio."""
+    print(f"\nstandalone: {'FMU':<16}{'µs':>8}{'standalone/feedaxis':>26}")
+    for row in (*FMU_NAMES, "axis"):
+        cost = statistics.median(run[row] for run in runs["standalone"])
+        ratio = spread(a[row] / f[row] for a, f in zip(runs["standalone"], runs["PID"]))
+        label = "full axis" if row == "axis" else row
+        print(f"{'':<12}{label:<16}{cost:>8.1f}{ratio:>26}")
+
+
 def first_start_ms(fmu_paths, other, starts):
     """{label: [(wall ms, CPU ms), ...]} of the first instantiate + initialisation of each
     FMU (and the servo in NPID) in ``starts`` fresh processes each, after ``other`` was
@@ -292,6 +308,9 @@ def print_instruction_table(sets, n_steps):
         print(f"  {mode:<9}{counts[mode]:>10,.0f}  feedaxis/native "
               f"{counts[mode] / counts['native']:.2f}  feedaxis/empty "
               f"{counts[mode] / counts['empty']:.2f}")
+    if "standalone" in counts:
+        print(f"  {'standalone':<9}{counts['standalone']:>10,.0f}  standalone/feedaxis (PID) "
+              f"{counts['standalone'] / counts['PID']:.2f}")
 
 
 def main(argv=None):
@@ -304,6 +323,8 @@ def main(argv=None):
     parser.add_argument("--fmus", type=Path, help="take the feedaxis FMUs from this folder")
     parser.add_argument("--instructions", action="store_true",
                         help="also count instructions per macro step under callgrind")
+    parser.add_argument("--standalone", action="store_true",
+                        help="also time the standalone FMUs (feedaxis build-fmus --standalone)")
     parser.add_argument("--drive", help=argparse.SUPPRESS)  # one axis run, for callgrind
     # smoke: two repeats (the ratios' spread), 200 steps (the thermal screw steps twice), one
     # fresh process per first start; --instructions stays opt-in (valgrind, minutes per set)
@@ -319,8 +340,13 @@ def main(argv=None):
         sets = {"native": (build_native_fmus(full, folder), {}),
                 "empty": (build_empty_fmus(full, folder), {})}
         sets.update({mode: (full, parameters) for mode, parameters in MODES.items()})
+        if args.standalone:
+            sets["standalone"] = ({p.stem: p for p in build_fmus(Path(folder) / "standalone",
+                                                                 standalone=True)}, MODES["PID"])
         runs = interleaved_runs(sets, args.repeats, args.steps)
         print_floor_tables(runs, args.repeats, args.steps)
+        if "standalone" in runs:
+            print_standalone(runs)
         if args.instructions:
             print_instruction_table(sets, args.steps)
         if args.starts:

@@ -15,4 +15,4 @@ with Master(default_axis(), cached_fmus()) as master:
                         parameters={"NpidServo": {"nonlinear": True}},   # this run only
                         output_interval_s=0.01)
 print(result.dtype.names[:6])
-print(f"{result['positioning_error_um'][-1]:.3f} um at {result['table_position_mm'][-1]:.4f} mm")
+print(f"{result['positioning_error_um'][-1]:.3f} µm at {result['table_position_mm'][-1]:.4f} mm")

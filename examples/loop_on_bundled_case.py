@@ -16,4 +16,4 @@ for effect, values in result.params().items():
     for name, value in values.items():
         sigma = result.uncertainties[effect][name]
         print(f"{effect + '.' + name:44s} {value:+.4f} +/- {sigma:.4f}")
-print(f"{len(rounds)} rounds, verdict {diagnosis.verdict}, RMS {result.rms_um:.4f} um")
+print(f"{len(rounds)} rounds, verdict {diagnosis.verdict}, RMS {result.rms_um:.4f} µm")

@@ -21,10 +21,10 @@ with tempfile.TemporaryDirectory() as folder:   # the case is read whole into me
 start = fit(Model([CATALOG[name] for name in
                    ("lead_error", "assembly_eccentricity", "motor_step_error")]), case).model
 before = diagnose(case, start, CATALOG)       # the catalog alone: no effect fits it
-print(f"catalog model: RMS {before.rms_um:.4f} um, verdict {before.verdict}")
+print(f"catalog model: RMS {before.rms_um:.4f} µm, verdict {before.verdict}")
 for structure in before.unexplained:
     print(f"  unexplained {structure.kind}: {structure.evidence}")
 final = fit(start + effects["coupling_ripple"], case).model
 after = diagnose(case, final, effects)
-print(f"with coupling_ripple: RMS {after.rms_um:.4f} um (noise {after.noise_um:.4f} um), "
+print(f"with coupling_ripple: RMS {after.rms_um:.4f} µm (noise {after.noise_um:.4f} µm), "
       f"verdict {after.verdict}")

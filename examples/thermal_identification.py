@@ -24,5 +24,5 @@ for name in ("k2_W_m2K", "conductivity_W_mK", "fixed_end_mm"):
 compensation = compensate(cases[9000], result.model)
 before_um = abs(compensation.thermal_error_um).max()
 after_um = abs(compensation.left_um).max()
-print(f"9000 mm/min: thermal error max {before_um:.1f} um -> {after_um:.1f} um "
+print(f"9000 mm/min: thermal error max {before_um:.1f} µm -> {after_um:.1f} µm "
       f"({100 * (1 - after_um / before_um):.0f} % less)")

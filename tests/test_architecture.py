@@ -1,11 +1,13 @@
 """Checks on the codebase itself: no import cycle among feedaxis's modules (function-level
-imports included), and the floors of the import graph stay layered (run this file as a
-script to print them)."""
+imports included), the floors of the import graph stay layered (run this file as a
+script to print them), and no merge left its conflict markers in a file."""
 import ast
 import sys
 from pathlib import Path
 
-SOURCE = Path(__file__).resolve().parents[1] / "src" / "feedaxis"
+ROOT = Path(__file__).resolve().parents[1]
+SOURCE = ROOT / "src" / "feedaxis"
+TEXT_SUFFIXES = {".py", ".md", ".toml", ".c", ".h", ".yml", ".yaml", ".txt", ".cfg"}
 
 
 def module_name(path):
@@ -117,6 +119,20 @@ def test_the_leaves_stay_leaves():
     assert floor["feedaxis.fit"] < floor["feedaxis.diagnose"] < floor["feedaxis.analysis"] \
         < floor["feedaxis.cli"]
 
+
+
+def test_no_conflict_markers_in_the_project():
+    """A merge's ``<<<<<<<`` / ``>>>>>>>`` lines never reach a committed file."""
+    folders = ("src", "tests", "docs", "benchmarks", "fmus", "examples", ".ci")
+    marked = [f"{path.relative_to(ROOT)}:{number}"
+              for folder in folders for path in (ROOT / folder).rglob("*")
+              if path.suffix in TEXT_SUFFIXES and path.is_file()
+              for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1)
+              if line.startswith(("<<<<<<< ", ">>>>>>> "))]
+    marked += [f"{path.name}:{number}" for path in ROOT.glob("*.md")
+               for number, line in enumerate(path.read_text().splitlines(), 1)
+               if line.startswith(("<<<<<<< ", ">>>>>>> "))]
+    assert not marked, marked
 
 if __name__ == "__main__":
     by_floor = {}

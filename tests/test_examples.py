@@ -12,10 +12,10 @@ EXAMPLES = ROOT / "examples"
 
 # script -> a line of its output (regular expression) that shows it did its job
 PROMISES = {
-    "loop_on_bundled_case.py": r"^4 rounds, verdict adequate, RMS 0\.05\d+ um$",
-    "own_effect.py": r"^with coupling_ripple: RMS 0\.05\d+ um .*verdict adequate$",
-    "thermal_identification.py": r"^9000 mm/min: thermal error max 60\.\d um -> [3-5]\.\d um",
-    "cosimulation.py": r"^-?\d+\.\d{3} um at -?\d+\.\d{4} mm$",
+    "loop_on_bundled_case.py": r"^4 rounds, verdict adequate, RMS 0\.05\d+ µm$",
+    "own_effect.py": r"^with coupling_ripple: RMS 0\.05\d+ µm .*verdict adequate$",
+    "thermal_identification.py": r"^9000 mm/min: thermal error max 60\.\d µm -> [3-5]\.\d µm",
+    "cosimulation.py": r"^-?\d+\.\d{3} µm at -?\d+\.\d{4} mm$",
     "ssp_in_libcosim.py": r"^\[\d+\.\d+, -?\d+\.\d+(e-\d+)?\]$",
 }
 

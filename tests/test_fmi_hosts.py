@@ -7,6 +7,7 @@ message with a category, never a crash. Tests needing a tool from ../shared/tool
 with the reason outside CI and fail in CI (CI=true).
 """
 import os
+import re
 import subprocess
 import sys
 import time
@@ -53,22 +54,23 @@ def cross_check_options(name):
     return {key: float(value) for key, value in (line.split(", ") for line in text.splitlines())}
 
 
-@pytest.mark.parametrize("name", FMU_NAMES)
-def test_fmu_check_simulates_cross_check_input_in_a_c_host(fmu_paths, tmp_path, name):
-    require_tool(FMU_CHECK)
+def cross_check_command(name, input_csv, result_csv, fmu_path, program=FMU_CHECK, extra=()):
+    """fmuCheck's command line for ``name``'s cross-check run (the _ref.opt options);
+    ``extra``: more fmuCheck options."""
     options = cross_check_options(name)
-    folder = FMU_SOURCES / name
-    result_csv = tmp_path / "out.csv"
-    run = subprocess.run(
-        [str(FMU_CHECK), "-k", "cs", "-s", repr(options["StopTime"]), "-h",
-         repr(options["StepSize"]), "-l", "3", "-i", str(folder / f"{name}_in.csv"),
-         "-o", str(result_csv), str(fmu_paths[name])],
-        capture_output=True, text=True, timeout=300)
+    return [str(program), "-k", "cs", "-s", repr(options["StopTime"]), "-h",
+            repr(options["StepSize"]), "-l", "3", "-i", str(input_csv), "-o", str(result_csv),
+            *extra, str(fmu_path)]
+
+
+def assert_cross_check_passed(name, run, result_csv):
+    """fmuCheck exited 0 without errors and ``result_csv`` matches ``<name>_ref.csv``."""
     report = run.stdout + run.stderr
     assert run.returncode == 0, report[-2000:]
     assert "[FATAL]" not in report and "[ERROR]" not in report, report[-2000:]
     assert "0 Error(s)" in report and "0 Warning(s)" in report
-    result, reference = read_csv(result_csv), read_csv(folder / f"{name}_ref.csv")
+    options = cross_check_options(name)
+    result, reference = read_csv(result_csv), read_csv(FMU_SOURCES / name / f"{name}_ref.csv")
     steps = result["time"] / options["StepSize"]
     on_step = np.abs(steps - np.rint(steps)) < 1e-6
     assert on_step.sum() >= 100
@@ -79,14 +81,80 @@ def test_fmu_check_simulates_cross_check_input_in_a_c_host(fmu_paths, tmp_path, 
                                    atol=1e-9 * np.max(np.abs(reference[output])))
 
 
-def test_c_host_without_python_gets_a_message_not_a_crash(fmu_paths):
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_check_simulates_cross_check_input_in_a_c_host(fmu_paths, tmp_path, name):
     require_tool(FMU_CHECK)
-    environment = dict(os.environ, FEEDAXIS_LIBPYTHON="/nonexistent/libpython3.so")
-    run = subprocess.run([str(FMU_CHECK), "-k", "cs", "-l", "3", str(fmu_paths["StepperError"])],
-                         capture_output=True, text=True, timeout=60, env=environment)
-    assert run.returncode == 1  # fmuCheck's "could not instantiate", not a signal
-    assert "[logStatusFatal]" in run.stdout + run.stderr
-    assert "cannot load libpython (set FEEDAXIS_LIBPYTHON)" in run.stdout + run.stderr
+    result_csv = tmp_path / "out.csv"
+    run = subprocess.run(cross_check_command(name, FMU_SOURCES / name / f"{name}_in.csv",
+                                             result_csv, fmu_paths[name]),
+                         capture_output=True, text=True, timeout=300)
+    assert_cross_check_passed(name, run, result_csv)
+
+
+def instantiate_in_fmu_check(fmu_path, **environment):
+    """fmuCheck's report on ``fmu_path`` with ``environment`` added; it must not be
+    instantiable: exit 1 (fmuCheck's "could not instantiate", not a signal), a fatal message."""
+    run = subprocess.run([str(FMU_CHECK), "-k", "cs", "-l", "3", str(fmu_path)],
+                         capture_output=True, text=True, timeout=60,
+                         env=dict(os.environ, **environment))
+    report = run.stdout + run.stderr
+    assert run.returncode == 1 and "[logStatusFatal]" in report, report[-2000:]
+    return report
+
+
+def test_c_host_without_python_gets_a_message_naming_the_variable(fmu_paths):
+    require_tool(FMU_CHECK)
+    report = instantiate_in_fmu_check(fmu_paths["StepperError"],
+                                      FEEDAXIS_LIBPYTHON="/nonexistent/libpython3.so")
+    assert "cannot load FEEDAXIS_LIBPYTHON=/nonexistent/libpython3.so: " in report
+
+
+def test_a_wrong_feedaxis_python_fails_instantiate_naming_it(fmu_paths):
+    """It used to be ignored: Python started from the libpython's own prefix instead."""
+    require_tool(FMU_CHECK)
+    report = instantiate_in_fmu_check(fmu_paths["StepperError"],
+                                      FEEDAXIS_PYTHON="/nonexistent/python")
+    assert "cannot use FEEDAXIS_PYTHON=/nonexistent/python as the Python: No such file" in report
+
+
+def test_a_libpython_of_another_minor_version_is_refused(fmu_paths, tmp_path):
+    """The host layer is compiled against the building Python's C API: a libpython of
+    another minor version (here a stand-in exporting what the layer asks first) is refused
+    before anything of it runs."""
+    require_tool(FMU_CHECK)
+    source = tmp_path / "fake.c"
+    source.write_text('const char *Py_GetVersion(void) { return "3.10.14 (stand-in)"; }\n'
+                      "int Py_IsInitialized(void) { return 0; }\n")
+    library = tmp_path / "libpython3.10.so"
+    subprocess.run(["cc", "-shared", "-fPIC", "-o", str(library), str(source)], check=True)
+    report = instantiate_in_fmu_check(fmu_paths["StepperError"], FEEDAXIS_LIBPYTHON=str(library))
+    version = f"{sys.version_info.major}.{sys.version_info.minor}"
+    assert (f"FEEDAXIS_LIBPYTHON={library} is Python 3.10.14; this FMU needs CPython {version}"
+            in report)
+
+
+def test_the_host_layer_is_checked_against_the_fmi_headers(tmp_path):
+    """The official fmi2Functions.h declares every export: a definition that strays from the
+    standard's signature does not compile."""
+    import sysconfig
+    source = (FMU_SOURCES / "common" / "feedaxis_fmi_host.c").read_text()
+    definition = source.index("EXPORT fmi2Status fmi2GetReal(")
+    signature_end = source.index("{", definition)
+    signature = source[definition:signature_end]
+    assert "fmi2Real value[]" in signature
+    (tmp_path / "wrong.c").write_text(source[:definition] + signature.replace(
+        "fmi2Real value[]", "float value[]") + source[signature_end:])
+    (tmp_path / "feedaxis_fmi_vars.h").write_text(
+        "typedef struct { unsigned vr; char kind; char type; const char *name; } FeedaxisVar;\n"
+        "static const FeedaxisVar FEEDAXIS_VARS[] = {{0, 'u', 'R', \"x\"}};\n"
+        "#define FEEDAXIS_N_VARS 1\n")
+    run = subprocess.run(["cc", "-fsyntax-only", f"-I{sysconfig.get_paths()['include']}",
+                          f"-I{FMU_SOURCES / 'common' / 'fmi2'}", f"-I{tmp_path}",
+                          '-DFEEDAXIS_PYTHON_VERSION="3"', '-DFEEDAXIS_PYTHON="p"',
+                          '-DFEEDAXIS_LIBPYTHON="l"', str(tmp_path / "wrong.c")],
+                         capture_output=True, text=True)
+    assert run.returncode != 0
+    assert re.search(r"conflicting types for .fmi2GetReal.", run.stderr), run.stderr
 
 
 @pytest.mark.parametrize("name", FMU_NAMES)

@@ -1,12 +1,17 @@
-"""Property-based fuzzing of the case reader and the CLI (issue 15), about a minute in all.
+"""Property-based fuzzing of the readers and the CLI (issues 15 and 26).
 
 - any bytes in any case file: a :class:`Case` or one :class:`InputError` naming a file of
   the case (never another exception);
 - valid-format cases with random values (positioning, and positioning with tracking
   beside) through ``fit``, ``compare`` and ``diagnose``: exit 0 or 2, stdout strict JSON,
-  traced memory bounded.
+  traced memory bounded;
+- issue 26's classes: TOML nested deep or holding huge integers (axis.toml, model files);
+  every encoding through ``import`` (a readable case or nothing written); user effects
+  breaking their contract; controller tables asking for more than they hold; tracking
+  spans beyond the control loop's budget. Each draws in bounded time.
 """
 import contextlib
+import re
 from collections import Counter
 import io
 import json
@@ -169,3 +174,219 @@ def test_cli_on_random_values_exits_0_or_2_with_strict_json(tmp_path_factory, co
 
     check()
     print(f"{command[0]}: exit codes {dict(exits)}")  # the counts for the notes (pytest -s)
+
+
+# --- issue 26: the classes of bad input found since, each drawn in bounded time ---------
+
+def _located(error, *paths):
+    """An InputError naming one of ``paths`` (or inside one of them) in its message."""
+    return (isinstance(error, InputError) and error.path is not None
+            and any(error.path == p or p in error.path.parents for p in paths)
+            and str(error.path) in str(error))
+
+
+def _nested(kind, depth):
+    return ("[" * depth + "1" + "]" * depth) if kind == "array" else (
+        "{a = " * depth + "1" + "}" * depth)
+
+
+TOML_VALUES = st.one_of(
+    st.builds(_nested, st.sampled_from(["array", "table"]), st.integers(1, 400)),
+    st.builds(lambda sign, n: sign + "1" + "0" * (n - 1), st.sampled_from(["", "-", "+"]),
+              st.integers(1, 6000)),
+    st.integers(1, 6000).map(lambda n: "1_" + "0" * n),
+    st.sampled_from(["1e400", "-1e400", "inf", "nan", "0", "-5", "5.0", "1e-320", "true",
+                     "'x'", "2026-02-30", "1" + "0" * 308, "1" + "0" * 309]),
+)
+TOML_KEYS = st.sampled_from(["lead_mm", "length_m", "error_period_steps", "kp_V_per_mm",
+                             "x", "offset_um", "slope_um_per_mm"])
+
+
+@st.composite
+def toml_with_a_strange_value(draw):
+    """A TOML text: a known table, and a key holding a deep, huge or odd value."""
+    table = draw(st.sampled_from(["screw", "motor", "servo", "lead_error"]))
+    return (f"[{table}]\n{draw(TOML_KEYS)} = {draw(TOML_VALUES)}\n"
+            + draw(st.sampled_from(["", "lead_mm = 5.0\n", "slope_um_per_mm = 0\n"])))
+
+
+@settings(FUZZ, max_examples=300)
+@given(text=toml_with_a_strange_value(), as_model=st.booleans())
+def test_deep_or_huge_toml_gives_a_result_or_one_error_naming_the_file(tmp_path_factory, text,
+                                                                       as_model):
+    from feedaxis.effects import CATALOG, load_model
+
+    folder = tmp_path_factory.mktemp("toml")
+    case = folder / "c"
+    _write(case, dict(GOOD, **({} if as_model else {"axis.toml": text})))
+    path = folder / "m.toml"
+    path.write_text(text)
+    try:
+        load_model(path, CATALOG) if as_model else read_case(case)
+        event("accepted")
+    except InputError as error:
+        event("refused naming the file")
+        assert _located(error, path if as_model else case), str(error)
+
+
+ENCODINGS = st.sampled_from(["utf-8", "utf-8-sig", "utf-16", "utf-16-le", "latin-1", "cp1252"])
+IMPORT_TEXTS = st.one_of(
+    st.just("target_mm,run1+,run1-\n# Lauf \xb5m\n0,1.0,2.0\n50,1.5,2.5\n"),
+    st.just("target_mm;run1+;run1-\n0;1,0;2,0\n50;1,5;2,5\n"),
+    st.lists(st.sampled_from(["target_mm", "run1+", "run2-", "run1_up", ",", ";", "\n",
+                              "\r\n", "0", "50", "1.5", "1e300", "", "#", "\xb5", "\u2028",
+                              "nan", "1" + "0" * 5000]), max_size=40).map("".join),
+)
+
+
+@settings(FUZZ, max_examples=80)
+@given(text=IMPORT_TEXTS, encoding=ENCODINGS, axis_encoding=ENCODINGS,
+       suffix=st.sampled_from([".csv", ".rtl"]))
+def test_import_in_any_encoding_writes_a_readable_case_or_nothing(tmp_path_factory, text,
+                                                                  encoding, axis_encoding,
+                                                                  suffix):
+    from feedaxis.importers.rtl import rtl_text
+
+    folder = tmp_path_factory.mktemp("import")
+    if suffix == ".rtl":
+        text = rtl_text([0.0, 50.0], [(1.0, [1.0, 1.5]), (-1.0, [2.0, 2.5])],
+                        {"Machine": "M\xfchle"}) if "run1+" in text else text
+    source, axis = folder / f"x{suffix}", folder / "axis.toml"
+    source.write_bytes(text.encode(encoding, errors="replace"))
+    axis.write_bytes("# Achse \xb5\n[screw]\nlead_mm = 5.0\n".encode(axis_encoding,
+                                                                    errors="replace"))
+    code, out, _ = _cli_json(["import", str(source), "--axis", str(axis), "--out",
+                              str(folder / "case"), "--json"])
+    payload = _strict(out)
+    assert code in (0, 2), payload
+    if code == 0:
+        event("imported")
+        assert read_case(folder / "case").positioning.size == payload["samples"]
+    else:
+        event("refused")
+        assert payload["file"] and not (folder / "case").exists()
+        assert sorted(p.name for p in folder.iterdir()) == sorted(["axis.toml", source.name])
+
+
+BOUNDS = st.sampled_from(["-10, 10", "5, 5", "5, -5", "-np.inf, 5", "0, np.nan", "-1e308, 1e308",
+                          "'a', 'b'", "0, 10**400"])
+RETURNS = st.sampled_from(["a_um + 0 * case.positioning.target_mm", "1e300 + 0 * a_um",
+                           "np.full(case.positioning.size, 1e300)",
+                           "(1 + 1j) * np.ones(case.positioning.size)",
+                           "np.full(case.positioning.size, np.nan)", "np.zeros(3)", "None",
+                           "'text'", "[a_um] * case.positioning.size",
+                           "np.ones(case.positioning.size, dtype=object)",
+                           "__import__('sys').exit(5)", "1 / 0",
+                           "print('x') or a_um * np.ones(case.positioning.size)"])
+GUESSES = st.sampled_from([None, "{'a_um': 1.0}", "{'b_um': 1.0}", "{}", "[1.0]",
+                           "{'a_um': float('nan')}", "{'a_um': 1j}", "{'a_um': np.float32(2)}"])
+IMPORT_TIME = st.sampled_from(["", "print('hello')\n", "import sys\nsys.exit(2)\n",
+                               "raise RuntimeError('x')\n", "while False: pass\n"])
+
+
+def write_effect_case(folder, bounds, body, guess, extra):
+    """A 30-sample case ``folder/c`` and an effects file ``folder/mine.py`` of one effect
+    ``probe`` built from the pieces; returns the ``fit`` command line."""
+    write_case(folder / "c", {"name": "fuzz", "screw": {"lead_mm": 5.0}},
+               positioning={"target_mm": np.linspace(0.0, 100.0, 30),
+                            "error_um": np.linspace(0.0, 3.0, 30)})
+    guess_code = f", guess=lambda case, residual: {guess}" if guess else ""
+    (folder / "mine.py").write_text(
+        "import numpy as np\nfrom feedaxis.effects import Parameter, effect\n" + extra +
+        f"@effect('probe', 'a probe', [Parameter('a_um', 'um', {bounds})]{guess_code})\n"
+        f"def probe(case, a_um):\n    return {body}\n")
+    return ["fit", str(folder / "c"), "--effects", str(folder / "mine.py"), "--add", "probe",
+            "--json"]
+
+
+@settings(FUZZ, max_examples=60)
+@given(bounds=BOUNDS, body=RETURNS, guess=GUESSES, extra=IMPORT_TIME)
+def test_user_effects_exit_0_or_2_with_strict_json(tmp_path_factory, bounds, body, guess,
+                                                   extra):
+    folder = tmp_path_factory.mktemp("effect")
+    code, out, _ = _cli_json(write_effect_case(folder, bounds, body, guess, extra))
+    payload = _strict(out)
+    assert code in (0, 2), payload
+    event("fitted" if code == 0 else "refused")
+    if code == 2:
+        assert payload["file"] == str(folder / "mine.py"), payload
+
+
+def _controller_text(draw, module):
+    """A file of ``module``'s format: its own output for a small table with one value or
+    line replaced by an extreme one, or lines of its tokens."""
+    from feedaxis.comptable.table import CompTable
+
+    position_mm = np.arange(0.0, 50.0, 10.0)
+    table = CompTable(position_mm, 0.1 * position_mm, 0.1 * position_mm + 2.0, "model")
+    lines = module.write(table, module.DEFAULT_AXIS_ID).splitlines()
+    extreme = draw(st.sampled_from(["2147483648", "1e-9", "-1e9", "1e400", "nan", "0", "-1",
+                                    "9" * 5000, "1023", "1024", ""]))
+    index = draw(st.integers(0, len(lines) - 1))
+    lines[index] = re.sub(r"[-+]?\d+(\.\d+)?(e[-+]?\d+)?$", extreme, lines[index])
+    if draw(st.booleans()):
+        lines = draw(st.permutations(lines))
+    return "\n".join(lines) + "\n"
+
+
+def controller_outcome(module, text):
+    """"read" (no more points than the file holds), "refused" (naming the line or field),
+    or what is wrong."""
+    try:
+        table = module.read(text)
+    except InputError as error:
+        return "refused" if ("line" in str(error) or "field" in str(error)) else \
+            f"unlocated: {error}"
+    return "read" if table.size <= text.count("\n") + 1024 else "unbounded"
+
+
+@settings(FUZZ, max_examples=300)
+@given(data=st.data(), name=st.sampled_from(["linuxcnc", "siemens", "fanuc", "heidenhain",
+                                              "beckhoff", "mach4"]))
+def test_controller_tables_read_bounded_or_refused_naming_the_line(data, name):
+    from feedaxis.comptable import CONTROLLERS
+
+    module = CONTROLLERS[name]
+    outcome = controller_outcome(module, _controller_text(data.draw, module))
+    event(outcome)
+    assert outcome in ("read", "refused"), outcome
+
+
+TIME_STEPS = st.one_of(st.floats(1e-5, 1e-2), st.floats(1e-2, 1e9), st.sampled_from([0.0, -1.0]))
+
+
+def write_span_case(folder, steps, loop_step_s):
+    """A tracking case at ``folder`` sampled after the intervals ``steps`` (s), its loop
+    stepping ``loop_step_s`` (the default 0.1 ms when None: no [servo] table)."""
+    time_s = np.concatenate(([0.0], np.cumsum(steps)))
+    servo = "" if loop_step_s is None else (
+        '[servo]\ncontroller = "pid"\nkp_V_per_mm = 0.9\nki_V_per_mm_s = 0.0\n'
+        f"kd_V_s_per_mm = 0.0\nforce_constant_N_per_V = 100.0\nloop_step_s = {loop_step_s!r}\n")
+    rows = "".join(f"{t!r},0.0,0.0\n" for t in time_s.tolist())
+    _write(folder, {"axis.toml": "[screw]\nlead_mm = 5.0\n" + servo,
+                    "tracking.csv": "time_s,reference_mm,actual_mm\n" + rows})
+
+
+def within_loop_budget(case):
+    """Whether the loop's steps through ``case``'s tracking record stay within its budget."""
+    from feedaxis.physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS, step_counts
+
+    counts = step_counts(case.tracking.time_s, case.axis.servo.get("loop_step_s", 1e-4))
+    return counts.max() <= MAX_INTERVAL_STEPS + 1 and counts.sum() <= MAX_LOOP_STEPS + 1
+
+
+@settings(FUZZ, max_examples=300)
+@given(steps=st.lists(TIME_STEPS, min_size=1, max_size=40),
+       loop_step_s=st.sampled_from([1e-4, 1e-7, 1e-2, None]))
+def test_tracking_spans_are_read_within_the_loops_budget_or_refused(tmp_path_factory, steps,
+                                                                    loop_step_s):
+    folder = tmp_path_factory.mktemp("span") / "c"
+    write_span_case(folder, steps, loop_step_s)
+    try:
+        case = read_case(folder)
+    except InputError as error:
+        event("refused")
+        assert _located(error, folder), str(error)
+        return
+    event("accepted")
+    assert within_loop_budget(case)

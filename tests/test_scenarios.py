@@ -7,8 +7,8 @@ import pytest
 from feedaxis.case import read_case
 from feedaxis.cli import main
 from feedaxis.cosim.master import Master
-from feedaxis.cosim.scenarios import (ScenarioInterrupted, iso230_targets, simulate_iso230,
-                                      simulate_tracking)
+from feedaxis.cosim.scenarios import (MeasurementNoise, ScenarioInterrupted, iso230_targets,
+                                      simulate_iso230, simulate_tracking)
 from feedaxis.cosim.system import default_axis
 from feedaxis.physics import geometry, motor, mounting
 from test_seed_reproduction import TABLE1_PID_MM
@@ -115,6 +115,21 @@ def test_tracking_with_cutting_force_writes_the_disturbance(tmp_path, master):
                                                              rel=1e-3)
 
 
+def test_measurement_noise_is_added_to_the_measured_column_only(tmp_path, master):
+    """The noisy case differs from the exact one by the seeded draws, in µm."""
+    exact = simulate_tracking(tmp_path / "exact", master, 0.7, 10.0, 1.2)
+    noisy = simulate_tracking(tmp_path / "noisy", master, 0.7, 10.0, 1.2,
+                              noise=MeasurementNoise(0.5, seed=3))
+    assert noisy["noise"] == {"sigma_um": 0.5, "seed": 3}
+    assert noisy["max_tracking_error_mm"] == exact["max_tracking_error_mm"]
+    exact_case = read_case(tmp_path / "exact").tracking
+    noisy_case = read_case(tmp_path / "noisy").tracking
+    np.testing.assert_array_equal(noisy_case.reference_mm, exact_case.reference_mm)
+    added_um = 1e3 * (noisy_case.actual_mm - exact_case.actual_mm)
+    draws = np.random.default_rng(3).normal(0.0, 0.5, added_um.size)
+    np.testing.assert_allclose(added_um, draws, atol=1e-6)   # the CSV keeps 1e-9 mm
+
+
 def test_ctrl_c_writes_the_samples_computed_so_far(tmp_path, master):
     def press_ctrl_c(done_steps, total_steps):
         if done_steps == 3000:
@@ -140,6 +155,7 @@ def test_ctrl_c_writes_the_samples_computed_so_far(tmp_path, master):
     (("iso230", "{out}", "--thermal-step-s", 0.0015), "whole multiple of the macro step"),
     (("iso230", "{out}", "--model", "m.toml"), "--model: needs --axis"),
     (("tracking", "{out}", "--frequency-hz", -1), "frequency_hz: must be > 0"),
+    (("tracking", "{out}", "--noise-um", -1), "--noise-um: must be a finite number >= 0"),
     (("thermal", "{out}", "--duty", "missing.csv", "--targets", "1"), "missing.csv: case file not found"),
     (("thermal", "{out}", "--duty", "{bad}", "--targets", "1"), "bad.csv, row 2, column 'duration_s'"),
     (("thermal", "{out}", "--duty", "{good}", "--targets", "1,x"), "--targets 1,x: expected"),

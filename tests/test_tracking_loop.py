@@ -79,9 +79,9 @@ def test_table1_pid_figures_through_the_fits_simulation():
     for (frequency_hz, amplitude_mm), expected_mm in TABLE1_PID_MM.items():
         t = np.arange(int((1.0 + 2.0 / frequency_hz) / 1e-3)) * 1e-3
         reference = amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
-        case = _case_from_arrays(t, reference)
-        predicted_um = Tracking(case).predict_um(Model())
-        last_two_periods = t > t[-1] - 2.0 / frequency_hz
+        tracking = Tracking(_case_from_arrays(t, reference))
+        predicted_um = tracking.predict_um(Model())
+        last_two_periods = tracking.time_s > t[-1] - 2.0 / frequency_hz
         assert np.max(np.abs(predicted_um[last_two_periods])) * 1e-3 == pytest.approx(
             expected_mm, rel=0.02)
 
@@ -108,8 +108,9 @@ def test_npid_case_runs_the_nonlinear_loop(tmp_path):
     model = Model((CATALOG["servo_plant"], CATALOG["viscous_friction"]),
                   {"servo_plant": PLANT, "viscous_friction": {"damping_N_s_per_mm": 0.02}})
     assert servo_params(case.axis, model).nonlinear
-    predicted_mm = case.tracking.reference_mm + Tracking(case).predict_um(model) * 1e-3
-    assert np.max(np.abs(predicted_mm - run[2])) < 1e-6
+    tracking = Tracking(case)
+    predicted_mm = tracking.reference_mm + tracking.predict_um(model) * 1e-3
+    assert np.max(np.abs(predicted_mm - run[2][tracking.index])) < 1e-6
 
 
 def test_fmu_and_fit_agree(loaded_fmus):
@@ -158,7 +159,9 @@ def test_unknown_periodic_force_is_described_at_its_frequency(tmp_path):
     periodic = found.unexplained[0]
     assert periodic.kind == "periodic"
     assert periodic.frequency_hz == pytest.approx(force_hz, rel=0.02)
-    assert set(periodic.to_json()) >= {"kind", "frequency_hz", "amplitude_um", "evidence"}
+    report = periodic.to_json()
+    assert set(report) >= {"kind", "frequency_hz", "start_s", "end_s", "amplitude_um", "evidence"}
+    assert report["end_s"] == 4.0  # a force lasting the record: no window
 
 
 def test_plant_is_recovered_from_an_exciting_run_and_a_smooth_sine_says_what_it_cannot_fix(
@@ -168,9 +171,10 @@ def test_plant_is_recovered_from_an_exciting_run_and_a_smooth_sine_says_what_it_
     for name, value in PLANT.items():
         fitted = exciting.params()["servo_plant"][name]
         sigma = exciting.uncertainties["servo_plant"][name]
-        assert fitted == pytest.approx(value, rel=0.02)
+        assert fitted == pytest.approx(value, rel=0.1)  # the delay to ±6 % (1 sigma)
         assert abs(fitted - value) < 4 * sigma
-    assert exciting.undetermined == {}
+    # only the caveat every such reference carries: a recording delay would move the plant
+    assert all("measurement delay" in why for why in exciting.undetermined.values())
 
     def smooth_sine(t):  # started gently: no transient, one frequency
         ramp = 0.5 - 0.5 * math.cos(math.pi * min(t, 2.0) / 2.0)

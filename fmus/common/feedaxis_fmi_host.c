@@ -4,14 +4,20 @@
  * the host to have loaded libpython, which only Python hosts do. This layer
  *   1. loads libpython RTLD_GLOBAL when the host has not (a plain C host such as
  *      fmuCheck or OMSimulator) and starts the interpreter that built the FMU (its
- *      program name finds the virtual environment, so numpy and scipy import), never
- *      finalising it: finalisation runs libgfortran's close_units on a heap pythonfmu has
- *      already damaged, and the process is ending anyway;
+ *      program name finds the virtual environment, so numpy and scipy import) or, in a
+ *      standalone FMU, the one the FMU carries (FEEDAXIS_RUNTIME), never finalising it:
+ *      finalisation runs libgfortran's close_units on a heap pythonfmu has already
+ *      damaged, and the process is ending anyway; a Python of another minor version than
+ *      the one the layer is compiled against is refused;
  *   2. forwards every fmi2 function to pythonfmu's library, guarding the FMI state machine:
  *      a fixed parameter or an output set after initialisation is refused with fmi2Error,
  *      a call made after fmi2Fatal is refused without reaching pythonfmu (whose instance
  *      then holds freed Python objects), an error logged by the slave during a call turns
- *      that call's status into fmi2Error;
+ *      that call's status into fmi2Error; what a host gets wrong is refused with fmi2Error
+ *      before pythonfmu sees it (where pythonfmu would raise, which is fmi2Fatal, or crash):
+ *      a value reference that is no variable of the function's type (references_known), a
+ *      NULL array or state pointer, a serialisation buffer of the wrong size, a state buffer
+ *      the slave cannot restore (state_refused);
  *   3. passes every message to the host's logger with a category (pythonfmu passes NULL),
  *      the instance name in front, never text containing '%' as the format;
  *   4. reuses freed instances through pythonfmu's fmi2Reset (its fmi2Instantiate leaks);
@@ -19,49 +25,35 @@
  *      of them never reach Python, and fmi2DoStep is one Python call (the slave's exchange
  *      function, feedaxis_slave.claim) that takes the inputs and returns the outputs, where
  *      pythonfmu makes three, each building Python lists (about 6 of its 7.5 us per step).
- *      Any other call first hands pending inputs to the slave through pythonfmu.
+ *      Any other call first hands pending inputs to the slave through pythonfmu;
+ *   6. when the host unloads it (or at exit), gives its pooled instances back to pythonfmu
+ *      and unloads pythonfmu's library (unloading): it does not pin itself in the process.
  *
- * Build-time constants (-D): FEEDAXIS_PYTHON (the interpreter to start) and
- * FEEDAXIS_LIBPYTHON (its shared library); the environment variables of the same names
- * override them on the host. The per-FMU variable table comes from feedaxis_fmi_vars.h. Python is reached
- * only through dlsym, so the library loads in a host without libpython.
+ * Build-time constants (-D): FEEDAXIS_PYTHON_VERSION (major.minor of the C API compiled
+ * against); FEEDAXIS_PYTHON (the interpreter to start) and FEEDAXIS_LIBPYTHON (its shared
+ * library), which the environment variables of the same names override on the host; or, for
+ * a standalone FMU, FEEDAXIS_RUNTIME (its CPython's folder in binaries/linux64),
+ * FEEDAXIS_LIBPYTHON_NAME and FEEDAXIS_REQUIRED_MODULES (what a Python host must import).
+ * The per-FMU variable table comes from feedaxis_fmi_vars.h. Python is reached only through
+ * dlsym, so the library loads in a host without libpython.
  */
 #define _GNU_SOURCE
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <ctype.h>
 #include <dlfcn.h>
+#include <errno.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
+#include "fmi2Functions.h" /* the official FMI 2.0 headers (fmi2/): every export checked */
 #include "feedaxis_fmi_vars.h"
 
-typedef void *fmi2Component;
-typedef void *fmi2ComponentEnvironment;
-typedef void *fmi2FMUstate;
-typedef unsigned int fmi2ValueReference;
-typedef double fmi2Real;
-typedef int fmi2Integer;
-typedef int fmi2Boolean;
-typedef char fmi2Char;
-typedef const fmi2Char *fmi2String;
-typedef char fmi2Byte;
-typedef enum { fmi2OK, fmi2Warning, fmi2Discard, fmi2Error, fmi2Fatal, fmi2Pending } fmi2Status;
-typedef enum { fmi2ModelExchange, fmi2CoSimulation } fmi2Type;
-typedef int fmi2StatusKind;
-typedef void (*fmi2CallbackLogger)(fmi2ComponentEnvironment, fmi2String, fmi2Status, fmi2String,
-                                   fmi2String, ...);
-typedef struct {
-    fmi2CallbackLogger logger;
-    void *(*allocateMemory)(size_t, size_t);
-    void (*freeMemory)(void *);
-    void (*stepFinished)(fmi2ComponentEnvironment, fmi2Status);
-    fmi2ComponentEnvironment componentEnvironment;
-} fmi2CallbackFunctions;
-
-#define EXPORT __attribute__((visibility("default")))
+#define EXPORT FMI2_Export
 
 #define MAX_MIRRORED 16
 #define HANDOFF_MODULE "feedaxis_fmu_handoff" /* feedaxis_slave.HANDOFF_MODULE */
@@ -90,71 +82,351 @@ typedef struct {
 
 static void *real_library;
 static char load_error[1024];
-static pthread_once_t load_once = PTHREAD_ONCE_INIT;
 
-/* ---- loading Python and pythonfmu's library ---------------------------------------- */
-
-static const char *setting(const char *name, const char *built_in)
-{
-    const char *value = getenv(name);
-    return value && *value ? value : built_in;
-}
-
+/* pythonfmu's function ``symbol`` (NULL before its library is loaded). */
 static void *real(const char *symbol)
 {
     return real_library ? dlsym(real_library, symbol) : NULL;
 }
 
-static int start_python(void)
-{
-    int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
-    if (!is_initialized) {
-        const char *libpython = setting("FEEDAXIS_LIBPYTHON", FEEDAXIS_LIBPYTHON);
-        if (!*libpython) {
-            snprintf(load_error, sizeof load_error, "the Python that built this FMU has no shared "
-                     "libpython: set FEEDAXIS_LIBPYTHON to one (and FEEDAXIS_PYTHON)");
-            return -1;
-        }
-        if (!dlopen(libpython, RTLD_NOW | RTLD_GLOBAL)) {
-            snprintf(load_error, sizeof load_error,
-                     "cannot load libpython (set FEEDAXIS_LIBPYTHON): %s", dlerror());
-            return -1;
-        }
-        is_initialized = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
-        if (!is_initialized) {
-            snprintf(load_error, sizeof load_error, "%s is not a libpython", libpython);
-            return -1;
-        }
-    }
-    if (is_initialized()) return 0;
+/* ---- the Python C API, found with dlsym (never linked: see the top) ------------------- */
 
-    void (*init_config)(PyConfig *) = dlsym(RTLD_DEFAULT, "PyConfig_InitPythonConfig");
+static struct {
+    PyGILState_STATE (*gil_ensure)(void);
+    void (*gil_release)(PyGILState_STATE);
+    PyObject *(*import)(const char *);
+    PyObject *(*get_attr)(PyObject *, const char *);
+    PyObject *(*call)(PyObject *, PyObject *);
+    PyObject *(*tuple_new)(Py_ssize_t);
+    int (*tuple_set)(PyObject *, Py_ssize_t, PyObject *);
+    PyObject *(*tuple_get)(PyObject *, Py_ssize_t);
+    Py_ssize_t (*tuple_size)(PyObject *);
+    PyObject *(*list_get)(PyObject *, Py_ssize_t);
+    Py_ssize_t (*list_size)(PyObject *);
+    PyObject *(*dict_get)(PyObject *, const char *);
+    PyObject *(*sys_get)(const char *);
+    PyObject *(*from_double)(double);
+    double (*as_double)(PyObject *);
+    long (*as_long)(PyObject *);
+    PyObject *(*from_string)(const char *);
+    PyObject *(*from_path)(const char *);
+    PyObject *(*bytes_new)(const char *, Py_ssize_t);
+    const char *(*as_utf8)(PyObject *);
+    void (*decref)(PyObject *);
+    PyObject *(*err_occurred)(void);
+    void (*err_fetch)(PyObject **, PyObject **, PyObject **);
+    void (*err_clear)(void);
+    PyObject *(*str)(PyObject *);
+    int (*is_initialized)(void);
+    PyObject *none;
+    int ready;
+} py;
+
+#define FIND(field, symbol) (py.field = dlsym(RTLD_DEFAULT, symbol)) != NULL
+
+/* Resolve the API once Python runs; py.ready stays 0 if a symbol is missing. */
+static void resolve_python_api(void)
+{
+    py.ready = FIND(gil_ensure, "PyGILState_Ensure") && FIND(gil_release, "PyGILState_Release")
+        && FIND(import, "PyImport_ImportModule") && FIND(get_attr, "PyObject_GetAttrString")
+        && FIND(call, "PyObject_CallObject")
+        && FIND(tuple_new, "PyTuple_New") && FIND(tuple_set, "PyTuple_SetItem")
+        && FIND(tuple_get, "PyTuple_GetItem") && FIND(tuple_size, "PyTuple_Size")
+        && FIND(list_get, "PyList_GetItem") && FIND(list_size, "PyList_Size")
+        && FIND(dict_get, "PyDict_GetItemString") && FIND(sys_get, "PySys_GetObject")
+        && FIND(from_double, "PyFloat_FromDouble") && FIND(as_double, "PyFloat_AsDouble")
+        && FIND(as_long, "PyLong_AsLong") && FIND(from_string, "PyUnicode_FromString")
+        && FIND(from_path, "PyUnicode_DecodeFSDefault") && FIND(as_utf8, "PyUnicode_AsUTF8")
+        && FIND(bytes_new, "PyBytes_FromStringAndSize")
+        && FIND(decref, "Py_DecRef") && FIND(err_occurred, "PyErr_Occurred")
+        && FIND(err_fetch, "PyErr_Fetch") && FIND(err_clear, "PyErr_Clear")
+        && FIND(str, "PyObject_Str") && FIND(is_initialized, "Py_IsInitialized")
+        && FIND(none, "_Py_NoneStruct");
+}
+
+/* The pending Python exception's text in ``text``; clears it. Holds the GIL. */
+static void take_python_error(char *text, size_t size)
+{
+    PyObject *type = NULL, *value = NULL, *traceback = NULL;
+    py.err_fetch(&type, &value, &traceback);
+    PyObject *message = value ? py.str(value) : NULL;
+    const char *reason = message ? py.as_utf8(message) : NULL;
+    snprintf(text, size, "%s", reason ? reason : "(no message)");
+    if (py.err_occurred()) py.err_clear();
+    if (message) py.decref(message);
+    if (type) py.decref(type);
+    if (value) py.decref(value);
+    if (traceback) py.decref(traceback);
+}
+
+/* ---- loading Python and pythonfmu's library ---------------------------------------- */
+
+/* Why loading failed: the message fmi2Instantiate gives the host. Returns -1. */
+static int fail(const char *format, ...)
+{
+    va_list args;
+    va_start(args, format);
+    vsnprintf(load_error, sizeof load_error, format, args);
+    va_end(args);
+    return -1;
+}
+
+/* Whether ``version`` (Py_GetVersion: "3.11.7 (main, ...") is FEEDAXIS_PYTHON_VERSION: the
+ * layer is compiled against that minor version's C API (PyConfig's layout, the object
+ * macros), so the minor version must match; ``which`` names the Python in the message. */
+static int check_version(const char *version, const char *which)
+{
+    size_t n = strlen(FEEDAXIS_PYTHON_VERSION);
+    if (version && strncmp(version, FEEDAXIS_PYTHON_VERSION, n) == 0 && version[n] == '.')
+        return 0;
+    return fail("%s is Python %.*s; this FMU needs CPython %s (the minor version that built it: "
+                "its host layer is compiled against that version's C API)", which,
+                version ? (int)strcspn(version, " ") : 1, version ? version : "?",
+                FEEDAXIS_PYTHON_VERSION);
+}
+
+/* Load libpython ``path`` RTLD_GLOBAL (pythonfmu's library and numpy's extension modules
+ * take its symbols from the process); ``which`` names it in the messages. */
+static int load_libpython(const char *path, const char *which)
+{
+    void *library = dlopen(path, RTLD_NOW | RTLD_GLOBAL);
+    if (!library) return fail("cannot load %s: %s", which, dlerror());
+    const char *(*get_version)(void) = (const char *(*)(void))dlsym(library, "Py_GetVersion");
+    if (!get_version || !dlsym(library, "Py_IsInitialized"))
+        return fail("%s is not a libpython", which);
+    return check_version(get_version(), which);
+}
+
+/* Start the interpreter: ``isolated`` (the FMU's own runtime: no environment variables, no
+ * user site, no bytecode written) with prefix ``path``, else Python's default configuration
+ * with program name ``path`` (which finds that interpreter's virtual environment). Never
+ * finalised: finalisation runs libgfortran's close_units on a heap pythonfmu has already
+ * damaged, and the process is ending anyway. */
+static int start_interpreter(int isolated, const char *path, const char *which)
+{
+    void (*init_config)(PyConfig *) =
+        dlsym(RTLD_DEFAULT, isolated ? "PyConfig_InitIsolatedConfig" : "PyConfig_InitPythonConfig");
     PyStatus (*set_string)(PyConfig *, wchar_t **, const char *) =
         dlsym(RTLD_DEFAULT, "PyConfig_SetBytesString");
     PyStatus (*initialize)(const PyConfig *) = dlsym(RTLD_DEFAULT, "Py_InitializeFromConfig");
     void (*clear)(PyConfig *) = dlsym(RTLD_DEFAULT, "PyConfig_Clear");
     int (*is_exception)(PyStatus) = dlsym(RTLD_DEFAULT, "PyStatus_Exception");
     PyThreadState *(*save_thread)(void) = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
-    if (!init_config || !set_string || !initialize || !clear || !is_exception || !save_thread) {
-        snprintf(load_error, sizeof load_error, "libpython lacks the PyConfig API (3.8 or newer)");
-        return -1;
-    }
+    if (!init_config || !set_string || !initialize || !clear || !is_exception || !save_thread)
+        return fail("%s lacks the PyConfig API", which);
     PyConfig config;
     init_config(&config);
-    config.install_signal_handlers = 0;  /* the host owns SIGINT */
+    config.install_signal_handlers = 0; /* the host owns SIGINT */
     config.parse_argv = 0;
-    PyStatus status = set_string(&config, &config.program_name,
-                                 setting("FEEDAXIS_PYTHON", FEEDAXIS_PYTHON));
+    PyStatus status;
+    if (isolated) {
+        /* the prefix, and a program name inside it: a bare name would be looked up on PATH,
+         * and a virtual environment found there would become sys.prefix */
+        char program[4200];
+        snprintf(program, sizeof program, "%s/bin/python%s", path, FEEDAXIS_PYTHON_VERSION);
+        config.write_bytecode = 0; /* the FMU's folder may be read-only */
+        status = set_string(&config, &config.home, path);
+        if (!is_exception(status)) status = set_string(&config, &config.program_name, program);
+    } else {
+        status = set_string(&config, &config.program_name, path);
+    }
     if (!is_exception(status)) status = initialize(&config);
     clear(&config);
-    if (is_exception(status)) {
-        snprintf(load_error, sizeof load_error, "cannot start Python (set FEEDAXIS_PYTHON): %s",
-                 status.err_msg ? status.err_msg : "unknown error");
-        return -1;
-    }
-    save_thread();  /* pythonfmu takes the GIL with PyGILState_Ensure */
+    if (is_exception(status))
+        return fail("cannot start %s: %s", which, status.err_msg ? status.err_msg : "no reason");
+    save_thread(); /* pythonfmu takes the GIL with PyGILState_Ensure */
     return 0;
 }
+
+#ifdef FEEDAXIS_RUNTIME
+/* A standalone FMU: it carries its own CPython (libpython, the standard library and the
+ * packages its step path imports) in <unpacked FMU>/binaries/linux64/FEEDAXIS_RUNTIME, found
+ * from the resource location the host passes, never from a path of the build machine.
+ * A C host: the layer starts that Python. A process where another standalone feedaxis FMU
+ * started its own: this FMU's packages go behind that one's on sys.path. A Python host: its
+ * own interpreter runs the FMU when it imports FEEDAXIS_REQUIRED_MODULES, else
+ * fmi2Instantiate fails naming what is missing. */
+#define RUNTIME_MARK "feedaxis_fmu_runtime" /* the module a standalone FMU's Python carries */
+
+/* The local path of file URI ``uri`` (file:///p, file://localhost/p, file:/p), decoded. */
+static int uri_path(const char *uri, char *path, size_t size)
+{
+    const char *p = strncmp(uri, "file://localhost/", 17) == 0 ? uri + 16
+                    : strncmp(uri, "file:///", 8) == 0         ? uri + 7
+                    : strncmp(uri, "file:/", 6) == 0           ? uri + 5 : NULL;
+    size_t n = 0;
+    for (; p && *p && n + 1 < size; ++p) {
+        if (p[0] == '%' && isxdigit((unsigned char)p[1]) && isxdigit((unsigned char)p[2])) {
+            char hex[3] = {p[1], p[2], 0};
+            path[n++] = (char)strtol(hex, NULL, 16);
+            p += 2;
+        } else {
+            path[n++] = *p;
+        }
+    }
+    if (!p || *p) return -1;
+    path[n] = 0;
+    while (n > 1 && path[n - 1] == '/') path[--n] = 0;
+    return 0;
+}
+
+static char runtime[4096]; /* this FMU's own CPython prefix */
+
+static int find_runtime(const char *resources)
+{
+    char folder[4096];
+    if (uri_path(resources, folder, sizeof folder) != 0)
+        return fail("the resource location %s is not a file URI: this standalone FMU finds its "
+                    "own Python beside it", resources);
+    char *slash = strrchr(folder, '/');
+    if (slash) *slash = 0; /* the unpacked FMU */
+    int length = snprintf(runtime, sizeof runtime, "%s/binaries/linux64/%s", folder,
+                          FEEDAXIS_RUNTIME);
+    if (length < 0 || (size_t)length >= sizeof runtime)
+        return fail("the resource location %s is too long a path", resources);
+    if (access(runtime, R_OK | X_OK) != 0)
+        return fail("this standalone FMU's own Python is missing: %s: %s (resource location %s)",
+                    runtime, strerror(errno), resources);
+    return 0;
+}
+
+/* feedaxis_fmu_runtime.join(runtime): this FMU's runtime joins the interpreter (its module,
+ * fmus/common/feedaxis_fmu_runtime.py, is carried in the runtime's site-packages). */
+static int join_runtime(void)
+{
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *module = py.import(RUNTIME_MARK);
+    PyObject *join = module ? py.get_attr(module, "join") : NULL;
+    PyObject *args = join ? py.tuple_new(1) : NULL;
+    PyObject *result = NULL;
+    if (args && py.tuple_set(args, 0, py.from_path(runtime)) == 0) result = py.call(join, args);
+    char reason[512] = "";
+    if (!result) take_python_error(reason, sizeof reason);
+    if (result) py.decref(result);
+    if (args) py.decref(args);
+    if (join) py.decref(join);
+    if (module) py.decref(module);
+    py.gil_release(gil);
+    return result ? 0 : fail("cannot use this FMU's own Python: %s", reason);
+}
+
+/* Start the Python this FMU carries (its libpython loaded already, by this FMU or another
+ * of the same minor version). */
+static int start_own_python(void)
+{
+    if (start_interpreter(1, runtime, "this FMU's own Python") != 0) return -1;
+    resolve_python_api();
+    if (!py.ready) return fail("this FMU's own libpython lacks a function the layer calls");
+    return join_runtime();
+}
+
+/* The names of FEEDAXIS_REQUIRED_MODULES the running Python cannot import, in ``missing``;
+ * holds the GIL. */
+static void find_missing(char *missing, size_t size)
+{
+    PyObject *util = py.import("importlib.util");
+    PyObject *find_spec = util ? py.get_attr(util, "find_spec") : NULL;
+    char names[] = FEEDAXIS_REQUIRED_MODULES, *rest = NULL;
+    for (char *name = strtok_r(names, " ", &rest); name && find_spec;
+         name = strtok_r(NULL, " ", &rest)) {
+        PyObject *args = py.tuple_new(1);
+        PyObject *spec = NULL;
+        if (args && py.tuple_set(args, 0, py.from_string(name)) == 0)
+            spec = py.call(find_spec, args);
+        if (args) py.decref(args);
+        if (!spec || spec == py.none)
+            snprintf(missing + strlen(missing), size - strlen(missing), "%s%s",
+                     *missing ? ", " : "", name);
+        if (spec) py.decref(spec);
+        if (py.err_occurred()) py.err_clear();
+    }
+    if (find_spec) py.decref(find_spec);
+    if (util) py.decref(util);
+    if (py.err_occurred()) py.err_clear();
+}
+
+/* Python runs already: join the interpreter another standalone FMU started, or check that
+ * the host's own Python imports what this FMU needs. */
+static int use_running_python(void)
+{
+    resolve_python_api();
+    if (!py.ready) return fail("the Python in this process lacks a function the layer calls");
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *modules = py.sys_get("modules");
+    int started_by_a_standalone_fmu = modules && py.dict_get(modules, RUNTIME_MARK);
+    char missing[512] = "", executable[512] = "?";
+    if (!started_by_a_standalone_fmu) {
+        find_missing(missing, sizeof missing);
+        PyObject *program = py.sys_get("executable");
+        const char *text = program ? py.as_utf8(program) : NULL;
+        if (text) snprintf(executable, sizeof executable, "%s", text);
+        if (py.err_occurred()) py.err_clear();
+    }
+    py.gil_release(gil);
+    if (started_by_a_standalone_fmu) return join_runtime();
+    if (*missing)
+        return fail("the Python running in this process (%s) cannot import %s, which this FMU "
+                    "needs: install it there, or run the FMU in a host that is not a Python "
+                    "process, where it starts the Python it carries", executable, missing);
+    return 0;
+}
+
+static int start_python(const char *resources)
+{
+    if (find_runtime(resources) != 0) return -1;
+    const char *(*get_version)(void) = dlsym(RTLD_DEFAULT, "Py_GetVersion");
+    if (get_version) {
+        if (check_version(get_version(), "the Python loaded in this process") != 0) return -1;
+    } else {
+        char libpython[4160], which[4200];
+        snprintf(libpython, sizeof libpython, "%s/lib/%s", runtime, FEEDAXIS_LIBPYTHON_NAME);
+        snprintf(which, sizeof which, "this FMU's own libpython %s", libpython);
+        if (load_libpython(libpython, which) != 0) return -1;
+    }
+    int (*is_initialized)(void) = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    return is_initialized() ? use_running_python() : start_own_python();
+}
+#else
+/* The FMU runs in the Python that built it (FEEDAXIS_PYTHON, FEEDAXIS_LIBPYTHON at build
+ * time), or the one the environment variables of the same names give, or the host's own. */
+static const char *setting(const char *name, const char *built_in, char *which, size_t size)
+{
+    const char *value = getenv(name);
+    if (value && *value) {
+        snprintf(which, size, "%s=%s", name, value);
+        return value;
+    }
+    snprintf(which, size, "%s (the build machine's; set %s to one here)", built_in, name);
+    return built_in;
+}
+
+static int start_python(const char *resources)
+{
+    (void)resources;
+    char which[4200];
+    const char *(*get_version)(void) = dlsym(RTLD_DEFAULT, "Py_GetVersion");
+    if (get_version) { /* a Python host, or another FMU loaded one */
+        if (check_version(get_version(), "the Python loaded in this process") != 0) return -1;
+    } else {
+        const char *libpython =
+            setting("FEEDAXIS_LIBPYTHON", FEEDAXIS_LIBPYTHON, which, sizeof which);
+        if (!*libpython)
+            return fail("the Python that built this FMU has no shared libpython: set "
+                        "FEEDAXIS_LIBPYTHON to a CPython %s libpython (and FEEDAXIS_PYTHON)",
+                        FEEDAXIS_PYTHON_VERSION);
+        if (load_libpython(libpython, which) != 0) return -1;
+    }
+    int (*is_initialized)(void) = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (!is_initialized()) {
+        const char *python = setting("FEEDAXIS_PYTHON", FEEDAXIS_PYTHON, which, sizeof which);
+        if (access(python, X_OK) != 0)
+            return fail("cannot use %s as the Python: %s", which, strerror(errno));
+        if (start_interpreter(0, python, which) != 0) return -1;
+    }
+    resolve_python_api();
+    return py.ready ? 0 : fail("the libpython in this process lacks a function the layer calls");
+}
+#endif
 
 /* pythonfmu's library keeps its interpreter state in a static shared_ptr, destroyed at exit
  * by a C++ static destructor, and then assigns nullptr to that destroyed shared_ptr in its
@@ -172,12 +444,13 @@ static void release_pythonfmu_state(void)
 static void prepare_mirror(void);
 static void unloading(void);
 
-static void load(void)
+/* Start (or find) Python, then load pythonfmu's library from this library's folder. */
+static void load(const char *resources)
 {
     Dl_info self;
-    if (start_python() != 0) return;
+    if (start_python(resources) != 0) return;
     if (!dladdr((void *)&load, &self) || !self.dli_fname) {
-        snprintf(load_error, sizeof load_error, "cannot locate the FMU's binary folder");
+        fail("cannot locate the FMU's binary folder");
         return;
     }
     char path[4096];
@@ -187,13 +460,24 @@ static void load(void)
              "libpythonfmu-export.so");
     real_library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (!real_library) {
-        snprintf(load_error, sizeof load_error, "cannot load %s: %s", path, dlerror());
+        fail("cannot load %s: %s", path, dlerror());
         return;
     }
     /* Registered after pythonfmu's static destructors, so that it runs before them: at exit,
      * and when the host unloads this library (glibc binds a library's atexit handlers to it). */
     atexit(unloading);
     prepare_mirror();
+}
+
+/* The first fmi2Instantiate of this library loads; later ones see its outcome. */
+static void load_once(const char *resources)
+{
+    static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+    static int tried;
+    pthread_mutex_lock(&lock);
+    if (!tried) load(resources);
+    tried = 1;
+    pthread_mutex_unlock(&lock);
 }
 
 /* ---- logging ---------------------------------------------------------------------- */
@@ -243,7 +527,7 @@ static fmi2Status refuse(Guard *g, const char *format, ...)
     return fmi2Error;
 }
 
-/* ---- the state machine ------------------------------------------------------------ */
+/* ---- the state guard -------------------------------------------------------------- */
 
 static const char *const MODE_NAMES[] = {"instantiated", "initialisation mode", "step mode",
                                          "terminated", "failed", "dead after fmi2Fatal"};
@@ -329,44 +613,15 @@ static int references_known(Guard *g, const char *function, char type,
     return 1;
 }
 
-/* ---- Real inputs and outputs kept here while stepping (item 5) ----------------------- */
-
-/* The Python C API, found with dlsym once Python runs (never linked: see the top). */
-static struct {
-    PyGILState_STATE (*gil_ensure)(void);
-    void (*gil_release)(PyGILState_STATE);
-    PyObject *(*import)(const char *);
-    PyObject *(*get_attr)(PyObject *, const char *);
-    PyObject *(*call)(PyObject *, PyObject *);
-    PyObject *(*tuple_new)(Py_ssize_t);
-    int (*tuple_set)(PyObject *, Py_ssize_t, PyObject *);
-    PyObject *(*tuple_get)(PyObject *, Py_ssize_t);
-    Py_ssize_t (*tuple_size)(PyObject *);
-    PyObject *(*list_get)(PyObject *, Py_ssize_t);
-    Py_ssize_t (*list_size)(PyObject *);
-    PyObject *(*from_double)(double);
-    double (*as_double)(PyObject *);
-    long (*as_long)(PyObject *);
-    PyObject *(*from_string)(const char *);
-    PyObject *(*bytes_new)(const char *, Py_ssize_t);
-    const char *(*as_utf8)(PyObject *);
-    void (*decref)(PyObject *);
-    PyObject *(*err_occurred)(void);
-    void (*err_fetch)(PyObject **, PyObject **, PyObject **);
-    void (*err_clear)(void);
-    PyObject *(*str)(PyObject *);
-    int (*is_initialized)(void);
-    PyObject *none;
-    int ready;
-} py;
+/* ---- the mirror: Real inputs and outputs kept here while stepping (item 5) ------------ */
 
 static fmi2ValueReference input_vr[MAX_MIRRORED], output_vr[MAX_MIRRORED];
 static size_t n_inputs, n_outputs;
 
-#define FIND(field, symbol) (py.field = dlsym(RTLD_DEFAULT, symbol)) != NULL
+/* Index the mirrored variables; ``mirrorable`` stays 0 (every call then goes through
+ * pythonfmu) if an input or output is not a Real or there are too many. */
+static int mirrorable;
 
-/* Resolve the API and index the mirrored variables; py.ready stays 0 (every call then goes
- * through pythonfmu) if a symbol is missing or an input or output is not a Real. */
 static void prepare_mirror(void)
 {
     for (size_t k = 0; k < FEEDAXIS_N_VARS; ++k) {
@@ -381,19 +636,7 @@ static void prepare_mirror(void)
             output_vr[n_outputs++] = v->vr;
         }
     }
-    py.ready = FIND(gil_ensure, "PyGILState_Ensure") && FIND(gil_release, "PyGILState_Release")
-        && FIND(import, "PyImport_ImportModule") && FIND(get_attr, "PyObject_GetAttrString")
-        && FIND(call, "PyObject_CallObject") && FIND(tuple_new, "PyTuple_New")
-        && FIND(tuple_set, "PyTuple_SetItem") && FIND(tuple_get, "PyTuple_GetItem")
-        && FIND(tuple_size, "PyTuple_Size") && FIND(list_get, "PyList_GetItem")
-        && FIND(list_size, "PyList_Size") && FIND(from_double, "PyFloat_FromDouble")
-        && FIND(as_double, "PyFloat_AsDouble") && FIND(as_long, "PyLong_AsLong")
-        && FIND(from_string, "PyUnicode_FromString") && FIND(as_utf8, "PyUnicode_AsUTF8")
-        && FIND(bytes_new, "PyBytes_FromStringAndSize")
-        && FIND(decref, "Py_DecRef") && FIND(err_occurred, "PyErr_Occurred")
-        && FIND(err_fetch, "PyErr_Fetch") && FIND(err_clear, "PyErr_Clear")
-        && FIND(str, "PyObject_Str") && FIND(is_initialized, "Py_IsInitialized")
-        && FIND(none, "_Py_NoneStruct");
+    mirrorable = 1;
 }
 
 static int mirror_index(const fmi2ValueReference list[], size_t n, fmi2ValueReference vr)
@@ -445,7 +688,7 @@ static PyObject *call_handoff(const char *function, PyObject *args)
 /* Before pythonfmu constructs a slave: forget any slave constructed earlier on this thread. */
 static void expect_slave(void)
 {
-    if (!py.ready) return;
+    if (!py.ready || !mirrorable) return;
     PyGILState_STATE gil = py.gil_ensure();
     PyObject *result = call_handoff("forget", py.tuple_new(0));
     if (result) py.decref(result);
@@ -458,7 +701,7 @@ static void claim_exchange(Guard *g)
 {
     drop_exchange(g);
     g->inputs_current = g->inputs_pending = g->outputs_current = 0;
-    if (!py.ready) return;
+    if (!py.ready || !mirrorable) return;
     PyGILState_STATE gil = py.gil_ensure();
     PyObject *args = py.tuple_new(2);
     if (args) {
@@ -471,9 +714,8 @@ static void claim_exchange(Guard *g)
     py.gil_release(gil);
 }
 
-static fmi2Status (*real_get_real)(fmi2Component, const fmi2ValueReference *, size_t, fmi2Real *);
-static fmi2Status (*real_set_real)(fmi2Component, const fmi2ValueReference *, size_t,
-                                   const fmi2Real *);
+static fmi2GetRealTYPE *real_get_real;
+static fmi2SetRealTYPE *real_set_real;
 
 /* Read the slave's inputs and outputs into the mirror (through pythonfmu). */
 static int load_mirror(Guard *g)
@@ -537,19 +779,10 @@ static int read_outputs(Guard *g, PyObject *outputs)
 /* A Python exception out of the exchange function is a bug: fmi2Fatal with its text. */
 static fmi2Status exchange_failed(Guard *g)
 {
-    PyObject *type = NULL, *value = NULL, *traceback = NULL;
-    py.err_fetch(&type, &value, &traceback);
-    PyObject *text = value ? py.str(value) : NULL;
-    const char *reason = text ? py.as_utf8(text) : NULL;
-    char message[512];
-    snprintf(message, sizeof message, "doStep: internal error in the slave's exchange: %s",
-             reason ? reason : "(no message)");
+    char reason[400], message[512];
+    take_python_error(reason, sizeof reason);
+    snprintf(message, sizeof message, "doStep: internal error in the slave's exchange: %s", reason);
     tell_host(g, fmi2Fatal, NULL, message);
-    if (py.err_occurred()) py.err_clear();
-    if (text) py.decref(text);
-    if (type) py.decref(type);
-    if (value) py.decref(value);
-    if (traceback) py.decref(traceback);
     return fmi2Fatal;
 }
 
@@ -588,9 +821,13 @@ static fmi2Status exchange_step(Guard *g, fmi2Real t, fmi2Real h)
     return status;
 }
 
-/* Whether fmi2GetReal of ``vr`` can be answered from the mirror; copies the values. */
-static int get_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[])
+/* Whether fmi2GetReal of ``vr`` is answered from the mirror (instance ``c`` stepping, every
+ * ``vr`` a mirrored input or output, the mirror current); copies the values. */
+static int mirror_get(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                      fmi2Real value[])
 {
+    Guard *g = c;
+    if (!g || !fast(g) || !vr || !value) return 0; /* a NULL array: refused by the guard */
     for (size_t i = 0; i < nvr; ++i) {
         int k = mirror_index(output_vr, n_outputs, vr[i]);
         if (k >= 0 && g->outputs_current) continue;
@@ -604,10 +841,13 @@ static int get_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr, fmi
     return 1;
 }
 
-/* Whether fmi2SetReal of ``vr`` (all inputs) can be kept in the mirror; stores the values. */
-static int set_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr,
-                        const fmi2Real value[])
+/* Whether fmi2SetReal of ``vr`` is kept in the mirror (instance ``c`` stepping, every ``vr`` a
+ * mirrored input); stores the values, handed to the slave at the next step. */
+static int mirror_set(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                      const fmi2Real value[])
 {
+    Guard *g = c;
+    if (!g || !fast(g) || !vr || !value) return 0; /* a NULL array: refused by the guard */
     for (size_t i = 0; i < nvr; ++i)
         if (mirror_index(input_vr, n_inputs, vr[i]) < 0) return 0;
     if (!g->inputs_current && !load_mirror(g)) return 0;
@@ -618,8 +858,8 @@ static int set_mirrored(Guard *g, const fmi2ValueReference vr[], size_t nvr,
 
 /* ---- the fmi2 functions ------------------------------------------------------------ */
 
-EXPORT const char *fmi2GetTypesPlatform(void) { return "default"; }
-EXPORT const char *fmi2GetVersion(void) { return "2.0"; }
+EXPORT const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+EXPORT const char *fmi2GetVersion(void) { return fmi2Version; }
 
 /* Freed instances are kept (up to POOL_SIZE) and reused through pythonfmu's fmi2Reset, which
  * creates a fresh Python slave: pythonfmu's fmi2Instantiate leaks about 1.4 kB in findClass
@@ -690,7 +930,7 @@ static void unloading(void)
 {
     int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
     if (is_initialized && is_initialized()) {
-        void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
+        fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)real("fmi2FreeInstance");
         pthread_mutex_lock(&pool_lock);
         while (pooled > 0) {
             Guard *g = pool[--pooled];
@@ -713,8 +953,8 @@ static Guard *reuse(fmi2String name, fmi2String guid, fmi2String resources,
     Guard *g = take_pooled(guid, resources);
     if (!g) return NULL;
     attach(g, name, functions, loggingOn);
-    static fmi2Status (*reset)(fmi2Component);
-    if (!reset) reset = (fmi2Status(*)(fmi2Component))real("fmi2Reset");
+    static fmi2ResetTYPE *reset;
+    if (!reset) reset = (fmi2ResetTYPE *)real("fmi2Reset");
     begin(g);
     expect_slave();
     if (finish(g, reset(g->real)) <= fmi2Warning) {
@@ -722,7 +962,7 @@ static Guard *reuse(fmi2String name, fmi2String guid, fmi2String resources,
         return g;
     }
     if (g->mode != DEAD) {
-        void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
+        fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)real("fmi2FreeInstance");
         free_instance(g->real);
     }
     release(g);
@@ -734,7 +974,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
                                      fmi2Boolean visible, fmi2Boolean loggingOn)
 {
     if (!functions || !functions->logger || !guid || !resources) return NULL;
-    pthread_once(&load_once, load);
+    load_once(resources);
     Guard *g = fmuType == fmi2CoSimulation && real_library
                    ? reuse(instanceName, guid, resources, functions, loggingOn) : NULL;
     if (g) return g;
@@ -743,9 +983,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     attach(g, instanceName, functions, loggingOn);
     g->guid = strdup(guid);
     g->resources = strdup(resources);
-    fmi2Component (*instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
-                                 const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean) =
-        real("fmi2Instantiate");
+    fmi2InstantiateTYPE *instantiate = (fmi2InstantiateTYPE *)real("fmi2Instantiate");
     if (!instantiate) {
         tell_host(g, fmi2Fatal, NULL, *load_error ? load_error : "pythonfmu library incomplete");
     } else if (fmuType != fmi2CoSimulation) {
@@ -774,7 +1012,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
     g->host.logger = NULL;  /* the host's callbacks end here */
     drop_exchange(g);
     if (put_pooled(g)) return;
-    void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
+    fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)real("fmi2FreeInstance");
     free_instance(g->real);
     release(g);
 }
@@ -790,12 +1028,15 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
     return fmi2OK;
 }
 
-#define FORWARD(function, when_failed, signature, ...)                                          \
+/* The state guard around a call forwarded to pythonfmu: refuse it when the instance may not
+ * take it, hand over pending inputs, and make the call's status the worse of pythonfmu's and
+ * what the slave logged meanwhile. Declares ``g`` and ``status``. */
+#define FORWARD(function, when_failed, ...)                                                     \
     Guard *g = c;                                                                              \
     if (!g) return fmi2Error;                                                                  \
     if (!usable(g, #function, when_failed)) return fmi2Error;                                  \
-    static fmi2Status(*call) signature; /* resolved once: dlsym costs a microsecond */     \
-    if (!call) call = (fmi2Status(*) signature)real(#function);                                \
+    static function##TYPE *call; /* resolved once: dlsym costs a microsecond */                \
+    if (!call) call = (function##TYPE *)real(#function);                                       \
     hand_over_inputs(g);                                                                       \
     begin(g);                                                                                  \
     fmi2Status status = finish(g, call(g->real, ##__VA_ARGS__))
@@ -803,15 +1044,14 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, si
 EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol,
                                       fmi2Real start, fmi2Boolean stopDefined, fmi2Real stop)
 {
-    FORWARD(fmi2SetupExperiment, 0, (fmi2Component, fmi2Boolean, fmi2Real, fmi2Real, fmi2Boolean,
-                                     fmi2Real), tolDefined, tol, start, stopDefined, stop);
+    FORWARD(fmi2SetupExperiment, 0, tolDefined, tol, start, stopDefined, stop);
     g->last_successful_time = start;
     return status;
 }
 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 {
-    FORWARD(fmi2EnterInitializationMode, 0, (fmi2Component));
+    FORWARD(fmi2EnterInitializationMode, 0);
     slave_changed(g);
     if (status <= fmi2Warning) g->mode = INITIALISING;
     return status;
@@ -819,7 +1059,7 @@ EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c)
 
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 {
-    FORWARD(fmi2ExitInitializationMode, 0, (fmi2Component));
+    FORWARD(fmi2ExitInitializationMode, 0);
     slave_changed(g);
     if (status <= fmi2Warning) g->mode = STEPPING;
     if (fast(g)) load_mirror(g);
@@ -828,7 +1068,7 @@ EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c)
 
 EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 {
-    FORWARD(fmi2Terminate, 1, (fmi2Component));
+    FORWARD(fmi2Terminate, 1);
     slave_changed(g);
     if (status <= fmi2Warning) g->mode = TERMINATED;
     return status;
@@ -837,7 +1077,7 @@ EXPORT fmi2Status fmi2Terminate(fmi2Component c)
 EXPORT fmi2Status fmi2Reset(fmi2Component c)
 {
     expect_slave();
-    FORWARD(fmi2Reset, 1, (fmi2Component));
+    FORWARD(fmi2Reset, 1);
     slave_changed(g);
     if (status <= fmi2Warning) {
         g->mode = INSTANTIATED;
@@ -847,48 +1087,74 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     return status;
 }
 
-/* ``mirrored``: a statement that may answer the call from the mirror (item 5), which knows
- * its references; a setter's mirror takes inputs only, which are always settable, so it
- * may come before the checks. ``code``: the variable type (references_known). */
-#define GETTER(function, type, code, mirrored)                                                   \
+/* Whether instance ``c`` may take a get of ``vr`` (variables of type ``code``, see
+ * references_known) now; refuses it with a message otherwise. */
+static int may_get(fmi2Component c, const char *function, char code,
+                   const fmi2ValueReference vr[], size_t nvr, const void *value)
+{
+    Guard *g = c;
+    return !g || g->mode == DEAD || references_known(g, function, code, vr, nvr, value);
+}
+
+/* ``code``: the variable type the function takes (references_known). */
+#define GETTER(function, type, code)                                                            \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                type value[])                                                    \
     {                                                                                           \
-        Guard *guard = c;                                                                       \
-        if (guard) { mirrored }                                                                 \
-        if (guard && guard->mode != DEAD && !references_known(guard, #function, code, vr, nvr,  \
-                                                              value)) return fmi2Error;         \
-        FORWARD(function, 1, (fmi2Component, const fmi2ValueReference *, size_t, type *), vr,   \
-                nvr, value);                                                                    \
+        if (!may_get(c, #function, code, vr, nvr, value)) return fmi2Error;                     \
+        FORWARD(function, 1, vr, nvr, value);                                                   \
         return status;                                                                          \
     }
 
-GETTER(fmi2GetReal, fmi2Real, 'R',
-       if (fast(guard) && vr && value && get_mirrored(guard, vr, nvr, value)) return fmi2OK;)
-GETTER(fmi2GetInteger, fmi2Integer, 'I', )
-GETTER(fmi2GetBoolean, fmi2Boolean, 'B', )
-GETTER(fmi2GetString, fmi2String, 'S', )
+GETTER(fmi2GetInteger, fmi2Integer, 'I')
+GETTER(fmi2GetBoolean, fmi2Boolean, 'B')
+GETTER(fmi2GetString, fmi2String, 'S')
 
-#define SETTER(function, type, code, mirrored)                                                   \
+/* Whether instance ``c`` may take a set of ``vr`` (variables of type ``code``) now; refuses it
+ * with a message otherwise. */
+static int may_set(fmi2Component c, const char *function, char code,
+                   const fmi2ValueReference vr[], size_t nvr, const void *value)
+{
+    Guard *g = c;
+    return !g || g->mode == DEAD
+           || (references_known(g, function, code, vr, nvr, value) && settable(g, vr, nvr));
+}
+
+#define SETTER(function, type, code)                                                            \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                const type value[])                                              \
     {                                                                                           \
-        Guard *guard = c;                                                                       \
-        if (guard) { mirrored }                                                                 \
-        if (guard && guard->mode != DEAD && !(references_known(guard, #function, code, vr, nvr, \
-                                                               value)                           \
-                                              && settable(guard, vr, nvr))) return fmi2Error;   \
-        FORWARD(function, 0, (fmi2Component, const fmi2ValueReference *, size_t, const type *), \
-                vr, nvr, value);                                                                \
+        if (!may_set(c, #function, code, vr, nvr, value)) return fmi2Error;                     \
+        FORWARD(function, 0, vr, nvr, value);                                                   \
         slave_changed(g);                                                                       \
         return status;                                                                          \
     }
 
-SETTER(fmi2SetReal, fmi2Real, 'R',
-       if (fast(guard) && vr && value && set_mirrored(guard, vr, nvr, value)) return fmi2OK;)
-SETTER(fmi2SetInteger, fmi2Integer, 'I', )
-SETTER(fmi2SetBoolean, fmi2Boolean, 'B', )
-SETTER(fmi2SetString, fmi2String, 'S', )
+SETTER(fmi2SetInteger, fmi2Integer, 'I')
+SETTER(fmi2SetBoolean, fmi2Boolean, 'B')
+SETTER(fmi2SetString, fmi2String, 'S')
+
+/* Reals: while stepping, the mirror answers the Real inputs and outputs (mirror_get,
+ * mirror_set: their references are known Reals); any other Real goes through the guard as
+ * the other types do. */
+EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                              fmi2Real value[])
+{
+    if (mirror_get(c, vr, nvr, value)) return fmi2OK;
+    if (!may_get(c, "fmi2GetReal", 'R', vr, nvr, value)) return fmi2Error;
+    FORWARD(fmi2GetReal, 1, vr, nvr, value);
+    return status;
+}
+
+EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                              const fmi2Real value[])
+{
+    if (mirror_set(c, vr, nvr, value)) return fmi2OK; /* inputs only: always settable */
+    if (!may_set(c, "fmi2SetReal", 'R', vr, nvr, value)) return fmi2Error;
+    FORWARD(fmi2SetReal, 0, vr, nvr, value);
+    slave_changed(g);
+    return status;
+}
 
 /* ---- saved states: what a host got wrong is refused here (pythonfmu would dereference a
  * NULL pointer, copy past a buffer's end, or make a corrupt buffer fmi2Fatal) ------------- */
@@ -923,14 +1189,14 @@ static int state_refused(Guard *g, const fmi2Byte bytes[], size_t size, char *wh
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     if (c && !state) return refuse(c, "fmi2GetFMUstate: NULL pointer for the state");
-    FORWARD(fmi2GetFMUstate, 0, (fmi2Component, fmi2FMUstate *), state);
+    FORWARD(fmi2GetFMUstate, 0, state);
     return status;
 }
 
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
     if (c && !state) return refuse(c, "fmi2SetFMUstate: NULL state");
-    FORWARD(fmi2SetFMUstate, 0, (fmi2Component, fmi2FMUstate), state);
+    FORWARD(fmi2SetFMUstate, 0, state);
     slave_changed(g);
     return status;
 }
@@ -939,14 +1205,14 @@ EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
     if (c && !state) return refuse(c, "fmi2FreeFMUstate: NULL pointer for the state");
     if (c && !*state) return fmi2OK;  /* nothing to free */
-    FORWARD(fmi2FreeFMUstate, 1, (fmi2Component, fmi2FMUstate *), state);
+    FORWARD(fmi2FreeFMUstate, 1, state);
     return status;
 }
 
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
     if (c && (!state || !size)) return refuse(c, "fmi2SerializedFMUstateSize: NULL state or size");
-    FORWARD(fmi2SerializedFMUstateSize, 0, (fmi2Component, fmi2FMUstate, size_t *), state, size);
+    FORWARD(fmi2SerializedFMUstateSize, 0, state, size);
     return status;
 }
 
@@ -959,8 +1225,7 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
         && needed != size)
         return refuse(c, "fmi2SerializeFMUstate: a buffer of %zu bytes for a state of %zu "
                          "(fmi2SerializedFMUstateSize)", size, needed);
-    FORWARD(fmi2SerializeFMUstate, 0, (fmi2Component, fmi2FMUstate, fmi2Byte *, size_t), state,
-            bytes, size);
+    FORWARD(fmi2SerializeFMUstate, 0, state, bytes, size);
     return status;
 }
 
@@ -972,8 +1237,7 @@ EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[
     if (guard && !state) return refuse(guard, "fmi2DeSerializeFMUstate: NULL pointer for the state");
     if (guard && guard->mode != DEAD && state_refused(guard, bytes, size, why, sizeof why))
         return refuse(guard, "fmi2DeSerializeFMUstate: %s", why);
-    FORWARD(fmi2DeSerializeFMUstate, 0, (fmi2Component, const fmi2Byte *, size_t, fmi2FMUstate *),
-            bytes, size, state);
+    FORWARD(fmi2DeSerializeFMUstate, 0, bytes, size, state);
     return status;
 }
 
@@ -1021,7 +1285,7 @@ EXPORT fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolea
         begin(guard);
         return stepped(guard, t, h, finish(guard, exchange_step(guard, t, h)));
     }
-    FORWARD(fmi2DoStep, 0, (fmi2Component, fmi2Real, fmi2Real, fmi2Boolean), t, h, no_set_prior);
+    FORWARD(fmi2DoStep, 0, t, h, no_set_prior);
     slave_changed(g);
     return stepped(g, t, h, status);
 }
@@ -1034,7 +1298,7 @@ EXPORT fmi2Status fmi2CancelStep(fmi2Component c)
 #define STATUS_GETTER(function, type)                                                            \
     EXPORT fmi2Status function(fmi2Component c, const fmi2StatusKind kind, type *value)         \
     {                                                                                           \
-        FORWARD(function, 1, (fmi2Component, fmi2StatusKind, type *), kind, value);             \
+        FORWARD(function, 1, kind, value);                                                      \
         return status;                                                                          \
     }
 
@@ -1043,16 +1307,15 @@ STATUS_GETTER(fmi2GetIntegerStatus, fmi2Integer)
 STATUS_GETTER(fmi2GetStringStatus, fmi2String)
 
 /* The two kinds pythonfmu answers are kept here: the layer may step without it. */
-enum { LAST_SUCCESSFUL_TIME = 2, TERMINATED_KIND = 3 };
 
 EXPORT fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind kind, fmi2Real *value)
 {
     Guard *guard = c;
-    if (guard && kind == LAST_SUCCESSFUL_TIME && value && guard->mode != DEAD) {
+    if (guard && kind == fmi2LastSuccessfulTime && value && guard->mode != DEAD) {
         *value = guard->last_successful_time;
         return fmi2OK;
     }
-    FORWARD(fmi2GetRealStatus, 1, (fmi2Component, fmi2StatusKind, fmi2Real *), kind, value);
+    FORWARD(fmi2GetRealStatus, 1, kind, value);
     return status;
 }
 
@@ -1060,10 +1323,10 @@ EXPORT fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind kin
                                        fmi2Boolean *value)
 {
     Guard *guard = c;
-    if (guard && kind == TERMINATED_KIND && value && guard->mode != DEAD) {
+    if (guard && kind == fmi2Terminated && value && guard->mode != DEAD) {
         *value = guard->wants_to_terminate;
         return fmi2OK;
     }
-    FORWARD(fmi2GetBooleanStatus, 1, (fmi2Component, fmi2StatusKind, fmi2Boolean *), kind, value);
+    FORWARD(fmi2GetBooleanStatus, 1, kind, value);
     return status;
 }

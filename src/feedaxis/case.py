@@ -6,11 +6,11 @@ optionally ``duty.csv``. Every rule of the format is checked; a broken file rais
 """
 from __future__ import annotations
 
+import errno
+import io
 import math
 import os
-import re
 import shutil
-import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,15 +18,12 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .errors import InputError, finite_float, read_text, toml_key_line
-from .output import umask_mode
+from .errors import (InputError, finite_float, finite_value, read_text, read_toml,
+                     shown_value, toml_key_line)
+from .output import umask_mode, writing
 from .physics.geometry import SUPPORTS
+from .physics.servo import loop_budget_problem
 from .physics.thermal import DutySegment
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:
-    import tomli as tomllib
 
 AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE = (
     "axis.toml", "positioning.csv", "duty.csv", "tracking.csv")
@@ -183,7 +180,8 @@ def read_case(folder):
         raise CaseError(folder / DUTY_FILE, f"a thermal test needs {POSITIONING_FILE} "
                                             "with time_s beside duty.csv")
     if (folder / TRACKING_FILE).exists():
-        tracking = read_tracking(folder / TRACKING_FILE)
+        tracking = read_tracking(folder / TRACKING_FILE,
+                                 axis.servo.get("loop_step_s", DEFAULT_LOOP_STEP_S))
     if positioning is None and tracking is None:
         raise CaseError(folder, f"a case holds {POSITIONING_FILE}, {TRACKING_FILE} or both; "
                                 "neither was found")
@@ -193,15 +191,7 @@ def read_case(folder):
 def read_axis(path):
     """Read ``axis.toml``: known snake_case keys with units only, each value checked."""
     path = Path(path)
-    if not path.exists():
-        raise CaseError(path, "missing: every case needs axis.toml")
-    text = _read_text(path)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        line = re.search(r"line (\d+)", str(error))
-        raise CaseError(path, f"not valid TOML: {error}",
-                        row=int(line.group(1)) if line else None) from None
+    text, data = read_axis_values(path)
     tables = {}
     for key, value in data.items():
         if key == "name":
@@ -218,6 +208,18 @@ def read_axis(path):
                         column="screw.lead_mm")
     servo = _check_servo(path, text, tables["servo"]) if "servo" in tables else {}
     return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}), servo)
+
+
+def read_axis_values(path):
+    """(text, {key: value}) of the TOML of ``axis.toml`` at ``path``, unchecked; a missing,
+    unreadable or malformed file is a :class:`CaseError`."""
+    path = Path(path)
+    if not path.exists():
+        raise CaseError(path, "missing: every case needs axis.toml")
+    try:
+        return read_toml(path, "case file")
+    except InputError as error:
+        raise CaseError(path, error.message, error.row) from None
 
 
 def _check_servo(path, text, servo):
@@ -246,7 +248,7 @@ def _check_table(path, text, table, values):
             raise CaseError(path, _unknown_key_message(key, list(known)), row, column)
         problem = _value_problem(known[key], key, value)
         if problem:
-            raise CaseError(path, f"{key} {problem}, got {value!r}", row, column)
+            raise CaseError(path, f"{key} {problem}, got {shown_value(value)}", row, column)
     return dict(values)
 
 
@@ -260,20 +262,20 @@ def _value_problem(rule, key, value):
         return None if value in SUPPORTS else f"must be one of {', '.join(SUPPORTS)}"
     if rule == "controller":
         return None if value in CONTROLLERS else f"must be one of {', '.join(CONTROLLERS)}"
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return "must be a number"
-    if not math.isfinite(value):
-        return "must be finite"
+    try:
+        finite_value(value)
+    except ValueError as problem:
+        return str(problem)
     if rule == "positive" and value <= 0:
         return "must be > 0"
     if rule == "non_negative" and value < 0:
         return "must be >= 0"
     if rule == "positive_integer" and (not isinstance(value, int) or value < 1):
         return "must be a whole number >= 1"
-    return _range_problem(key, value)
+    return range_problem(key, value)
 
 
-def _range_problem(key, value):
+def range_problem(key, value):
     """Why ``value`` lies beyond any physical axis for ``key`` (None when it does not)."""
     low, high = PHYSICAL_RANGE.get(key, (-math.inf, math.inf))
     if low <= value <= high:
@@ -284,37 +286,115 @@ def _range_problem(key, value):
 def _read_csv(path, spec):
     """Read a CSV of the format: header row, '#' comment lines, numeric fields only.
 
-    Returns {column: float array} for the columns present and each data row's label.
+    The numbers are parsed by NumPy's C reader; a file it cannot take as one table is read
+    again line by line to name the first bad cell. Returns ({column: float array} for the
+    columns present, the data rows' :class:`RowLabels`).
     """
     path = Path(path)
-    records = []
-    for line_number, line in enumerate(_read_text(path).splitlines(), 1):
-        stripped = line.strip()
-        if stripped and not stripped.startswith("#"):
-            records.append((line_number, [cell.strip() for cell in line.split(",")]))
-    if not records:
+    text = _read_text(path).replace("\r\n", "\n").replace("\r", "\n")
+    header = _first_record(text)
+    if header is None:
         raise CaseError(path, "empty: a header row and at least one data row are needed")
-    header_line, header = records[0]
-    names = _check_header(path, header, spec, _row_label(1, header_line))
-    if len(records) == 1:
-        raise CaseError(path, "no data rows below the header", _row_label(2, header_line + 1))
-    row_labels = [_row_label(i + 2, line) for i, (line, _) in enumerate(records[1:])]
-    values = {name: np.empty(len(records) - 1) for name in names}
-    for index, ((_, cells), row) in enumerate(zip(records[1:], row_labels)):
-        if len(cells) != len(names):
-            column = names[min(len(cells), len(names) - 1)]
-            raise CaseError(path, f"{len(cells)} fields where the header has {len(names)}",
-                            row, column)
-        for name, cell in zip(names, cells):
-            values[name][index] = _number(path, cell, row, name)
+    header_line, header_text, body = header
+    names = _check_header(path, [cell.strip() for cell in header_text.split(",")], spec,
+                          _row_label(1, header_line))
+    table, rows = _table(path, body, header_line, names)
+    if table.shape[1] != len(names):
+        raise CaseError(path, f"{table.shape[1]} fields where the header has {len(names)}",
+                        rows[0], names[min(table.shape[1], len(names) - 1)])
+    _check_finite(path, table, body, header_line, rows, names)
+    values = {name: table[:, index] for index, name in enumerate(names)}
     for name, column in values.items():
         low, high = PHYSICAL_RANGE.get(name, (-math.inf, math.inf))
         bad = np.flatnonzero((column < low) | (column > high))
         if bad.size:
             value = column[bad[0]]
-            raise CaseError(path, f"{value:g} {_range_problem(name, value)}",
-                            row_labels[bad[0]], name)
-    return values, row_labels
+            raise CaseError(path, f"{value:g} {range_problem(name, value)}", rows[bad[0]], name)
+    return values, rows
+
+
+class RowLabels:
+    """The labels of a CSV's data rows (:func:`_row_label`), made when a message needs one.
+
+    ``lines[i]`` is the file line of data row ``i`` (the header is row 1).
+    """
+
+    def __init__(self, lines):
+        self.lines = lines
+
+    def __len__(self):
+        return len(self.lines)
+
+    def __getitem__(self, index):
+        return _row_label(int(index) + 2, int(self.lines[index]))
+
+
+def _first_record(text):
+    """(line number, text, the text after it) of the first line that is neither blank nor a
+    '#' comment; None when there is none. ``text`` has LF line ends."""
+    position, number = 0, 1
+    while position < len(text):
+        end = text.find("\n", position)
+        end = len(text) if end < 0 else end
+        stripped = text[position:end].strip()
+        if stripped and not stripped.startswith("#"):
+            return number, text[position:end], text[end + 1:]
+        position, number = end + 1, number + 1
+    return None
+
+
+def _table(path, body, header_line, names):
+    """The data rows below the header as a float table, and their :class:`RowLabels`.
+
+    A body without comments or blank lines goes to NumPy whole; otherwise its data lines
+    are picked out first. Where NumPy refuses, the first bad cell is named.
+    """
+    if (body and not body.isspace() and not body.startswith("\n") and "\n\n" not in body
+            and "#" not in body):
+        try:
+            table = _parse(io.StringIO(body))
+            return table, RowLabels(np.arange(header_line + 1, header_line + 1 + len(table)))
+        except ValueError:
+            pass  # whitespace-only lines or a bad cell: the line-by-line pass sorts it out
+    records = [(number, line) for number, line in enumerate(body.split("\n"), header_line + 1)
+               if line.strip() and not line.strip().startswith("#")]
+    if not records:
+        raise CaseError(path, "no data rows below the header", _row_label(2, header_line + 1))
+    rows = RowLabels(np.array([number for number, _ in records]))
+    try:
+        return _parse([line for _, line in records]), rows
+    except ValueError as refused:
+        _raise_first_bad_cell(path, records, rows, names)
+        raise refused  # NumPy refused a table every cell of which reads: a bug
+
+
+def _parse(lines):
+    """NumPy's C reader over comma-separated lines: a float table, ValueError if it cannot."""
+    return np.loadtxt(lines, delimiter=",", comments=None, dtype=float, ndmin=2,
+                      encoding=None)
+
+
+def _raise_first_bad_cell(path, records, rows, names):
+    """Raise naming the first row with the wrong number of fields or the first cell that is
+    not a finite number, in reading order."""
+    for index, (_, line) in enumerate(records):
+        cells = line.split(",")
+        if len(cells) != len(names):
+            raise CaseError(path, f"{len(cells)} fields where the header has {len(names)}",
+                            rows[index], names[min(len(cells), len(names) - 1)])
+        for name, cell in zip(names, cells):
+            _number(path, cell.strip(), rows[index], name)
+
+
+def _check_finite(path, table, body, header_line, rows, names):
+    """Raise naming the first cell (in reading order) that is NaN or infinite."""
+    finite = np.isfinite(table)
+    if finite.all():
+        return
+    index = int(np.flatnonzero(~finite.all(axis=1))[0])
+    column = int(np.flatnonzero(~finite[index])[0])
+    line = body.split("\n")[rows.lines[index] - header_line - 1]
+    _number(path, line.split(",")[column].strip(), rows[index], names[column])
 
 
 def _row_label(row, line):
@@ -410,13 +490,20 @@ def read_duty(path, length_mm=None):
     return Duty(segments, values.get("ambient_C"))
 
 
-def read_tracking(path):
-    """Read tracking.csv: strictly increasing time, reference and actual position."""
+def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
+    """Read tracking.csv: strictly increasing time, reference and actual position.
+
+    The control loop steps ``loop_step_s`` through every interval, so samples too far apart
+    for it (:func:`feedaxis.physics.servo.loop_budget_problem`) are refused at the row.
+    """
     path = Path(path)
     values, rows = _read_csv(path, TRACKING_COLUMNS)
     time_s = values["time_s"]
     _first_bad(path, np.concatenate(([False], np.diff(time_s) <= 0)), rows, "time_s",
                "time_s must be strictly increasing")
+    problem = loop_budget_problem(time_s, loop_step_s)
+    if problem is not None:
+        raise CaseError(path, problem[1], rows[problem[0]], "time_s")
     return Tracking(time_s, values["reference_mm"], values["actual_mm"],
                     values.get("disturbance_N"))
 
@@ -443,35 +530,54 @@ def _check_within_duty(path, time_s, rows, duty_end_s):
                "match the samples' time span")
 
 
-def write_case(folder, axis_values, positioning=None, duty=None, tracking=None):
+def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, check=None):
     """Write a case folder atomically: all files appear together or none does.
 
     Parameters
     ----------
     folder : path
-        The case folder to create; it must not exist yet.
+        The case folder to create; it must not exist yet (when another writer creates it
+        meanwhile, the first to finish wins and this one is refused).
     axis_values : dict
         The content of axis.toml (``name``, ``screw``, ``motor``, optionally ``servo``).
     positioning, duty, tracking : dict of {column: array}, optional
         Columns of each CSV, written in the given order.
+    check : callable, optional
+        Called with the staged folder before it is published; what it raises leaves
+        nothing behind.
     """
     folder = Path(folder)
-    if folder.exists():
+    if os.path.lexists(folder):
         raise CaseError(folder, "already exists; choose a new case folder")
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
-    try:
-        (staging / AXIS_FILE).write_text(tomli_w.dumps(axis_values), encoding="utf-8")
-        for name, columns in ((POSITIONING_FILE, positioning), (DUTY_FILE, duty),
-                              (TRACKING_FILE, tracking)):
-            if columns is not None:
-                _write_csv(staging / name, columns)
-        os.chmod(staging, umask_mode(0o777))  # mkdtemp's 0700 would hide it from others
-        os.replace(staging, folder)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
+    with writing(folder):
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+        try:
+            (staging / AXIS_FILE).write_text(tomli_w.dumps(axis_values), encoding="utf-8")
+            for name, columns in ((POSITIONING_FILE, positioning), (DUTY_FILE, duty),
+                                  (TRACKING_FILE, tracking)):
+                if columns is not None:
+                    _write_csv(staging / name, columns)
+            if check is not None:
+                check(staging)
+            os.chmod(staging, umask_mode(0o777))  # mkdtemp's 0700 would hide it from others
+            _publish(staging, folder)
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
     return folder
+
+
+def _publish(staging, folder):
+    """Rename the staged folder to ``folder``, refused when another writer got there first
+    (a rename never replaces a folder that holds files)."""
+    try:
+        os.replace(staging, folder)
+    except OSError as error:
+        if folder.exists() and error.errno in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR):
+            raise CaseError(folder, "was created by another run while this one wrote it; "
+                                    "that one is kept: choose a new case folder") from None
+        raise
 
 
 def _write_csv(path, columns):
@@ -479,15 +585,16 @@ def _write_csv(path, columns):
 
 
 def csv_text(columns):
-    """{column: values} as CSV text in the case format (header row, full float precision)."""
-    names = list(columns)
-    table = np.column_stack([np.asarray(columns[name], dtype=float) for name in names])
-    lines = [",".join(names)] + [",".join(_format_cell(name, v) for name, v in zip(names, row))
-                                 for row in table]
-    return "\n".join(lines) + "\n"
+    """{column: values} as CSV text in the case format (header row, full float precision:
+    each value as Python's shortest repr, which reads back exactly)."""
+    cells = [_formatted(name, np.asarray(values, dtype=float)) for name, values in columns.items()]
+    return "\n".join([",".join(columns), *map(",".join, zip(*cells))]) + "\n"
 
 
-def _format_cell(name, value):
-    if name in ("direction", "run"):
-        return f"{int(value):+d}" if name == "direction" else f"{int(value)}"
-    return repr(float(value))
+def _formatted(name, values):
+    """The cells of one column: ``direction`` as +1/-1, ``run`` as a whole number."""
+    if name == "direction":
+        return [f"{value:+d}" for value in values.astype(int).tolist()]
+    if name == "run":
+        return list(map(str, values.astype(int).tolist()))
+    return list(map(repr, values.tolist()))

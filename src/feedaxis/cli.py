@@ -18,7 +18,8 @@ from pathlib import Path
 
 from . import __version__, text
 from .case import read_case
-from .errors import InputError, check_writable_target, json_safe
+from .console import INTERRUPTED_EXIT, fail
+from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
@@ -210,13 +211,22 @@ def _diagnose_options(parser):
 
 
 @command("diagnose", help="where the model fails and which effect is missing",
-         description="Refit the model, fit each missing effect on top and judge it by an F "
-                     "test against the noise the data support (the pure error of repeated "
-                     "samples, the residual mean square, or the effective sample count of a "
-                     "serially correlated trace), stepwise at a family-wise error rate of "
-                     "0.001 (Bonferroni); describe structure no effect explains by the same "
-                     "tests; give a verdict: adequate, missing_effect or unexplained. A case "
-                     "with positioning.csv and tracking.csv is diagnosed on the samples the "
+         description="Refit the model as fit does (outliers named by row and kept out, a "
+                     "drift along the test fitted beside the effects), then fit each missing "
+                     "effect on top and judge it by an F test against the noise the samples "
+                     "support: the pure error of repeated samples (or of the + and - readings "
+                     "at each target in one pass each way), the residual mean square where "
+                     "there are no replicates, the noise power at the term's frequencies "
+                     "where the residual is serially correlated (Ljung-Box, AR model), or "
+                     "the effective sample count of a tracking trace. Stepwise: the smallest "
+                     "p-value is accepted below a family-wise error rate of 0.001 (Bonferroni "
+                     "over the stages and the effects tried). Then describe structure no "
+                     "effect explains (a periodic error, a trend, a reversal, a drift, a "
+                     "constant force; a lack of fit left) under the same policy, and give a "
+                     "verdict: adequate, missing_effect, unexplained, or undetermined (the "
+                     "samples cannot tell noise from structure; the reason is given). The "
+                     "noise line and the test line name the same noise model. A case with "
+                     "positioning.csv and tracking.csv is diagnosed on the samples the "
                      "model's effects act on, or on each in turn with an empty model.",
          options=_diagnose_options)
 def _cmd_diagnose(args):
@@ -262,10 +272,11 @@ def _report_options(parser):
 
 
 @command("report", help="self-contained HTML page with the plots",
-         description="The diagnosis, the measurement against the model, the residual and its "
-                     "spectrum, each effect's contribution, the error ladder, the figures of "
-                     "compare and the model's parameters, on one page (a case with both "
-                     "measurements: both).",
+         description="The diagnosis, the measurement against the model (drawn between the "
+                     "targets too), the residual and its spectrum, each effect's contribution, "
+                     "the error ladder, the figures of compare with the ISO 230-2 deviation "
+                     "plot, and the model's parameters, on one self-contained HTML page (a "
+                     "case with both measurements: both).",
          options=_report_options)
 def _cmd_report(args):
     from .analysis import analyse
@@ -330,7 +341,7 @@ def _import_options(parser):
                 "          50.012,0.8,2.9,,3.0\n"
                 "        target_mm first (mm); then one column per run and direction,\n"
                 "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
-                "        measured - target in um; an empty cell = not measured; '#' comment\n"
+                "        measured - target in µm; an empty cell = not measured; '#' comment\n"
                 "        lines; ';'- or tab-separated files may use a decimal comma.",
          options=_import_options)
 def _cmd_import(args):
@@ -488,8 +499,14 @@ def _cmd_effects(args):
     _emit(args, payload, text.effect_lines(effects))
 
 
+STANDALONE_HELP = ("each FMU carries the Python its physics needs (21-37 MB each), for FMI "
+                   "hosts on machines without Python (docs/fmu-hosts.md); without it the FMUs "
+                   "are small and need this machine's Python")
+
+
 def _build_fmus_options(parser):
     parser.add_argument("--out", default="build/fmus", help="FMU folder (default: build/fmus)")
+    parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
 
 
 @command("build-fmus", help="build the four FMUs",
@@ -499,8 +516,21 @@ def _cmd_build_fmus(args):
     from . import fmu_build
 
     check_writable_target(args.out, "folder")
-    paths = fmu_build.build_fmus(args.out)
+    with _progress("building FMUs", "FMU") as tick, _standalone_errors():
+        paths = fmu_build.build_fmus(args.out, standalone=args.standalone, progress=tick)
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
+
+
+@contextmanager
+def _standalone_errors():
+    """A machine that cannot build standalone FMUs: one clear error naming the option."""
+    from .fmu_standalone import StandaloneUnavailable
+
+    try:
+        yield
+    except StandaloneUnavailable as error:
+        raise InputError(f"cannot build standalone FMUs here: {error}",
+                         parameter="--standalone") from None
 
 
 def _axis_system(args):
@@ -515,7 +545,8 @@ def _axis_system(args):
 def _fmu_paths(args):
     from .cosim.fmu_cache import fmu_paths
 
-    return fmu_paths(args.fmus)
+    with _standalone_errors():
+        return fmu_paths(args.fmus, getattr(args, "standalone", False))
 
 
 @contextmanager
@@ -546,7 +577,21 @@ def _simulate(args, run):
 
 
 def _simulate_options(parser):
-    _scenario_parsers(parser, "case folder to create (must not exist)")
+    _scenario_parsers(parser, "case folder to create (must not exist)", _noise_options)
+
+
+def _noise_options(sub):
+    sub.add_argument("--noise-um", type=float, default=0.0,
+                     help="white Gaussian measurement noise added to what the case records "
+                          "as measured, standard deviation in µm (default 0: the simulated "
+                          "axis exactly)")
+    sub.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
+
+
+def _noise(args):
+    from .cosim.scenarios import MeasurementNoise
+
+    return MeasurementNoise(args.noise_um, args.seed) if args.noise_um else None
 
 
 def _scenario_parsers(parser, out_help, more_options=None, handler=None):
@@ -596,10 +641,10 @@ def _cmd_simulate_iso230(args):
     from .cosim.scenarios import simulate_iso230
 
     summary = _simulate(args, lambda master, progress: simulate_iso230(
-        args.out, master, **_iso230_arguments(args), progress=progress))
+        args.out, master, **_iso230_arguments(args), progress=progress, noise=_noise(args)))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples, {args.targets} targets x "
                          f"{args.runs} runs each direction; deviation "
-                         f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} um")
+                         f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} µm")
 
 
 @scenario_arguments("iso230")
@@ -630,10 +675,10 @@ def _cmd_simulate_thermal(args):
     from .cosim.scenarios import simulate_thermal
 
     summary = _simulate(args, lambda master, progress: simulate_thermal(
-        args.out, master, **_thermal_arguments(args), progress=progress))
+        args.out, master, **_thermal_arguments(args), progress=progress, noise=_noise(args)))
     _emit(args, summary, f"{args.out}: {summary['samples']} samples (duty.csv + "
                          f"positioning.csv); deviation {summary['error_min_um']:.3f} to "
-                         f"{summary['error_max_um']:.3f} um")
+                         f"{summary['error_max_um']:.3f} µm")
 
 
 @scenario_arguments("thermal")
@@ -667,7 +712,7 @@ def _cmd_simulate_tracking(args):
     from .cosim.scenarios import simulate_tracking
 
     summary = _simulate(args, lambda master, progress: simulate_tracking(
-        args.out, master, **_tracking_arguments(args), progress=progress))
+        args.out, master, **_tracking_arguments(args), progress=progress, noise=_noise(args)))
     _emit(args, summary, f"{args.out}/tracking.csv: {args.controller.upper()}, "
                          f"{args.frequency_hz:g} Hz, {args.amplitude_mm:g} mm"
                          + (f", cutting force at {args.spindle_rpm:g} rpm"
@@ -705,6 +750,7 @@ def _checked_axis(args):
 
 def _export_ssp_options(parser):
     parser.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
+    parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
     parser.add_argument("--stop-time", type=float, default=1.0, metavar="S",
                         help="DefaultExperiment stopTime in s (default 1)")
     parser.add_argument("--osp-step-hints", action="store_true",
@@ -720,17 +766,27 @@ def _export_ssp_options(parser):
                      "ecos; see README.",
          options=_export_ssp_options)
 def _cmd_export_ssp(args):
-    from .cosim.ssp import export_ssp
+    from .cosim.ssp import export_ssp, open_inputs
 
     check_writable_target(args.out)
-    path = export_ssp(args.out, *_checked_axis(args), args.stop_time, args.osp_step_hints)
-    _emit(args, {"ssp": str(path)}, f"{path}: SystemStructure.ssd, a parameter-values file "
-                                    "(.ssv) per component and the four FMUs")
+    system, paths = _checked_axis(args)
+    path = export_ssp(args.out, system, paths, args.stop_time, args.osp_step_hints)
+    unconnected = [{"input": connector, "unit": variable.unit, "start": variable.start,
+                    "meaning": variable.description}
+                   for connector, variable in open_inputs(system)]
+    _emit(args, {"ssp": str(path), "open_inputs": unconnected},
+          f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
+          f"four {'standalone ' if args.standalone else ''}FMUs\n"
+          "open inputs (unconnected: drive them from the importing tool, else they keep their "
+          "start values; position_ref_mm at 0 is a standing axis):\n"
+          + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
+                      for i in unconnected))
 
 
 
 def _export_fmu_options(parser):
     parser.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
+    parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
     _add_axis_options(parser, thermal_step=False)
 
 
@@ -916,43 +972,47 @@ def _one_line_warnings():
 
 
 def main(argv=None):
-    """Entry point of the ``feedaxis`` console script; returns the exit code.
+    """Entry point of the command line; returns the exit code.
 
-    Bad input (:class:`InputError`, a usage error) exits 2 with one message naming where;
-    anything else is a bug: exit 1 with one line (``--debug`` re-raises it for the
-    traceback). With ``--json`` the message is a JSON object on stdout.
+    Bad input (:class:`InputError`, a usage error) exits 2 with one message naming where,
+    and so does a disk that is full or read-only (naming the file); anything else is a bug:
+    exit 1 with one line (``--debug`` re-raises it for the traceback). With ``--json`` the
+    message is a JSON object on stdout. Ctrl-C exits 130 with one line.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     wants_json, debug = "--json" in argv, "--debug" in argv
     try:
+        from threadpoolctl import threadpool_limits
+
         args = build_parser().parse_args(argv)
         with _one_line_warnings():
             args.handler(args)
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
         message = str(stopped)
-        return _fail(wants_json, message if message.startswith("interrupted") else
-                     "interrupted", 130)
+        return fail(wants_json, message if message.startswith("interrupted") else
+                    "interrupted", INTERRUPTED_EXIT)
     except BrokenPipeError:
         sys.stderr.close()
         return 0
     except InputError as error:
-        return _fail(wants_json, str(error), 2, error.as_json())
+        return fail(wants_json, str(error), 2, error.as_json())
+    except OSError as error:
+        refused = write_error(error) if error.errno in DISK_STATE_ERRORS else None
+        if refused is None:
+            return _internal_error(wants_json, debug, error)
+        return fail(wants_json, str(refused), 2, refused.as_json())
     except Exception as error:  # a bug: one line, the traceback with --debug
-        if debug:
-            raise
-        return _fail(wants_json, f"internal error (a bug, please report it): "
-                                 f"{type(error).__name__}: {error}; run the command again "
-                                 "with --debug to see the traceback", 1)
+        return _internal_error(wants_json, debug, error)
     return 0
 
 
-def _fail(wants_json, message, code, payload=None):
-    """Report a failure on stderr, and as JSON on stdout with ``--json``; return ``code``."""
-    print(f"feedaxis: {message}", file=sys.stderr)
-    if wants_json:
-        print(_json_text(payload or {"error": message, "file": None, "row": None,
-                                     "column": None, "parameter": None}))
-    return code
+def _internal_error(wants_json, debug, error):
+    """Exit 1 with one line; ``--debug`` re-raises for the traceback."""
+    if debug:
+        raise error
+    return fail(wants_json, f"internal error (a bug, please report it): "
+                            f"{type(error).__name__}: {error}; run the command again with "
+                            "--debug to see the traceback", 1)
 
 
 if __name__ == "__main__":

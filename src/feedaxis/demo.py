@@ -8,7 +8,7 @@ parameters are checked against the model.
 """
 from __future__ import annotations
 
-import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ from .effects import CATALOG, Model
 from .examples import BUNDLED_CASE, LASER_EXAMPLE
 from .fit import fit
 from .fmu_build import build_fmus
-from .output import write_atomically
+from .output import staged_folder, write_atomically
 from .report import write_report
 
 MAX_ROUNDS = 8
@@ -39,7 +39,7 @@ def improve(case, model, effects=None, echo=print, max_rounds=MAX_ROUNDS):
         diagnosis = diagnose(case, model, effects)
         round_ = {"round": number, "rms_um": diagnosis.rms_um, "noise_um": diagnosis.noise_um,
                   "verdict": diagnosis.verdict, **diagnosis.to_json()}
-        echo(f"round {number}: RMS {diagnosis.rms_um:.4f} um (noise {diagnosis.noise_um:.4f} um)"
+        echo(f"round {number}: RMS {diagnosis.rms_um:.4f} µm (noise {diagnosis.noise_um:.4f} µm)"
              f" -> {diagnosis.verdict}")
         for structure in diagnosis.unexplained:
             echo(f"    unexplained {structure.kind}: {structure.evidence}")
@@ -52,7 +52,7 @@ def improve(case, model, effects=None, echo=print, max_rounds=MAX_ROUNDS):
         rounds.append(round_)
         echo(f"    missing: {best.effect} ({best.meaning})")
         echo(f"    evidence: {best.evidence}")
-        echo(f"    add {best.effect}, refit: RMS {best.rms_after_um:.4f} um")
+        echo(f"    add {best.effect}, refit: RMS {best.rms_after_um:.4f} µm")
     return model, rounds, diagnose(case, model, effects)
 
 
@@ -63,26 +63,42 @@ def ladder_of(rounds):
 
 
 def run_demo(out_dir, echo=print):
-    """Run the loop on the bundled case and write model, report and FMUs to ``out_dir``."""
+    """Run the loop on the bundled case and write the case, model, report, laser example and
+    FMUs to ``out_dir``.
+
+    They are written together (:func:`feedaxis.output.staged_folder`): an error, a full disk
+    or Ctrl-C on the way leaves none of them.
+    """
     out_dir = Path(out_dir)
-    case = read_case(shutil.copytree(BUNDLED_CASE, out_dir / "case", dirs_exist_ok=True))
+    case = replace(read_case(BUNDLED_CASE), folder=out_dir / "case")
     echo(f"case: {case.name}")
     echo(f"      {case.positioning.size} laser points, {case.positioning.target_mm.min():g} to "
          f"{case.positioning.target_mm.max():g} mm; model: empty; copied to {case.folder}")
     model, rounds, diagnosis = improve(case, Model(), echo=echo)
-    model_path = write_atomically(out_dir / "model.toml", fit(model, case).fitted_model().to_toml())
     analysis = analyse(case, model, CATALOG, diagnosis=diagnosis, ladder=ladder_of(rounds))
-    report_path = write_report(analysis, out_dir / "report.html")
-    laser_path = shutil.copytree(LASER_EXAMPLE, out_dir / "laser-example", dirs_exist_ok=True)
+    with staged_folder(out_dir) as staging:
+        _copy_files(BUNDLED_CASE, staging / "case")
+        write_atomically(staging / "model.toml", fit(model, case).fitted_model().to_toml())
+        write_report(analysis, staging / "report.html")
+        _copy_files(LASER_EXAMPLE, staging / "laser-example")
+        fmu_paths = {path.stem: path for path in build_fmus(staging / "fmus", POSITION_FMUS)}
+        difference_um = float(np.max(np.abs(replay_positioning(case, model, fmu_paths)
+                                            - model.predict_um(case))))
+    model_path, report_path = out_dir / "model.toml", out_dir / "report.html"
+    laser_path = out_dir / "laser-example"
     echo(f"fitted model: {model_path}")
     echo(f"report:       {report_path}")
     echo(f"laser example: {laser_path} (axis.toml + X-axis.rtl for feedaxis import)")
-    fmu_paths = {path.stem: path for path in build_fmus(out_dir / "fmus", POSITION_FMUS)}
-    difference_um = float(np.max(np.abs(replay_positioning(case, model, fmu_paths)
-                                        - model.predict_um(case))))
     echo(f"FMUs {' + '.join(POSITION_FMUS)} with the fitted parameters reproduce the model "
-         f"within {difference_um:.1e} um ({out_dir / 'fmus'})")
+         f"within {difference_um:.1e} µm ({out_dir / 'fmus'})")
     return {"case": str(case.folder), "rounds": rounds, "effects": list(model.names),
             "params": model.values, "model": str(model_path), "report": str(report_path),
             "laser_example": str(laser_path),
             "fmu_max_difference_um": difference_um}
+
+
+def _copy_files(source, target):
+    """The files of folder ``source`` written into ``target`` (a full disk named as such)."""
+    for path in sorted(source.iterdir()):
+        if path.is_file():
+            write_atomically(target / path.name, path.read_bytes())

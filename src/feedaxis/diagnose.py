@@ -78,7 +78,8 @@ class Candidate:
 @dataclass
 class Structure:
     """A structure found in the residual, with its test; ``location`` (a wavelength in mm
-    along the travel, a frequency in Hz in time, or None) under ``location_key``."""
+    along the travel, a frequency in Hz in time, or None) under ``location_key``, and
+    ``details`` (JSON fields the shape adds: a burst's ``start_s``, ``end_s``)."""
 
     kind: str
     location_key: str
@@ -88,6 +89,7 @@ class Structure:
     evidence: str
     fitted_um: np.ndarray = field(repr=False)
     basis: np.ndarray | None = field(default=None, repr=False)
+    details: dict = field(default_factory=dict)
 
     @property
     def wavelength_mm(self):
@@ -98,7 +100,7 @@ class Structure:
         return self.location if self.location_key == "frequency_hz" else None
 
     def to_json(self):
-        return {"kind": self.kind, self.location_key: self.location,
+        return {"kind": self.kind, self.location_key: self.location, **self.details,
                 "amplitude_um": self.amplitude_um, "evidence": self.evidence,
                 **self.test.to_json()}
 
@@ -336,7 +338,8 @@ def find_structures(measurement, left, shapes, stages, notify=None):
         structures.append(Structure(shape.kind, measurement.location_key, trial.location,
                                     amplitude_um, test,
                                     f"{shape.describe(measurement, trial, fitted)} "
-                                    f"({test.describe()})", fitted, trial.basis))
+                                    f"({test.describe()})", fitted, trial.basis,
+                                    dict(trial.extra or {})))
         if trial.location is None:
             shapes.remove(shape)
         model = current.model + BasisEffect(f"structure_{len(structures)}", trial.basis)

@@ -7,10 +7,28 @@ it as (:func:`read_text`), checking where a result may be written, and strict-JS
 """
 from __future__ import annotations
 
+import errno
 import math
 import os
 import re
+import sys
 from pathlib import Path
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
+
+# Lines end at LF, CRLF or CR only (as Python's universal newlines): str.splitlines() would
+# also split at a form feed, U+2028 and others, which a comment may hold.
+LINE_BREAK = re.compile(r"\r\n|\r|\n")
+# Arrays or inline tables nested deeper than this are refused before tomllib recurses.
+MAX_TOML_DEPTH = 64
+# Python (3.11+ by default) refuses to turn a longer digit string into an int.
+MAX_INT_DIGITS = 4300
+TOML_TOKENS = re.compile(  # strings and comments (to skip) and brackets
+    r'''"""[\s\S]*?"""|'{3}[\s\S]*?'{3}|"(?:\\.|[^"\\\n])*"''' r"|'[^'\n]*'|#[^\n]*|[\[\]{}]")
+LONG_INTEGER = re.compile(rf"\d(?:_?\d){{{MAX_INT_DIGITS},}}")
 
 
 class InputError(Exception):
@@ -72,8 +90,10 @@ def json_safe(value):
     return value
 
 
-def read_text(path, what="file"):
-    """The text of ``path``: UTF-8 with or without a byte-order mark, or UTF-16 with one.
+def read_text(path, what="file", legacy_encoding=None):
+    """The text of ``path``: UTF-8 with or without a byte-order mark, or UTF-16 with one;
+    with ``legacy_encoding`` (a code page such as cp1252) a file that is not UTF-8 is read
+    in it, undecodable bytes replaced.
 
     Raises
     ------
@@ -100,19 +120,105 @@ def read_text(path, what="file"):
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as error:
+        if legacy_encoding:
+            return _without_nul(path, data.decode(legacy_encoding, errors="replace"))
         line = data.count(b"\n", 0, error.start) + 1
         raise InputError(f"not UTF-8 text: byte 0x{data[error.start]:02x} cannot be decoded; "
                          "save the file as UTF-8", path=path, row=line) from None
+    return _without_nul(path, text)
+
+
+def _without_nul(path, text):
+    """``text``, refused when it holds a NUL character (a binary file)."""
     if "\x00" in text:
         raise InputError("holds NUL characters: a binary file, not text", path=path,
-                         row=text.count("\n", 0, text.index("\x00")) + 1)
+                         row=line_of(text, text.index("\x00")))
     return text
+
+
+def text_lines(text):
+    """``text`` split into lines at LF, CRLF or CR (never at a form feed or U+2028)."""
+    lines = LINE_BREAK.split(text)
+    return lines[:-1] if lines and lines[-1] == "" else lines
+
+
+def line_of(text, position):
+    """1-based line of character ``position`` in ``text`` (lines as :func:`text_lines`)."""
+    return len(LINE_BREAK.findall(text, 0, position)) + 1
+
+
+def read_toml(path, what="file"):
+    """(text, data) of the TOML file ``path``, read with :func:`read_text`.
+
+    Raises
+    ------
+    InputError
+        Naming the path and line: not TOML, values nested more than ``MAX_TOML_DEPTH``
+        deep, or an integer of more than ``MAX_INT_DIGITS`` digits.
+    """
+    text = read_text(path, what)
+    _check_toml_depth(path, text)
+    long_integer = LONG_INTEGER.search(text)
+    try:
+        return text, tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        line = re.search(r"line (\d+)", str(error))
+        raise InputError(f"not valid TOML: {error}", path=path,
+                         row=int(line.group(1)) if line else None) from None
+    except ValueError:  # tomllib's int() of a digit string over Python's limit
+        if long_integer is None:
+            raise
+        raise InputError(f"an integer of more than {MAX_INT_DIGITS} digits: no value needs "
+                         "that many", path=path, row=line_of(text, long_integer.start())) \
+            from None
+
+
+def _check_toml_depth(path, text):
+    """Raise naming the line where arrays or inline tables nest beyond ``MAX_TOML_DEPTH``."""
+    depth = 0
+    for token in TOML_TOKENS.finditer(text):
+        bracket = token.group()
+        if bracket in "[{":
+            depth += 1
+            if depth > MAX_TOML_DEPTH:
+                raise InputError(f"values nested more than {MAX_TOML_DEPTH} deep (arrays or "
+                                 "inline tables inside each other)", path=path,
+                                 row=line_of(text, token.start()))
+        elif bracket in "]}":
+            depth = max(depth - 1, 0)
+
+
+def finite_value(value):
+    """A TOML or JSON number as a finite float; ValueError with the reason otherwise.
+
+    Booleans and strings are not numbers; an integer beyond the float range is refused
+    rather than overflowing.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError("must be a number")
+    try:
+        number = float(value)
+    except OverflowError:
+        raise ValueError("is beyond the range of a number (about 1.8e308)") from None
+    if not math.isfinite(number):
+        raise ValueError("must be finite")
+    return number
+
+
+def shown_value(value):
+    """``value`` for a message: its repr, or its length when it is a very long integer."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 10**20:
+        return f"an integer of {len(str(abs(value)))} digits"
+    return repr(value)
 
 
 def check_writable_target(path, kind="file"):
     """Raise :class:`InputError` when ``path`` cannot be written as a ``kind`` ("file" or
     "folder"): a folder where a file is expected or the reverse, or a parent that is a file."""
     path = Path(path)
+    if path.is_symlink() and not path.exists():
+        raise InputError(f"is a symbolic link to {os.readlink(path)}, which does not exist; "
+                         "give another name or remove the link", path=path)
     if kind == "file" and path.is_dir():
         raise InputError("is a folder; give a file name to write", path=path)
     if kind == "folder" and path.exists() and not path.is_dir():
@@ -122,14 +228,48 @@ def check_writable_target(path, kind="file"):
             if not parent.is_dir():
                 raise InputError(f"{parent} is a file, not a folder", path=path)
             if not os.access(parent, os.W_OK):
-                raise InputError(f"cannot write into {parent}: permission denied", path=path)
+                reason = "read-only file system" if _read_only(parent) else "permission denied"
+                raise InputError(f"cannot write into {parent}: {reason}", path=path)
             break
 
 
+def _read_only(folder):
+    """Whether ``folder`` lies on a file system mounted read-only."""
+    return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+
+
+# The OSErrors of writing that are the machine's state, not a bug: named, exit 2.
+WRITE_ERRORS = {errno.ENOSPC: "no space left on the device",
+                errno.EDQUOT: "the disk quota is exceeded",
+                errno.EROFS: "read-only file system",
+                errno.EACCES: "permission denied", errno.EPERM: "permission denied"}
+
+
+# Of those, the ones any write may meet (a command's own output is checked beforehand for
+# permission): reported as the disk's state wherever they arise.
+DISK_STATE_ERRORS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS)
+
+
+def write_error(error, path=None):
+    """The :class:`InputError` for an OSError raised while writing ``path`` (or the error's
+    own file name), or None when the error is not one of ``WRITE_ERRORS``."""
+    reason = WRITE_ERRORS.get(error.errno)
+    if reason is None:
+        return None
+    return InputError(f"cannot write: {reason}", path=path or error.filename)
+
+
 def finite_float(text):
-    """``text`` as a finite float; ValueError with the reason (for the caller to locate)."""
+    """``text`` as a finite float; ValueError with the reason (for the caller to locate).
+
+    A number is ASCII as C and NumPy read it (``1.5``, ``-3e2``, ``.5``), surrounding white
+    space ignored; Python's own extras (``1_000``, digits of other scripts) are not numbers.
+    """
+    stripped = text.strip()
     try:
-        value = float(text)
+        if not stripped.isascii() or "_" in stripped:
+            raise ValueError
+        value = float(stripped)
     except ValueError:
         raise ValueError(f"not a number: {text!r}") from None
     if not math.isfinite(value):
@@ -140,7 +280,7 @@ def finite_float(text):
 def toml_key_line(text, key, table=None):
     """1-based line of ``key = ...`` (inside ``[table]`` when given), or of ``[key]``."""
     current = None
-    for number, line in enumerate(text.splitlines(), start=1):
+    for number, line in enumerate(text_lines(text), start=1):
         stripped = line.strip()
         header = re.match(r"\[\s*([A-Za-z0-9_.-]+)\s*\]", stripped)
         if header:

@@ -169,6 +169,8 @@ def too_few_samples(model, found):
 def evaluate(model, data, kind=None):
     """Statistics and residual of ``model`` as it stands (no fitting)."""
     found = check_available(model, data, kind)
+    for measurement in found:
+        measurement.check_start(model, model.values)
     problem = Problem(model, found)
     residual = problem.measured_um - problem.predicted_um(model.values)
     return FitResult(model, Statistics.of(problem.measured_um, residual, 0),
@@ -215,6 +217,10 @@ def fit(model, data, progress=None, kind=None):
     fitted = model.with_values(layout.values(solution.x))
     if found[0].loose_share is not None:
         flag_loose(fitted, sigma, undetermined, found[0].loose_share)
+    if len(found) == 1:
+        for key, reason in found[0].confounded(fitted, layout.slots, solution.jac, solution.fun,
+                                               sigma).items():
+            undetermined.setdefault(key, reason)
     result = FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
                        problem.measured_um, solution.fun, sigma, undetermined, covariance, found,
                        jacobian=solution.jac if layout.nonlinear_index.size else None)
@@ -423,6 +429,8 @@ def starting_values(model, found):
         if effect.additive:
             running = running - effect.prepare(case)(current)
     model = model.with_values(values)
+    for measurement in found:
+        measurement.check_start(model, model.values)
     probed = [(e, name, step) for e in model.effects if not any(model.values[e.name].values())
               for name, step in e.probe.items()]
     return _probed_step(model, found, probed) if probed else model

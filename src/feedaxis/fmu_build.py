@@ -19,6 +19,7 @@ but not in plain C hosts, and a warning says so once. Under CI the host layer is
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
 import math
 import os
@@ -31,6 +32,10 @@ import warnings
 import zipfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
+
+from .fmu_standalone import libpython_path
+from .output import write_atomically, writing
+from .toolchain import c_compiler, cache_root  # c_compiler: also imported from here
 
 FMU_NAMES = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 PHYSICS_PACKAGE = "feedaxis_fmu_physics"
@@ -63,11 +68,6 @@ if locals() is not globals():
 
 class HostLayerUnavailable(RuntimeError):
     """This machine cannot compile the C host layer (no compiler, no Python headers)."""
-
-
-def c_compiler():
-    """The machine's C compiler: ``$CC``, else cc or gcc on the PATH (None without one)."""
-    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
 
 
 def host_layer_missing():
@@ -111,15 +111,35 @@ SI_UNITS = {
 }
 
 
-def build_fmus(out_dir, names=FMU_NAMES):
-    """Build the named FMUs into ``out_dir``; return their paths."""
+def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None):
+    """Build the named FMUs into ``out_dir``; return their paths. ``standalone``: each
+    carries the Python its step path needs (:mod:`feedaxis.fmu_standalone`); ``progress``
+    is called after each FMU."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    return [build_fmu(name, out_dir) for name in names]
+    with writing(out_dir):
+        out_dir.mkdir(parents=True, exist_ok=True)
+    with contextlib.ExitStack() as stack:
+        runtime = None
+        if standalone:
+            from .fmu_standalone import RuntimeBuilder
+
+            runtime = stack.enter_context(RuntimeBuilder(fmu_sources()))
+        paths = []
+        for name in names:
+            paths.append(build_fmu(name, out_dir, runtime))
+            if progress:
+                progress()
+        return paths
 
 
-def build_fmu(name, out_dir):
-    """Build one FMU ``<out_dir>/<name>.fmu``: pythonfmu, then the host layer and description."""
+def build_fmu(name, out_dir, runtime=None):
+    """Build one FMU ``<out_dir>/<name>.fmu``: pythonfmu, then the host layer and description;
+    with ``runtime`` (a :class:`~feedaxis.fmu_standalone.RuntimeBuilder`) a standalone FMU.
+
+    The FMU is completed in a private folder and then written whole under its name (a
+    temporary file renamed), so an interrupted build or a full disk leaves no partial FMU,
+    and builds racing for one folder each leave a complete one.
+    """
     from pythonfmu.builder import FmuBuilder
 
     sources = fmu_sources()
@@ -131,21 +151,23 @@ def build_fmu(name, out_dir):
         script.write_text(ENTRY_SCRIPT.format(name=name), encoding="utf-8")
         try:
             fmu_path = Path(FmuBuilder.build_FMU(
-                script, dest=out_dir, project_files=[staging / package],
+                script, dest=staging / "built", project_files=[staging / package],
                 canGetAndSetFMUstate=True, canSerializeFMUstate=True))
             slave = getattr(importlib.import_module(name), name)(instance_name="describe")
         finally:
             _forget_modules(staging, (name, package))
         variables = _complete_model_description(fmu_path, slave)
         missing = host_layer_missing()
-        if missing is None:
+        if runtime is not None:
+            _make_standalone(fmu_path, name, sources, variables, staging, runtime, missing)
+        elif missing is None:
             _install_host_layer(fmu_path, name, _compile_host_layer(sources, variables, staging))
         elif os.environ.get("CI") == "true":
             raise HostLayerUnavailable(f"{missing}: CI requires the FMUs' C host layer")
         else:
             warnings.warn(f"the FMUs run in Python hosts only ({missing}); plain C hosts "
                           "need the host layer: see fmus/README.md", stacklevel=2)
-    return fmu_path
+        return write_atomically(out_dir / fmu_path.name, fmu_path.read_bytes())
 
 
 def _stage_package(sources, name, package_dir):
@@ -153,7 +175,6 @@ def _stage_package(sources, name, package_dir):
     shutil.copytree(SOURCE_DIR / "physics", package_dir / "physics",
                     ignore=shutil.ignore_patterns("__pycache__", "*.so"))
     if name == "NpidServo":
-        from .cosim.fmu_cache import cache_root
         from .kernel_build import install_kernel
 
         install_kernel(package_dir / "physics", cache_root())
@@ -166,8 +187,21 @@ def _stage_package(sources, name, package_dir):
         (package_dir / source.name).write_text(text, encoding="utf-8")
 
 
-def _compile_host_layer(sources, variables, work_dir):
-    """Compile fmus/common/feedaxis_fmi_host.c for this FMU's variables; return the .so."""
+def _make_standalone(fmu_path, name, sources, variables, work_dir, runtime, missing):
+    """The host layer that starts the FMU's own Python, and that Python's files."""
+    from .fmu_standalone import StandaloneUnavailable, trace_fmu, host_layer_defines
+
+    if missing is not None:
+        raise StandaloneUnavailable(f"{missing}: a standalone FMU needs the C host layer")
+    trace = trace_fmu(fmu_path, name, sources / name / f"{name}_in.csv")
+    host_layer = _compile_host_layer(sources, variables, work_dir, host_layer_defines(trace))
+    _install_host_layer(fmu_path, name, host_layer)
+    runtime.add_runtime(fmu_path, trace)
+
+
+def _compile_host_layer(sources, variables, work_dir, defines=None):
+    """Compile fmus/common/feedaxis_fmi_host.c for this FMU's variables; return the .so.
+    ``defines``: a standalone FMU's constants, else the Python that builds (its paths)."""
     rows = [f'    {{{vr}, \'{kind}\', \'{type_code}\', "{variable}"}},'
             for vr, kind, type_code, variable in variables]
     (work_dir / "feedaxis_fmi_vars.h").write_text(
@@ -175,23 +209,19 @@ def _compile_host_layer(sources, variables, work_dir):
         "static const FeedaxisVar FEEDAXIS_VARS[] = {\n" + "\n".join(rows) + "\n};\n"
         "#define FEEDAXIS_N_VARS (sizeof FEEDAXIS_VARS / sizeof FEEDAXIS_VARS[0])\n",
         encoding="utf-8")
+    defines = {**(defines or {"FEEDAXIS_PYTHON": sys.executable,
+                              "FEEDAXIS_LIBPYTHON": libpython_path() or ""}),
+               "FEEDAXIS_PYTHON_VERSION": f"{sys.version_info.major}.{sys.version_info.minor}"}
     output = work_dir / "host.so"
     command = [c_compiler(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-Wall",
-               f"-I{sysconfig.get_paths()['include']}", f"-I{work_dir}",
-               f'-DFEEDAXIS_PYTHON="{sys.executable}"', f'-DFEEDAXIS_LIBPYTHON="{_libpython()}"',
+               f"-I{sysconfig.get_paths()['include']}", f"-I{sources / 'common' / 'fmi2'}",
+               f"-I{work_dir}", *(f'-D{name}="{value}"' for name, value in defines.items()),
                "-o", str(output), str(sources / "common" / "feedaxis_fmi_host.c"),
                "-ldl", "-lpthread"]
     result = subprocess.run(command, capture_output=True, text=True)
     if result.returncode != 0:
         raise RuntimeError(f"compiling the FMU host layer failed:\n{result.stderr}")
     return output
-
-
-def _libpython():
-    """Path of this Python's shared library ('' for a Python built without one)."""
-    if not sysconfig.get_config_var("Py_ENABLE_SHARED"):
-        return ""
-    return str(Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME"))
 
 
 def _install_host_layer(fmu_path, name, host_library):

@@ -31,6 +31,8 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from .toolchain import c_compiler
+
 MODULE_NAME = "servo_kernel"
 SIGNATURE = "void(f8[::1], i8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1])"
 SERVO_SOURCE = Path(__file__).resolve().parent / "physics" / "servo.py"
@@ -55,8 +57,6 @@ class KernelUnavailable(RuntimeError):
 
 def kernel_missing():
     """Why the kernel cannot be compiled here (None when it can)."""
-    from .fmu_build import c_compiler
-
     if not sys.platform.startswith("linux"):
         return f"the servo kernel is built for Linux only, not {sys.platform}"
     if not c_compiler():

@@ -15,9 +15,14 @@ class LineError(InputError):
         self.args = (f"{', '.join(where)}: {message}",)
 
 
-def number(text, path, line, field):
-    """``text`` as a finite float, else :class:`LineError` naming line and field."""
+def number(text, path, line, field, limits=None):
+    """``text`` as a finite float, else :class:`LineError` naming line and field; with
+    ``limits`` (low, high) a value outside them is refused too."""
     try:
-        return finite_float(text)
+        value = finite_float(text)
     except ValueError as problem:
         raise LineError(path, str(problem), line, field) from None
+    if limits is not None and not limits[0] <= value <= limits[1]:
+        raise LineError(path, f"{value:g} is beyond any physical axis: expected "
+                              f"{limits[0]:g} to {limits[1]:g}", line, field)
+    return value

@@ -6,30 +6,90 @@ published gets the mode a plain ``open``/``mkdir`` would give under the user's u
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
-from .errors import check_writable_target
+from .errors import InputError, check_writable_target, write_error
+
+
+@contextmanager
+def writing(path):
+    """Turn an OSError of a full, read-only or forbidden disk while writing ``path`` into an
+    :class:`~feedaxis.errors.InputError` naming ``path`` (any other OSError passes)."""
+    try:
+        yield
+    except OSError as error:
+        refused = write_error(error, path)
+        if refused is None:
+            raise
+        raise refused from None
 
 
 def write_atomically(path, content):
     """Write text or bytes to ``path`` through a temporary file in the same folder.
 
-    Raises :class:`~feedaxis.errors.InputError` when ``path`` is a folder or lies under a file.
+    Two writers of one path each publish a whole file; the last rename wins. Raises
+    :class:`~feedaxis.errors.InputError` when ``path`` is a folder or lies under a file, or
+    the disk is full or read-only.
     """
     path = Path(path)
     check_writable_target(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, staging = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(content.encode("utf-8") if isinstance(content, str) else content)
-        os.chmod(staging, umask_mode(0o666))
-        os.replace(staging, path)
-    except BaseException:
-        Path(staging).unlink(missing_ok=True)
-        raise
+    with writing(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, staging = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
+        try:
+            with os.fdopen(handle, "wb") as stream:
+                stream.write(content.encode("utf-8") if isinstance(content, str) else content)
+            os.chmod(staging, umask_mode(0o666))
+            os.replace(staging, path)
+        except BaseException:
+            Path(staging).unlink(missing_ok=True)
+            raise
     return path
+
+
+@contextmanager
+def staged_folder(folder):
+    """Yield a private folder beside ``folder`` to write into; when the block ends without
+    an error its files are moved into ``folder`` (created if need be), each replacing its
+    namesake at once, so ``folder`` never holds half of a result; on an error or Ctrl-C
+    the staged files are removed and ``folder`` is left as it was."""
+    folder = Path(folder)
+    check_writable_target(folder, "folder")
+    with writing(folder):
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+        try:
+            try:
+                yield staging
+            except InputError as error:  # name the user's folder, not the staging one
+                if error.path is None or staging not in error.path.parents:
+                    raise
+                raise InputError(error.message, folder / error.path.relative_to(staging),
+                                 error.row, error.column, error.parameter) from None
+            os.chmod(staging, umask_mode(0o777))
+            if not folder.exists():
+                os.replace(staging, folder)
+            else:
+                _merge(staging, folder)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _merge(staging, folder):
+    """Move each entry of ``staging`` into ``folder``: files by one rename, a folder by
+    moving the old one aside first."""
+    for entry in staging.iterdir():
+        target = folder / entry.name
+        if entry.is_dir() and target.is_dir():
+            old = Path(tempfile.mkdtemp(prefix=f".{entry.name}-old-", dir=folder))
+            os.replace(target, old / entry.name)
+            os.replace(entry, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(entry, target)
 
 
 def umask_mode(mode):

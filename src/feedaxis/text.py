@@ -1,9 +1,20 @@
-"""Plain-text tables of fit, diagnosis, comparison and catalog results, for the terminal."""
+"""Plain-text tables of fit, diagnosis, comparison and catalog results, for the terminal.
+
+One vocabulary with the report: micrometres are written µm (JSON keys keep ``_um``), a
+p-value as :func:`~feedaxis.stats.wording.p_text` writes it, an uncertainty after ±.
+"""
 from __future__ import annotations
 
 import math
+import re
 
 from .effects.base import BasisEffect
+from .stats.wording import p_text
+
+
+def micro(unit):
+    """A unit as people read it: µm, not um (``um/mm`` -> ``µm/mm``)."""
+    return re.sub(r"\bum\b", "µm", unit)
 
 
 def _number(value, digits=4):
@@ -17,16 +28,16 @@ def fit_lines(result, rms_before_um, out_path=None):
     s = result.statistics
     effects = [e for e in result.model.effects if not isinstance(e, BasisEffect)]
     lines = [f"effects: {', '.join(e.name for e in effects) or '(none)'}",
-             f"RMS {rms_before_um:.4g} um -> {s.rms_um:.4g} um   max {s.max_um:.4g} um   "
-             f"P-V {s.pv_um:.4g} um   R2 {s.r2:.4f}   AIC {s.aic:.1f}   BIC {s.bic:.1f}   "
+             f"RMS {rms_before_um:.4g} µm -> {s.rms_um:.4g} µm   max {s.max_um:.4g} µm   "
+             f"P-V {s.pv_um:.4g} µm   R² {s.r2:.4f}   AIC {s.aic:.1f}   BIC {s.bic:.1f}   "
              f"({s.n_points} points, {s.n_free} parameters)"]
     for effect in effects:
         for parameter in effect.parameters:
             value = result.model.values[effect.name][parameter.name]
             sigma = result.uncertainties.get(effect.name, {}).get(parameter.name)
             note = result.undetermined.get(f"{effect.name}.{parameter.name}", "")
-            lines.append(f"  {effect.name + '.' + parameter.name:44s} {value:12.6g} +/- "
-                         f"{_number(sigma, 2):8s} {parameter.unit:8s} {note}".rstrip())
+            lines.append(f"  {effect.name + '.' + parameter.name:44s} {value:12.6g} ± "
+                         f"{_number(sigma, 2):8s} {micro(parameter.unit):8s} {note}".rstrip())
     lines += _artefact_lines(result)
     if out_path:
         lines.append(f"model written to {out_path}")
@@ -47,24 +58,24 @@ def _artefact_lines(result):
 
 def diagnosis_lines(diagnosis):
     """Verdict, candidates best first, unexplained structure, passed-over effects."""
-    lines = [f"residual RMS {diagnosis.rms_um:.4g} um, noise {diagnosis.noise_um:.3g} um "
+    lines = [f"residual RMS {diagnosis.rms_um:.4g} µm, noise {diagnosis.noise_um:.3g} µm "
              f"({diagnosis.noise_source})", f"verdict: {diagnosis.verdict}"]
     if diagnosis.undetermined_reason:
         lines.append(f"  undetermined: {diagnosis.undetermined_reason}")
     if diagnosis.repeatability and not diagnosis.repeatability["repeatable"]:
         lines.append(f"  the axis does not repeat: {repeatability_text(diagnosis.repeatability)}")
     for candidate in diagnosis.candidates:
-        lines.append(f"  missing: {candidate.effect:22s} RMS after {candidate.rms_after_um:.4g} um"
-                     f"   p {candidate.test.p_value:.2g}")
+        lines.append(f"  missing: {candidate.effect:22s} RMS after {candidate.rms_after_um:.4g} µm"
+                     f"   {p_text(candidate.test.p_value)}")
         lines.append(f"           {candidate.meaning}")
         lines.append(f"           evidence: {candidate.evidence}")
-        lines += [f"           {name} = {_number(value, 4)} ± {_number(error, 2)} {unit}"
+        lines += [f"           {name} = {_number(value, 4)} ± {_number(error, 2)} {micro(unit)}"
                   for name, (value, error, unit) in candidate.sizes().items()]
     for structure in diagnosis.unexplained:
         unit = structure.location_key.rsplit("_", 1)[1].replace("hz", "Hz")
         where = "" if structure.location is None else f" at {structure.location:.4g} {unit}"
         lines.append(f"  unexplained {structure.kind}{where}, amplitude "
-                     f"{structure.amplitude_um:.3g} um: {structure.evidence}")
+                     f"{structure.amplitude_um:.3g} µm: {structure.evidence}")
     if diagnosis.outlier_rows:
         lines.append(f"  outliers kept out of the fit, rows of {diagnosis.file}: "
                      f"{', '.join(map(str, diagnosis.outlier_rows))}")
@@ -81,8 +92,8 @@ def repeatability_text(repeatability):
     """Repeatability R against the systematic deviation E, in words."""
     r_um, e_um = repeatability["R_um"], repeatability["E_um"]
     if repeatability["repeatable"]:
-        return f"repeatability R = {r_um:.3g} um within the systematic deviation E = {e_um:.3g} um"
-    return (f"repeatability R = {r_um:.3g} um exceeds the systematic deviation E = {e_um:.3g} um "
+        return f"repeatability R = {r_um:.3g} µm within the systematic deviation E = {e_um:.3g} µm"
+    return (f"repeatability R = {r_um:.3g} µm exceeds the systematic deviation E = {e_um:.3g} µm "
             "(what varies from run to run is larger than what repeats: slip, a loose coupling "
             "or the set-up; no model or table removes it)")
 
@@ -97,7 +108,7 @@ def _iso_comparison_lines(comparison):
     """ISO 230-2 figures, measured against the residual after the model."""
     lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
              f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
-             f"{'ISO 230-2 figure':32s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
+             f"{'ISO 230-2 figure (µm)':32s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
     for figure in comparison["figures"].values():
         explained = figure["explained"]
         lines.append(f"{figure['name']:32s} {figure['measured_um']:10.4g} "
@@ -119,8 +130,8 @@ def _tracking_comparison_lines(comparison):
         f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
         f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
         f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
-        f"residual actual - predicted: max {comparison['residual_max_um']:.4g} um, RMS "
-        f"{comparison['residual_rms_um']:.4g} um"])
+        f"residual actual - predicted: max {comparison['residual_max_um']:.4g} µm, RMS "
+        f"{comparison['residual_rms_um']:.4g} µm"])
 
 
 def compensation_lines(result, out_path=None):
@@ -132,13 +143,13 @@ def compensation_lines(result, out_path=None):
         return (f"{row['max_before_um']:11.3f} {row['max_after_um']:10.3f} "
                 f"{row['rms_before_um']:11.3f} {row['rms_after_um']:10.3f}")
 
-    lines = [f"thermal error max {summary['max_before_um']:.3f} um -> {summary['max_after_um']:.3f}"
-             f" um ({100 * summary['reduction']:.1f} % less), RMS {summary['rms_before_um']:.3f}"
-             f" -> {summary['rms_after_um']:.3f} um over {result.time_s.size} samples",
-             "", f"{'target (mm)':>11s} {'dir':>3s} {header}  (um)"]
+    lines = [f"thermal error max {summary['max_before_um']:.3f} µm -> {summary['max_after_um']:.3f}"
+             f" µm ({100 * summary['reduction']:.1f} % less), RMS {summary['rms_before_um']:.3f}"
+             f" -> {summary['rms_after_um']:.3f} µm over {result.time_s.size} samples",
+             "", f"{'target (mm)':>11s} {'dir':>3s} {header}  (µm)"]
     lines += [f"{row['target_mm']:11.3f} {row['direction']:+3d} {figures(row)}"
               for row in result.by_target()]
-    lines += ["", f"{'visit':>5s} {'t (min)':>9s} {header}  (um)"]
+    lines += ["", f"{'visit':>5s} {'t (min)':>9s} {header}  (µm)"]
     lines += [f"{row['visit']:5d} {row['time_s'] / 60.0:9.1f} {figures(row)}"
               for row in result.over_time()]
     if out_path:
@@ -150,7 +161,7 @@ def effect_lines(effects):
     """The catalog: name, meaning, parameters with units."""
     lines = []
     for name, effect in effects.items():
-        parameters = ", ".join(f"{p.name} [{p.unit}]" for p in effect.parameters) or \
+        parameters = ", ".join(f"{p.name} [{micro(p.unit)}]" for p in effect.parameters) or \
             "none (computed from axis.toml)"
         lines += [f"{name}  (FMU {effect.fmu or '-'})", f"    {effect.meaning}",
                   f"    parameters: {parameters}"]

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..case import POSITIONING_FILE
 from ..errors import InputError
 from ..iso230 import target_clusters
 from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, safety, siemens
@@ -37,9 +38,13 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
     target_mm = case.positioning.target_mm
     first_mm, last_mm = _span_mm(module, target_mm)
     if from_measured:
+        count = target_clusters(target_mm)[0].size
+        if count < 2:
+            raise InputError(f"a table from the measurement needs at least two targets; every "
+                             f"sample is at {target_mm[0]:g} mm", column="target_mm",
+                             path=case.folder / POSITIONING_FILE)
         if spacing_mm is None and not module.EQUIDISTANT:
             return from_measurement(case)
-        count = target_clusters(target_mm)[0].size
         spacing_mm = spacing_mm or (target_mm.max() - target_mm.min()) / max(count - 1, 1)
         return from_measurement(case, _grid(module, first_mm, last_mm, spacing_mm))
     spacing_mm = spacing_mm or default_spacing_mm(case, module.MAX_POINTS, last_mm - first_mm)
@@ -177,7 +182,7 @@ def summary_lines(report):
 def _figure_lines(report):
     """The ISO 230-2 figures expected before and after the table, and the model's view
     between the targets."""
-    lines = [f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (um)"]
+    lines = [f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (µm)"]
     lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
               for f in report["figures"].values()]
     between = report["between_targets"]

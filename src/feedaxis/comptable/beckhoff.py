@@ -20,7 +20,7 @@ MAX_POINTS = 1500  # P-COMP-00059 default (kw.ssfk.max_points)
 EQUIDISTANT = True
 DEFAULT_AXIS_ID = "1"
 UNIT_UM = 0.1
-SIGN = "value = measured - setpoint, 0.1 um (manual's worked example)"
+SIGN = "value = measured - setpoint, 0.1 µm (manual's worked example)"
 LOAD = ("list file named by achs_kw[i] with achs_kw_log_ax_nr[i] in the start-up "
         "description; lr_param.ssfk = 1 in the axis parameters")
 PATTERN = r"^((?:kopf|kw)\.[A-Za-z0-9_.\[\]]+)\s+(\S+)"
@@ -50,7 +50,7 @@ def read(text, path="achskw.lis"):
     found = assignments(text, path, PATTERN)
     unit, line = require(found, "kw.ssfk.unit", path)
     if unit != "1":
-        raise LineError(path, "only metric values (1: 0.1 um) are read; 0 means encoder "
+        raise LineError(path, "only metric values (1: 0.1 µm) are read; 0 means encoder "
                               "increments", line, "kw.ssfk.unit")
     count = int(number(require(found, "kw.ssfk.kw_nr_max", path)[0], path,
                        found["kw.ssfk.kw_nr_max"][1], "kw.ssfk.kw_nr_max"))

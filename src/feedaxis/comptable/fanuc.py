@@ -37,11 +37,12 @@ DETECTION_UNIT_UM = 1.0
 MAX_VALUE = 127
 PITCH_DATA = 10000
 BIDIRECTIONAL_BITS = 3605  # bit parameter, written bit 7 .. bit 0; #0 = bidirectional
-SIGN = "increment of -(measured - target) per interval, detection units (1 um) x 3623"
+SIGN = "increment of -(measured - target) per interval, detection units (1 µm) x 3623"
 LOAD = ("parameter tape (or MDI): 3605#0 = 1 for bidirectional, 3620-3627, then the pitch "
         "data; power off and on, reference return (G28); point 3620 is the reference position "
         "at 0 mm (parameter 1240 = 0)")
-PATTERN = r"^N(\d+)\s*(?:A(\d+))?\s*P([-+]?\d+)\s*$"
+PATTERN = r"^N(\d{1,9})\s*(?:A(\d{1,9}))?\s*P([-+]?\d{1,9})\s*$"  # 9 digits: any parameter
+LAST_POINT = 1023  # compensation points are numbered 0 to 1023 (B-63980EN, 3620-3622)
 
 
 def _magnification(*corrections_um):
@@ -130,6 +131,11 @@ def read(text, path="PITCH.TXT"):
     if not lowest <= reference <= highest or parameters[3624] <= 0 or parameters[3623] < 1:
         raise LineError(path, "needs 3621 <= 3620 <= 3622, 3623 >= 1 and 3624 > 0",
                         field="3620")
+    last = parameters[3626] + highest - lowest if bidirectional else highest
+    if lowest < 0 or last > LAST_POINT or (bidirectional and parameters[3626] <= highest):
+        raise LineError(path, f"the points (3621 to 3622, and from 3626 for the negative "
+                              f"direction after 3622) must lie within 0 to {LAST_POINT}",
+                        field="3622")
     unit = DETECTION_UNIT_UM * parameters[3623]
     position_mm = (parameters.get(REFERENCE_COORDINATE, 0)
                    + parameters[3624] * np.arange(lowest - 1 - reference, highest - reference + 1)

@@ -74,8 +74,16 @@ def _grid(found, prefix, suffix, path):
     step, line, key = values["STEP"]
     if step <= 0:
         raise LineError(path, "must be > 0", line, key)
-    count = int(round((values["MAX"][0] - values["MIN"][0]) / step)) + 1
-    return values["MIN"][0] + step * np.arange(count)
+    (low, _, _), (high, high_line, high_key) = values["MIN"], values["MAX"]
+    if not high > low:
+        raise LineError(path, f"must be above {prefix}_MIN{suffix} ({low:g}), got {high:g}",
+                        high_line, high_key)
+    count = (high - low) / step + 1
+    if count > len(found):  # each point needs its value: the file cannot hold them
+        raise LineError(path, f"MIN {low:g} to MAX {high:g} every {step:g} mm asks for "
+                              f"{count:.3g} points; the file holds {len(found)} values",
+                        line, key)
+    return low + step * np.arange(int(round(count)))
 
 
 def _values(found, key_of, count, path):

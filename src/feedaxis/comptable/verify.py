@@ -14,6 +14,7 @@ import numpy as np
 from scipy import stats
 
 from ..iso230 import FIGURE_NAMES, iso230_figures, target_groups
+from ..stats.wording import p_text
 from .table import position_error_um
 
 ALPHA = 0.05
@@ -77,7 +78,7 @@ def _warnings(figures, systematic):
     p_value = systematic["p_value"]
     if p_value is not None and p_value > ALPHA:
         warnings.append(f"the table cannot help: the target means do not differ beyond the "
-                        f"scatter (ANOVA p = {p_value:.3g} > {ALPHA}); the error is "
+                        f"scatter (ANOVA {p_text(p_value)} > {ALPHA}); the error is "
                         "repeatability or drift")
     key = _headline(figures)
     if key and figures[key]["after_um"] > (1 - LITTLE_GAIN) * figures[key]["before_um"]:

@@ -6,10 +6,32 @@ before step k (held over [t_k, t_k + h)), output value k is read after it, at t_
 from __future__ import annotations
 
 import shutil
+import zipfile
+from pathlib import PurePosixPath
 
 import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+
+from ..errors import InputError
+
+
+def check_fmu_archive(path):
+    """Raise :class:`InputError` naming ``path`` unless it is a zip archive holding
+    ``modelDescription.xml`` whose every member unpacks inside the FMU's own folder
+    (no absolute path, drive, backslash or ``..``)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = archive.namelist()
+    except (zipfile.BadZipFile, OSError) as error:
+        raise InputError(f"not an FMU (FMUs are zip archives): {error}", path=path) from None
+    for name in names:
+        if (name.startswith("/") or "\\" in name or ":" in name
+                or ".." in PurePosixPath(name).parts):
+            raise InputError(f"holds the member {name!r}, which would unpack outside the "
+                             "FMU's folder: refused as unsafe", path=path)
+    if "modelDescription.xml" not in names:
+        raise InputError("not an FMU: no modelDescription.xml at its top", path=path)
 
 
 class LoadedFmu:

@@ -32,6 +32,7 @@ from ..errors import ParameterError
 from ..iso230 import iso230_figures, per_target
 from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..physics.checks import require_positive
+from ..physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS, ServoParams
 from ..physics.thermal import DutySegment
 from .master import SimulationInterrupted
 from .physics_check import start_value
@@ -322,13 +323,13 @@ def run_iso230(master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5, over
 
 
 def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5,
-                    overrun_mm=2.0, parameters=None, progress=None):
+                    overrun_mm=2.0, parameters=None, progress=None, noise=None):
     """Simulate an ISO 230-2 positioning test (:func:`run_iso230`) and write it as a case
     folder ``out`` (it must not exist); return the case folder, number of samples and the
     deviation range (µm)."""
     run = run_iso230(master, targets_mm, runs, feed_mm_min, dwell_s, overrun_mm, parameters,
                      progress)
-    return write_run(out, master, run)
+    return write_run(out, master, run, noise)
 
 
 def run_thermal(master, duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0.5,
@@ -381,12 +382,12 @@ def run_thermal(master, duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0
 
 
 def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
-                     dwell_s=0.5, parameters=None, progress=None):
+                     dwell_s=0.5, parameters=None, progress=None, noise=None):
     """Simulate a thermal test (:func:`run_thermal`) and write duty.csv + positioning.csv
     into the case folder ``out``; return its summary."""
     run = run_thermal(master, duty, targets_mm, every_s, feed_mm_min, dwell_s, parameters,
                       progress)
-    return write_run(out, master, run)
+    return write_run(out, master, run, noise)
 
 
 def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
@@ -440,6 +441,9 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
         raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
     overrides = {**(parameters or {})}
     overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
+    stop_s = _stop_time_s(duration_s, h)
+    servo = master.system.with_parameters(overrides).component("NpidServo").parameters
+    _check_loop_budget(h, stop_s, servo.get("time_step_s", ServoParams.time_step_s))
 
     def reference_mm(t):
         return amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
@@ -447,7 +451,6 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     inputs = {"position_ref_mm": lambda t: reference_mm(t + h)}
     if spindle_rpm is not None:
         inputs["disturbance_N"] = lambda t: cutting_force_N(t, spindle_rpm, force_N)
-    stop_s = _stop_time_s(duration_s, h)
     try:
         rows, completed = master.run(stop_s, inputs, overrides, progress=progress), True
     except SimulationInterrupted as stopped:
@@ -477,20 +480,52 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
 
 
 def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, controller="pid",
-                      spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
+                      spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None,
+                      noise=None):
     """Sinusoidal tracking (:func:`run_tracking`) written as tracking.csv into the case
     folder ``out``; return the case folder, the run's settings and its max and RMS
     tracking error (mm)."""
     run = run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller,
                        spindle_rpm, force_N, parameters, progress)
-    return write_run(out, master, run)
+    return write_run(out, master, run, noise)
 
 
 RUNS = {"iso230": run_iso230, "thermal": run_thermal, "tracking": run_tracking}
 
 
-def write_run(out, master, run):
-    """Write ``run`` as the case folder ``out``; return its summary with the folder.
+@dataclass(frozen=True)
+class MeasurementNoise:
+    """White Gaussian noise added to what a case records as measured (the positioning
+    deviation, the tracking ``actual_mm``), standard deviation ``sigma_um``, drawn by
+    ``numpy.random.default_rng(seed)``: the simulated axis measured by an instrument."""
+
+    sigma_um: float
+    seed: int = 0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.sigma_um) and self.sigma_um >= 0):
+            raise ParameterError(f"must be a finite number >= 0 (µm), got {self.sigma_um}",
+                                 parameter="--noise-um")
+
+    def measured(self, tables):
+        """``tables`` with the noise added to their measured column."""
+        rng = np.random.default_rng(self.seed)
+        noisy = dict(tables)
+        if "positioning" in tables:
+            error_um = np.asarray(tables["positioning"]["error_um"], dtype=float)
+            noisy["positioning"] = {**tables["positioning"], "error_um":
+                                    error_um + rng.normal(0.0, self.sigma_um, error_um.size)}
+        if "tracking" in tables:
+            actual_mm = np.asarray(tables["tracking"]["actual_mm"], dtype=float)
+            noisy["tracking"] = {**tables["tracking"], "actual_mm": actual_mm
+                                 + 1e-3 * rng.normal(0.0, self.sigma_um, actual_mm.size)}
+        return noisy
+
+
+def write_run(out, master, run, noise=None):
+    """Write ``run`` as the case folder ``out``, its measured column with ``noise`` (a
+    :class:`MeasurementNoise`) when given; return its summary with the folder. The summary's
+    figures are the simulated axis's, before the noise.
 
     Raises
     ------
@@ -498,9 +533,12 @@ def write_run(out, master, run):
         After writing an interrupted run, saying what it holds.
     """
     with_servo = "tracking" in run.tables
+    tables = noise.measured(run.tables) if noise else run.tables
     write_case(out, axis_values(master, run.parameters, run.name, with_servo=with_servo),
-               **run.tables)
+               **tables)
     summary = {"case": str(out), **run.summary}
+    if noise:
+        summary["noise"] = {"sigma_um": noise.sigma_um, "seed": noise.seed}
     if not run.completed:
         if with_servo:
             raise ScenarioInterrupted(f"interrupted at t = {summary['simulated_s']:g} s; the "
@@ -508,6 +546,22 @@ def write_run(out, master, run):
         raise ScenarioInterrupted(f"interrupted: {summary['samples']} of "
                                   f"{summary['planned_samples']} samples written to {out}")
     return summary
+
+
+def _check_loop_budget(macro_step_s, stop_s, loop_step_s):
+    """Refuse a tracking test whose case no reader would take: samples every macro step too
+    far apart for the control loop, or a record too long for it
+    (:func:`feedaxis.physics.servo.loop_budget_problem`)."""
+    if macro_step_s / loop_step_s > MAX_INTERVAL_STEPS:
+        steps = macro_step_s / loop_step_s
+        raise ParameterError(f"a sample every {macro_step_s:g} s is {steps:.3g} "
+                             f"steps of the {loop_step_s:g} s control loop; a tracking case may "
+                             f"hold at most {MAX_INTERVAL_STEPS:g} between samples", "--step-ms")
+    if stop_s / loop_step_s > MAX_LOOP_STEPS:
+        raise ParameterError(f"{stop_s:g} s is {stop_s / loop_step_s:.3g} steps of the "
+                             f"{loop_step_s:g} s control loop; a tracking case may need at most "
+                             f"{MAX_LOOP_STEPS:g} ({MAX_LOOP_STEPS * loop_step_s:g} s)",
+                             "duration_s")
 
 
 def _positioning_parameters(parameters):

@@ -86,9 +86,18 @@ def export_ssp(out, system, fmu_paths, stop_time_s=1.0, step_size_hints=False):
             archive.writestr(f"resources/{component.name}.ssv",
                              _xml(parameter_values(component, system.name,
                                                    descriptions[component.fmu])))
-        for fmu in sorted({c.fmu for c in system.components}):
-            archive.write(fmu_paths[fmu], f"resources/{fmu}.fmu")
+        for fmu in sorted({c.fmu for c in system.components}):  # zips already: stored
+            archive.write(fmu_paths[fmu], f"resources/{fmu}.fmu", zipfile.ZIP_STORED)
     return write_atomically(out, buffer.getvalue())
+
+
+def open_inputs(system):
+    """[(connector, system input)] the SSP leaves unconnected: the axis's system inputs
+    (libcosim refuses system-level connectors). An importing tool must drive them, else
+    they keep their start values: ``NpidServo.position_ref_mm`` at 0 mm, a standing axis."""
+    inputs = {variable.name: variable for variable in system.inputs}
+    return [(connection.target, inputs[connection.source]) for connection in system.connections
+            if connection.source_component is None]
 
 
 def _xml(root):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import tomli_w
 
-from ..errors import InputError
+from ..errors import InputError, finite_value
 from ..fmu_map import neutral_fmu_parameters
 
 FIT_TABLE = "fit"  # the model file's table holding its FitRecord: no effect may take the name
@@ -153,7 +153,7 @@ class FunctionEffect(Effect):
         self._wavelength_mm, self._guess = wavelength_mm, guess
 
     def prepare(self, case):
-        return lambda values: np.asarray(self.function(case, **values), dtype=float)
+        return lambda values: np.asarray(self.function(case, **values))
 
     def guess(self, case, residual_um):
         return self._guess(case, residual_um) if self._guess else super().guess(case, residual_um)
@@ -258,7 +258,7 @@ class FitRecord:
             isinstance(row, list) and len(row) == size for row in rows)
         try:
             covariance = np.array(rows, dtype=float).reshape(size, size) if square else None
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             covariance = None
         if covariance is None or not np.all(np.isfinite(covariance)):
             raise bad(f"must be a {size} x {size} matrix of finite numbers", "covariance")
@@ -268,9 +268,11 @@ class FitRecord:
         n_points, rms_um = table["n_points"], table["rms_um"]
         if isinstance(n_points, bool) or not isinstance(n_points, int) or n_points < 1:
             raise bad("must be a positive integer", "n_points")
-        if isinstance(rms_um, bool) or not isinstance(rms_um, (int, float)) or not \
-                np.isfinite(rms_um) or rms_um < 0:
-            raise bad("must be a finite number >= 0", "rms_um")
+        try:
+            if finite_value(rms_um) < 0:
+                raise ValueError
+        except ValueError:
+            raise bad("must be a finite number >= 0", "rms_um") from None
         return cls(tuple(parameters), covariance, {k: str(v) for k, v in undetermined.items()},
                    n_points, float(rms_um), artefacts)
 

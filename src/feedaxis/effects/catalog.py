@@ -195,7 +195,8 @@ class ThermalScrew(Effect):
         Parameter("k3_W_per_mm_min", "W/(mm/min)", 0.0, 0.05, "bearing heat Q_B = k3 v (Eq. 18)"),
         Parameter("k4_W_per_mm_min", "W/(mm/min)", 0.0, 0.05, "nut heat Q_N = k4 v (Eq. 19)"),
         Parameter("conductivity_W_mK", "W/(m.K)", 1.0, 5000.0, "identified λ (Table 3)"),
-        Parameter("fixed_end_mm", "mm", -1e4, 1e4, "axis coordinate P_f of the fixed end"),
+        Parameter("fixed_end_mm", "mm", -4e5, 4e5, "axis coordinate P_f of the fixed end "
+                  "(on an axis: within twice the screw's reach, see bounds)"),
     )
     linear = ("k3_W_per_mm_min", "k4_W_per_mm_min")
     needs = Needs(columns=("time_s",), screw_keys=THERMAL_SCREW_KEYS, duty=True)

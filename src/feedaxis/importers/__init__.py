@@ -7,19 +7,13 @@ nothing). Formats: Renishaw ``.rtl`` (:mod:`.rtl`) and the wide CSV of spreadshe
 """
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..case import read_axis, write_case
-from ..errors import InputError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:
-    import tomli as tomllib
+from ..case import POSITIONING_FILE, CaseError, read_axis, read_axis_values, read_case, write_case
+from ..errors import InputError, check_writable_target
 
 
 @dataclass(frozen=True)
@@ -61,21 +55,47 @@ def read_measurement(path):
 def import_case(path, axis_path, out):
     """Read ``path``, write case folder ``out`` with the axis of ``axis_path``.
 
-    The case's name is axis.toml's, else the file's. Returns (folder, measurement, dropped):
-    {field: value} of what the case does not hold.
+    The case's name is axis.toml's, else the file's. The case is read back as every command
+    reads it before it is published, so nothing is written that would then be refused.
+    Returns (folder, measurement, dropped): {field: value} of what the case does not hold.
     """
     axis_path = Path(axis_path)
     axis_file = axis_path / "axis.toml" if axis_path.is_dir() else axis_path
-    read_axis(axis_file)
+    axis = read_axis(axis_file)
     if Path(out).exists():
         raise InputError("already exists; choose a new case folder", path=out)
+    check_writable_target(out, "folder")
     measurement = read_measurement(path)
-    axis_values = tomllib.loads(axis_file.read_text(encoding="utf-8"))
+    _check_travel(path, measurement, axis)
+    _, axis_values = read_axis_values(axis_file)
     dropped = dict(measurement.dropped)
     if measurement.name:
         if axis_values.get("name"):
             dropped["axis name"] = f"{measurement.name} (axis.toml names the case)"
         else:
             axis_values["name"] = measurement.name
-    folder = write_case(out, axis_values, positioning=measurement.columns())
+    folder = write_case(out, axis_values, positioning=measurement.columns(),
+                        check=lambda staged: _check_case(path, staged))
     return folder, measurement, dropped
+
+
+def _check_travel(path, measurement, axis):
+    """Raise naming the export when its targets span more than the screw is long."""
+    if "length_m" not in axis.screw:
+        return
+    length_mm = axis.screw["length_m"] * 1e3
+    span_mm = float(np.ptp(measurement.target_mm))
+    if span_mm > length_mm * (1 + 1e-9):
+        raise InputError(f"the targets span {span_mm:g} mm ({measurement.target_mm.min():g} to "
+                         f"{measurement.target_mm.max():g}) on a screw {length_mm:g} mm long "
+                         "([screw] length_m of the axis)", path=path, column="target_mm")
+
+
+def _check_case(path, staged):
+    """Read the staged case as every command will; a refusal names the export."""
+    try:
+        read_case(staged)
+    except CaseError as error:
+        where = f"{POSITIONING_FILE} row {error.row}" if error.row else error.path.name
+        raise InputError(f"the case it makes breaks the case format ({where}, column "
+                         f"{error.column}): {error.message}", path=path) from None

@@ -16,20 +16,14 @@ from pathlib import Path
 import numpy as np
 
 from ..case import PHYSICAL_RANGE
+from ..errors import read_text, text_lines
 from ..linefile import LineError, number
 from . import Measurement
 
 REQUIRED = ("TARGET DATA", "RUNS", "DEVIATIONS")
+MAX_COUNT_DIGITS = 9  # a count of targets or runs beyond 10^9 is no laser test
 KEPT = {"AXIS", "MACHINE"}
 AIR_TEMPERATURE = re.compile(r"air\s*temp\w*\s*:?\s*(.*)", re.I)
-
-
-def _decode(path):
-    data = Path(path).read_bytes()
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        return data.decode("cp1252", errors="replace")
 
 
 def _key(text):
@@ -71,9 +65,10 @@ def _integer(path, fields, key, section_line):
     if key not in fields:
         raise LineError(path, "missing", section_line, key.capitalize())
     text, line = fields[key]
-    if not re.fullmatch(r"\+?\d+", text) or int(text) < 1:
-        raise LineError(path, f"expected a whole number >= 1, got {text!r}", line,
-                        key.capitalize())
+    if not re.fullmatch(rf"\+?\d{{1,{MAX_COUNT_DIGITS}}}", text) or int(text) < 1:
+        shown = repr(text) if len(text) <= 20 else f"{len(text)} characters"
+        raise LineError(path, f"expected a whole number from 1 to 10^{MAX_COUNT_DIGITS}, got "
+                              f"{shown}", line, key.capitalize())
     return int(text), line
 
 
@@ -91,7 +86,8 @@ def _targets(path, section):
         if row > start and ":" in text:
             break
         words = text.partition(":")[2].split() if row == start else text.split()
-        values += [(number(w, path, row, "Targets"), row) for w in words]
+        values += [(number(w, path, row, "Targets", PHYSICAL_RANGE["target_mm"]), row)
+                   for w in words]
     if len(values) != count:
         raise LineError(path, f"{len(values)} targets listed, Target-count says {count}",
                         count_line, "Target-count")
@@ -117,8 +113,8 @@ def _deviations(path, section, n_targets, n_runs):
         if target != int(target) or not 1 <= target <= n_targets:
             raise LineError(path, f"target must be 1 to Target-count {n_targets}",
                             row, "target")
-        runs.setdefault(int(run), []).append((int(target), number(words[2], path, row,
-                                                                    "deviation"), row))
+        deviation_um = number(words[2], path, row, "deviation", PHYSICAL_RANGE["error_um"])
+        runs.setdefault(int(run), []).append((int(target), deviation_um, row))
     return runs
 
 
@@ -139,7 +135,7 @@ def _direction(path, run, rows, bidirectional):
 def read_rtl(path):
     """Read a ``.rtl`` file into a :class:`~feedaxis.importers.Measurement`."""
     path = Path(path)
-    sections = _sections(path, _decode(path).splitlines())
+    sections = _sections(path, text_lines(read_text(path, ".rtl file", "cp1252")))
     target_mm = _targets(path, sections["TARGET DATA"])
     run_fields = _fields(sections["RUNS"])
     n_runs, runs_line = _integer(path, run_fields, "RUN-COUNT",

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..case import PHYSICAL_RANGE
+from ..errors import read_text, text_lines
 from ..linefile import LineError, number
 from . import Measurement
 
@@ -36,16 +38,18 @@ def _run_column(path, name, line):
     return int(match.group(1)), 1.0 if sign == "+" else -1.0
 
 
-def _cell(path, text, line, column, decimal_comma):
+def _cell(path, text, line, column, decimal_comma, quantity):
+    """The number in a cell (its ``quantity``'s physical range checked)."""
     text = text.strip()
-    return number(text.replace(",", ".") if decimal_comma else text, path, line, column)
+    return number(text.replace(",", ".") if decimal_comma else text, path, line, column,
+                  PHYSICAL_RANGE[quantity])
 
 
 def read_wide_csv(path):
     """Read a wide CSV into a :class:`~feedaxis.importers.Measurement`."""
     path = Path(path)
     rows = [(number, line) for number, line in
-            enumerate(path.read_text(encoding="utf-8-sig").splitlines(), 1)
+            enumerate(text_lines(read_text(path, "wide CSV")), 1)
             if line.strip() and not line.lstrip().startswith("#")]
     if len(rows) < 2:
         raise LineError(path, "needs a header row and at least one target row")
@@ -62,20 +66,21 @@ def read_wide_csv(path):
         if run in runs[:index]:
             raise LineError(path, "column appears twice", header_line, header[index + 1])
     columns = {"target_mm": [], "error_um": [], "direction": [], "run": []}
-    targets = []
+    targets = set()
     for line, text in rows[1:]:
         cells = text.split(separator)
         if len(cells) != len(header):
             raise LineError(path, f"{len(cells)} fields, the header has {len(header)}",
                             line)
-        target = _cell(path, cells[0], line, "target_mm", separator != ",")
+        target = _cell(path, cells[0], line, "target_mm", separator != ",", "target_mm")
         if target in targets:
             raise LineError(path, "target appears twice", line, "target_mm")
-        targets.append(target)
+        targets.add(target)
         for (run, sign), name, cell in zip(runs, header[1:], cells[1:]):
             if cell.strip():
                 columns["target_mm"].append(target)
-                columns["error_um"].append(_cell(path, cell, line, name, separator != ","))
+                columns["error_um"].append(_cell(path, cell, line, name, separator != ",",
+                                                 "error_um"))
                 columns["direction"].append(sign)
                 columns["run"].append(run)
     if not columns["error_um"]:

@@ -91,6 +91,11 @@ class Measurement:
         """Why the samples cannot support any fit beyond their count (None when they can)."""
         return None
 
+    def check_start(self, model, values):
+        """Raise :class:`InputError` when ``model`` with ``values``, as a comparison takes
+        them or a fit starts from them, cannot describe a working axis; by default every
+        value within its effect's bounds can."""
+
     def core(self, model):
         """``f(values) -> predicted_um`` of the effects that are not additive, or None when
         the model has none (their prediction is 0)."""
@@ -155,6 +160,13 @@ class Measurement:
         residual shows: ``variance`` · J'J for white noise (the default); a serially
         correlated measurement widens it (the sandwich covariance's middle)."""
         return variance * (jacobian.T @ jacobian)
+
+    def confounded(self, model, slots, jacobian, residual_um, sigma):
+        """{"effect.parameter": why}: fitted parameters the samples cannot separate from a
+        measurement artefact the model does not carry (none by default). ``slots`` are the
+        (effect, parameter) of the ``jacobian``'s columns (d residual / d parameter at the
+        optimum), ``sigma`` the standard uncertainties."""
+        return {}
 
     # -- diagnosis ------------------------------------------------------------------------
 
@@ -244,8 +256,9 @@ class Shape:
 
 class Trial:
     """A shape fitted at the current residual: its ``basis`` (samples x columns), where it
-    sits (``location``: a wavelength or frequency, or None) and, for a search whose
-    significance is family-wise over its own trials, its ``test``."""
+    sits (``location``: a wavelength or frequency, or None), for a search whose
+    significance is family-wise over its own trials its ``test``, and ``extra``: more of
+    where it sits (a dict of JSON fields, e.g. ``start_s`` and ``end_s`` of a burst)."""
 
     def __init__(self, basis, location=None, test=None, extra=None):
         self.basis, self.location, self.test, self.extra = basis, location, test, extra

@@ -38,6 +38,12 @@ from .threads import one_blas_thread
 
 FRICTION_SMOOTHING_MM_S = 0.1
 STATE_SIZE = 6  # position_mm, velocity_mm_s, integral_V, previous_error_mm, reference_mm, head
+# The loop steps through every interval of a record, so its cost is the record's span over
+# the loop step, whatever the samples: a record may ask for at most this many steps between
+# two samples (10 s at 0.1 ms) and in all (about 1.5 s of the compiled loop per simulation).
+MAX_INTERVAL_STEPS = 10**5
+MAX_LOOP_STEPS = 10**8
+MAX_POSITION_MM = 1e5  # a simulated position beyond any axis (data-format.md): the loop ran away
 # The delay line holds delay_s / time_step_s commands: 10^6 (8 MB) covers the tracking
 # fit's widest case, a 20 ms delay at the shortest loop step a case may have (1e-7 s).
 MAX_DELAY_STEPS = 1_000_000
@@ -73,7 +79,8 @@ class ServoParams:
         for field in fields(self):
             value = getattr(self, field.name)
             if field.name in ("delay_s", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm",
-                              "plant_stiffness_per_s2", "friction_N", "damping_N_s_per_mm"):
+                              "plant_damping_per_s", "plant_stiffness_per_s2", "friction_N",
+                              "damping_N_s_per_mm"):
                 require_non_negative(field.name, value)
             elif field.name != "nonlinear":
                 require_positive(field.name, value)
@@ -323,9 +330,39 @@ def whole_steps(pending_s, duration_s, time_step_s):
     return n_steps, remainder_s if remainder_s > 0.0 else 0.0
 
 
+def loop_budget_problem(time_s, time_step_s):
+    """Where stepping the loop every ``time_step_s`` through samples at ``time_s`` costs more
+    than a record may: (index of the sample, why), or None.
+
+    A gap of more than :data:`MAX_INTERVAL_STEPS` loop steps before a sample, or a record
+    needing more than :data:`MAX_LOOP_STEPS` in all, is refused rather than simulated for
+    minutes or hours.
+    """
+    interval_s = np.diff(np.asarray(time_s, dtype=float))
+    steps = interval_s / time_step_s
+    gaps = np.flatnonzero(steps > MAX_INTERVAL_STEPS)
+    if gaps.size:
+        i = gaps[0]
+        return i + 1, (f"a gap of {interval_s[i]:g} s before this sample, {steps[i]:.3g} steps "
+                       f"of the {time_step_s:g} s control loop; samples may be at most "
+                       f"{MAX_INTERVAL_STEPS:g} steps ({MAX_INTERVAL_STEPS * time_step_s:g} s) "
+                       "apart: split the record at the gap into two cases")
+    over = np.flatnonzero(np.cumsum(steps) > MAX_LOOP_STEPS)
+    if over.size:
+        return over[0] + 1, (f"the record reaches {MAX_LOOP_STEPS:g} steps of the "
+                             f"{time_step_s:g} s control loop here ({steps.sum():.3g} in all), "
+                             f"the most one may need: split it into cases of at most "
+                             f"{MAX_LOOP_STEPS * time_step_s:g} s")
+    return None
+
+
 def step_counts(time_s, time_step_s):
     """Internal steps between consecutive samples, carrying remainders as :class:`Servo` does;
-    the first sample gets 0 (the loop starts there)."""
+    the first sample gets 0 (the loop starts there). Samples beyond the loop's budget
+    (:func:`loop_budget_problem`) raise :class:`ParameterError` naming ``time_s``."""
+    problem = loop_budget_problem(time_s, time_step_s)
+    if problem is not None:
+        raise ParameterError(f"sample {problem[0] + 1}: {problem[1]}", "time_s")
     counts, pending = np.zeros(len(time_s), dtype=np.int64), 0.0
     for i, duration_s in enumerate(np.diff(time_s), start=1):
         counts[i], pending = whole_steps(pending, float(duration_s), time_step_s)
@@ -349,6 +386,27 @@ def simulate(params, time_s, reference_mm, disturbance_N=None, counts=None):
                     np.ascontiguousarray(disturbance_V), state, np.zeros(params.buffer_size),
                     positions_mm)
     return positions_mm
+
+
+class LoopRunsAway(ParameterError):
+    """The closed loop runs away with these plant, friction and controller values: its
+    position leaves any axis (beyond ±``MAX_POSITION_MM``) or is not finite."""
+
+    def __init__(self, params):
+        super().__init__(
+            f"the closed position loop runs away (beyond ±{MAX_POSITION_MM:g} mm) with plant "
+            f"gain {params.plant_gain_mm_per_Vs2:g} mm/(V.s2), damping "
+            f"{params.plant_damping_per_s:g} 1/s, stiffness {params.plant_stiffness_per_s2:g} "
+            f"1/s2, delay {params.delay_s:g} s, friction {params.friction_N:g} N + "
+            f"{params.damping_N_s_per_mm:g} N.s/mm under kp {params.kp_V_per_mm:g} V/mm: no "
+            "working axis behaves so", "tracking model")
+
+
+def check_runs(params, positions_mm):
+    """Raise :class:`LoopRunsAway` when positions :func:`simulate` gave with ``params`` leave
+    any axis. (A fit's trial values may run away: the optimiser steps back from them.)"""
+    if not np.all(np.abs(positions_mm) <= MAX_POSITION_MM):
+        raise LoopRunsAway(params)
 
 
 class Servo:

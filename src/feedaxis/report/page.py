@@ -13,6 +13,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .. import __version__
+from ..stats.wording import p_text
+from ..text import micro
 from ..output import write_atomically
 from ..text import repeatability_text
 from . import plots
@@ -20,8 +22,10 @@ from .compensation_table import compensation_table_html
 
 STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;
-text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
+text-align:left;vertical-align:top}th{background:#f3f3f3}.number{text-align:right}
 img{max-width:100%}.verdict{font-size:1.2em;font-weight:bold}"""
+# a cell that is one number (a unit or a percent sign may follow): right-aligned
+NUMBER_CELL = re.compile(r"[-+−]?(\d[\d,]*\.?\d*|\.\d+)(e[-+]?\d+)?( ?%)?")
 
 
 def image(png, alt):
@@ -31,16 +35,16 @@ def image(png, alt):
 
 
 def table(header, rows):
-    """An HTML table of text cells."""
+    """An HTML table of text cells: a number right-aligned (so digits line up), text
+    left-aligned."""
+    def cell(tag, text):
+        text = str(text)
+        align = ' class="number"' if NUMBER_CELL.fullmatch(text) else ""
+        return f"<{tag}{align}>{html.escape(text)}</{tag}>"
+
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>"
-                   for row in rows)
+    body = "".join("<tr>" + "".join(cell("td", c) for c in row) + "</tr>" for row in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
-
-
-def micro(unit):
-    """A unit as the page writes it: µm, not um."""
-    return re.sub(r"\bum\b", "µm", unit)
 
 
 def _parameter_table(model, refit):
@@ -69,7 +73,7 @@ def _diagnosis_html(analysis):
         parts.append(f"<p>{html.escape(micro(repeatability_text(diagnosis.repeatability)))}</p>")
     if diagnosis.candidates:
         parts.append(table(("missing effect", "RMS after (µm)", "p-value", "meaning", "evidence"),
-                           [(c.effect, f"{c.rms_after_um:.4g}", f"{c.test.p_value:.2g}",
+                           [(c.effect, f"{c.rms_after_um:.4g}", p_text(c.test.p_value),
                              c.meaning, c.evidence) for c in diagnosis.candidates]))
     if diagnosis.unexplained:
         parts.append(table(("unexplained", location, "amplitude (µm)", "evidence"),
@@ -93,20 +97,28 @@ def _positioning_views(analysis):
     """Measurement against model, the residual and its spectrum, the thermal compensation
     and the compensation table."""
     case, result, details = analysis.case, analysis.result, analysis.details
-    positioning = case.positioning
+    positioning, dense = case.positioning, details.dense
     panels = _residual_panels(positioning, result.residual_um)
     parts = [
         "<h2>Measurement against model</h2>",
         image(plots.measurement_vs_model(positioning.target_mm, result.measured_um,
-                                         result.measured_um - result.residual_um,
-                                         positioning.direction, details.run_of_sample),
+                                         dense.position_mm, dense.predicted_um,
+                                         dense.direction, dense.line, dense.per_run),
               "measurement against model"),
         "<h2>Residual</h2>",
         image(plots.residual_vs_position(positioning.target_mm, result.residual_um,
                                          details.marks), "residual against position"),
-        image(plots.spectrum(details.residual_spectrum, details.measured_spectrum,
-                             details.marks, analysis.diagnosis.unexplained), "spectrum"),
     ]
+    if details.unresolved:
+        parts.append("<p>Not marked, the targets cannot resolve them: " + "; ".join(
+            f"{html.escape(name)} ({html.escape(reason)})"
+            for name, reason in details.unresolved.items()) + ".</p>")
+    if details.spectrum_missing:
+        parts.append(f"<p>No spatial spectrum: {html.escape(details.spectrum_missing)}.</p>")
+    else:
+        parts.append(image(plots.spectrum(details.residual_spectrum, details.measured_spectrum,
+                                          details.marks, analysis.diagnosis.unexplained),
+                           "spectrum"))
     if panels:
         parts.append(image(plots.residual_against(panels),
                            "residual against time, direction, ambient"))
@@ -114,15 +126,33 @@ def _positioning_views(analysis):
         analysis, image, table)
 
 
+def _positioning_contributions(analysis):
+    """Each effect's contribution between the targets, a short period also over a window
+    (at the samples when no line joins two targets)."""
+    dense = analysis.details.dense
+    if not dense.position_mm.size:
+        return _sample_contributions(analysis)
+    return plots.contributions(dense.position_mm, dense.components, "position (mm)",
+                               dense.line, dense.direction, dense.windows)
+
+
+def _sample_contributions(analysis):
+    """Each effect's contribution at the samples, against their coordinate."""
+    measurement = analysis.measurement
+    return plots.contributions(measurement.coordinate, analysis.components,
+                               measurement.coordinate_label)
+
+
 def _positioning_figures(analysis):
-    comparison = analysis.comparison
+    comparison, details = analysis.comparison, analysis.details
     rows = [(f["name"], f"{f['measured_um']:.4g}", f"{f['residual_um']:.4g}",
              "" if f["explained"] is None else f"{100 * f['explained']:.1f} %")
             for f in comparison["figures"].values()]
     rows.append(("RMS", f"{comparison['rms_measured_um']:.4g}",
                  f"{comparison['rms_residual_um']:.4g}", ""))
     return ["<h2>ISO 230-2 figures</h2>",
-            image(plots.iso230_deviation(analysis.details.iso_deviation), "ISO 230-2 deviation"),
+            image(plots.iso230_deviation(details.iso_deviation, details.iso_line),
+                  "ISO 230-2 deviation"),
             table(("ISO 230-2 figure", "measured (µm)", "residual (µm)", "explained"), rows)]
 
 
@@ -182,14 +212,14 @@ def _tracking_views(analysis):
     ]
 
 
-# per kind: its views, its figures, how its contributions are drawn (samples or a record)
-VIEWS = {"positioning": (_positioning_views, _positioning_figures, "."),
-         "tracking": (_tracking_views, lambda analysis: [], "-")}
+# per kind: its views, its figures, its contributions plot
+VIEWS = {"positioning": (_positioning_views, _positioning_figures, _positioning_contributions),
+         "tracking": (_tracking_views, lambda analysis: [], _sample_contributions)}
 
 
 def _sections(analysis):
     """The page's sections for one analysis."""
-    views, figures, style = VIEWS[analysis.kind]
+    views, figures, contributions = VIEWS[analysis.kind]
     measurement, result, model = analysis.measurement, analysis.result, analysis.model
     steps = analysis.ladder
     return [
@@ -201,9 +231,8 @@ def _sections(analysis):
         "<h2>Diagnosis</h2>", _diagnosis_html(analysis),
         *views(analysis),
         "<h2>Each effect's contribution</h2>",
-        image(plots.contributions(measurement.coordinate, analysis.components,
-                                  measurement.coordinate_label, style),
-              "contributions") if model.effects else "<p>(no effect in the model)</p>",
+        image(contributions(analysis), "contributions") if model.effects
+        else "<p>(no effect in the model)</p>",
         "<h2>Error ladder</h2>", image(plots.ladder(steps, analysis.diagnosis.noise_um),
                                        "error ladder"),
         table(("step", "residual RMS (µm)"), [(label, f"{v:.4g}") for label, v in steps]),

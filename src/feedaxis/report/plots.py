@@ -1,4 +1,10 @@
-"""Report figures as PNG bytes (matplotlib, Agg backend); each takes computed arrays only."""
+"""Report figures as PNG bytes (matplotlib, Agg backend); each takes computed arrays only.
+
+Every figure reads without help: a legend only where something is labelled, tick labels
+without an offset or a power of ten over the axis, and a span of at least
+``MIN_SPAN_UM`` on a value axis, so a contribution constant to the last digit reads as the
+constant it is.
+"""
 from __future__ import annotations
 
 import io
@@ -8,20 +14,42 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import ScalarFormatter  # noqa: E402
 
 MARK_COLOURS = ("tab:red", "tab:purple", "tab:brown", "tab:olive")
+DIRECTION_COLOURS = {1.0: "tab:blue", -1.0: "tab:orange"}
 MAX_PERIOD_LINES = 60
+MAX_MARKED_TARGETS = 60  # more targets than this are drawn as a line, without markers
+MIN_SPAN_UM = 1e-3  # 1 nm, the diagnosis's resolution: a smaller span is rounding
+MAX_PLOTTED = 4000  # points per series: beyond it the envelope (min and max per bin) is drawn
 
 
 def _finish(figure, axes, xlabel, ylabel, title, grid="major"):
-    """Labels, legend and grid, then the figure as PNG bytes."""
+    """Labels, legend (when anything is labelled) and grid, then the figure as PNG bytes."""
     axes.set(xlabel=xlabel, ylabel=ylabel, title=title)
-    axes.legend(loc="best", fontsize=8)
+    _legend(axes)
     axes.grid(alpha=0.3, which=grid)
     return _png(figure)
 
 
-MAX_PLOTTED = 4000  # points per series: beyond it the envelope (min and max per bin) is drawn
+def _legend(axes):
+    if axes.get_legend_handles_labels()[0]:
+        axes.legend(loc="best", fontsize=8)
+
+
+def _readable(axes):
+    """Plain tick labels (no offset, no power of ten over the axis) and a value axis at
+    least ``MIN_SPAN_UM`` wide."""
+    if axes.get_yscale() == "linear":
+        low, high = axes.get_ylim()
+        if high - low < MIN_SPAN_UM:
+            centre = (low + high) / 2
+            axes.set_ylim(centre - MIN_SPAN_UM / 2, centre + MIN_SPAN_UM / 2)
+    for axis in (axes.xaxis, axes.yaxis):
+        formatter = axis.get_major_formatter()
+        if isinstance(formatter, ScalarFormatter):
+            formatter.set_useOffset(False)
+            formatter.set_scientific(False)
 
 
 def _plot(axes, x, y, *style, **options):
@@ -48,6 +76,8 @@ def _first_per_bin(mask, bins):
 
 
 def _png(figure):
+    for axes in figure.axes:
+        _readable(axes)
     buffer = io.BytesIO()
     figure.tight_layout()
     figure.savefig(buffer, format="png", dpi=110)
@@ -55,42 +85,67 @@ def _png(figure):
     return buffer.getvalue()
 
 
-def measurement_vs_model(position_mm, measured_um, predicted_um, direction, run=None):
-    """Measured deviations (dots) and the model (lines) against position: one line per
-    approach direction, and per run when ``run`` is given (a time-dependent case, whose
-    runs differ), so no line joins points of different runs."""
+def _direction_label(sign):
+    return "+" if sign > 0 else "-"
+
+
+def measurement_vs_model(position_mm, measured_um, model_mm, model_um, model_direction,
+                         model_line, per_run=False):
+    """Measured deviations (dots) and the model between the targets (lines): ``model_mm``,
+    ``model_um`` are points on lines numbered by ``model_line``, one per approach direction
+    (and per run when ``per_run``: a time-dependent case, whose runs differ), so no line
+    joins points of different runs."""
     figure, axes = plt.subplots(figsize=(9, 3.6))
-    _plot(axes, position_mm, measured_um, ".", ms=2, color="0.55", label="measured")
-    runs = np.zeros_like(position_mm) if run is None else run
-    order = np.argsort(position_mm, kind="stable")
-    for sign, colour in ((1.0, "tab:blue"), (-1.0, "tab:orange")):
-        label = f"model ({'+' if sign > 0 else '-'} approach{', per run' if run is not None else ''})"
-        for number in np.unique(runs):
-            chosen = order[(direction[order] == sign) & (runs[order] == number)]
-            if chosen.size:
-                _plot(axes, position_mm[chosen], predicted_um[chosen], "-", lw=1.0, color=colour,
-                          alpha=0.8, label=label)
-                label = None
-    return _finish(figure, axes, "target position (mm)", "error (µm)",
-                   "Measurement against model")
+    _plot(axes, position_mm, measured_um, ".", ms=2, color="0.55", label="measured", zorder=3)
+    labelled = set()
+    for number in np.unique(model_line):
+        chosen = model_line == number
+        sign = float(model_direction[chosen][0])
+        label = None
+        if sign not in labelled:
+            labelled.add(sign)
+            label = (f"model ({_direction_label(sign)} approach"
+                     f"{', per run' if per_run else ''}), between the targets too")
+        _plot(axes, model_mm[chosen], model_um[chosen], "-", lw=0.8,
+              color=DIRECTION_COLOURS[sign], alpha=0.8, label=label)
+    return _finish(figure, axes, "position (mm)", "error (µm)", "Measurement against model")
 
 
-def iso230_deviation(per_direction):
-    """The figure of ISO 230-2: mean deviation x̄ and x̄ ± 2s at each target, per direction.
+def iso230_deviation(per_direction, line):
+    """The figure of ISO 230-2: the mean deviation x̄ at each target per direction, with bars
+    x̄ ± 2s where the runs repeat (s is NaN with one run); below, the same less ``line``
+    (offset_um, slope_um_per_mm), the straight line through the means, so a steep lead
+    error does not hide the reversal and the scatter.
 
-    ``per_direction`` is {"+" or "-": (target_mm, mean_um, std_um)}; s is NaN with one run.
+    ``per_direction`` is {"+" or "-": (target_mm, mean_um, std_um)}.
     """
-    figure, axes = plt.subplots(figsize=(9, 3.8))
-    for (sign, (target_mm, mean_um, std_um)), colour in zip(per_direction.items(),
-                                                           ("tab:blue", "tab:orange")):
-        _plot(axes, target_mm, mean_um, "o-" if target_mm.size <= MAX_PLOTTED else "-", ms=3,
-              lw=1.2, color=colour, label=f"x̄{'↑' if sign == '+' else '↓'} ({sign} approach)")
-        if np.any(np.isfinite(std_um)):
-            for bound_um in (mean_um + 2 * std_um, mean_um - 2 * std_um):
-                _plot(axes, target_mm, bound_um, "--", lw=0.8, color=colour)
-            axes.plot([], [], "--", lw=0.8, color=colour, label=f"x̄ ± 2s ({sign})")
-    return _finish(figure, axes, "target position (mm)", "deviation (µm)",
-                   "ISO 230-2 deviation: mean ± 2s per approach direction")
+    offset_um, slope_um_per_mm = line
+    figure, (top, bottom) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    repeated = False
+    for sign, (target_mm, mean_um, std_um) in per_direction.items():
+        colour = DIRECTION_COLOURS[1.0 if sign == "+" else -1.0]
+        style = "o-" if target_mm.size <= MAX_MARKED_TARGETS else "-"
+        finite = np.isfinite(std_um)
+        repeated = repeated or bool(finite.any())
+        for axes, values_um in ((top, mean_um),
+                                (bottom, mean_um - (offset_um + slope_um_per_mm * target_mm))):
+            _plot(axes, target_mm, values_um, style, ms=3, lw=1.0, color=colour,
+                  label=f"x̄{'↑' if sign == '+' else '↓'} ({sign} approach)")
+            if finite.any():
+                axes.errorbar(target_mm[finite], values_um[finite], yerr=2 * std_um[finite],
+                              fmt="none", ecolor=colour, elinewidth=0.8, capsize=2,
+                              label=f"x̄ ± 2s ({sign})")
+    band = ("bars x̄ ± 2s where the runs repeat" if repeated
+            else "one run per target: no s, so no ± 2s band")
+    top.set(ylabel="mean deviation (µm)",
+            title=f"ISO 230-2 mean deviation x̄ per approach direction; {band}")
+    bottom.set(xlabel="target position (mm)", ylabel="less the line (µm)",
+               title=f"The same less the straight line through the means "
+                     f"({slope_um_per_mm:+.4g} µm/mm, {offset_um:+.4g} µm at 0 mm)")
+    _legend(top)
+    for axes in (top, bottom):
+        axes.grid(alpha=0.3)
+    return _png(figure)
 
 
 def residual_vs_position(position_mm, residual_um, marks):
@@ -106,18 +161,20 @@ def residual_vs_position(position_mm, residual_um, marks):
         axes.plot([start, start + wavelength], [top, top], "-", lw=3, color=colour,
                   label=f"{label}: {wavelength:.4g} mm")
     return _finish(figure, axes, "target position (mm)", "residual (µm)",
-                   "Residual against position, with the marked wavelengths")
+                   "Residual against position" + (", with the catalog wavelengths the "
+                                                  "targets resolve" if marks else ""))
 
 
 def spectrum(residual, measured, marks, structures=()):
     """Amplitude spectra (wavelength, amplitude) of the residual and of the detrended
-    measurement against wavelength, over the wavelengths the targets resolve only; the
-    catalog wavelengths and unexplained peaks within that band marked, the others named in
-    the title."""
+    measurement against wavelength, over the wavelengths the targets resolve only (call it
+    with at least one spectrum that is not empty); the catalog wavelengths ``marks`` (those
+    the targets resolve) and unexplained peaks within that band marked, marks outside the
+    band named in the title."""
     figure, axes = plt.subplots(figsize=(9, 3.4))
     shown = [w for w, _ in (residual, measured) if w.size]
-    low = min(float(w.min()) for w in shown) if shown else 0.0
-    high = max(float(w.max()) for w in shown) if shown else 0.0
+    low = min(float(w.min()) for w in shown)
+    high = max(float(w.max()) for w in shown)
     top = 0.0
     for (wavelength_mm, amplitude_um), style in ((measured, dict(color="0.6", lw=0.7,
                                                                   label="measured, trend removed")),
@@ -138,28 +195,51 @@ def spectrum(residual, measured, marks, structures=()):
         if structure.wavelength_mm and low <= structure.wavelength_mm <= high:
             axes.axvline(structure.wavelength_mm, color="k", ls=":", lw=1.2,
                          label=f"unexplained {structure.wavelength_mm:.4g} mm")
-    if shown:
-        axes.set_xlim(low, high)
-        axes.set_ylim(0.0, 1.1 * top if top > 0 else 1.0)
+    axes.set_xlim(low, high)
+    axes.set_ylim(0.0, 1.1 * top if top > 0 else 1.0)
     title = "Spatial spectrum along the travel, over the wavelengths the targets resolve"
     if outside:
-        title += "\nnot resolvable here: " + ", ".join(outside)
+        title += "\noutside this band: " + ", ".join(outside)
     return _finish(figure, axes, "wavelength (mm)", "amplitude (µm)", title, grid="both")
 
 
-def contributions(coordinate, components, xlabel, style="."):
+def contributions(coordinate, components, xlabel, line=None, direction=None, windows=None):
     """Each effect's contribution against ``coordinate`` (position or time), one panel per
-    effect; ``style`` "." for samples at targets, "-" for a record in time."""
+    effect, drawn as lines (numbered by ``line``, coloured by approach ``direction``;
+    coordinates increasing along each line). An effect with a window in ``windows``
+    {effect: (start, stop)} (a period too short to read over the whole travel) gets a
+    second panel showing that window."""
+    windows = windows or {}
     count = max(len(components), 1)
-    figure, axes_list = plt.subplots(count, 1, figsize=(9, 1.8 * count + 0.6), sharex=True,
-                                     squeeze=False)
-    order = np.argsort(coordinate, kind="stable")
-    for axes, (name, values_um) in zip(axes_list[:, 0], components.items()):
-        _plot(axes, coordinate[order], values_um[order], style, ms=1.5, lw=0.8)
+    line = np.zeros(coordinate.size, dtype=int) if line is None else line
+    direction = np.ones(coordinate.size) if direction is None else direction
+    figure = plt.figure(figsize=(9, 1.8 * count + 0.6))
+    grid = figure.add_gridspec(count, 4 if windows else 1)
+    first = None
+    for row, (name, values_um) in enumerate(components.items()):
+        axes = figure.add_subplot(grid[row, :3] if name in windows else grid[row, :],
+                                  sharex=first)
+        first = first or axes
+        panels = [(axes, np.ones(coordinate.size, dtype=bool))]
+        if name in windows:
+            start, stop = windows[name]
+            zoom = figure.add_subplot(grid[row, 3])
+            zoom.set_title(f"zoomed in: {start:g} to {stop:.4g}", fontsize=8, loc="left")
+            panels.append((zoom, (coordinate >= start) & (coordinate <= stop)))
+        for panel, inside in panels:
+            for number in np.unique(line):
+                chosen = (line == number) & inside
+                if chosen.any():
+                    _plot(panel, coordinate[chosen], values_um[chosen], "-", lw=0.8,
+                          color=DIRECTION_COLOURS[float(direction[chosen][0])])
+            panel.grid(alpha=0.3)
         axes.set_ylabel("µm")
         axes.set_title(name, fontsize=9, loc="left")
-        axes.grid(alpha=0.3)
-    axes_list[-1, 0].set_xlabel(xlabel)
+        if row == count - 1:
+            for panel, _ in panels:
+                panel.set_xlabel(xlabel)
+        else:
+            axes.tick_params(labelbottom=False)
     figure.suptitle("Each effect's contribution")
     return _png(figure)
 

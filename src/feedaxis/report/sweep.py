@@ -9,7 +9,9 @@ import numpy as np
 
 from .. import __version__
 from ..output import write_atomically
-from .page import STYLE, image, micro, table as html_table
+from ..stats.wording import p_text
+from ..text import micro
+from .page import STYLE, image, table as html_table
 from .plots import _png, plt
 
 MAX_SCATTERS = 4  # inputs shown against each figure, the most influential first
@@ -84,7 +86,7 @@ def _sensitivity_rows(summary):
     for name, s in summary["sensitivities"].items():
         for input_name, v in (s.get("inputs") or {}).items():
             rows.append((micro(name), input_name, f"{v['src']:+.3f}", f"{s['r2']:.3f}",
-                         f"{v['spearman']:+.3f}", f"{v['p_value']:.2g}"))
+                         f"{v['spearman']:+.3f}", p_text(v["p_value"])))
     return rows
 
 

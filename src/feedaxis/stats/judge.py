@@ -28,6 +28,7 @@ from scipy import stats
 from scipy.optimize import least_squares
 
 from ..iso230 import target_groups
+from .wording import p_text
 
 
 FAMILY_ALPHA = 0.001
@@ -112,7 +113,7 @@ class Test:
 
     def describe(self):
         """The test in one phrase, e.g. ``F(2, 2497) = 2.78e+03, p < 1e-300``."""
-        p_value = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
+        p_value = p_text(self.p_value)
         if self.symbol == "F":
             return (f"F({self.dof[0]:.4g}, {self.dof[1]:.4g}) = {self.statistic:.3g}, "
                     f"{p_value}")

@@ -1,6 +1,10 @@
 """Noise models: what a term's reduction of the residual is judged against, named in every
 verdict. The measurement chooses the one its samples support.
 
+Each model has a ``label`` that both its test (``name``) and its noise estimate (the
+source :meth:`estimate_um` gives) carry, so the noise a diagnosis prints and the test it
+decided by always name the same model.
+
 - :class:`PureError`: repeated samples. The extra-sum-of-squares F test against their
   within-group scatter (Draper & Smith, Applied Regression Analysis, 3rd ed., §2.1 and
   §6.1): a large effect is named however much unmodelled per-target shape is left. The
@@ -64,11 +68,12 @@ class PureError:
         rank = 0 if self.within is None else int(np.linalg.matrix_rank(self.within))
         self.dof = int(self.groups.size - self.n_groups - rank)
         self.paired = paired
-        self.name = ("F test against the scatter of the + and - readings at each target "
-                     "(one pass each way, a constant reversal allowed)" if paired else
-                     "F test against the pure error of repeated samples")
-        self.source = ("scatter of the + and - readings at each target about a constant "
-                       "reversal" if paired else "scatter of repeated samples")
+        self.label = "+ and - readings at each target" if paired else "repeated samples"
+        self.name = (f"F test against the scatter of the {self.label} (one pass each way, a "
+                     "constant reversal allowed)" if paired else
+                     f"F test against the pure error of {self.label}")
+        self.source = (f"scatter of the {self.label} about a constant reversal" if paired
+                       else f"scatter of {self.label}")
 
     def group_means(self, values):
         """Mean of ``values`` in each sample's group, per sample."""
@@ -141,8 +146,9 @@ class ResidualMeanSquare:
     """No replicates: the residual mean square; ``order`` sorts the samples in the order they
     were taken (run or time, then position) for the noise estimate."""
 
-    name = "partial F test against the residual mean square (no replicates)"
-    source = "point-to-point scatter along the test (no replicates)"
+    label = "no replicates"
+    name = f"partial F test against the residual mean square ({label})"
+    source = f"point-to-point scatter along the test ({label})"
 
     def __init__(self, order):
         self.order = order
@@ -175,7 +181,7 @@ class Serial:
     they were taken; ``white`` decides where the residual shows no correlation."""
 
     def __init__(self, order, white):
-        self.order, self.white = order, white
+        self.order, self.white, self.label = order, white, white.label
         self.name = (f"{white.name}; where the residual is serially correlated, against the "
                      "noise power at the term's frequencies (AR noise model, order by BIC)")
 
@@ -228,8 +234,8 @@ class Serial:
         if noise.order == 0:
             return self.white.estimate_um(residual_um)
         return (float(np.sqrt(noise.variance)),
-                f"serially correlated along the test: AR({noise.order}), neighbouring samples "
-                f"correlated {noise.lag_one():.2f}")
+                f"serially correlated along the test ({self.label}): AR({noise.order}), "
+                f"neighbouring samples correlated {noise.lag_one():.2f}")
 
     def error_scale(self, result):
         if self.autoregression(result.residual_um).order == 0:
@@ -254,7 +260,8 @@ class Serial:
 class Coloured:
     """A serially correlated residual: the effective sample count n / τ."""
 
-    name = "F test with the effective sample count n/τ (serially correlated noise)"
+    label = "serially correlated noise"
+    name = f"F test with the effective sample count n/τ ({label})"
 
     def extra_ss_test(self, before_um, after_um, extra, n_free_after):
         """F test of ``extra`` parameters with n replaced by n / τ, τ the integrated
@@ -277,8 +284,8 @@ class Coloured:
         """(σ (µm), source): the RMS of the residual left, its autocorrelation time named."""
         tau = autocorrelation_time(residual_um)
         return (float(np.sqrt(np.mean(residual_um ** 2))),
-                f"residual left after the effects and structures found (autocorrelation time "
-                f"{tau:.1f} samples)")
+                f"{self.label}: the residual left after the effects and structures found "
+                f"(autocorrelation time {tau:.1f} samples)")
 
     def error_scale(self, result):
         return 1.0

@@ -16,18 +16,10 @@ budget entry: it comes from the case's own runs.
 """
 from __future__ import annotations
 
-import math
-import re
-import sys
 from dataclasses import dataclass, field
 
-from ..errors import InputError, read_text, toml_key_line
+from ..errors import InputError, finite_value, read_toml, shown_value, toml_key_line
 from .distributions import BOUNDED, DISTRIBUTIONS, Distribution
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:
-    import tomli as tomllib
 
 HP_5528A = ("HP 5528A Laser Measurement System User's Guide, 'Distance Measurement Error "
             "Sources' and 'Error Budget Worksheet', pp. 6-24 to 6-28")
@@ -135,13 +127,7 @@ def read_budget(path):
         comes from the data), an unknown key or distribution, a size that is not a finite
         number >= 0, a table without its size.
     """
-    text = read_text(path, "budget file")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        line = re.search(r"line (\d+)", str(error))
-        raise InputError(f"not valid TOML: {error}", path=path,
-                         row=int(line.group(1)) if line else None) from None
+    text, data = read_toml(path, "budget file")
     budget = default_budget()
     for name, table in data.items():
         if name in FROM_THE_DATA:
@@ -173,9 +159,8 @@ def _distribution(path, text, contribution, table):
                       key)
         if key == "source" and not isinstance(value, str):
             raise bad("must be text", key)
-        if key in size_keys and (isinstance(value, bool) or not isinstance(value, (int, float))
-                                 or not math.isfinite(value) or value < 0):
-            raise bad(f"must be a finite number >= 0, got {value!r}", key)
+        if key in size_keys and not _finite_non_negative(value):
+            raise bad(f"must be a finite number >= 0, got {shown_value(value)}", key)
     kind = table.get("distribution", contribution.default.kind)
     if kind not in DISTRIBUTIONS:
         raise bad(f"unknown distribution {kind!r}; known: {', '.join(DISTRIBUTIONS)}",
@@ -189,6 +174,13 @@ def _distribution(path, text, contribution, table):
             raise bad(f"a {kind} distribution needs {key}")
         return Distribution(kind, float(table[key])), table.get("source")
     return Distribution(kind, _normal_size(table, unit, bad)), table.get("source")
+
+
+def _finite_non_negative(value):
+    try:
+        return finite_value(value) >= 0
+    except ValueError:
+        return False
 
 
 def _normal_size(table, unit, bad):

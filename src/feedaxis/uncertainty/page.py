@@ -10,6 +10,7 @@ from .. import __version__
 from ..output import write_atomically
 from ..report import plots
 from ..report.page import STYLE, image, table
+from ..text import micro
 from .budget import CONTRIBUTIONS
 
 
@@ -31,8 +32,8 @@ def _figure_rows(result):
 def _budget_rows(result):
     budget = result.budget.to_json()["contributions"]
     return [(name, "varies" if name in result.inputs else "not applied",
-             entry["distribution"], f"{entry['size']:g} {entry['unit']}",
-             f"{entry['standard_uncertainty']:.3g} {entry['unit']}",
+             entry["distribution"], f"{entry['size']:g} {micro(entry['unit'])}",
+             f"{entry['standard_uncertainty']:.3g} {micro(entry['unit'])}",
              CONTRIBUTIONS[name].meaning, entry["source"])
             for name, entry in budget.items()]
 
@@ -43,7 +44,7 @@ def _parameter_parts(result):
     method = result.parameter_method
     rows = [(key, f"{e['value']:.6g}", f"{e['standard_uncertainty']:.2g}",
              f"{e['fit_standard_uncertainty']:.2g}", _interval(e["coverage_interval"]),
-             e["unit"]) for key, e in result.parameters.items()]
+             micro(e["unit"])) for key, e in result.parameters.items()]
     return ["<h2>Fitted parameters</h2>",
             f"<p>{html.escape(method['method'])}; refitting {method['checked_trials']} trials "
             f"differs from it by at most {method['largest_refit_difference_in_u']:.1g} standard "

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from ..text import micro
+
 SHORT_NAMES = {"repeatability": "repeat.", "device_calibration": "device",
                "machine_temperature": "temp.", "expansion_coefficient": "alpha",
                "misalignment": "align.", "setup": "setup", "eve": "EVE"}
@@ -30,9 +32,9 @@ def uncertainty_lines(result):
     if result.adaptive:
         adaptive = result.adaptive
         lines.append(f"adaptive (JCGM 101 §7.9): {adaptive.blocks} blocks, numerical tolerance "
-                     f"{adaptive.reached:.2g} um of {adaptive.tolerance:g} asked"
+                     f"{adaptive.reached:.2g} µm of {adaptive.tolerance:g} asked"
                      + ("" if adaptive.stabilised else " -- NOT reached"))
-    lines += ["", f"{'ISO 230-2 figure (um)':28s} {'value':>8s} {'u':>7s}  "
+    lines += ["", f"{'ISO 230-2 figure (µm)':28s} {'value':>8s} {'u':>7s}  "
                   f"{'95 % interval':20s} {'shortest 95 %':20s}"]
     for figure in result.figures.values():
         lines.append(f"{figure['name']:28s} {figure['value_um']:8.4g} "
@@ -50,7 +52,7 @@ def uncertainty_lines(result):
         lines += ["", f"compensation table ({table['source']}: "
                       f"{', '.join(table['included'])}), {len(table['position_mm'])} points, "
                       f"{table['trials']} trials: largest u "
-                      f"{table['largest_standard_uncertainty_um']:.2g} um; shares: "
+                      f"{table['largest_standard_uncertainty_um']:.2g} µm; shares: "
                       + ", ".join(f"{SHORT_NAMES.get(i, i)} {_share(c['share'])}"
                                   for i, c in table["contributions"].items())]
     lines += [f"note: {note}" for note in result.notes]
@@ -73,6 +75,6 @@ def _parameter_lines(result):
     for key, entry in result.parameters.items():
         lines.append(f"  {key:42s} {entry['value']:11.5g} {entry['standard_uncertainty']:9.2g} "
                      f"{entry['fit_standard_uncertainty']:9.2g}  "
-                     f"{_interval(entry['coverage_interval'], 5)} {entry['unit']}")
+                     f"{_interval(entry['coverage_interval'], 5)} {micro(entry['unit'])}")
     lines += [f"  {key:42s} undetermined: {why}" for key, why in result.undetermined.items()]
     return lines
