@@ -1,30 +1,57 @@
-"""The FMUs' cost against the FMI floor: the full axis per 1 ms macro step vs empty FMUs.
+"""The FMUs' cost against the FMI floor: per FMU and for the axis, in each controller mode.
 
-Run: ``python benchmarks/bench_fmi_floor.py [--repeats 7] [--steps 2000] [--standalone]``. It
-builds the four feedaxis FMUs and four empty pythonfmu FMUs with the same interface (the same
-variables, names, types and causalities; ``do_step`` does nothing), and drives both sets
-with the same raw fmpy ctypes calls (``fmi2SetReal`` of the inputs, ``fmi2DoStep``,
-``fmi2GetReal`` of the outputs; preallocated arrays, as feedaxis.cosim.master does) on the
-default axis schedule: servo, motor and geometric error every 1 ms macro step, the thermal
-screw every 0.1 s. Repeats are interleaved (full, empty, full, ...). It prints the median
-cost per macro step of each set and per FMU (so the servo's share can be read on its own),
-the ratio of the medians, and the spread of the ratio over the interleaved pairs (the
-machine is shared: a busy moment slows the pair it falls on). ``--standalone`` adds the
-standalone build (each FMU carrying its Python; in this Python host it runs on the host's
-interpreter) to the interleaved sets and prints its ratio to the feedaxis FMUs.
+Run: ``python benchmarks/bench_fmi_floor.py [--repeats 15] [--steps 2000] [--starts 5]
+[--instructions] [--standalone] [--fmus DIR] [--smoke]``. It builds the four feedaxis FMUs
+(or takes them from ``--fmus``) and two sets of FMUs with the same interface (the same
+variables, names, types, causalities and value references) and no physics:
+
+- **native**: minimal C FMUs (``benchmarks/native_fmu.c`` compiled against the official
+  FMI 2.0 headers, ``fmus/common/fmi2/``): the floor any FMU pays in this host;
+- **empty pythonfmu**: pythonfmu slaves whose ``do_step`` does nothing.
+
+All are driven by the same raw fmpy ctypes calls (``fmi2SetReal`` of the inputs,
+``fmi2DoStep``, ``fmi2GetReal`` of the outputs; preallocated arrays, as
+feedaxis.cosim.master does) on the default axis schedule: servo, motor and geometric error
+every 1 ms macro step, the thermal screw every 0.1 s. The feedaxis set runs in each
+controller mode of the servo (PID; NPID, seed 002 Eq. 8; PID with Coulomb friction). Each
+FMU is driven alone on its schedule and the four together (the axis); the cost is the CPU
+time of this process per macro step (a busy machine delays the process, which wall time
+would count). One repeat runs every set once, in an order rotated from repeat to repeat; a
+ratio is taken within each repeat (the machine is shared: a busy moment slows the repeat it
+falls on, also in CPU time, through the caches), and the table gives the median of the
+per-repeat ratios with their quartiles.
+
+``--instructions`` also counts the instructions per macro step of the axis under valgrind's
+callgrind (two runs of each set, the difference per step: start-up cancels), a figure the
+machine's load does not move; valgrind must be installed. It takes minutes per set.
+
+``--starts`` times the first instantiate + initialisation of each freshly extracted FMU in
+fresh processes, after the first import (numpy, fmpy and pythonfmu imported, one other FMU
+loaded: what every FMU but the first in a process pays).
+
+``--standalone`` adds the standalone build (``feedaxis build-fmus --standalone``: each FMU
+carrying its Python; in this Python host it runs on the host's interpreter) to the
+interleaved sets, in the PID mode, and prints its cost and per-repeat ratio to the feedaxis
+FMUs.
 """
 import argparse
+import ast
 import ctypes
+import itertools
+import os
+import shutil
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from feedaxis.fmu_build import FMU_NAMES, build_fmus
+from feedaxis.fmu_build import FMU_NAMES, build_fmus, c_compiler
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import arguments  # noqa: E402
@@ -33,6 +60,11 @@ MACRO_STEP_S = 1e-3
 EVERY = {"NpidServo": 1, "StepperError": 1, "GeometricError": 1, "ThermalScrew": 100}
 INPUT_VALUES = {"position_ref_mm": 5.0, "disturbance_N": 0.0, "position_mm": 5.0,
                 "velocity_mm_s": 50.0, "ambient_C": 20.0}
+# the servo's parameters in each controller mode (20 N of Coulomb friction: 0.2 V at the
+# default 100 N/V, a fifth of the command a 0.25 mm error gives at kp = 0.9 V/mm)
+MODES = {"PID": {}, "NPID": {"nonlinear": True}, "friction": {"friction_N": 20.0}}
+NATIVE_SOURCE = Path(__file__).resolve().parent / "native_fmu.c"
+FMI_HEADERS = Path(__file__).resolve().parents[1] / "fmus" / "common" / "fmi2"
 EMPTY_SLAVE = '''from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer
 from pythonfmu import Real, String
 
@@ -57,6 +89,31 @@ class {name}(Fmi2Slave):
     def do_step(self, current_time, step_size):
         return True
 '''
+FIRST_START = '''
+import sys, time
+import numpy, pythonfmu  # the first import
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+
+def start(path, parameters):
+    description = read_model_description(path)
+    slave = FMU2Slave(guid=description.guid, unzipDirectory=extract(path),
+                      modelIdentifier=description.coSimulation.modelIdentifier,
+                      instanceName="start")
+    variables = {v.name: v for v in description.modelVariables}
+    started = time.perf_counter(), time.process_time()
+    slave.instantiate()
+    for name, value in parameters.items():
+        setter = slave.setBoolean if isinstance(value, bool) else slave.setReal
+        setter([variables[name].valueReference], [value])
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    return time.perf_counter() - started[0], time.process_time() - started[1]
+
+start(sys.argv[1], {})
+print(*start(sys.argv[2], eval(sys.argv[3])))
+'''
 
 
 def build_empty_fmus(fmu_paths, out_dir):
@@ -72,15 +129,41 @@ def build_empty_fmus(fmu_paths, out_dir):
     return empty
 
 
+def build_native_fmus(fmu_paths, out_dir):
+    """{name: path} of C FMUs with the model description of ``fmu_paths`` (native_fmu.c)."""
+    compiler = c_compiler()
+    if compiler is None:
+        raise SystemExit("the native floor needs a C compiler (cc or gcc, or set CC)")
+    native = {}
+    for name, path in fmu_paths.items():
+        description = read_model_description(str(path))
+        identifier = description.coSimulation.modelIdentifier
+        n_values = 1 + max(v.valueReference for v in description.modelVariables)
+        library = Path(out_dir) / f"native_{identifier}.so"
+        subprocess.run([compiler, "-shared", "-fPIC", "-O2", "-Wall", f"-I{FMI_HEADERS}",
+                        f"-DN_VALUES={n_values}", "-o", str(library), str(NATIVE_SOURCE)],
+                       check=True)
+        native[name] = Path(out_dir) / f"Native{name}.fmu"
+        with zipfile.ZipFile(path) as source, zipfile.ZipFile(native[name], "w") as fmu:
+            fmu.writestr("modelDescription.xml", source.read("modelDescription.xml"))
+            fmu.write(library, f"binaries/linux64/{identifier}.so")
+    return native
+
+
 class Driven:
     """One instantiated, initialised FMU with preallocated input/output arrays."""
 
-    def __init__(self, path):
+    def __init__(self, path, parameters):
         description = read_model_description(str(path))
-        self.slave = FMU2Slave(guid=description.guid, unzipDirectory=extract(str(path)),
+        self.unzip_dir = extract(str(path))
+        self.slave = FMU2Slave(guid=description.guid, unzipDirectory=self.unzip_dir,
                                modelIdentifier=description.coSimulation.modelIdentifier,
                                instanceName="bench")
         self.slave.instantiate()
+        variables = {v.name: v for v in description.modelVariables}
+        for name, value in parameters.items():
+            setter = self.slave.setBoolean if isinstance(value, bool) else self.slave.setReal
+            setter([variables[name].valueReference], [value])
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()
         self.slave.exitInitializationMode()
@@ -96,92 +179,186 @@ class Driven:
     def step(self, time_s, step_s):
         set_real, do_step, get_real = self.calls
         component = self.slave.component
-        set_real(component, self.in_vrs, len(self.in_vrs), self.in_values)
-        do_step(component, time_s, step_s, 1)
-        get_real(component, self.out_vrs, len(self.out_vrs), self.out_values)
+        if (set_real(component, self.in_vrs, len(self.in_vrs), self.in_values)
+                or do_step(component, time_s, step_s, 1)
+                or get_real(component, self.out_vrs, len(self.out_vrs), self.out_values)):
+            raise RuntimeError("an FMU call failed during the benchmark")
 
     def free(self):
         self.slave.terminate()
         self.slave.freeInstance()
+        shutil.rmtree(self.unzip_dir, ignore_errors=True)
 
 
-def time_per_macro_step_us(paths, n_steps):
-    """{name: µs per macro step spent in that FMU's calls} for one run of ``n_steps``."""
-    driven = {name: Driven(paths[name]) for name in FMU_NAMES}
-    spent = dict.fromkeys(FMU_NAMES, 0.0)
+def cpu_us_per_macro_step(paths, names, n_steps, servo_parameters):
+    """CPU µs of this process per macro step driving the FMUs ``names`` for ``n_steps``."""
+    driven = [(Driven(paths[name], servo_parameters if name == "NpidServo" else {}), EVERY[name])
+              for name in names]
     try:
-        for k in range(n_steps):
-            for name in FMU_NAMES:
-                every = EVERY[name]
-                if (k + 1) % every == 0:
-                    started = time.perf_counter()
-                    driven[name].step((k + 1 - every) * MACRO_STEP_S, every * MACRO_STEP_S)
-                    spent[name] += time.perf_counter() - started
+        started = time.process_time()
+        for k in range(1, n_steps + 1):
+            for fmu, every in driven:
+                if k % every == 0:
+                    fmu.step((k - every) * MACRO_STEP_S, every * MACRO_STEP_S)
+        spent = time.process_time() - started
     finally:
-        for fmu in driven.values():
+        for fmu, _ in driven:
             fmu.free()
-    return {name: 1e6 * seconds / n_steps for name, seconds in spent.items()}
+    return 1e6 * spent / n_steps
+
+
+def one_repeat(paths, n_steps, servo_parameters):
+    """{FMU name: CPU µs per macro step} of each FMU driven alone, and ``"axis"``: all four
+    driven together."""
+    run = {name: cpu_us_per_macro_step(paths, [name], n_steps, servo_parameters)
+           for name in FMU_NAMES}
+    run["axis"] = cpu_us_per_macro_step(paths, FMU_NAMES, n_steps, servo_parameters)
+    return run
+
+
+def interleaved_runs(sets, repeats, n_steps):
+    """{set name: [{FMU name: µs per macro step}, ...]}, one run per set and repeat, the
+    order of the sets rotated from repeat to repeat."""
+    names = list(sets)
+    runs = {name: [] for name in names}
+    for repeat in range(repeats):
+        for name in names[repeat % len(names):] + names[:repeat % len(names)]:
+            paths, servo_parameters = sets[name]
+            runs[name].append(one_repeat(paths, n_steps, servo_parameters))
+    return runs
+
+
+def spread(values):
+    """'median (q1-q3)' of ``values`` (the quartiles are the extremes below four values)."""
+    values = sorted(values)
+    low, high = (statistics.quantiles(values, n=4)[::2] if len(values) >= 4
+                 else (values[0], values[-1]))
+    return f"{statistics.median(values):.2f} ({low:.2f}-{high:.2f})"
+
+
+def print_floor_tables(runs, repeats, n_steps):
+    """Per mode: µs per macro step of each FMU and the axis, and the per-repeat ratios."""
+    print(f"CPU µs per 1 ms macro step, median of {repeats} interleaved repeats of {n_steps} "
+          f"steps (thermal every 100 steps); ratios: median of the per-repeat ratios "
+          f"(quartiles)")
+    for mode in MODES:
+        print(f"\n{mode}: {'FMU':<16}{'native':>8}{'empty':>8}{'feedaxis':>10}"
+              f"{'feedaxis/native':>22}{'feedaxis/empty':>22}")
+        for row in (*FMU_NAMES, "axis"):
+            cost = {kind: statistics.median(run[row] for run in runs[kind])
+                    for kind in ("native", "empty", mode)}
+            over_native = spread(f[row] / n[row] for f, n in zip(runs[mode], runs["native"]))
+            over_empty = spread(f[row] / e[row] for f, e in zip(runs[mode], runs["empty"]))
+            label = "full axis" if row == "axis" else row
+            print(f"{'':<{len(mode) + 2}}{label:<16}{cost['native']:>8.1f}{cost['empty']:>8.1f}"
+                  f"{cost[mode]:>10.1f}{over_native:>22}{over_empty:>22}")
+    servo = [run["NpidServo"] for run in runs["PID"]]
+    for mode in ("NPID", "friction"):
+        ratios = (run["NpidServo"] / pid for run, pid in zip(runs[mode], servo))
+        print(f"NpidServo {mode} / PID: {spread(ratios)}")
+
+
+def print_standalone(runs):
+    """The standalone FMUs against the feedaxis FMUs in the PID mode (same physics, same
+    host): CPU µs per macro step and the per-repeat ratio."""
+    print(f"\nstandalone: {'FMU':<16}{'µs':>8}{'standalone/feedaxis':>26}")
+    for row in (*FMU_NAMES, "axis"):
+        cost = statistics.median(run[row] for run in runs["standalone"])
+        ratio = spread(a[row] / f[row] for a, f in zip(runs["standalone"], runs["PID"]))
+        label = "full axis" if row == "axis" else row
+        print(f"{'':<12}{label:<16}{cost:>8.1f}{ratio:>26}")
+
+
+def first_start_ms(fmu_paths, other, starts):
+    """{label: [(wall ms, CPU ms), ...]} of the first instantiate + initialisation of each
+    FMU (and the servo in NPID) in ``starts`` fresh processes each, after ``other`` was
+    loaded."""
+    cases = [(name, fmu_paths[name], {}) for name in FMU_NAMES]
+    cases.append(("NpidServo NPID", fmu_paths["NpidServo"], MODES["NPID"]))
+    times = {label: [] for label, _, _ in cases}
+    for _, (label, path, parameters) in itertools.product(range(starts), cases):
+        run = subprocess.run([sys.executable, "-c", FIRST_START, str(other), str(path),
+                              repr(parameters)], capture_output=True, text=True, check=True)
+        times[label].append(tuple(1e3 * float(s) for s in run.stdout.split()[-2:]))
+    return times
+
+
+def instructions_per_macro_step(paths, servo_parameters, n_steps):
+    """Instructions per macro step of the axis: callgrind's total for ``n_steps`` and for
+    ``n_steps // 5`` steps, the difference per step (hash seed fixed: the runs repeat)."""
+    totals = []
+    for steps in (n_steps // 5, n_steps):
+        run = subprocess.run(
+            ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable,
+             __file__, "--drive", repr(({k: str(v) for k, v in paths.items()},
+                                        servo_parameters, steps))],
+            capture_output=True, text=True, check=True, env={**os.environ, "PYTHONHASHSEED": "0"})
+        totals.append(int(run.stderr.split("Collected : ")[1].split()[0]))
+    return (totals[1] - totals[0]) / (n_steps - n_steps // 5)
+
+
+def print_instruction_table(sets, n_steps):
+    """Instructions per macro step of the axis for every set, and the feedaxis ratios."""
+    counts = {name: instructions_per_macro_step(paths, parameters, n_steps)
+              for name, (paths, parameters) in sets.items()}
+    print(f"\ninstructions per 1 ms macro step of the axis (callgrind, {n_steps} steps "
+          f"less {n_steps // 5})")
+    print(f"  native {counts['native']:,.0f}, empty pythonfmu {counts['empty']:,.0f}")
+    for mode in MODES:
+        print(f"  {mode:<9}{counts[mode]:>10,.0f}  feedaxis/native "
+              f"{counts[mode] / counts['native']:.2f}  feedaxis/empty "
+              f"{counts[mode] / counts['empty']:.2f}")
+    if "standalone" in counts:
+        print(f"  {'standalone':<9}{counts['standalone']:>10,.0f}  standalone/feedaxis (PID) "
+              f"{counts['standalone'] / counts['PID']:.2f}")
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=15,
                         help="interleaved repeats (default 15)")
-    parser.add_argument("--steps", type=int, default=2000,
-                        help="macro steps per run (default 2000)")
+    parser.add_argument("--steps", type=int, default=2000, help="macro steps per run (default 2000)")
+    parser.add_argument("--starts", type=int, default=5,
+                        help="fresh processes per FMU for the first-start times (default 5)")
+    parser.add_argument("--fmus", type=Path, help="take the feedaxis FMUs from this folder")
+    parser.add_argument("--instructions", action="store_true",
+                        help="also count instructions per macro step under callgrind")
     parser.add_argument("--standalone", action="store_true",
                         help="also time the standalone FMUs (feedaxis build-fmus --standalone)")
-    args = arguments(parser, argv, repeats=2, steps=200)
+    parser.add_argument("--drive", help=argparse.SUPPRESS)  # one axis run, for callgrind
+    # smoke: two repeats (the ratios' spread), 200 steps (the thermal screw steps twice), one
+    # fresh process per first start; --instructions stays opt-in (valgrind, minutes per set)
+    args = arguments(parser, argv, repeats=2, steps=200, starts=1)
+    if args.drive:
+        paths, servo_parameters, n_steps = ast.literal_eval(args.drive)
+        cpu_us_per_macro_step({k: Path(v) for k, v in paths.items()}, FMU_NAMES, n_steps,
+                              servo_parameters)
+        return 0
     with tempfile.TemporaryDirectory() as folder:
-        sets = {"full": {p.stem: p for p in build_fmus(Path(folder) / "full")}}
-        sets["empty"] = build_empty_fmus(sets["full"], Path(folder))
+        full = ({name: args.fmus / f"{name}.fmu" for name in FMU_NAMES} if args.fmus else
+                {p.stem: p for p in build_fmus(Path(folder) / "full")})
+        sets = {"native": (build_native_fmus(full, folder), {}),
+                "empty": (build_empty_fmus(full, folder), {})}
+        sets.update({mode: (full, parameters) for mode, parameters in MODES.items()})
         if args.standalone:
-            sets["standalone"] = {p.stem: p for p in build_fmus(Path(folder) / "standalone",
-                                                                standalone=True)}
-        runs = {kind: [] for kind in sets}
-        for _ in range(args.repeats):
-            for kind, paths in sets.items():
-                runs[kind].append(time_per_macro_step_us(paths, args.steps))
-    medians = {kind: {name: statistics.median(r[name] for r in results) for name in FMU_NAMES}
-               for kind, results in runs.items()}
-    totals = {kind: statistics.median(sum(r.values()) for r in results)
-              for kind, results in runs.items()}
-    print(f"µs per 1 ms macro step (median of {args.repeats} interleaved runs of "
-          f"{args.steps} steps; thermal every 100 steps)")
-    print(f"{'FMU':<16}{'feedaxis':>10}{'empty':>10}{'ratio':>8}")
-    for name in FMU_NAMES:
-        ratio = medians["full"][name] / medians["empty"][name]
-        print(f"{name:<16}{medians['full'][name]:>10.1f}{medians['empty'][name]:>10.1f}"
-              f"{ratio:>8.2f}")
-    without_servo = {kind: totals[kind] - medians[kind]["NpidServo"] for kind in totals}
-    print(f"{'full axis':<16}{totals['full']:>10.1f}{totals['empty']:>10.1f}"
-          f"{totals['full'] / totals['empty']:>8.2f}")
-    print(f"{'axis w/o servo':<16}{without_servo['full']:>10.1f}{without_servo['empty']:>10.1f}"
-          f"{without_servo['full'] / without_servo['empty']:>8.2f}")
-    print_pair_ratios("full axis ratio", runs, "full", "empty")
-    if "standalone" in runs:
-        print_standalone(runs, medians, totals)
-
-
-def print_pair_ratios(label, runs, kind, reference):
-    """The full axis's ratio ``kind`` / ``reference`` over the interleaved pairs."""
-    pair_ratios = sorted(sum(k.values()) / sum(r.values())
-                         for k, r in zip(runs[kind], runs[reference]))
-    low, _, high = statistics.quantiles(pair_ratios, n=4)
-    print(f"{label} over the {len(pair_ratios)} interleaved pairs: median "
-          f"{statistics.median(pair_ratios):.2f}, quartiles {low:.2f}-{high:.2f}, "
-          f"range {pair_ratios[0]:.2f}-{pair_ratios[-1]:.2f}")
-
-
-def print_standalone(runs, medians, totals):
-    """The standalone FMUs against the feedaxis FMUs (same physics, same host)."""
-    print(f"{'standalone':<16}{'µs':>10}{'/ feedaxis':>12}")
-    for name in FMU_NAMES:
-        print(f"{name:<16}{medians['standalone'][name]:>10.1f}"
-              f"{medians['standalone'][name] / medians['full'][name]:>12.2f}")
-    print(f"{'full axis':<16}{totals['standalone']:>10.1f}"
-          f"{totals['standalone'] / totals['full']:>12.2f}")
-    print_pair_ratios("standalone / feedaxis", runs, "standalone", "full")
+            sets["standalone"] = ({p.stem: p for p in build_fmus(Path(folder) / "standalone",
+                                                                 standalone=True)}, MODES["PID"])
+        runs = interleaved_runs(sets, args.repeats, args.steps)
+        print_floor_tables(runs, args.repeats, args.steps)
+        if "standalone" in runs:
+            print_standalone(runs)
+        if args.instructions:
+            print_instruction_table(sets, args.steps)
+        if args.starts:
+            empty_stepper = sets["empty"][0]["StepperError"]
+            times = first_start_ms(full, empty_stepper, args.starts)
+            print(f"\nfirst instantiate + initialisation, ms (median and range of "
+                  f"{args.starts} fresh processes, after the first import): wall, CPU")
+            for label, values in times.items():
+                wall, cpu = ([v[i] for v in values] for i in (0, 1))
+                print(f"  {label:<16}{statistics.median(wall):>8.1f} ({min(wall):.1f}-"
+                      f"{max(wall):.1f}){statistics.median(cpu):>8.1f} ({min(cpu):.1f}-"
+                      f"{max(cpu):.1f})")
 
 
 if __name__ == "__main__":

@@ -2,12 +2,15 @@
 test that needs something outside pip: it skips with the reason on a developer's machine
 and fails under CI (``CI=true``), whose ``.ci/run`` installs it."""
 import ctypes
+import importlib.machinery
+import importlib.util
 import os
 import shutil
 
 import pytest
 
-from feedaxis.cosim.fmu_cache import cache_folder
+from feedaxis import kernel_build
+from feedaxis.cosim.fmu_cache import cache_folder, cache_root
 from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.fmu_build import FMU_NAMES, build_fmus
 
@@ -58,3 +61,18 @@ def user_fmu_cache(fmu_paths, tmp_path, monkeypatch):
     for path in fmu_paths.values():
         shutil.copy2(path, cache / path.name)
     return cache
+
+
+@pytest.fixture(scope="session")
+def compiled_servo_loop():
+    """physics.servo.run_loop compiled ahead of time as the NpidServo FMU carries it
+    (feedaxis.kernel_build, the user cache); skips without a compiler, fails under CI."""
+    missing = kernel_build.kernel_missing()
+    if missing is not None:
+        unavailable(f"the servo kernel cannot be compiled here: {missing}")
+    path = kernel_build.cached_kernel(cache_root())
+    loader = importlib.machinery.ExtensionFileLoader(kernel_build.MODULE_NAME, str(path))
+    module = importlib.util.module_from_spec(
+        importlib.util.spec_from_loader(kernel_build.MODULE_NAME, loader))
+    loader.exec_module(module)
+    return module.run_loop

@@ -1,4 +1,7 @@
 """The four FMUs as products: valid, faithful to the physics, robust, restorable."""
+import json
+import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -116,6 +119,20 @@ BAD_PARAMETERS = [
     ("NpidServo", {"time_step_s": -1e-4}, "time_step_s"),
     ("NpidServo", {"e_max_mm": 0.0}, "e_max_mm"),
     ("GeometricError", {"support": "floating"}, "support"),
+    # values each in range whose derived quantities are beyond a float's (issue 26)
+    ("NpidServo", {"time_step_s": 1e-300}, "time_step_s"),
+    ("NpidServo", {"plant_stiffness_per_s2": 1e300}, "plant_stiffness_per_s2"),
+    ("NpidServo", {"force_constant_N_per_V": 5e-324}, "force_constant_N_per_V"),
+    ("GeometricError", {"length_m": 1e300}, "length_m"),
+    ("GeometricError", {"diameter_m": 1e-300}, "diameter_m"),
+    ("GeometricError", {"diameter_m": 1e300}, "diameter_m"),
+    ("GeometricError", {"youngs_modulus_Pa": 5e-324}, "youngs_modulus_Pa"),
+    ("StepperError", {"lead_mm": 5e-324}, "lead_mm"),
+    ("ThermalScrew", {"length_m": 1e300}, "length_m"),
+    ("ThermalScrew", {"diameter_m": 1e300}, "diameter_m"),
+    ("ThermalScrew", {"density_kg_m3": 5e-324}, "density_kg_m3"),
+    ("ThermalScrew", {"nut_length_m": 5e-324}, "nut_length_m"),
+    ("ThermalScrew", {"time_step_s": 5e-324}, "time_step_s"),
 ]
 
 
@@ -125,8 +142,128 @@ def test_bad_parameter_gives_fmi_error_with_message(loaded_fmus, capsys, name, p
         run_fmu(loaded_fmus[name], STEP_SIZE_S[name], 3, scripted_inputs(name), parameters,
                 OUTPUTS[name])
     assert failure.value.status == ERROR
-    assert named in capsys.readouterr().out
+    errors = [line for line in capsys.readouterr().out.splitlines() if "[ERROR]" in line]
+    assert len(errors) == 1 and named in errors[0] and "internal error" not in errors[0]
     assert np.isfinite(run_scripted(loaded_fmus[name], name)[OUTPUTS[name][0]]).all()
+
+
+def initialised(loaded, instance_name="refusals"):
+    slave = loaded.instantiate(instance_name)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    return slave
+
+
+def refused(call, capsys):
+    """The one error message of a call that must end in fmi2Error (issue 26: it was
+    fmi2Fatal, which leaves the instance dead)."""
+    with pytest.raises(FMICallException) as failure:
+        call()
+    assert failure.value.status == ERROR
+    errors = [line for line in capsys.readouterr().out.splitlines() if "[ERROR]" in line]
+    assert len(errors) == 1, errors
+    return errors[0]
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_an_unknown_or_mistyped_value_reference_is_an_error_not_fatal(loaded_fmus, capsys, name):
+    """fmi2Get/SetX with a reference that is no variable, or a variable of another type: an
+    error naming the reference; the instance still steps."""
+    loaded = loaded_fmus[name]
+    slave = initialised(loaded)
+    real = loaded.variables[OUTPUTS[name][0]].valueReference
+    try:
+        assert "fmi2GetReal: value reference 9999 is not a variable of this FMU" in refused(
+            lambda: slave.getReal([9999]), capsys)
+        assert "fmi2SetReal: value reference 9999 is not" in refused(
+            lambda: slave.setReal([9999], [1.0]), capsys)
+        assert f"value reference {real} is {OUTPUTS[name][0]}, a Real variable, not an Integer" \
+            in refused(lambda: slave.getInteger([real]), capsys)
+        assert "not a Boolean" in refused(lambda: slave.setBoolean([real], [True]), capsys)
+        assert "fmi2GetString: value reference 9999" in refused(
+            lambda: slave.getString([9999]), capsys)
+        slave.doStep(0.0, STEP_SIZE_S[name])
+        assert np.isfinite(loaded.get_reals(slave, OUTPUTS[name])).all()
+    finally:
+        slave.freeInstance()
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_a_corrupt_state_buffer_is_an_error_and_a_good_one_still_restores(loaded_fmus, capsys,
+                                                                           name):
+    """fmi2DeSerializeFMUstate of an empty, 1-byte, truncated or foreign buffer, one with a
+    wrong type or a changed fixed parameter: an error saying why (was fmi2Fatal); then the
+    instance's own state still restores and the run continues as saved."""
+    loaded = loaded_fmus[name]
+    other = loaded_fmus[FMU_NAMES[(FMU_NAMES.index(name) + 1) % len(FMU_NAMES)]]
+    foreign_slave = initialised(other, "foreign")
+    foreign = foreign_slave.serializeFMUstate(foreign_slave.getFMUstate())
+    foreign_slave.freeInstance()
+    slave = initialised(loaded)
+    try:
+        good = slave.serializeFMUstate(slave.getFMUstate())
+        state = json.loads(good)
+        output = OUTPUTS[name][0]
+        fixed = next(v.name for v in loaded.description.modelVariables
+                     if v.variability == "fixed" and v.type == "Real")
+        corrupt = {
+            b"": "an empty buffer is not a state", b"{": "not a serialised state",
+            b"x": "not a serialised state", good[:len(good) // 2]: "not a serialised state",
+            b"[1, 2]": "a JSON list", b"[" * 100000: "not a serialised state",
+            foreign: "not a state of this FMU",
+            json.dumps({**state, output: "text"}).encode(): f"{output} holds 'text', not a Real",
+            json.dumps({**state, fixed: state[fixed] * 2 + 1}).encode():
+                f"fixed parameter {fixed} is",
+        }
+        for data, reason in corrupt.items():
+            assert reason in refused(lambda: slave.deSerializeFMUstate(data), capsys)
+        h = STEP_SIZE_S[name]
+        slave.doStep(0.0, h)
+        after_one = loaded.get_reals(slave, OUTPUTS[name])
+        slave.setFMUstate(slave.deSerializeFMUstate(good))
+        slave.doStep(0.0, h)
+        assert loaded.get_reals(slave, OUTPUTS[name]) == after_one
+    finally:
+        slave.freeInstance()
+
+
+def test_a_state_whose_model_part_does_not_restore_is_refused_and_rolled_back(loaded_fmus,
+                                                                              capsys):
+    """A well-formed state whose model part the physics cannot take (a temperature field of
+    text): fmi2SetFMUstate is an error naming it, and the instance keeps its own state."""
+    loaded = loaded_fmus["ThermalScrew"]
+    slave = initialised(loaded)
+    try:
+        slave.setReal([loaded.variables["velocity_mm_s"].valueReference], [100.0])
+        slave.doStep(0.0, 10.0)
+        before = loaded.get_reals(slave, OUTPUTS["ThermalScrew"])
+        state = json.loads(slave.serializeFMUstate(slave.getFMUstate()))
+        state["model_state"] = {"rise_K": "text"}
+        bad = slave.deSerializeFMUstate(json.dumps(state).encode())
+        assert "fmi2SetFMUstate refused, the instance is unchanged: its model state does not " \
+            "restore" in refused(lambda: slave.setFMUstate(bad), capsys)
+        assert loaded.get_reals(slave, OUTPUTS["ThermalScrew"]) == before
+    finally:
+        slave.freeInstance()
+
+
+@pytest.mark.parametrize("engagement", [2.0, "text", None])
+def test_a_backlash_engagement_outside_the_play_is_refused(loaded_fmus, capsys, engagement):
+    """GeometricError's model state is the nut's engagement in its play, -1 to +1: a state
+    with another is refused and the instance keeps its own."""
+    loaded = loaded_fmus["GeometricError"]
+    slave = initialised(loaded)
+    try:
+        before = loaded.get_reals(slave, OUTPUTS["GeometricError"])
+        state = json.loads(slave.serializeFMUstate(slave.getFMUstate()))
+        state["model_state"] = {"engagement": engagement}
+        bad = slave.deSerializeFMUstate(json.dumps(state).encode())
+        assert "engagement must be a number from -1 to 1" in refused(
+            lambda: slave.setFMUstate(bad), capsys)
+        assert loaded.get_reals(slave, OUTPUTS["GeometricError"]) == before
+    finally:
+        slave.freeInstance()
 
 
 @pytest.mark.parametrize("name", FMU_NAMES)
@@ -142,11 +279,35 @@ def test_nan_input_gives_fmi_error_with_message(loaded_fmus, capsys, name):
         in capsys.readouterr().out
 
 
+def test_finite_inputs_whose_sum_overflows_still_step(loaded_fmus, capsys):
+    """The exchange checks all inputs by their sum at once: finite inputs summing to inf
+    take the slow path, which finds nothing wrong and steps."""
+    result = run_fmu(loaded_fmus["GeometricError"], 0.01, 2,
+                     {"position_mm": [1e307, 1e307], "velocity_mm_s": [1.79e308, 1.79e308]},
+                     {"sag_enabled": False}, ("error_um",))
+    assert np.isfinite(result["error_um"]).all()
+    assert "[ERROR]" not in capsys.readouterr().out
+
+
 def test_zero_communication_step_is_refused(loaded_fmus, capsys):
     with pytest.raises(FMICallException) as failure:
         run_fmu(loaded_fmus["StepperError"], 0.0, 2, {"position_mm": [0.0, 0.1]}, {}, ("error_um",))
     assert failure.value.status == ERROR
     assert "communication step size must be finite and > 0" in capsys.readouterr().out
+
+
+def build_without(monkeypatch, tmp_path, name, module, check, error, warning):
+    """Build FMU ``name`` with ``module.check`` saying what is missing: ``error`` under CI,
+    else ``warning`` and the FMU's path."""
+    from feedaxis import fmu_build
+
+    monkeypatch.setattr(module, check, lambda: "missing (test)")
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(error, match="CI requires"):
+        fmu_build.build_fmu(name, tmp_path / "ci")
+    monkeypatch.delenv("CI")
+    with pytest.warns(UserWarning, match=warning):
+        return fmu_build.build_fmu(name, tmp_path)
 
 
 def test_without_a_compiler_the_fmus_still_run_in_python_hosts(tmp_path, monkeypatch,
@@ -155,13 +316,8 @@ def test_without_a_compiler_the_fmus_still_run_in_python_hosts(tmp_path, monkeyp
     and the same results in fmpy as the FMU with the host layer; under CI it is an error."""
     from feedaxis import fmu_build
 
-    monkeypatch.setattr(fmu_build, "host_layer_missing", lambda: "no C compiler (test)")
-    monkeypatch.setenv("CI", "true")
-    with pytest.raises(fmu_build.HostLayerUnavailable, match="CI requires"):
-        fmu_build.build_fmu("StepperError", tmp_path / "ci")
-    monkeypatch.delenv("CI")
-    with pytest.warns(UserWarning, match="Python hosts only"):
-        path = fmu_build.build_fmu("StepperError", tmp_path)
+    path = build_without(monkeypatch, tmp_path, "StepperError", fmu_build, "host_layer_missing",
+                         fmu_build.HostLayerUnavailable, "Python hosts only")
     with zipfile.ZipFile(path) as archive:
         assert "binaries/linux64/libpythonfmu-export.so" not in archive.namelist()
     from feedaxis.cosim.fmu_runner import LoadedFmu
@@ -174,3 +330,69 @@ def test_without_a_compiler_the_fmus_still_run_in_python_hosts(tmp_path, monkeyp
             np.testing.assert_array_equal(got[output], expected[output])
     finally:
         python_only.close()
+
+
+# Runs the NPID scenario of one FMU in a fresh process (an FMU's package is imported once per
+# process: a second build of NpidServo in this one would run the first one's code).
+SCENARIO = """
+import json, sys
+sys.path.insert(0, sys.argv[2])
+from feedaxis.cosim.fmu_runner import run_fmu
+from scenarios import N_STEPS, OUTPUTS, PARAMETERS, STEP_SIZE_S, scripted_inputs
+result = run_fmu(sys.argv[1], STEP_SIZE_S["NpidServo"], N_STEPS["NpidServo"],
+                 scripted_inputs("NpidServo"), PARAMETERS["NpidServo"], OUTPUTS["NpidServo"])
+print(json.dumps({name: result[name].tolist() for name in OUTPUTS["NpidServo"]}))
+"""
+
+
+def npid_scenario_in_fresh_process(fmu_path):
+    """(outputs by name, what the FMU logged) of the NPID scenario in a new process."""
+    run = subprocess.run([sys.executable, "-c", SCENARIO, str(fmu_path),
+                          str(Path(__file__).parent)], capture_output=True, text=True, check=True)
+    *log, outputs = run.stdout.strip().splitlines()
+    return {name: np.array(values) for name, values in json.loads(outputs).items()}, log
+
+
+def kernels_in(fmu_path):
+    with zipfile.ZipFile(fmu_path) as archive:
+        return [name for name in archive.namelist() if "/physics/servo_kernel" in name]
+
+
+def test_servo_fmu_steps_the_compiled_loop(fmu_paths, compiled_servo_loop):
+    """NpidServo carries run_loop compiled ahead of time; NPID through it equals the physics
+    stepped by Python (test_fmu_reproduces_physics_called_directly runs NPID in-process)."""
+    assert len(kernels_in(fmu_paths["NpidServo"])) == 1
+    outputs, log = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
+    expected = direct("NpidServo", scripted_inputs("NpidServo"), PARAMETERS["NpidServo"])[1:]
+    np.testing.assert_allclose(outputs["position_mm"], expected[:, 0], rtol=0, atol=1e-12)
+    assert not log
+
+
+def test_without_the_servo_kernel_the_fmu_steps_python_with_the_same_results(
+        tmp_path, monkeypatch, fmu_paths):
+    """Where the kernel cannot be compiled (no numba.pycc, no compiler): a warning at the build,
+    no kernel in the FMU, the Python loop with the same results; under CI it is an error."""
+    from feedaxis import kernel_build
+
+    path = build_without(monkeypatch, tmp_path, "NpidServo", kernel_build, "kernel_missing",
+                         kernel_build.KernelUnavailable, "steps NPID and friction in Python")
+    assert kernels_in(path) == []
+    python_loop, log = npid_scenario_in_fresh_process(path)
+    compiled, _ = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
+    for output in OUTPUTS["NpidServo"]:
+        np.testing.assert_allclose(python_loop[output], compiled[output], rtol=0, atol=1e-12)
+    assert not log
+
+
+def test_a_kernel_that_does_not_load_is_a_warning_and_the_python_loop(tmp_path, fmu_paths):
+    """An FMU moved to a Python whose ABI the kernel does not fit: the import fails, the FMU
+    says so once (logStatusWarning) and steps the Python loop."""
+    broken = tmp_path / "NpidServo.fmu"
+    with zipfile.ZipFile(fmu_paths["NpidServo"]) as source, zipfile.ZipFile(broken, "w") as fmu:
+        for entry in source.infolist():
+            data = source.read(entry)
+            fmu.writestr(entry, b"not a library" if "servo_kernel" in entry.filename else data)
+    outputs, log = npid_scenario_in_fresh_process(broken)
+    expected, _ = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
+    np.testing.assert_allclose(outputs["position_mm"], expected["position_mm"], rtol=0, atol=1e-12)
+    assert len(log) == 1 and "the compiled servo loop does not load" in log[0]

@@ -57,4 +57,8 @@ class GeometricError(AxisSlave):
         return {"engagement": self.engagement}
 
     def restore_model_state(self, state):
-        self.engagement = float(state["engagement"])
+        engagement = state["engagement"]
+        if (isinstance(engagement, bool) or not isinstance(engagement, (int, float))
+                or not -1.0 <= engagement <= 1.0):  # NaN fails the range test too
+            raise ValueError(f"engagement must be a number from -1 to 1, got {engagement!r}")
+        self.engagement = float(engagement)

@@ -74,4 +74,7 @@ class ThermalScrew(AxisSlave):
         return {"rise_K": self.rise_K.tolist()}
 
     def restore_model_state(self, state):
-        self.rise_K = np.array(state["rise_K"], dtype=float)
+        rise_K = np.array(state["rise_K"], dtype=float)
+        if rise_K.shape != (self.model.n_cells,) or not np.isfinite(rise_K).all():
+            raise ValueError(f"rise_K must be {self.model.n_cells} finite temperatures")
+        self.rise_K = rise_K

@@ -13,7 +13,11 @@
  *      a fixed parameter or an output set after initialisation is refused with fmi2Error,
  *      a call made after fmi2Fatal is refused without reaching pythonfmu (whose instance
  *      then holds freed Python objects), an error logged by the slave during a call turns
- *      that call's status into fmi2Error;
+ *      that call's status into fmi2Error; what a host gets wrong is refused with fmi2Error
+ *      before pythonfmu sees it (where pythonfmu would raise, which is fmi2Fatal, or crash):
+ *      a value reference that is no variable of the function's type (references_known), a
+ *      NULL array or state pointer, a serialisation buffer of the wrong size, a state buffer
+ *      the slave cannot restore (state_refused);
  *   3. passes every message to the host's logger with a category (pythonfmu passes NULL),
  *      the instance name in front, never text containing '%' as the format;
  *   4. reuses freed instances through pythonfmu's fmi2Reset (its fmi2Instantiate leaks);
@@ -21,7 +25,9 @@
  *      of them never reach Python, and fmi2DoStep is one Python call (the slave's exchange
  *      function, feedaxis_slave.claim) that takes the inputs and returns the outputs, where
  *      pythonfmu makes three, each building Python lists (about 6 of its 7.5 us per step).
- *      Any other call first hands pending inputs to the slave through pythonfmu.
+ *      Any other call first hands pending inputs to the slave through pythonfmu;
+ *   6. when the host unloads it (or at exit), gives its pooled instances back to pythonfmu
+ *      and unloads pythonfmu's library (unloading): it does not pin itself in the process.
  *
  * Build-time constants (-D): FEEDAXIS_PYTHON_VERSION (major.minor of the C API compiled
  * against); FEEDAXIS_PYTHON (the interpreter to start) and FEEDAXIS_LIBPYTHON (its shared
@@ -104,6 +110,7 @@ static struct {
     long (*as_long)(PyObject *);
     PyObject *(*from_string)(const char *);
     PyObject *(*from_path)(const char *);
+    PyObject *(*bytes_new)(const char *, Py_ssize_t);
     const char *(*as_utf8)(PyObject *);
     void (*decref)(PyObject *);
     PyObject *(*err_occurred)(void);
@@ -130,6 +137,7 @@ static void resolve_python_api(void)
         && FIND(from_double, "PyFloat_FromDouble") && FIND(as_double, "PyFloat_AsDouble")
         && FIND(as_long, "PyLong_AsLong") && FIND(from_string, "PyUnicode_FromString")
         && FIND(from_path, "PyUnicode_DecodeFSDefault") && FIND(as_utf8, "PyUnicode_AsUTF8")
+        && FIND(bytes_new, "PyBytes_FromStringAndSize")
         && FIND(decref, "Py_DecRef") && FIND(err_occurred, "PyErr_Occurred")
         && FIND(err_fetch, "PyErr_Fetch") && FIND(err_clear, "PyErr_Clear")
         && FIND(str, "PyObject_Str") && FIND(is_initialized, "Py_IsInitialized")
@@ -272,7 +280,10 @@ static int find_runtime(const char *resources)
                     "own Python beside it", resources);
     char *slash = strrchr(folder, '/');
     if (slash) *slash = 0; /* the unpacked FMU */
-    snprintf(runtime, sizeof runtime, "%s/binaries/linux64/%s", folder, FEEDAXIS_RUNTIME);
+    int length = snprintf(runtime, sizeof runtime, "%s/binaries/linux64/%s", folder,
+                          FEEDAXIS_RUNTIME);
+    if (length < 0 || (size_t)length >= sizeof runtime)
+        return fail("the resource location %s is too long a path", resources);
     if (access(runtime, R_OK | X_OK) != 0)
         return fail("this standalone FMU's own Python is missing: %s: %s (resource location %s)",
                     runtime, strerror(errno), resources);
@@ -431,6 +442,7 @@ static void release_pythonfmu_state(void)
 }
 
 static void prepare_mirror(void);
+static void unloading(void);
 
 /* Start (or find) Python, then load pythonfmu's library from this library's folder. */
 static void load(const char *resources)
@@ -451,10 +463,9 @@ static void load(const char *resources)
         fail("cannot load %s: %s", path, dlerror());
         return;
     }
-    /* Stay loaded to the end (the exit handler below lives here), then register the handler
-     * after pythonfmu's static destructors, so that it runs before them. */
-    dlopen(self.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
-    atexit(release_pythonfmu_state);
+    /* Registered after pythonfmu's static destructors, so that it runs before them: at exit,
+     * and when the host unloads this library (glibc binds a library's atexit handlers to it). */
+    atexit(unloading);
     prepare_mirror();
 }
 
@@ -565,6 +576,43 @@ static int settable(Guard *g, const fmi2ValueReference vr[], size_t nvr)
     return 1;
 }
 
+/* ---- value references: a host's bad reference is refused here (pythonfmu raises, which
+ * is fmi2Fatal) ------------------------------------------------------------------------ */
+
+static const char *type_name(char type)
+{
+    switch (type) {
+    case 'R': return "a Real";
+    case 'I': return "an Integer";
+    case 'B': return "a Boolean";
+    default: return "a String";
+    }
+}
+
+/* Whether every reference in ``vr`` is a variable of ``type``; refuses the call otherwise. */
+static int references_known(Guard *g, const char *function, char type,
+                            const fmi2ValueReference vr[], size_t nvr, const void *values)
+{
+    if (nvr > 0 && (!vr || !values)) {
+        refuse(g, "%s: NULL value reference or value array for %zu values", function, nvr);
+        return 0;
+    }
+    for (size_t i = 0; i < nvr; ++i) {
+        size_t k = 0;
+        while (k < FEEDAXIS_N_VARS && FEEDAXIS_VARS[k].vr != vr[i]) ++k;
+        if (k == FEEDAXIS_N_VARS) {
+            refuse(g, "%s: value reference %u is not a variable of this FMU", function, vr[i]);
+            return 0;
+        }
+        if (FEEDAXIS_VARS[k].type != type) {
+            refuse(g, "%s: value reference %u is %s, %s variable, not %s", function, vr[i],
+                   FEEDAXIS_VARS[k].name, type_name(FEEDAXIS_VARS[k].type), type_name(type));
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* ---- the mirror: Real inputs and outputs kept here while stepping (item 5) ------------ */
 
 static fmi2ValueReference input_vr[MAX_MIRRORED], output_vr[MAX_MIRRORED];
@@ -579,7 +627,7 @@ static void prepare_mirror(void)
     for (size_t k = 0; k < FEEDAXIS_N_VARS; ++k) {
         const FeedaxisVar *v = &FEEDAXIS_VARS[k];
         if (v->kind != 'u' && v->kind != 'o') continue;
-        if (!v->real) return;
+        if (v->type != 'R') return;
         if (v->kind == 'u') {
             if (n_inputs == MAX_MIRRORED) return;
             input_vr[n_inputs++] = v->vr;
@@ -666,9 +714,8 @@ static void claim_exchange(Guard *g)
     py.gil_release(gil);
 }
 
-static fmi2Status (*real_get_real)(fmi2Component, const fmi2ValueReference *, size_t, fmi2Real *);
-static fmi2Status (*real_set_real)(fmi2Component, const fmi2ValueReference *, size_t,
-                                   const fmi2Real *);
+static fmi2GetRealTYPE *real_get_real;
+static fmi2SetRealTYPE *real_set_real;
 
 /* Read the slave's inputs and outputs into the mirror (through pythonfmu). */
 static int load_mirror(Guard *g)
@@ -780,7 +827,7 @@ static int mirror_get(fmi2Component c, const fmi2ValueReference vr[], size_t nvr
                       fmi2Real value[])
 {
     Guard *g = c;
-    if (!g || !fast(g)) return 0;
+    if (!g || !fast(g) || !vr || !value) return 0; /* a NULL array: refused by the guard */
     for (size_t i = 0; i < nvr; ++i) {
         int k = mirror_index(output_vr, n_outputs, vr[i]);
         if (k >= 0 && g->outputs_current) continue;
@@ -800,7 +847,7 @@ static int mirror_set(fmi2Component c, const fmi2ValueReference vr[], size_t nvr
                       const fmi2Real value[])
 {
     Guard *g = c;
-    if (!g || !fast(g)) return 0;
+    if (!g || !fast(g) || !vr || !value) return 0; /* a NULL array: refused by the guard */
     for (size_t i = 0; i < nvr; ++i)
         if (mirror_index(input_vr, n_inputs, vr[i]) < 0) return 0;
     if (!g->inputs_current && !load_mirror(g)) return 0;
@@ -872,14 +919,42 @@ static void attach(Guard *g, fmi2String name, const fmi2CallbackFunctions *funct
     g->mode = INSTANTIATED;
 }
 
+/* ---- unloading ---------------------------------------------------------------------- */
+
+/* At exit, or when the host unloads this library (fmpy does at every fmi2FreeInstance): the
+ * pooled instances go back to pythonfmu, whose state is released (release_pythonfmu_state)
+ * and library unloaded, so that loading an FMU from fresh folders again and again keeps
+ * nothing of the earlier copies (both libraries stayed mapped: 0.35 MB a copy). In a Python
+ * host at exit Python is already finalised: only pythonfmu's state is released. */
+static void unloading(void)
+{
+    int (*is_initialized)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (is_initialized && is_initialized()) {
+        fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)real("fmi2FreeInstance");
+        pthread_mutex_lock(&pool_lock);
+        while (pooled > 0) {
+            Guard *g = pool[--pooled];
+            drop_exchange(g);
+            if (free_instance) free_instance(g->real);
+            release(g);
+        }
+        pthread_mutex_unlock(&pool_lock);
+        release_pythonfmu_state();
+        dlclose(real_library);
+        real_library = NULL;
+        return;
+    }
+    release_pythonfmu_state();
+}
+
 static Guard *reuse(fmi2String name, fmi2String guid, fmi2String resources,
                     const fmi2CallbackFunctions *functions, fmi2Boolean loggingOn)
 {
     Guard *g = take_pooled(guid, resources);
     if (!g) return NULL;
     attach(g, name, functions, loggingOn);
-    static fmi2Status (*reset)(fmi2Component);
-    if (!reset) reset = (fmi2Status(*)(fmi2Component))real("fmi2Reset");
+    static fmi2ResetTYPE *reset;
+    if (!reset) reset = (fmi2ResetTYPE *)real("fmi2Reset");
     begin(g);
     expect_slave();
     if (finish(g, reset(g->real)) <= fmi2Warning) {
@@ -887,7 +962,7 @@ static Guard *reuse(fmi2String name, fmi2String guid, fmi2String resources,
         return g;
     }
     if (g->mode != DEAD) {
-        void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
+        fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)real("fmi2FreeInstance");
         free_instance(g->real);
     }
     release(g);
@@ -908,9 +983,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, 
     attach(g, instanceName, functions, loggingOn);
     g->guid = strdup(guid);
     g->resources = strdup(resources);
-    fmi2Component (*instantiate)(fmi2String, fmi2Type, fmi2String, fmi2String,
-                                 const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean) =
-        real("fmi2Instantiate");
+    fmi2InstantiateTYPE *instantiate = (fmi2InstantiateTYPE *)real("fmi2Instantiate");
     if (!instantiate) {
         tell_host(g, fmi2Fatal, NULL, *load_error ? load_error : "pythonfmu library incomplete");
     } else if (fmuType != fmi2CoSimulation) {
@@ -939,7 +1012,7 @@ EXPORT void fmi2FreeInstance(fmi2Component c)
     g->host.logger = NULL;  /* the host's callbacks end here */
     drop_exchange(g);
     if (put_pooled(g)) return;
-    void (*free_instance)(fmi2Component) = real("fmi2FreeInstance");
+    fmi2FreeInstanceTYPE *free_instance = (fmi2FreeInstanceTYPE *)real("fmi2FreeInstance");
     free_instance(g->real);
     release(g);
 }
@@ -1014,45 +1087,61 @@ EXPORT fmi2Status fmi2Reset(fmi2Component c)
     return status;
 }
 
-#define GETTER(function, type)                                                                  \
+/* Whether instance ``c`` may take a get of ``vr`` (variables of type ``code``, see
+ * references_known) now; refuses it with a message otherwise. */
+static int may_get(fmi2Component c, const char *function, char code,
+                   const fmi2ValueReference vr[], size_t nvr, const void *value)
+{
+    Guard *g = c;
+    return !g || g->mode == DEAD || references_known(g, function, code, vr, nvr, value);
+}
+
+/* ``code``: the variable type the function takes (references_known). */
+#define GETTER(function, type, code)                                                            \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                type value[])                                                    \
     {                                                                                           \
+        if (!may_get(c, #function, code, vr, nvr, value)) return fmi2Error;                     \
         FORWARD(function, 1, vr, nvr, value);                                                   \
         return status;                                                                          \
     }
 
-GETTER(fmi2GetInteger, fmi2Integer)
-GETTER(fmi2GetBoolean, fmi2Boolean)
-GETTER(fmi2GetString, fmi2String)
+GETTER(fmi2GetInteger, fmi2Integer, 'I')
+GETTER(fmi2GetBoolean, fmi2Boolean, 'B')
+GETTER(fmi2GetString, fmi2String, 'S')
 
-/* Whether instance ``c`` may take a set of ``vr`` now; refuses it with a message otherwise. */
-static int may_set(fmi2Component c, const fmi2ValueReference vr[], size_t nvr)
+/* Whether instance ``c`` may take a set of ``vr`` (variables of type ``code``) now; refuses it
+ * with a message otherwise. */
+static int may_set(fmi2Component c, const char *function, char code,
+                   const fmi2ValueReference vr[], size_t nvr, const void *value)
 {
     Guard *g = c;
-    return !g || g->mode == DEAD || settable(g, vr, nvr);
+    return !g || g->mode == DEAD
+           || (references_known(g, function, code, vr, nvr, value) && settable(g, vr, nvr));
 }
 
-#define SETTER(function, type)                                                                  \
+#define SETTER(function, type, code)                                                            \
     EXPORT fmi2Status function(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,      \
                                const type value[])                                              \
     {                                                                                           \
-        if (!may_set(c, vr, nvr)) return fmi2Error;                                             \
+        if (!may_set(c, #function, code, vr, nvr, value)) return fmi2Error;                     \
         FORWARD(function, 0, vr, nvr, value);                                                   \
         slave_changed(g);                                                                       \
         return status;                                                                          \
     }
 
-SETTER(fmi2SetInteger, fmi2Integer)
-SETTER(fmi2SetBoolean, fmi2Boolean)
-SETTER(fmi2SetString, fmi2String)
+SETTER(fmi2SetInteger, fmi2Integer, 'I')
+SETTER(fmi2SetBoolean, fmi2Boolean, 'B')
+SETTER(fmi2SetString, fmi2String, 'S')
 
 /* Reals: while stepping, the mirror answers the Real inputs and outputs (mirror_get,
- * mirror_set); any other Real goes through the guard as the other types do. */
+ * mirror_set: their references are known Reals); any other Real goes through the guard as
+ * the other types do. */
 EXPORT fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                               fmi2Real value[])
 {
     if (mirror_get(c, vr, nvr, value)) return fmi2OK;
+    if (!may_get(c, "fmi2GetReal", 'R', vr, nvr, value)) return fmi2Error;
     FORWARD(fmi2GetReal, 1, vr, nvr, value);
     return status;
 }
@@ -1061,20 +1150,52 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
                               const fmi2Real value[])
 {
     if (mirror_set(c, vr, nvr, value)) return fmi2OK; /* inputs only: always settable */
-    if (!may_set(c, vr, nvr)) return fmi2Error;
+    if (!may_set(c, "fmi2SetReal", 'R', vr, nvr, value)) return fmi2Error;
     FORWARD(fmi2SetReal, 0, vr, nvr, value);
     slave_changed(g);
     return status;
 }
 
+/* ---- saved states: what a host got wrong is refused here (pythonfmu would dereference a
+ * NULL pointer, copy past a buffer's end, or make a corrupt buffer fmi2Fatal) ------------- */
+
+/* Why the slave cannot restore ``size`` bytes (AxisSlave.state_error, reached through the
+ * exchange function), as a message written to ``why``; 0 when it can. */
+static int state_refused(Guard *g, const fmi2Byte bytes[], size_t size, char *why, size_t n)
+{
+    if (!bytes || size == 0) {
+        snprintf(why, n, "an empty buffer is not a state");
+        return 1;
+    }
+    if (!g->exchange) return 0;  /* no adapter to ask: pythonfmu parses (the adapter never raises) */
+    PyGILState_STATE gil = py.gil_ensure();
+    PyObject *check = py.get_attr(g->exchange, "state_error");
+    PyObject *args = check ? py.tuple_new(1) : NULL;
+    if (args) py.tuple_set(args, 0, py.bytes_new(bytes, (Py_ssize_t)size));
+    PyObject *answer = args ? py.call(check, args) : NULL;
+    int refused = answer != py.none;
+    if (refused) {
+        const char *text = answer && PyUnicode_Check(answer) ? py.as_utf8(answer) : NULL;
+        snprintf(why, n, "%s", text ? text : "the state could not be checked");
+    }
+    if (answer) py.decref(answer);
+    if (args) py.decref(args);
+    if (check) py.decref(check);
+    if (py.err_occurred()) py.err_clear();
+    py.gil_release(gil);
+    return refused;
+}
+
 EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
+    if (c && !state) return refuse(c, "fmi2GetFMUstate: NULL pointer for the state");
     FORWARD(fmi2GetFMUstate, 0, state);
     return status;
 }
 
 EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
+    if (c && !state) return refuse(c, "fmi2SetFMUstate: NULL state");
     FORWARD(fmi2SetFMUstate, 0, state);
     slave_changed(g);
     return status;
@@ -1082,12 +1203,15 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 
 EXPORT fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state)
 {
+    if (c && !state) return refuse(c, "fmi2FreeFMUstate: NULL pointer for the state");
+    if (c && !*state) return fmi2OK;  /* nothing to free */
     FORWARD(fmi2FreeFMUstate, 1, state);
     return status;
 }
 
 EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size)
 {
+    if (c && (!state || !size)) return refuse(c, "fmi2SerializedFMUstateSize: NULL state or size");
     FORWARD(fmi2SerializedFMUstateSize, 0, state, size);
     return status;
 }
@@ -1095,6 +1219,12 @@ EXPORT fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state
 EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[],
                                         size_t size)
 {
+    size_t needed = 0;
+    if (c && (!state || !bytes)) return refuse(c, "fmi2SerializeFMUstate: NULL state or buffer");
+    if (c && ((Guard *)c)->mode != DEAD && fmi2SerializedFMUstateSize(c, state, &needed) == fmi2OK
+        && needed != size)
+        return refuse(c, "fmi2SerializeFMUstate: a buffer of %zu bytes for a state of %zu "
+                         "(fmi2SerializedFMUstateSize)", size, needed);
     FORWARD(fmi2SerializeFMUstate, 0, state, bytes, size);
     return status;
 }
@@ -1102,6 +1232,11 @@ EXPORT fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi
 EXPORT fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size,
                                           fmi2FMUstate *state)
 {
+    char why[400];
+    Guard *guard = c;
+    if (guard && !state) return refuse(guard, "fmi2DeSerializeFMUstate: NULL pointer for the state");
+    if (guard && guard->mode != DEAD && state_refused(guard, bytes, size, why, sizeof why))
+        return refuse(guard, "fmi2DeSerializeFMUstate: %s", why);
     FORWARD(fmi2DeSerializeFMUstate, 0, bytes, size, state);
     return status;
 }

@@ -4,9 +4,10 @@ Building takes seconds per FMU (pythonfmu), so ``feedaxis simulate`` and ``expor
 reuse ``<cache>/feedaxis/fmus-<version>-<hash>/``, where the hash covers every file that
 goes into an FMU (the slave scripts, the adapter, the host layer, the physics package, the
 build scripts): a changed source builds a new folder, never a stale FMU. FMUs built
-without the C host layer (no compiler here) go to a folder of their own, so installing a
-compiler rebuilds; standalone FMUs (``export-ssp --standalone``) too. The folder is built
-in a staging folder and renamed into place, so a crash or Ctrl-C never leaves half a cache.
+without the C host layer (no compiler here) or the compiled servo loop go to a folder of
+their own, so installing a compiler rebuilds; standalone FMUs (``export-ssp --standalone``)
+too. The folder is built in a staging folder and renamed into place, so a crash or Ctrl-C
+never leaves half a cache.
 """
 from __future__ import annotations
 
@@ -20,7 +21,9 @@ from .. import __version__
 from ..errors import InputError
 from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
 from ..output import writing
+from ..toolchain import cache_root  # also imported from here (tests, benchmarks)
 from .fmu_runner import check_fmu_archive
+from ..kernel_build import kernel_missing
 
 
 def source_hash():
@@ -30,24 +33,20 @@ def source_hash():
     files = sorted([*sources.glob("*/*.py"), *sources.glob("common/*.c"),
                     *sources.glob("common/fmi2/*.h"), *(SOURCE_DIR / "physics").glob("*.py"),
                     *(SOURCE_DIR / name for name in ("fmu_build.py", "fmu_standalone.py",
-                                                     "fmu_trace.py"))])
+                                                     "fmu_trace.py", "kernel_build.py"))])
     for path in files:
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()[:12]
 
 
-def cache_root():
-    """``$XDG_CACHE_HOME/feedaxis`` (default ``~/.cache/feedaxis``)."""
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "feedaxis"
-
-
 def cache_folder(root=None, standalone=False):
     """The cache folder of this version's FMUs (``root`` defaults to :func:`cache_root`);
-    standalone FMUs (:mod:`feedaxis.fmu_standalone`) have their own."""
+    standalone FMUs (:mod:`feedaxis.fmu_standalone`) have their own, and so have FMUs
+    without the C host layer or the compiled servo loop."""
     kind = "-standalone" if standalone else "-python-hosts" if host_layer_missing() else ""
-    return Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{kind}"
+    python_loop = "-python-loop" if kernel_missing() else ""
+    return Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{kind}{python_loop}"
 
 
 def cached_fmus(root=None, standalone=False):

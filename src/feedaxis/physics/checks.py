@@ -49,3 +49,18 @@ def require_non_negative(name, value):
     require_finite(name, value)
     if not np.all(np.asarray(value, dtype=float) >= 0):
         raise ParameterError(f"must be >= 0, got {value!r}", name)
+
+
+def require_representable(what, value, positive=True, **parameters):
+    """Raise :class:`ParameterError` naming ``parameters`` unless ``value``, a quantity
+    derived from them (``what``, with its unit), is a finite float (> 0 if ``positive``).
+
+    Parameters each within their own range can still give a quantity beyond a float's:
+    1e300 m squared overflows, 1e-300 m to the fourth power underflows to 0.
+    """
+    value = float(value)
+    if (0.0 < value if positive else -math.inf < value) and value < math.inf:
+        return
+    given = ", ".join(f"{name} = {number!r}" for name, number in parameters.items())
+    kind = "a positive finite number" if positive else "a finite number"
+    raise ParameterError(f"{given} give {what} = {value!r}, not {kind}", next(iter(parameters)))

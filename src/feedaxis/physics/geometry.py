@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .checks import ParameterError, require_positive
-from .scalar import array_module, interp, is_scalar, table, values
+from .checks import ParameterError, require_positive, require_representable
+from .scalar import array_module, interp, table, values
 
 GRAVITY_M_S2 = 9.80665
 SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
@@ -120,12 +120,22 @@ def gravity_sag_table(length_m, diameter_m, density_kg_m3, youngs_modulus_Pa, su
     """
     require_positive("length_m", length_m)
     require_positive("youngs_modulus_Pa", youngs_modulus_Pa)
-    grid_m = np.linspace(0.0, length_m, n_grid)
-    slope = sag_slope(grid_m, length_m, screw_line_load_N_per_m(diameter_m, density_kg_m3),
-                      youngs_modulus_Pa * second_moment_m4(diameter_m), support)
-    excess = np.sqrt(1.0 + slope**2) - 1.0
-    cumulative_excess_m = np.concatenate(
-        ([0.0], np.cumsum(0.5 * (excess[1:] + excess[:-1]) * np.diff(grid_m))))
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # checked below
+        diameter, length = np.float64(diameter_m), np.float64(length_m)  # overflow to inf
+        line_load = float(screw_line_load_N_per_m(diameter, density_kg_m3))
+        require_representable("the weight per length q = ρ·g·πD²/4 (N/m)", line_load,
+                              diameter_m=diameter_m, density_kg_m3=density_kg_m3)
+        rigidity = float(youngs_modulus_Pa * second_moment_m4(diameter))
+        require_representable("the flexural rigidity E·πD⁴/64 (N·m²)", rigidity,
+                              youngs_modulus_Pa=youngs_modulus_Pa, diameter_m=diameter_m)
+        grid_m = np.linspace(0.0, length_m, n_grid)
+        slope = sag_slope(grid_m, length, line_load, rigidity, support)
+        excess = np.sqrt(1.0 + slope**2) - 1.0
+        cumulative_excess_m = np.concatenate(
+            ([0.0], np.cumsum(0.5 * (excess[1:] + excess[:-1]) * np.diff(grid_m))))
+    require_representable("the gravity sag at the far end (m)", cumulative_excess_m[-1], False,
+                          length_m=length_m, diameter_m=diameter_m,
+                          density_kg_m3=density_kg_m3, youngs_modulus_Pa=youngs_modulus_Pa)
     return table(grid_m, -1e6 * cumulative_excess_m)
 
 
@@ -145,7 +155,7 @@ def backlash_error_um(direction, backlash_um):
     backlash_um : float
         Reversal value B (µm).
     """
-    if is_scalar(direction):
+    if isinstance(direction, (float, int)):  # scalar.is_scalar inlined: every FMU step
         return 0.5 * backlash_um * min(1.0, max(-1.0, float(direction)))
     return 0.5 * backlash_um * np.clip(values(direction), -1.0, 1.0)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from .checks import require_positive
+from .checks import require_positive, require_representable
 from .scalar import array_module, values
 
 
@@ -21,7 +21,10 @@ def motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps):
     require_positive("lead_mm", lead_mm)
     require_positive("step_angle_deg", step_angle_deg)
     require_positive("error_period_steps", error_period_steps)
-    return angular_to_axial_um(error_period_steps * step_angle_deg, lead_mm) * 1e-3
+    period_mm = angular_to_axial_um(error_period_steps * step_angle_deg, lead_mm) * 1e-3
+    require_representable("the motor error period (mm)", period_mm, lead_mm=lead_mm,
+                          step_angle_deg=step_angle_deg, error_period_steps=error_period_steps)
+    return period_mm
 
 
 def angular_to_axial_um(angle_deg, lead_mm):
@@ -53,5 +56,6 @@ def motor_error_um(position_mm, period_mm, cos_um, sin_um):
     phase_rad = 2.0 * math.pi * values(position_mm) / period_mm
     error_um = 0.0 * phase_rad
     for k, (a_um, b_um) in enumerate(zip(cos_um, sin_um), start=1):
-        error_um = error_um + a_um * xp.cos(k * phase_rad) + b_um * xp.sin(k * phase_rad)
+        if a_um or b_um:  # a harmonic left at zero adds nothing: skip its cos and sin
+            error_um = error_um + a_um * xp.cos(k * phase_rad) + b_um * xp.sin(k * phase_rad)
     return error_um

@@ -29,12 +29,17 @@ def array_module(*inputs):
 
 def values(value):
     """``value`` as float when scalar, else as a float ndarray."""
-    return float(value) if is_scalar(value) else np.asarray(value, dtype=float)
+    # is_scalar inlined here and in sign: these run several times in every FMU step
+    if isinstance(value, (float, int)):
+        return float(value)
+    return np.asarray(value, dtype=float)
 
 
 def sign(value):
     """-1, 0 or +1 by the sign of ``value`` (element-wise for arrays), as ``np.sign``."""
-    return float(value > 0) - float(value < 0) if is_scalar(value) else np.sign(values(value))
+    if isinstance(value, (float, int)):
+        return float(value > 0) - float(value < 0)
+    return np.sign(values(value))
 
 
 def clip(value, lower, upper):

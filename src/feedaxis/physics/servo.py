@@ -15,11 +15,13 @@ friction of the guideways and the nut, a Coulomb force ``friction_N`` opposing t
 (smoothed linearly over |v| < ``FRICTION_SMOOTHING_MM_S``) plus a viscous force
 ``damping_N_s_per_mm``·v, both from the velocity at the start of the step.
 
-One kernel, :func:`run_loop`, advances the loop for the FMU (:class:`Servo`, plain Python)
-and for the fit (:func:`simulate`, the same function compiled by numba): the two agree to
-rounding. A PID loop without Coulomb friction is linear, so :class:`Servo` advances it over
-a whole communication step with one matrix (:func:`loop_propagator`, built by running the
-kernel on unit vectors): the FMU's cost no longer grows with the steps in the interval.
+One kernel, :func:`run_loop`, advances the loop for the FMU (:class:`Servo`) and for the fit
+(:func:`simulate`, the same function compiled by numba's JIT): they agree to rounding. The
+NpidServo FMU carries it compiled ahead of time (feedaxis.kernel_build; loaded by
+:func:`shipped_loop`), so every controller mode costs the same there. Without that module
+:class:`Servo` runs it in Python, and advances a linear loop (PID without Coulomb friction)
+over a whole communication step with one matrix instead (:func:`loop_propagator`, built by
+running the kernel on unit vectors).
 """
 from __future__ import annotations
 
@@ -30,7 +32,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from .checks import ParameterError, require_finite, require_non_negative, require_positive
+from .checks import (ParameterError, require_finite, require_non_negative, require_positive,
+                     require_representable)
 from .threads import one_blas_thread
 
 FRICTION_SMOOTHING_MM_S = 0.1
@@ -41,6 +44,12 @@ STATE_SIZE = 6  # position_mm, velocity_mm_s, integral_V, previous_error_mm, ref
 MAX_INTERVAL_STEPS = 10**5
 MAX_LOOP_STEPS = 10**8
 MAX_POSITION_MM = 1e5  # a simulated position beyond any axis (data-format.md): the loop ran away
+# The delay line holds delay_s / time_step_s commands: 10^6 (8 MB) covers the tracking
+# fit's widest case, a 20 ms delay at the shortest loop step a case may have (1e-7 s).
+MAX_DELAY_STEPS = 1_000_000
+# A linear loop without the compiled kernel advances by a propagator of (delay steps + 7)²
+# entries, built by as many runs of the loop: beyond this delay it steps the loop instead.
+MAX_PROPAGATOR_DELAY_STEPS = 64
 
 
 @dataclass(frozen=True)
@@ -75,6 +84,11 @@ class ServoParams:
                 require_non_negative(field.name, value)
             elif field.name != "nonlinear":
                 require_positive(field.name, value)
+        if not self.delay_s / self.time_step_s <= MAX_DELAY_STEPS:
+            raise ParameterError(
+                f"delay_s / time_step_s = {self.delay_s} / {self.time_step_s} s is "
+                f"{self.delay_s / self.time_step_s:.3g} internal steps of delay, at most "
+                f"{MAX_DELAY_STEPS} (raise time_step_s or shorten delay_s)", "time_step_s")
 
     @property
     def delay_steps(self):
@@ -92,12 +106,43 @@ def npid_gain(error_mm, ko_per_mm, e_max_mm):
     return math.cosh(ko_per_mm * min(abs(error_mm), e_max_mm))
 
 
-def _zoh(continuous, duration_s):
-    """(Φ, Γ) = (e^{A·τ}, ∫₀^τ e^{A·s} ds · B) for a 3x3 augmented [[A, B], [0, 0]]."""
-    from scipy.linalg import expm  # scipy.linalg takes 0.2 s to import: only when stepping
+def expm(matrix):
+    """e^M of a small square matrix by scaling and squaring its Taylor series.
 
-    augmented = expm(continuous * duration_s)
-    return augmented[:2, :2], augmented[:2, 2]
+    e^M = (e^{M/2^s})^{2^s} with s chosen so that ||M/2^s||_1 <= 1, where the series is
+    summed until a term no longer changes the sum (Moler & Van Loan, "Nineteen dubious ways
+    to compute the exponential of a matrix, twenty-five years later", SIAM Review 45 (2003),
+    methods 1 and 3). The servo needs one 3x3 exponential per loop discretisation; this
+    keeps scipy.linalg (0.2 s to import) off the FMU's initialisation. Agrees with
+    scipy.linalg.expm to rounding (tests/test_physics.py).
+    """
+    matrix = np.asarray(matrix, dtype=float)
+    norm = np.abs(matrix).sum(axis=0).max()
+    squarings = max(0, math.ceil(math.log2(norm))) if norm > 1.0 else 0
+    scaled = matrix / 2.0**squarings
+    result = term = np.eye(len(matrix))
+    for k in range(1, 40):
+        term = term @ scaled / k
+        total = result + term
+        if np.array_equal(total, result):
+            break
+        result = total
+    for _ in range(squarings):
+        result = result @ result
+    return result
+
+
+def _zoh(plant, duration_s):
+    """(Φ, Γ) = (e^{A·τ}, ∫₀^τ e^{A·s} ds · B) from e^{M·τ}, M = [[A, e₂], [0, 0]] (Van Loan).
+
+    ``plant`` is (a0, a1, b) of ẋ = [[0, 1], [-a0, -a1]] x + [0, b] u. The input column
+    is the unit e₂ and Γ is scaled by b afterwards (Γ is linear in B): b·τ would otherwise
+    set the number of squarings (7.8 at the defaults) and cost accuracy in Φ.
+    """
+    stiffness, damping, gain = plant
+    augmented = expm(np.array([[0.0, 1.0, 0.0], [-stiffness, -damping, 1.0], [0.0, 0.0, 0.0]])
+                     * duration_s)
+    return augmented[:2, :2], gain * augmented[:2, 2]
 
 
 def discrete_plant(params):
@@ -116,26 +161,39 @@ def discrete_plant(params):
     h = params.time_step_s
     fraction = params.delay_s / h - params.delay_steps
     fraction = min(max(fraction, 0.0), 1.0)
-    continuous = np.array([[0.0, 1.0, 0.0],
-                           [-params.plant_stiffness_per_s2, -params.plant_damping_per_s,
-                            params.plant_gain_mm_per_Vs2],
-                           [0.0, 0.0, 0.0]])
-    transition, late = _zoh(continuous, (1.0 - fraction) * h)
+    plant = (params.plant_stiffness_per_s2, params.plant_damping_per_s,
+             params.plant_gain_mm_per_Vs2)
+    transition, late = _zoh(plant, (1.0 - fraction) * h)
     if fraction == 0.0:
         return transition, late, np.zeros(2)
-    transition_early, early = _zoh(continuous, fraction * h)
+    transition_early, early = _zoh(plant, fraction * h)
     return transition @ transition_early, late, transition @ early
 
 
 def loop_coefficients(params):
     """The flat coefficient vector :func:`run_loop` reads (plant, controller, friction)."""
-    transition, late, early = discrete_plant(params)
+    with np.errstate(over="ignore", invalid="ignore"):  # checked below
+        transition, late, early = discrete_plant(params)
+    require_representable("a discrete plant (e^{A·h} and its input columns)",
+                          np.abs(np.concatenate((transition.ravel(), late, early))).sum(), False,
+                          plant_gain_mm_per_Vs2=params.plant_gain_mm_per_Vs2,
+                          plant_damping_per_s=params.plant_damping_per_s,
+                          plant_stiffness_per_s2=params.plant_stiffness_per_s2,
+                          time_step_s=params.time_step_s)
     volts_per_N = 1.0 / params.force_constant_N_per_V
+    require_representable("the command per newton 1 / force_constant (V/N)", volts_per_N,
+                          force_constant_N_per_V=params.force_constant_N_per_V)
+    friction_V = params.friction_N * volts_per_N
+    damping_V_s_per_mm = params.damping_N_s_per_mm * volts_per_N
+    require_representable("friction forces as commands (V, V·s/mm)",
+                          friction_V + damping_V_s_per_mm, False,
+                          force_constant_N_per_V=params.force_constant_N_per_V,
+                          friction_N=params.friction_N,
+                          damping_N_s_per_mm=params.damping_N_s_per_mm)
     return np.array([*transition.ravel(), *late, *early, params.kp_V_per_mm,
                      params.ki_V_per_mm_s, params.kd_V_s_per_mm, params.ko_per_mm,
-                     params.e_max_mm, float(params.nonlinear), params.friction_N * volts_per_N,
-                     params.damping_N_s_per_mm * volts_per_N, params.time_step_s,
-                     float(params.delay_steps)])
+                     params.e_max_mm, float(params.nonlinear), friction_V,
+                     damping_V_s_per_mm, params.time_step_s, float(params.delay_steps)])
 
 
 def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, positions_mm):
@@ -218,6 +276,17 @@ def loop_propagator(coefficients, n_steps, buffer_size):
     return np.array(columns).T
 
 
+def numba_ready_loop(numba):
+    """:func:`run_loop`'s code with its call of :func:`npid_gain` bound to a numba-compiled
+    :func:`npid_gain` (numba compiles calls to compiled functions only; cached on disk also
+    where site-packages is read-only: :func:`.numba_cache.cached_njit`): what numba's JIT
+    (:func:`compiled_loop`) and its ahead-of-time compiler (feedaxis.kernel_build) take."""
+    from .numba_cache import cached_njit
+
+    namespace = {**run_loop.__globals__, "npid_gain": cached_njit(numba, npid_gain)}
+    return types.FunctionType(run_loop.__code__, namespace, run_loop.__name__)
+
+
 @lru_cache(maxsize=1)
 def compiled_loop():
     """:func:`run_loop` compiled by numba (cached on disk, also where site-packages is
@@ -231,16 +300,34 @@ def compiled_loop():
 
     from .numba_cache import cached_njit
 
-    namespace = {**run_loop.__globals__, "npid_gain": cached_njit(numba, npid_gain)}
-    loop = types.FunctionType(run_loop.__code__, namespace, run_loop.__name__)
-    return cached_njit(numba, loop, nogil=True)
+    return cached_njit(numba, numba_ready_loop(numba), nogil=True)
+
+
+@lru_cache(maxsize=1)
+def shipped_loop():
+    """(:func:`run_loop` compiled ahead of time, or None; why it did not load, or None).
+
+    The NpidServo FMU carries the compiled module beside this file (feedaxis.kernel_build);
+    feedaxis's own copy of the physics has none (None, None). A module that is there but
+    does not load (another Python or numpy than the one that built it) gives its reason.
+    """
+    try:
+        from .servo_kernel import run_loop as compiled
+    except ModuleNotFoundError as error:
+        if error.name == f"{__package__}.servo_kernel":
+            return None, None
+        return None, str(error)
+    except ImportError as error:
+        return None, str(error)
+    return compiled, None
 
 
 def whole_steps(pending_s, duration_s, time_step_s):
     """Internal steps that fit in ``pending_s + duration_s``, and the remainder carried (s)."""
     elapsed_steps = (pending_s + duration_s) / time_step_s
-    n_steps = int(math.floor(elapsed_steps + 1e-9))
-    return n_steps, max(0.0, (elapsed_steps - n_steps) * time_step_s)
+    n_steps = int(elapsed_steps + 1e-9)  # floor: elapsed_steps >= 0
+    remainder_s = (elapsed_steps - n_steps) * time_step_s
+    return n_steps, remainder_s if remainder_s > 0.0 else 0.0
 
 
 def loop_budget_problem(time_s, time_step_s):
@@ -329,23 +416,41 @@ class Servo:
     communication step (first-order hold), so a sampled reference is followed smoothly;
     this delays the reference by one communication step and leaves the loop's tracking
     error unchanged.
+
+    ``loop`` is the implementation of :func:`run_loop` to step: by default the compiled one
+    an FMU carries (:func:`shipped_loop`), which then runs every controller mode; without
+    it, :func:`run_loop` itself, and a linear loop (PID, no Coulomb friction) advances by
+    one propagator matrix per communication step instead (:func:`loop_propagator`).
     """
 
-    def __init__(self, params: ServoParams, initial_reference_mm=0.0):
+    def __init__(self, params: ServoParams, initial_reference_mm=0.0, loop=None):
         self.params = params
-        self._coefficients = loop_coefficients(params).tolist()
-        self._propagators = {} if is_linear(self._coefficients) else None
+        self._compiled = loop if loop is not None else shipped_loop()[0]
+        coefficients = loop_coefficients(params)
+        if self._compiled is None:
+            self._coefficients = coefficients.tolist()
+            linear = (is_linear(self._coefficients)
+                      and params.delay_steps <= MAX_PROPAGATOR_DELAY_STEPS)
+        else:
+            self._coefficients = coefficients
+            # one call's samples: steps, reference, force (written through views), position
+            self._samples = (np.zeros(1, dtype=np.int64), np.zeros(1), np.zeros(1))
+            self._inputs = tuple(memoryview(array) for array in self._samples)
+            self._positions = np.zeros(1)
+            linear = False
+        self._propagators = {} if linear else None
         self._size = 5 + params.buffer_size
         self._vector = self._spare = self._spare_view = None
         self.restore({"loop": [float(initial_reference_mm), 0.0, 0.0, 0.0,
                                float(initial_reference_mm), 0.0],
                       "commands_V": [0.0] * params.buffer_size, "pending_s": 0.0})
 
-    # The loop state is held in one of two forms: lists for run_loop (self._state with the
-    # head, self._buffer), or one float64 vector in the propagator's order for the linear
-    # path (z, reference_mm, force_V; delay line read from its head). Both keep position,
-    # velocity, integral, previous error and reference at indices 0-4; self._loop is the
-    # form in use (the list, or a memoryview of the vector: both index to Python floats).
+    # The loop state is held in one of two forms: run_loop's (self._state with the head,
+    # self._buffer; lists for the Python loop, float64 arrays for the compiled one), or one
+    # float64 vector in the propagator's order for the linear path (z, reference_mm,
+    # force_V; delay line read from its head). Both keep position, velocity, integral,
+    # previous error and reference at indices 0-4; self._loop is the form in use (the list,
+    # or a memoryview of the array or vector: all index to Python floats).
 
     @property
     def position_mm(self):
@@ -362,20 +467,34 @@ class Servo:
     @property
     def tracking_error_mm(self):
         """Reference minus position at the end of the last step (mm)."""
-        return self.reference_mm - self.position_mm
+        return self.outputs()[2]
+
+    def outputs(self):
+        """(position_mm, velocity_mm_s, tracking_error_mm) at the end of the last step."""
+        loop = self._loop
+        return loop[0], loop[1], loop[4] - loop[0]
 
     def state(self):
         """All internal state as plain Python values (for FMU get/set state)."""
-        self._to_lists()
-        return {"loop": list(self._state), "commands_V": list(self._buffer),
-                "pending_s": self.pending_s}
+        self._to_loop_form()
+        return {"loop": [float(v) for v in self._state],
+                "commands_V": [float(v) for v in self._buffer], "pending_s": self.pending_s}
 
     def restore(self, state):
-        """Restore what :meth:`state` returned."""
-        self._state = [float(v) for v in state["loop"]]
-        self._buffer = [float(v) for v in state["commands_V"]]
-        self._loop, self._vector = self._state, None
-        self.pending_s = float(state["pending_s"])
+        """Restore what :meth:`state` returned (ValueError if it is not one of this loop's:
+        the compiled loop indexes the delay line by the stored head unchecked)."""
+        loop = [float(v) for v in state["loop"]]
+        commands_V = [float(v) for v in state["commands_V"]]
+        pending_s = float(state["pending_s"])
+        if (len(loop) != STATE_SIZE or len(commands_V) != self.params.buffer_size
+                or not (0 <= loop[5] < self.params.buffer_size and loop[5] == int(loop[5]))
+                or not math.isfinite(sum(loop) + sum(commands_V))
+                or not 0.0 <= pending_s < self.params.time_step_s):
+            raise ValueError(f"not a state of this loop: {STATE_SIZE} finite loop values with "
+                             f"a delay-line head, {self.params.buffer_size} finite commands and "
+                             f"0 <= pending_s < time_step_s are needed")
+        self._set_loop_form(loop, commands_V)
+        self.pending_s = pending_s
 
     def advance(self, duration_s, reference_mm, disturbance_N=0.0):
         """Run the loop for ``duration_s`` toward ``reference_mm`` under ``disturbance_N``.
@@ -390,20 +509,35 @@ class Servo:
         if n_steps == 0:  # run_loop leaves the state as it is
             return self.position_mm
         force_V = disturbance_N / self.params.force_constant_N_per_V
-        if self._propagators is None:
-            self._to_lists()
+        if self._compiled is not None:
+            steps, references, forces = self._inputs
+            steps[0], references[0], forces[0] = n_steps, reference_mm, force_V
+            self._compiled(*self._kernel_arguments)
+        elif self._propagators is None:
+            self._to_loop_form()
             run_loop(self._coefficients, [n_steps], [float(reference_mm)], [force_V],
                      self._state, self._buffer, [0.0])
         else:
             self._propagate(n_steps, float(reference_mm), force_V)
         return self.position_mm
 
-    def _to_lists(self):
-        """Put the state in list form (delay line re-headed) if it is a vector."""
+    def _set_loop_form(self, state, buffer):
+        """Hold ``state`` and ``buffer`` (lists) in run_loop's form."""
+        if self._compiled is None:
+            self._state, self._buffer = state, buffer
+            self._loop = self._state
+        else:
+            self._state, self._buffer = np.array(state), np.array(buffer)
+            self._loop = memoryview(self._state)
+            self._kernel_arguments = (self._coefficients, *self._samples, self._state,
+                                      self._buffer, self._positions)
+        self._vector = None
+
+    def _to_loop_form(self):
+        """Put the state in run_loop's form (delay line re-headed) if it is a vector."""
         if self._vector is not None:
             values = self._vector[:self._size].tolist()
-            self._state, self._buffer = values[:5] + [0.0], values[5:]
-            self._loop, self._vector = self._state, None
+            self._set_loop_form(values[:5] + [0.0], values[5:])
 
     def _to_vector(self):
         """Put the state in vector form (propagator order) if it is in lists."""

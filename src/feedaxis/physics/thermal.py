@@ -24,7 +24,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .checks import ParameterError, require_finite, require_non_negative, require_positive
+from .checks import (ParameterError, require_finite, require_non_negative, require_positive,
+                     require_representable)
 from .mounting import axis_sign, screw_coordinate_m
 from .scalar import is_scalar, values
 from .threads import one_blas_thread
@@ -40,6 +41,14 @@ class CellTerms(NamedTuple):
     neighbours_W_K: np.ndarray  # conduction to the neighbours per cell (one at either end)
     exposed_area_m2: np.ndarray  # lateral surface not under the bearing (Eq. 7)
     bearing_share: np.ndarray  # dx/L_B on the bearing's cells: the share of Q_B each takes (Eq. 10)
+
+
+# Cells of the finite-difference screw: a 100 m screw (the longest a case may describe) in
+# 1 cm cells; the identification's closed form decomposes an N x N matrix.
+MAX_CELLS = 10_000
+# Sub-steps of one advance(): taken as a matrix power beyond EULER_LOOP_LIMIT, so the cost
+# grows with their logarithm; more would be a time step no physics needs.
+MAX_SUB_STEPS = 1e12
 
 
 @dataclass(frozen=True)
@@ -76,9 +85,21 @@ class ThermalScrewParams:
                 require_positive(field.name, value)
         for name in ("k1_W_m2K_per_mm_min", "k2_W_m2K", "k3_W_per_mm_min", "k4_W_per_mm_min"):
             require_non_negative(name, getattr(self, name))
-        if self.n_cells < 2:
-            raise ParameterError(f"length_m / cell_length_m must give at least 2 cells, "
+        if not 2 <= self.length_m / self.cell_length_m + 0.5 < MAX_CELLS + 1:
+            raise ParameterError(f"length_m / cell_length_m must give 2 to {MAX_CELLS} cells, "
                                  f"got {self.length_m} / {self.cell_length_m}", "length_m")
+        cell = {"cell_length_m": self.cell_length_m, "diameter_m": self.diameter_m}
+        require_representable("the cross-section πD²/4 (m²)", self.area_m2,
+                              diameter_m=self.diameter_m)
+        require_representable("a cell's heat capacity ρ·c·A·dx (J/K)", self.cell_heat_capacity_J_K,
+                              density_kg_m3=self.density_kg_m3,
+                              specific_heat_J_kgK=self.specific_heat_J_kgK, **cell)
+        require_representable("a cell's conductance λ·A/dx (W/K)",
+                              self.conductivity_W_mK * self.area_m2 / self.cell_length_m,
+                              conductivity_W_mK=self.conductivity_W_mK, **cell)
+        for name in ("bearing_length_m", "nut_length_m"):  # heat sources per cell (Eq. 18-19)
+            require_representable(f"dx / {name[:-2]}", self.cell_length_m / getattr(self, name),
+                                  **{name: getattr(self, name)}, cell_length_m=self.cell_length_m)
 
     @property
     def n_cells(self):
@@ -87,8 +108,8 @@ class ThermalScrewParams:
 
     @property
     def area_m2(self):
-        """Cross-section A_s = πD²/4 (Eq. 5)."""
-        return np.pi * self.diameter_m**2 / 4.0
+        """Cross-section A_s = πD²/4 (Eq. 5); inf, not OverflowError, beyond a float."""
+        return np.pi * self.diameter_m * self.diameter_m / 4.0
 
     @property
     def cell_heat_capacity_J_K(self):
@@ -272,7 +293,13 @@ def advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
     nut_fraction = nut_cells(params, screw_coordinate_m(nut_position_mm, params.fixed_end_mm))
     loss_W_K = convective_loss_W_K(params, feed_mm_min, nut_fraction)
     sources_K_s = source_rate(params, feed_mm_min, nut_fraction)
-    n_sub = max(1, math.ceil(duration_s / stable_time_step_s(params, loss_W_K) - 1e-9))
+    sub_step_s = stable_time_step_s(params, loss_W_K)
+    if not duration_s / sub_step_s <= MAX_SUB_STEPS:
+        raise ParameterError(f"a step of {duration_s} s needs {duration_s / sub_step_s:.3g} "
+                             f"sub-steps of {sub_step_s:.3g} s (time_step_s or the stability "
+                             f"limit C / (loss + conduction)), at most {MAX_SUB_STEPS:.0e}",
+                             "time_step_s")
+    n_sub = max(1, math.ceil(duration_s / sub_step_s - 1e-9))
     dt_s = duration_s / n_sub
     if n_sub > EULER_LOOP_LIMIT:
         return _euler_steps_by_powers(rate_matrix(params, feed_mm_min, nut_fraction),

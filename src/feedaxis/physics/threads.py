@@ -12,18 +12,26 @@ from __future__ import annotations
 import functools
 import threading
 
-try:
-    from threadpoolctl import threadpool_limits
-except ImportError:  # an FMU's copy of the physics: nothing to limit
-    threadpool_limits = None
-
 _pinned = threading.local()
+
+
+@functools.lru_cache(maxsize=1)
+def _threadpool_limits():
+    """threadpoolctl's ``threadpool_limits``, imported at the first call (importing it takes
+    about 90 ms, which an FMU's start would pay), or None where it is missing (an FMU's
+    copy of the physics on a host without it: nothing to limit)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return None
+    return threadpool_limits
 
 
 def one_blas_thread(function):
     """Decorate ``function`` to run with BLAS on one thread (once per outermost call)."""
     @functools.wraps(function)
     def pinned(*args, **kwargs):
+        threadpool_limits = _threadpool_limits()
         if threadpool_limits is None or getattr(_pinned, "active", False):
             return function(*args, **kwargs)
         _pinned.active = True
