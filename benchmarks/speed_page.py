@@ -38,16 +38,22 @@ def scripts():
 
 
 def described(path):
-    """(title, description) from the script's docstring."""
+    """(title, description) from the script's docstring: its first paragraph, the rest."""
     doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or path.stem
-    title, _, rest = doc.partition("\n")
-    return title.strip().rstrip("."), rest.strip()
+    title, _, rest = doc.partition("\n\n")
+    return " ".join(title.split()).rstrip("."), rest.strip()
 
 
-def section(path, output):
+def section(path, measured):
+    """The page's section of ``path``: its title and description from the script as it is
+    now, then ``measured`` (the command, the machine and what it printed)."""
     title, description = described(path)
-    return (f"## {title}\n\n{description}\n\n`python benchmarks/{path.name}` on {machine()}:"
-            f"\n\n```\n{output.rstrip()}\n```\n")
+    return f"## {title}\n\n{description}\n\n{measured}"
+
+
+def measured_now(path, output):
+    return (f"`python benchmarks/{path.name}` on {machine()}:\n\n```\n{output.rstrip()}\n"
+            "```\n")
 
 
 def run(path):
@@ -61,15 +67,16 @@ def run(path):
     return done.stdout
 
 
-def existing_sections(page):
-    """{script name: section text} of a page this script wrote before."""
+def existing_measurements(page):
+    """{script name: what it measured} (the command line with the machine, and the output)
+    of a page this script wrote before."""
     if not page.exists():
         return {}
     found = {}
     for block in re.split(r"\n(?=## )", page.read_text(encoding="utf-8")):
-        match = re.search(r"`python benchmarks/(\S+\.py)`", block)
+        match = re.search(r"^`python benchmarks/(\S+\.py)` on .*", block, flags=re.M | re.S)
         if match and block.startswith("## "):
-            found[match.group(1)] = block.rstrip() + "\n"
+            found[match.group(1)] = match.group(0).rstrip() + "\n"
     return found
 
 
@@ -80,12 +87,13 @@ def main(argv=None):
     parser.add_argument("--out", default=str(ROOT / "docs" / "speed.md"))
     args = parser.parse_args(argv)
     page = Path(args.out)
-    sections = existing_sections(page)
+    measured = existing_measurements(page)
     for path in scripts():
         if args.only is None or path.stem in args.only:
             print(f"running {path.name} ...", file=sys.stderr, flush=True)
-            sections[path.name] = section(path, run(path))
-    body = "\n".join(sections[path.name] for path in scripts() if path.name in sections)
+            measured[path.name] = measured_now(path, run(path))
+    body = "\n".join(section(path, measured[path.name]) for path in scripts()
+                     if path.name in measured)
     page.write_text(f"{HEADER}\n{body}", encoding="utf-8")
     print(f"written: {page}")
 
