@@ -52,7 +52,7 @@ def section(path, measured):
 
 
 def measured_now(path, output):
-    return (f"`python benchmarks/{path.name}` on {machine()}:\n\n```\n{output.rstrip()}\n"
+    return (f"`python benchmarks/{path.name}` on {machine()}:\n\n```text\n{output.rstrip()}\n"
             "```\n")
 
 

@@ -6,6 +6,7 @@ import importlib.machinery
 import importlib.util
 import os
 import shutil
+import signal
 
 import pytest
 
@@ -34,6 +35,16 @@ def require_system_library(soname):
     except OSError as error:
         unavailable(f"the system library {soname} cannot be loaded ({error}); install: "
                     f"{SYSTEM_LIBRARIES.get(soname, 'the package providing it')}")
+
+
+@pytest.fixture(autouse=True)
+def python_sigint_handler():
+    """Every test starts with Python's own Ctrl-C handler and leaves the handler as it found
+    it: a test of the console script (which ignores SIGINT on its way out) must not change
+    what a later test in the same process (an xdist worker) sees when it raises SIGINT."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
 
 
 @pytest.fixture(scope="session")
