@@ -2,6 +2,8 @@
 imports included), the floors of the import graph stay layered (run this file as a
 script to print them), and no merge left its conflict markers in a file."""
 import ast
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -133,6 +135,17 @@ def test_no_conflict_markers_in_the_project():
                for number, line in enumerate(path.read_text().splitlines(), 1)
                if line.startswith(("<<<<<<< ", ">>>>>>> "))]
     assert not marked, marked
+
+
+def test_scipy_stats_and_signal_load_when_first_used():
+    """Start-up (issue 21): importing the command line and the analysis does not import
+    scipy.stats or scipy.signal (about 0.5 s together); a test that needs them loads them."""
+    code = ("import sys, feedaxis.cli, feedaxis.analysis, feedaxis.fit, feedaxis.diagnose, "
+            "feedaxis.measurement.tracking, feedaxis.comptable.verify; "
+            "print(sorted(m for m in ('scipy.stats', 'scipy.signal') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
+    assert done.stdout.strip() == "[]", done.stdout + done.stderr
 
 if __name__ == "__main__":
     by_floor = {}

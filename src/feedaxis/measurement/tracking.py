@@ -21,7 +21,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import fftconvolve
+import scipy
 
 from ..case import AXIS_FILE, CaseError
 from ..fmu_map import servo_to_fmu
@@ -180,7 +180,7 @@ class Tracking(Measurement):
         def response(a, b):
             gated = np.zeros_like(forces)
             gated[a:b + 1] = forces[a:b + 1]
-            return np.column_stack([fftconvolve(column, impulse_um)[:size]
+            return np.column_stack([scipy.signal.fftconvolve(column, impulse_um)[:size]
                                     for column in gated.T])
 
         def kick(sample):

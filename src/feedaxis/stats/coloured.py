@@ -48,10 +48,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy import stats
 from scipy.linalg import solve_toeplitz
-from scipy.stats import chi2
 from scipy.ndimage import median_filter
 from scipy.optimize import minimize_scalar
 
@@ -115,7 +114,7 @@ def _robust_noise_autocovariance(centred, max_order):
     if len(segments) >= MIN_ROBUST_SEGMENTS:
         level = np.quantile(power, NOISE_QUANTILE, axis=0)
         factor = np.full(level.size, -np.log1p(-NOISE_QUANTILE))
-        factor[[0, -1] if length % 2 == 0 else [0]] = stats.chi2.ppf(NOISE_QUANTILE, 1)
+        factor[[0, -1] if length % 2 == 0 else [0]] = scipy.stats.chi2.ppf(NOISE_QUANTILE, 1)
         level = level / factor
     else:
         level = power.mean(axis=0)
@@ -269,7 +268,7 @@ def ljung_box_p_value(residual, lags, groups=None):
             continue
         rho = float(np.mean((residual[lag:] * residual[:-lag])[pairs])) / variance
         statistic += (n * (n + 2) / (n - lag) if groups is None else count) * rho ** 2
-    return float(chi2.sf(statistic, lags))
+    return float(scipy.stats.chi2.sf(statistic, lags))
 
 
 def whitened(residual, robust=False):
@@ -305,7 +304,7 @@ def spikes(residual, alpha, floor=0.0):
     found = []
     if n < 8:
         return np.zeros(0, dtype=int)
-    limit = stats.norm.isf(alpha / (2 * n))
+    limit = scipy.stats.norm.isf(alpha / (2 * n))
     judged = np.zeros(n, dtype=bool)
     for _ in range(n // 10):
         departure = _cubic_departure(values)

@@ -24,7 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+import scipy
 from scipy.optimize import least_squares
 
 from ..iso230 import target_groups
@@ -134,7 +134,7 @@ def serial_correlation_test(residual_um):
     centred = residual - residual.mean()
     ratio = float(np.sum(np.diff(residual) ** 2) / max(centred @ centred, 1e-300))
     z = (2.0 - ratio) / (2.0 / np.sqrt(residual.size))
-    return Test(float(z), (1, residual.size), float(stats.norm.sf(z)),
+    return Test(float(z), (1, residual.size), float(scipy.stats.norm.sf(z)),
                 "von Neumann ratio test in the order taken (no replicates)", "z")
 
 
@@ -150,7 +150,7 @@ def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
     flagged = np.zeros(n, dtype=bool)
     if n < 8:
         return np.flatnonzero(flagged)
-    limit = stats.norm.isf(alpha / (2 * n))
+    limit = scipy.stats.norm.isf(alpha / (2 * n))
     for _ in range(MAX_OUTLIER_PASSES):
         if layout.has_repeats:
             deviation = _against_group(layout, residual_um, ~flagged)

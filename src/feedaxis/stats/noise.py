@@ -32,7 +32,7 @@ decided by always name the same model.
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+import scipy
 
 from . import judge
 from .coloured import (Autoregression, autocorrelation_time, least_squares_autoregression,
@@ -52,7 +52,7 @@ def _f_test(rss_before, rss_after, extra, denominator, dof, name):
     extra = max(int(extra), 1)
     dof = max(dof, 1)
     statistic = max(rss_before - rss_after, 0.0) / extra / max(denominator, 1e-300)
-    return Test(float(statistic), (extra, dof), float(stats.f.sf(statistic, extra, dof)), name)
+    return Test(float(statistic), (extra, dof), float(scipy.stats.f.sf(statistic, extra, dof)), name)
 
 
 class PureError:
@@ -138,7 +138,7 @@ class PureError:
         statistic = (float(means @ means) / lof_dof) / max(self.pure_ss(residual_um) / pure_dof,
                                                            1e-300)
         return Test(statistic, (lof_dof, pure_dof),
-                    float(stats.f.sf(statistic, lof_dof, pure_dof)),
+                    float(scipy.stats.f.sf(statistic, lof_dof, pure_dof)),
                     f"lack-of-fit F test against the {self.source}")
 
 
