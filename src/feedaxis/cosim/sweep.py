@@ -495,7 +495,10 @@ def _run_on_dask(plan, job, remaining, finished, workers, scheduler, client):
         running = as_completed()
 
         def submit():
-            batch = [queue.pop() for _ in range(min(batch_size, len(queue)))]
+            # guided self-scheduling: no batch takes more than its share of what is left,
+            # so the last batches finish together instead of one worker running alone
+            share = -(-len(queue) // slots)
+            batch = [queue.pop() for _ in range(min(batch_size, share))]
             inputs = [(trial, plan.inputs(trial)[1]) for trial in batch]
             running.add(dask.submit(run_batch, job_future, inputs, pure=False))
 
