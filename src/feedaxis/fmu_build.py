@@ -35,7 +35,7 @@ from pathlib import Path
 
 from .fmu_standalone import libpython_path
 from .output import write_atomically, writing
-from .toolchain import c_compiler, cache_root  # c_compiler: also imported from here
+from .toolchain import c_compiler, cache_root, compiler_missing  # c_compiler: also imported from here
 
 FMU_NAMES = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 PHYSICS_PACKAGE = "feedaxis_fmu_physics"
@@ -72,10 +72,9 @@ class HostLayerUnavailable(RuntimeError):
 
 def host_layer_missing():
     """Why the host layer cannot be compiled here (None when it can)."""
-    if not sys.platform.startswith("linux"):
-        return f"the host layer is built for Linux only, not {sys.platform}"
-    if not c_compiler():
-        return "no C compiler (cc or gcc, or set CC)"
+    missing = compiler_missing("the host layer")
+    if missing:
+        return missing
     if not (Path(sysconfig.get_paths()["include"]) / "Python.h").is_file():
         return "no Python headers (Debian: apt-get install python3-dev)"
     return None

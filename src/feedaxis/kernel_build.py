@@ -31,7 +31,7 @@ import tempfile
 import warnings
 from pathlib import Path
 
-from .toolchain import c_compiler
+from .toolchain import compiler_missing
 
 MODULE_NAME = "servo_kernel"
 SIGNATURE = "void(f8[::1], i8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1])"
@@ -57,10 +57,9 @@ class KernelUnavailable(RuntimeError):
 
 def kernel_missing():
     """Why the kernel cannot be compiled here (None when it can)."""
-    if not sys.platform.startswith("linux"):
-        return f"the servo kernel is built for Linux only, not {sys.platform}"
-    if not c_compiler():
-        return "no C compiler (cc or gcc, or set CC)"
+    missing = compiler_missing("the servo kernel")
+    if missing:
+        return missing
     for module in ("numba", "setuptools"):  # numba.pycc needs both; importing numba takes 0.3 s
         if importlib.util.find_spec(module) is None:
             return f"no {module} (numba's ahead-of-time compiler needs numba and setuptools)"
