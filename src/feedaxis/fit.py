@@ -247,11 +247,12 @@ def fit_with_artefacts(model, data, progress=None, kind=None):
         keep = np.ones(measurement.size, dtype=bool)
         keep[outliers] = False
         measurement = measurement.subset(keep)
-        result = fit(model, measurement, progress)
-    with_nuisances = model
+        result = fit(result.model, measurement, progress)   # refits start where the last ended
+    with_nuisances = result.model
     for name, _, basis in measurement.nuisances():
         with_nuisances = with_nuisances + BasisEffect(name, basis)
-    if with_nuisances is not model and not too_few_samples(with_nuisances, [measurement]):
+    if with_nuisances is not result.model and not too_few_samples(with_nuisances,
+                                                                   [measurement]):
         result = fit(with_nuisances, measurement, progress)
     result.artefacts = artefacts
     return result
