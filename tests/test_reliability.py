@@ -395,7 +395,9 @@ def test_ctrl_c_during_build_fmus_exits_130_and_leaves_only_whole_fmus(tmp_path,
         build.send_signal(signal.SIGINT)
     code, err = build.wait(timeout=600), build.stderr.read()
     interrupted = err.splitlines()[-1:] == ["feedaxis: interrupted"] and "Traceback" not in err
-    assert code == 130 and interrupted or code == 0, (code, err)   # above it: the progress bar
+    # 130, or killed by the SIGINT itself, which a shell reports as 130 too (128 + 2): seen
+    # once in four CI runs under load after the one line was printed, never in 80 runs here
+    assert code in (130, -signal.SIGINT) and interrupted or code == 0, (code, err)
     assert_complete_fmus(out, fmu_paths)
     assert not list(tmp_path.rglob(".*"))
 
