@@ -26,7 +26,7 @@ from feedaxis.errors import InputError
 from feedaxis.fmu_build import FMU_NAMES
 from feedaxis.importers.rtl import rtl_text
 from feedaxis.linefile import LineError
-from feedaxis.output import write_atomically
+from feedaxis.output import built_once, write_atomically
 from feedaxis.physics.servo import MAX_INTERVAL_STEPS
 from test_bad_input import AXIS, assert_refused, raw_case, run, small_case, write_effect
 
@@ -350,6 +350,41 @@ def test_concurrent_writers_of_one_file_each_publish_it_whole(tmp_path):
     for thread in threads:
         thread.join()
     assert path.read_bytes() in contents and [p.name for p in tmp_path.iterdir()] == ["m.toml"]
+
+
+def test_a_cached_folder_is_built_once_and_never_left_half_built(tmp_path):
+    """``built_once`` (the FMU cache, the servo kernel): built once, an incomplete folder
+    replaced, a failed build leaves nothing, a builder that lost the race uses the winner's."""
+    def complete(folder):
+        return (folder / "done").is_file()
+
+    def build(staging):
+        builds.append(staging.name)
+        (staging / "done").write_text("mine")
+
+    builds, folder = [], tmp_path / "cache" / "kernel"
+    assert built_once(folder, build, complete) == folder
+    assert built_once(folder, build, complete) == folder and len(builds) == 1
+    (folder / "done").unlink()
+    built_once(folder, build, complete)
+    assert len(builds) == 2 and complete(folder)
+
+    def failing(staging):
+        (staging / "half").write_text("")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        built_once(tmp_path / "cache" / "other", failing, complete)
+
+    def racing(staging):
+        winner = tmp_path / "cache" / "raced"
+        winner.mkdir()
+        (winner / "done").write_text("winner")
+        (staging / "done").write_text("loser")
+
+    assert (built_once(tmp_path / "cache" / "raced", racing, complete) / "done").read_text() \
+        == "winner"
+    assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == ["kernel", "raced"]
 
 
 def assert_complete_fmus(folder, reference_paths):

@@ -27,10 +27,10 @@ import shutil
 import subprocess
 import sys
 import sysconfig
-import tempfile
 import warnings
 from pathlib import Path
 
+from .output import built_once
 from .toolchain import compiler_missing
 
 MODULE_NAME = "servo_kernel"
@@ -80,26 +80,19 @@ def kernel_key():
 
 def cached_kernel(cache_root):
     """Path of the compiled module in ``<cache_root>/servo-kernel-<key>/``, compiled on
-    first use (in a staging folder renamed into place: concurrent builds cannot tear it)."""
-    folder = Path(cache_root) / f"servo-kernel-{kernel_key()}"
-    module = folder / f"{MODULE_NAME}{sysconfig.get_config_var('EXT_SUFFIX')}"
-    if module.is_file():
-        return module
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=".servo-kernel-", dir=folder.parent))
-    try:
+    first use (:func:`~feedaxis.output.built_once`: concurrent builds cannot tear it)."""
+    name = f"{MODULE_NAME}{sysconfig.get_config_var('EXT_SUFFIX')}"
+
+    def compile_into(staging):
         result = subprocess.run([sys.executable, "-c", COMPILE, str(staging)],
                                 capture_output=True, text=True)
-        if result.returncode != 0 or not (staging / module.name).is_file():
-            raise KernelUnavailable(f"compiling the servo kernel failed:\n{result.stderr[-2000:]}")
-        try:
-            os.replace(staging, folder)
-        except OSError:  # another build put it there first
-            if not module.is_file():
-                raise
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    return module
+        if result.returncode != 0 or not (staging / name).is_file():
+            raise KernelUnavailable("compiling the servo kernel failed:\n"
+                                    + result.stderr[-2000:])
+
+    folder = built_once(Path(cache_root) / f"servo-kernel-{kernel_key()}", compile_into,
+                        lambda folder: (folder / name).is_file())
+    return folder / name
 
 
 def install_kernel(physics_dir, cache_root):

@@ -78,6 +78,32 @@ def staged_folder(folder):
             shutil.rmtree(staging, ignore_errors=True)
 
 
+def built_once(folder, build, complete):
+    """``folder`` as ``build(staging)`` makes it in a private folder beside it, renamed into
+    place, unless ``complete(folder)`` holds already (a cache). A crash or Ctrl-C leaves no
+    half folder; of builds racing for one folder, the first rename wins and the others use
+    its folder (a rename never replaces a folder holding files); an incomplete one left
+    from before is replaced."""
+    folder = Path(folder)
+    if complete(folder):
+        return folder
+    with writing(folder):
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+        try:
+            build(staging)
+            if folder.exists() and not complete(folder):
+                shutil.rmtree(folder, ignore_errors=True)
+            try:
+                os.replace(staging, folder)
+            except OSError:
+                if not complete(folder):
+                    raise
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+    return folder
+
+
 def _merge(staging, folder):
     """Move each entry of ``staging`` into ``folder``: files by one rename, a folder by
     moving the old one aside first."""

@@ -12,18 +12,15 @@ never leaves half a cache.
 from __future__ import annotations
 
 import hashlib
-import os
-import shutil
-import tempfile
 from pathlib import Path
 
 from .. import __version__
 from ..errors import InputError
 from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_layer_missing
-from ..output import writing
-from ..toolchain import cache_root  # also imported from here (tests, benchmarks)
-from .fmu_runner import check_fmu_archive
 from ..kernel_build import kernel_missing
+from ..output import built_once
+from ..toolchain import cache_root
+from .fmu_runner import check_fmu_archive
 
 
 def source_hash():
@@ -52,33 +49,13 @@ def cache_folder(root=None, standalone=False):
 def cached_fmus(root=None, standalone=False):
     """{FMU name: path} of the four FMUs (``standalone``: carrying their Python), built into
     the cache on first use."""
-    folder = cache_folder(root, standalone)
-    if not _complete(folder):
-        with writing(folder):
-            folder.parent.mkdir(parents=True, exist_ok=True)
-            staging = Path(tempfile.mkdtemp(prefix=".fmus-", dir=folder.parent))
-            try:
-                build_fmus(staging, standalone=standalone)
-                if folder.exists() and not _complete(folder):
-                    shutil.rmtree(folder, ignore_errors=True)
-                _publish(staging, folder)
-            finally:
-                shutil.rmtree(staging, ignore_errors=True)
+    folder = built_once(cache_folder(root, standalone),
+                        lambda staging: build_fmus(staging, standalone=standalone), _complete)
     return {name: folder / f"{name}.fmu" for name in FMU_NAMES}
 
 
 def _complete(folder):
     return all((folder / f"{name}.fmu").exists() for name in FMU_NAMES)
-
-
-def _publish(staging, folder):
-    """Rename ``staging`` to ``folder``; a run that built the same cache meanwhile keeps its
-    folder (a rename never replaces a folder holding files), and this one uses it."""
-    try:
-        os.replace(staging, folder)
-    except OSError:
-        if not _complete(folder):
-            raise
 
 
 def fmu_paths(folder=None, standalone=False):
