@@ -51,7 +51,8 @@ from pathlib import Path
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from feedaxis.fmu_build import FMU_NAMES, build_fmus, c_compiler
+from feedaxis.fmu_build import FMU_NAMES, build_fmus
+from feedaxis.toolchain import c_compiler
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import arguments  # noqa: E402

@@ -11,7 +11,8 @@ import signal
 import pytest
 
 from feedaxis import kernel_build
-from feedaxis.cosim.fmu_cache import cache_folder, cache_root
+from feedaxis.cosim.fmu_cache import cache_folder
+from feedaxis.toolchain import cache_root
 from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.fmu_build import FMU_NAMES, build_fmus
 

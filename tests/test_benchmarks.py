@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 from conftest import unavailable
-from feedaxis.fmu_build import FMU_NAMES, c_compiler
+from feedaxis.fmu_build import FMU_NAMES
+from feedaxis.toolchain import c_compiler
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = sorted(p.name for p in (ROOT / "benchmarks").glob("*.py")

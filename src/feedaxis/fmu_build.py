@@ -35,7 +35,7 @@ from pathlib import Path
 
 from .fmu_standalone import libpython_path
 from .output import write_atomically, writing
-from .toolchain import c_compiler, cache_root, compiler_missing  # c_compiler: also imported from here
+from .toolchain import c_compiler, cache_root, compiler_missing
 
 FMU_NAMES = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 PHYSICS_PACKAGE = "feedaxis_fmu_physics"
