@@ -493,6 +493,10 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
 RUNS = {"iso230": run_iso230, "thermal": run_thermal, "tracking": run_tracking}
 
 
+# what each case file records as measured: (column, its unit per µm)
+MEASURED_COLUMNS = {"positioning": ("error_um", 1.0), "tracking": ("actual_mm", 1e-3)}
+
+
 @dataclass(frozen=True)
 class MeasurementNoise:
     """White Gaussian noise added to what a case records as measured (the positioning
@@ -511,14 +515,11 @@ class MeasurementNoise:
         """``tables`` with the noise added to their measured column."""
         rng = np.random.default_rng(self.seed)
         noisy = dict(tables)
-        if "positioning" in tables:
-            error_um = np.asarray(tables["positioning"]["error_um"], dtype=float)
-            noisy["positioning"] = {**tables["positioning"], "error_um":
-                                    error_um + rng.normal(0.0, self.sigma_um, error_um.size)}
-        if "tracking" in tables:
-            actual_mm = np.asarray(tables["tracking"]["actual_mm"], dtype=float)
-            noisy["tracking"] = {**tables["tracking"], "actual_mm": actual_mm
-                                 + 1e-3 * rng.normal(0.0, self.sigma_um, actual_mm.size)}
+        for table, (column, mm_per_um) in MEASURED_COLUMNS.items():
+            if table in tables:
+                measured = np.asarray(tables[table][column], dtype=float)
+                noisy[table] = {**tables[table], column: measured
+                                + mm_per_um * rng.normal(0.0, self.sigma_um, measured.size)}
         return noisy
 
 
