@@ -239,8 +239,9 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
             command_late = buffer[(head - shift) % size]
             command_early = buffer[(head - shift - 1) % size]
             head = (head + 1) % size
-            sliding = min(max(x2 / FRICTION_SMOOTHING_MM_S, -1.0), 1.0)
-            force = force_V - friction_V * sliding - damping_V_s_per_mm * x2
+            coulomb_V = (friction_V * min(max(x2 / FRICTION_SMOOTHING_MM_S, -1.0), 1.0)
+                         if friction_V != 0.0 else 0.0)  # no division on a frictionless path
+            force = force_V - coulomb_V - damping_V_s_per_mm * x2
             u_late = command_late + force
             u_early = command_early + force
             x1, x2 = (a11 * x1 + a12 * x2 + late1 * u_late + early1 * u_early,
