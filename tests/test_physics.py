@@ -173,6 +173,18 @@ def test_servo_over_a_communication_step_equals_the_loop_stepped(settings):
         assert fast.velocity_mm_s == pytest.approx(stepped.velocity_mm_s, abs=1e-10)
 
 
+@pytest.mark.parametrize("time_step_s", [1e-4, 3e-4, 7.3e-5])
+def test_step_counts_compiled_equal_the_python_carry(time_step_s):
+    """servo.step_counts (carry_steps compiled by numba) against carry_steps run by Python
+    over irregular samples: the same internal steps per interval, remainders carried."""
+    rng = np.random.default_rng(11)
+    time_s = np.cumsum(rng.choice([1e-3, 1e-3, 2.5e-3, 0.4e-3, 0.05e-3], size=5000))
+    python_counts = np.zeros(time_s.size, dtype=np.int64)
+    servo.carry_steps(np.diff(time_s), time_step_s, python_counts)
+    assert np.array_equal(servo.step_counts(time_s, time_step_s), python_counts)
+    assert python_counts[0] == 0 and len(set(python_counts[1:])) > 3  # remainders carried
+
+
 @pytest.mark.parametrize("settings", [{"nonlinear": True}, {"friction_N": 20.0},
                                       {"nonlinear": True, "friction_N": 5.0, "delay_s": 0.00125,
                                        "damping_N_s_per_mm": 0.3}, {}])
