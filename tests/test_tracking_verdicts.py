@@ -105,3 +105,23 @@ def test_nulls_of_every_noise_family_name_nothing(tmp_path, null_run, family):
         if family == "spikes":
             spikes = spike_indices(null_run[0].size, seed)
             assert set(found.outlier_rows) <= set((spikes + 2).tolist())
+
+
+def test_the_drift_is_tested_against_the_fit_without_it(tmp_path, null_run):
+    """The drift's test takes the model's fit before the drift was added (the diagnosis
+    reuses it, a simulation per plant parameter each saved): the same test as a refit of
+    the model without the drift, started from the fit with it."""
+    from feedaxis import diagnose as diagnosis
+    from feedaxis.fit import fit_with_artefacts
+    from feedaxis.measurement import measurement_of
+
+    case = read_case(write_tracking_case(tmp_path / "d", null_run, 3, family="drifting"))
+    base = fit_with_artefacts(Model((CATALOG["servo_plant"],), {"servo_plant": PLANT}),
+                              measurement_of(case, "tracking"))
+    measurement, stages = base.measurements[0], len(base.measurements[0].stages)
+    assert base.plain is not None and "drift" not in base.plain.model
+    reused = diagnosis._nuisance_findings(measurement, base, stages, lambda label: None)
+    base.plain = None
+    refitted = diagnosis._nuisance_findings(measurement, base, stages, lambda label: None)
+    assert len(reused) == len(refitted) == 1  # a drift of 0.5-2 µm over 2 s is found
+    assert reused[0].test.statistic == pytest.approx(refitted[0].test.statistic, rel=1e-6)

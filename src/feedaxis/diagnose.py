@@ -292,15 +292,17 @@ def _candidate(measurement, left, effect, result, test):
 
 
 def _nuisance_findings(measurement, left, stages, notify):
-    """Each nuisance in the final model, reported when its test passes."""
+    """Each nuisance in the final model, reported when its test against the fit without it
+    passes (the model's fit before the nuisances were added, where that is the one)."""
     found = []
     for name, shape, _ in measurement.nuisances():
         if name not in left.model:
             continue
         notify(name)
         nuisance = left.model.effects[left.model.names.index(name)]
-        others = [e for e in left.model.effects if e is not nuisance]
-        without = fit(Model(others, left.model.values), measurement)
+        others = Model([e for e in left.model.effects if e is not nuisance], left.model.values)
+        without = (left.plain if left.plain is not None and left.plain.model.names == others.names
+                   else fit(others, measurement))
         test = measurement.noise.extra_ss_test(without.residual_um, left.residual_um,
                                                shape.extra, left.statistics.n_free)
         if not accepts(test.p_value, 1, stages):

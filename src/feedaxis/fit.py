@@ -71,6 +71,8 @@ class FitResult:
     at the samples of ``measurements`` concatenated; ``jacobian`` d residual / d parameters
     at the optimum (samples x parameters in the model's order), kept where the model has
     parameters that enter nonlinearly (for the diagnosis's linearised screening).
+    ``plain`` is the fit of the same samples without the measurement's nuisances, where
+    :func:`fit_with_artefacts` fitted them beside the effects (for their test).
     """
 
     model: Model
@@ -83,6 +85,7 @@ class FitResult:
     measurements: list = field(default_factory=list, repr=False)
     artefacts: dict = field(default_factory=dict)
     jacobian: np.ndarray | None = field(default=None, repr=False)
+    plain: FitResult | None = field(default=None, repr=False)
 
     @property
     def rms_um(self):
@@ -253,7 +256,9 @@ def fit_with_artefacts(model, data, progress=None, kind=None):
         with_nuisances = with_nuisances + BasisEffect(name, basis)
     if with_nuisances is not result.model and not too_few_samples(with_nuisances,
                                                                    [measurement]):
+        plain = result
         result = fit(with_nuisances, measurement, progress)
+        result.plain = plain
     result.artefacts = artefacts
     return result
 
