@@ -27,7 +27,8 @@ import time
 from distributed import Client, LocalCluster
 
 from feedaxis.cosim.fmu_cache import cached_fmus
-from feedaxis.cosim.sweep import Job, TrialRunner, cluster_size, fmu_files, make_plan, sweep
+from feedaxis.cosim.sweep import (SCHEDULER_HTTP_PORT, Job, TrialRunner, cluster_size,
+                                  fmu_files, make_plan, sweep)
 
 VARY = ["NpidServo.friction_N=uniform(0,2)"]
 
@@ -83,7 +84,8 @@ def main(argv=None):
     runner = TrialRunner(Job("tracking", plan.options, plan.system, files, digest),
                          plan.fmu_paths)
     clusters = {n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                dashboard_address=None, silence_logs=logging.ERROR)
+                                dashboard_address=SCHEDULER_HTTP_PORT,
+                                silence_logs=logging.ERROR)
                 for n in (1, 2)}
     clients = {n: Client(cluster) for n, cluster in clusters.items()}
     times = {"plain": [], 1: [], 2: []}

@@ -43,7 +43,7 @@ def test_dask_workers_give_the_in_process_file_bit_for_bit(fmu_dir, tmp_path):
     distributed = pytest.importorskip("distributed")
     here = sweep("tracking", FRICTION, trials=6, seed=5, workers=0, fmus=fmu_dir, **TRACKING)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, \
+                                  dashboard_address=":0") as cluster, \
             distributed.Client(cluster) as client:
         two = sweep("tracking", FRICTION, trials=6, seed=5, client=client, fmus=fmu_dir,
                     **TRACKING)

@@ -52,6 +52,9 @@ TASK_S = 2.0          # a Dask task's target duration (s): batches grow to it
 MAX_BATCH = 256
 FLUSH_S = 10.0        # finished trials reach OUT/.partial at least this often (s)
 POLL_S = 0.02         # how often the client looks for finished Dask tasks (s)
+# The local cluster's HTTP server on a free port: its default, 8787, is taken by any other
+# cluster running (a second sweep), and Dask then warns on the user's terminal.
+SCHEDULER_HTTP_PORT = ":0"
 
 
 class SweepInterrupted(KeyboardInterrupt):
@@ -550,7 +553,8 @@ class _dask_client:
             raise InputError(f"must be a whole number >= 0, got {count}", parameter="--workers")
         with _ctrl_c_left_to_this_process():
             cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
+                                   dashboard_address=SCHEDULER_HTTP_PORT,
+                                   silence_logs=logging.ERROR)
         client = Client(cluster)
         self.owned += [client, cluster]
         return client
