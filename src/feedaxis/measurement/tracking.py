@@ -446,8 +446,10 @@ class Reversal(Shape):
         turns = np.flatnonzero(np.diff(direction) != 0) + 1
         basis = np.zeros((time_s.size, REVERSAL_BINS))
         width = REVERSAL_WINDOW_S / REVERSAL_BINS
-        for turn in turns:
-            since = time_s[turn:] - time_s[turn]
+        # each window's last sample or one past it: ``since < window`` below decides
+        ends = np.searchsorted(time_s, time_s[turns] + REVERSAL_WINDOW_S, side="right") + 1
+        for turn, end in zip(turns, ends):
+            since = time_s[turn:end] - time_s[turn]
             inside = since < REVERSAL_WINDOW_S
             rows = turn + np.flatnonzero(inside)
             basis[rows, (since[inside] / width).astype(int)] += direction[turn]
