@@ -1,4 +1,6 @@
 """Physics functions against independent answers: the paper's literal scheme, closed forms."""
+import math
+
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -254,6 +256,17 @@ def test_geometric_and_motor_errors_of_one_float_equal_the_array_path():
         assert type(one_um) is float and one_um == pytest.approx(arrays_um[k], abs=1e-12)
         assert motor.motor_error_um(x, 0.02, (0.08, 0.01), (0.06, -0.02)) == pytest.approx(
             motor_um[k], abs=1e-12)
+
+
+def test_scalar_values_give_a_float_or_a_float_array():
+    """A float as it is, an int or NumPy float as a float, anything else as a float array;
+    values_and_module adds the module its formula runs on."""
+    assert [type(scalar.values(v)) for v in (2.5, 2, np.float64(2.5), True)] == [float] * 4
+    assert scalar.values(2) == 2.0 and scalar.values(np.float64(2.5)) == 2.5
+    assert scalar.values([1, 2]).dtype == float and scalar.values(np.arange(2)).dtype == float
+    assert scalar.values_and_module(3) == (3.0, math)
+    one, xp = scalar.values_and_module([3])
+    assert xp is np and one.dtype == float and one.tolist() == [3.0]
 
 
 def dense_advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):

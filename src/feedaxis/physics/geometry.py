@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .checks import ParameterError, require_positive, require_representable
-from .scalar import array_module, interp, table, values
+from .scalar import interp, table, values, values_and_module
 
 GRAVITY_M_S2 = 9.80665
 SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
@@ -46,8 +46,8 @@ def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
         a2 and b2 (µm).
     """
     require_positive("lead_mm", lead_mm)
-    xp = array_module(position_mm)
-    phase_rad = 2.0 * xp.pi * values(position_mm) / lead_mm
+    position_mm, xp = values_and_module(position_mm)
+    phase_rad = 2.0 * xp.pi * position_mm / lead_mm
     return cos_um * xp.cos(phase_rad) + sin_um * xp.sin(phase_rad)
 
 

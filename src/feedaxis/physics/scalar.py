@@ -2,8 +2,9 @@
 
 An FMU evaluates the physics at one point per communication step, where NumPy's cost per
 call on a scalar (about 1 µs per ufunc, more for ``asarray``) would dominate the step. The
-physics functions therefore write each formula once against ``xp`` (``array_module``) and
-take their inputs through :func:`values`, so a float stays a float and an array an array.
+physics functions therefore take their inputs through :func:`values` (or
+:func:`values_and_module`, which also gives the module ``xp`` to write a formula once
+against), so a float stays a float and an array an array.
 """
 from __future__ import annotations
 
@@ -13,31 +14,39 @@ from typing import NamedTuple
 
 import numpy as np
 
+# The scalar types (NumPy's float64 is a float). A constant: ``isinstance(value, (float,
+# int))`` builds the tuple at every call, and is_scalar is inlined where it runs in every
+# FMU step (a Python call costs about as much as the formula it guards).
+SCALAR_TYPES = (float, int)
+
 
 def is_scalar(value):
     """True for a Python or NumPy float or int (not an array, not a list)."""
-    return isinstance(value, (float, int))
-
-
-def array_module(*inputs):
-    """``math`` when every input is a scalar, else ``numpy``."""
-    for value in inputs:  # a loop, not all(generator): this runs in every FMU step
-        if not isinstance(value, (float, int)):
-            return np
-    return math
+    return isinstance(value, SCALAR_TYPES)
 
 
 def values(value):
     """``value`` as float when scalar, else as a float ndarray."""
-    # is_scalar inlined here and in sign: these run several times in every FMU step
-    if isinstance(value, (float, int)):
+    if type(value) is float:  # the FMU's case, before the general test
+        return value
+    if isinstance(value, SCALAR_TYPES):
         return float(value)
     return np.asarray(value, dtype=float)
 
 
+def values_and_module(value):
+    """(:func:`values` of ``value``, ``math``) when scalar, else (:func:`values`, ``numpy``):
+    one call where a formula needs both (it runs in every FMU step)."""
+    if type(value) is float:  # the FMU's case, before the general test
+        return value, math
+    if isinstance(value, SCALAR_TYPES):
+        return float(value), math
+    return np.asarray(value, dtype=float), np
+
+
 def sign(value):
     """-1, 0 or +1 by the sign of ``value`` (element-wise for arrays), as ``np.sign``."""
-    if isinstance(value, (float, int)):
+    if isinstance(value, SCALAR_TYPES):
         return float(value > 0) - float(value < 0)
     return np.sign(values(value))
 
@@ -66,7 +75,7 @@ def interp(value, samples):
     """Piecewise-linear y at ``value`` from a :class:`Table`, as ``np.interp`` (held at the
     end values outside the table). A float takes a bisection on the lists and NumPy's own
     formula, slope·(x - x_j) + y_j, so it equals ``np.interp`` bit for bit."""
-    if not is_scalar(value):
+    if not isinstance(value, SCALAR_TYPES):
         return np.interp(value, samples.x, samples.y)
     x, y = samples.x_list, samples.y_list
     if value >= x[-1]:
