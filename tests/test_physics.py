@@ -237,25 +237,45 @@ def test_scalar_interp_equals_numpy_interp_bit_for_bit():
     np.testing.assert_array_equal(scalar.interp(points, samples), np.interp(points, grid, samples.y))
 
 
-def test_geometric_and_motor_errors_of_one_float_equal_the_array_path():
-    """The FMUs' scalar paths (math module, bisection) against NumPy on arrays, at seeded
-    random positions and directions: the same formula, so equal to 1e-12 µm."""
+@pytest.mark.parametrize("fixed_end_mm", (-141.0, 641.0))
+def test_geometric_and_motor_errors_of_one_float_equal_the_array_path(fixed_end_mm):
+    """The FMUs' scalar paths (math module, bisection, comparisons for the clip) against
+    NumPy on arrays, at seeded random positions and directions (±1 and inside the play),
+    the fixed end on either side: the same formula, so equal to 1e-12 µm."""
     rng = np.random.default_rng(5)
     position_mm = rng.uniform(-300.0, 900.0, 2000)
-    direction = rng.choice([-1.0, 1.0], 2000)
+    direction = np.where(rng.random(2000) < 0.5, rng.choice([-1.0, 1.0], 2000),
+                         rng.uniform(-1.5, 1.5, 2000))
     table = geometry.gravity_sag_table(0.8, 0.034, 7800.0, 2.1e11, "fixed-fixed")
-    screw_m = mounting.screw_coordinate_m(position_mm, -141.0)
+    screw_m = mounting.screw_coordinate_m(position_mm, fixed_end_mm)
     sag_um = geometry.gravity_sag_error_um(screw_m, table)
     arrays_um = geometry.transmission_error_um(position_mm, direction, 5.0, 0.25, -0.5, 0.2,
                                                0.15, 3.0, sag_um)
     motor_um = motor.motor_error_um(position_mm, 0.02, (0.08, 0.01), (0.06, -0.02))
     for k, (x, d) in enumerate(zip(position_mm.tolist(), direction.tolist())):
-        one_sag_um = geometry.gravity_sag_error_um(mounting.screw_coordinate_m(x, -141.0), table)
+        one_screw_m = mounting.screw_coordinate_m(x, fixed_end_mm)
+        assert type(one_screw_m) is float and one_screw_m == screw_m[k]
+        one_sag_um = geometry.gravity_sag_error_um(one_screw_m, table)
         assert type(one_sag_um) is float and one_sag_um == sag_um[k]
         one_um = geometry.transmission_error_um(x, d, 5.0, 0.25, -0.5, 0.2, 0.15, 3.0, one_sag_um)
         assert type(one_um) is float and one_um == pytest.approx(arrays_um[k], abs=1e-12)
         assert motor.motor_error_um(x, 0.02, (0.08, 0.01), (0.06, -0.02)) == pytest.approx(
             motor_um[k], abs=1e-12)
+
+
+def test_scalar_clip_equals_numpy_clip():
+    """The scalar clip (comparisons) against np.clip at seeded random values, at and beyond
+    both bounds, for floats, ints and NumPy floats; NaN stays NaN as in np.clip."""
+    rng = np.random.default_rng(23)
+    points = np.concatenate((rng.uniform(-3.0, 3.0, 2000), [-1.0, 1.0, -0.0, np.inf, -np.inf]))
+    expected = np.clip(points, -1.0, 1.0)
+    for k, x in enumerate(points.tolist()):
+        for value in (x, np.float64(x)):
+            clipped = scalar.clip(value, -1.0, 1.0)
+            assert type(clipped) is float and clipped == expected[k]
+    assert [scalar.clip(n, -1.0, 1.0) for n in (-2, 0, 3)] == [-1.0, 0.0, 1.0]
+    assert np.isnan(scalar.clip(float("nan"), -1.0, 1.0))
+    np.testing.assert_array_equal(scalar.clip(points.tolist(), -1.0, 1.0), expected)
 
 
 def test_scalar_values_give_a_float_or_a_float_array():

@@ -52,8 +52,12 @@ def sign(value):
 
 
 def clip(value, lower, upper):
-    """``value`` limited to [lower, upper] (element-wise for arrays), as ``np.clip``."""
-    return min(max(value, lower), upper) if is_scalar(value) else np.clip(value, lower, upper)
+    """``value`` limited to [lower, upper] (element-wise for arrays), as ``np.clip``: NaN
+    stays NaN. A scalar is compared, not passed through min and max (half the cost: this
+    runs in every FMU step)."""
+    if isinstance(value, SCALAR_TYPES):
+        return upper if value > upper else lower if value < lower else float(value)
+    return np.clip(values(value), lower, upper)
 
 
 class Table(NamedTuple):
