@@ -61,18 +61,20 @@ def clip(value, lower, upper):
 
 
 class Table(NamedTuple):
-    """Samples of y(x), x strictly increasing: as arrays for NumPy, as lists for one float."""
+    """Samples of y(x), x strictly increasing: as arrays for NumPy, as lists for one float
+    (with the slope of each interval, (y_j+1 - y_j) / (x_j+1 - x_j), computed once)."""
 
     x: np.ndarray
     y: np.ndarray
     x_list: list
     y_list: list
+    slope_list: list
 
 
 def table(x, y):
     """A :class:`Table` of the samples ``x``, ``y`` (1-D, same length)."""
     x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    return Table(x, y, x.tolist(), y.tolist())
+    return Table(x, y, x.tolist(), y.tolist(), (np.diff(y) / np.diff(x)).tolist())
 
 
 def interp(value, samples):
@@ -89,4 +91,4 @@ def interp(value, samples):
     if value != value:  # NaN, as np.interp returns it
         return value
     j = bisect.bisect_right(x, value) - 1
-    return (y[j + 1] - y[j]) / (x[j + 1] - x[j]) * (value - x[j]) + y[j]
+    return samples.slope_list[j] * (value - x[j]) + y[j]
