@@ -263,6 +263,22 @@ def test_geometric_and_motor_errors_of_one_float_equal_the_array_path(fixed_end_
             motor_um[k], abs=1e-12)
 
 
+def test_screw_coordinate_is_eq_15_16_through_the_axis_sign():
+    """The screw coordinate written out per side of P_f equals axis_sign · (P_x - P_f) as
+    Eq. 15-16 state it, for floats, ints, NumPy floats and arrays, P_f of either sign."""
+    rng = np.random.default_rng(19)
+    position_mm = np.concatenate((rng.uniform(-900.0, 900.0, 500), [0.0, -141.0, 641.0]))
+    for fixed_end_mm in (-141.0, 0.0, 641.0, -3, 7):
+        expected_m = mounting.axis_sign(fixed_end_mm) * (position_mm - fixed_end_mm) * 1e-3
+        np.testing.assert_array_equal(mounting.screw_coordinate_m(position_mm, fixed_end_mm),
+                                      expected_m)
+        for k, x in enumerate(position_mm.tolist()):
+            for value in (x, np.float64(x)):
+                assert mounting.screw_coordinate_m(value, fixed_end_mm) == expected_m[k]
+        assert mounting.screw_coordinate_m(12, fixed_end_mm) == mounting.axis_sign(
+            fixed_end_mm) * (12.0 - fixed_end_mm) * 1e-3
+
+
 def test_scalar_clip_equals_numpy_clip():
     """The scalar clip (comparisons) against np.clip at seeded random values, at and beyond
     both bounds, for floats, ints and NumPy floats; NaN stays NaN as in np.clip."""
