@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
+from feedaxis.errors import ParameterError
 from feedaxis.physics import geometry, motor, mounting, scalar, servo, thermal
 
 
@@ -303,6 +304,24 @@ def test_scalar_values_give_a_float_or_a_float_array():
     assert scalar.values_and_module(3) == (3.0, math)
     one, xp = scalar.values_and_module([3])
     assert xp is np and one.dtype == float and one.tolist() == [3.0]
+
+
+@pytest.mark.parametrize("bad, name", [({"duration_s": -1e-3}, "duration_s"),
+                                       ({"duration_s": np.inf}, "duration_s"),
+                                       ({"reference_mm": np.nan}, "reference_mm"),
+                                       ({"disturbance_N": -np.inf}, "disturbance_N"),
+                                       ({"reference_mm": 1e308, "disturbance_N": np.nan},
+                                        "disturbance_N")])
+def test_servo_advance_refuses_a_bad_input_naming_it(bad, name):
+    """One test passes valid inputs; a failing one reaches the checks, which name the input
+    and leave the loop as it was. Finite inputs whose sum overflows are valid."""
+    loop = servo.Servo(servo.ServoParams(), 1.0)
+    before = loop.state()
+    with pytest.raises(ParameterError, match=name):
+        loop.advance(**{"duration_s": 1e-3, "reference_mm": 1.0, "disturbance_N": 0.0, **bad})
+    assert loop.state() == before
+    loop.advance(0.0, 1e308, 1e308)
+    assert loop.state() == before  # a zero step leaves the loop as it is
 
 
 def dense_advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
