@@ -1,8 +1,11 @@
 """Physics functions against independent answers: the paper's literal scheme, closed forms."""
+import math
+
 import numpy as np
 import pytest
 from scipy.integrate import quad
 
+from feedaxis.errors import ParameterError
 from feedaxis.physics import geometry, motor, mounting, scalar, servo, thermal
 
 
@@ -247,25 +250,90 @@ def test_scalar_interp_equals_numpy_interp_bit_for_bit():
     np.testing.assert_array_equal(scalar.interp(points, samples), np.interp(points, grid, samples.y))
 
 
-def test_geometric_and_motor_errors_of_one_float_equal_the_array_path():
-    """The FMUs' scalar paths (math module, bisection) against NumPy on arrays, at seeded
-    random positions and directions: the same formula, so equal to 1e-12 µm."""
+@pytest.mark.parametrize("fixed_end_mm", (-141.0, 641.0))
+def test_geometric_and_motor_errors_of_one_float_equal_the_array_path(fixed_end_mm):
+    """The FMUs' scalar paths (math module, bisection, comparisons for the clip) against
+    NumPy on arrays, at seeded random positions and directions (±1 and inside the play),
+    the fixed end on either side: the same formula, so equal to 1e-12 µm."""
     rng = np.random.default_rng(5)
     position_mm = rng.uniform(-300.0, 900.0, 2000)
-    direction = rng.choice([-1.0, 1.0], 2000)
+    direction = np.where(rng.random(2000) < 0.5, rng.choice([-1.0, 1.0], 2000),
+                         rng.uniform(-1.5, 1.5, 2000))
     table = geometry.gravity_sag_table(0.8, 0.034, 7800.0, 2.1e11, "fixed-fixed")
-    screw_m = mounting.screw_coordinate_m(position_mm, -141.0)
+    screw_m = mounting.screw_coordinate_m(position_mm, fixed_end_mm)
     sag_um = geometry.gravity_sag_error_um(screw_m, table)
     arrays_um = geometry.transmission_error_um(position_mm, direction, 5.0, 0.25, -0.5, 0.2,
                                                0.15, 3.0, sag_um)
     motor_um = motor.motor_error_um(position_mm, 0.02, (0.08, 0.01), (0.06, -0.02))
     for k, (x, d) in enumerate(zip(position_mm.tolist(), direction.tolist())):
-        one_sag_um = geometry.gravity_sag_error_um(mounting.screw_coordinate_m(x, -141.0), table)
+        one_screw_m = mounting.screw_coordinate_m(x, fixed_end_mm)
+        assert type(one_screw_m) is float and one_screw_m == screw_m[k]
+        one_sag_um = geometry.gravity_sag_error_um(one_screw_m, table)
         assert type(one_sag_um) is float and one_sag_um == sag_um[k]
         one_um = geometry.transmission_error_um(x, d, 5.0, 0.25, -0.5, 0.2, 0.15, 3.0, one_sag_um)
         assert type(one_um) is float and one_um == pytest.approx(arrays_um[k], abs=1e-12)
         assert motor.motor_error_um(x, 0.02, (0.08, 0.01), (0.06, -0.02)) == pytest.approx(
             motor_um[k], abs=1e-12)
+
+
+def test_screw_coordinate_is_eq_15_16_through_the_axis_sign():
+    """The screw coordinate written out per side of P_f equals axis_sign · (P_x - P_f) as
+    Eq. 15-16 state it, for floats, ints, NumPy floats and arrays, P_f of either sign."""
+    rng = np.random.default_rng(19)
+    position_mm = np.concatenate((rng.uniform(-900.0, 900.0, 500), [0.0, -141.0, 641.0]))
+    for fixed_end_mm in (-141.0, 0.0, 641.0, -3, 7):
+        expected_m = mounting.axis_sign(fixed_end_mm) * (position_mm - fixed_end_mm) * 1e-3
+        np.testing.assert_array_equal(mounting.screw_coordinate_m(position_mm, fixed_end_mm),
+                                      expected_m)
+        for k, x in enumerate(position_mm.tolist()):
+            for value in (x, np.float64(x)):
+                assert mounting.screw_coordinate_m(value, fixed_end_mm) == expected_m[k]
+        assert mounting.screw_coordinate_m(12, fixed_end_mm) == mounting.axis_sign(
+            fixed_end_mm) * (12.0 - fixed_end_mm) * 1e-3
+
+
+def test_scalar_clip_equals_numpy_clip():
+    """The scalar clip (comparisons) against np.clip at seeded random values, at and beyond
+    both bounds, for floats, ints and NumPy floats; NaN stays NaN as in np.clip."""
+    rng = np.random.default_rng(23)
+    points = np.concatenate((rng.uniform(-3.0, 3.0, 2000), [-1.0, 1.0, -0.0, np.inf, -np.inf]))
+    expected = np.clip(points, -1.0, 1.0)
+    for k, x in enumerate(points.tolist()):
+        for value in (x, np.float64(x)):
+            clipped = scalar.clip(value, -1.0, 1.0)
+            assert type(clipped) is float and clipped == expected[k]
+    assert [scalar.clip(n, -1.0, 1.0) for n in (-2, 0, 3)] == [-1.0, 0.0, 1.0]
+    assert np.isnan(scalar.clip(float("nan"), -1.0, 1.0))
+    np.testing.assert_array_equal(scalar.clip(points.tolist(), -1.0, 1.0), expected)
+
+
+def test_scalar_values_give_a_float_or_a_float_array():
+    """A float as it is, an int or NumPy float as a float, anything else as a float array;
+    values_and_module adds the module its formula runs on."""
+    assert [type(scalar.values(v)) for v in (2.5, 2, np.float64(2.5), True)] == [float] * 4
+    assert scalar.values(2) == 2.0 and scalar.values(np.float64(2.5)) == 2.5
+    assert scalar.values([1, 2]).dtype == float and scalar.values(np.arange(2)).dtype == float
+    assert scalar.values_and_module(3) == (3.0, math)
+    one, xp = scalar.values_and_module([3])
+    assert xp is np and one.dtype == float and one.tolist() == [3.0]
+
+
+@pytest.mark.parametrize("bad, name", [({"duration_s": -1e-3}, "duration_s"),
+                                       ({"duration_s": np.inf}, "duration_s"),
+                                       ({"reference_mm": np.nan}, "reference_mm"),
+                                       ({"disturbance_N": -np.inf}, "disturbance_N"),
+                                       ({"reference_mm": 1e308, "disturbance_N": np.nan},
+                                        "disturbance_N")])
+def test_servo_advance_refuses_a_bad_input_naming_it(bad, name):
+    """One test passes valid inputs; a failing one reaches the checks, which name the input
+    and leave the loop as it was. Finite inputs whose sum overflows are valid."""
+    loop = servo.Servo(servo.ServoParams(), 1.0)
+    before = loop.state()
+    with pytest.raises(ParameterError, match=name):
+        loop.advance(**{"duration_s": 1e-3, "reference_mm": 1.0, "disturbance_N": 0.0, **bad})
+    assert loop.state() == before
+    loop.advance(0.0, 1e308, 1e308)
+    assert loop.state() == before  # a zero step leaves the loop as it is
 
 
 def dense_advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):

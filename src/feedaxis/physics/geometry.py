@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .checks import ParameterError, require_positive, require_representable
-from .scalar import array_module, interp, table, values
+from .scalar import clip, interp, table, values, values_and_module
 
 GRAVITY_M_S2 = 9.80665
 SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
@@ -46,8 +46,8 @@ def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
         a2 and b2 (µm).
     """
     require_positive("lead_mm", lead_mm)
-    xp = array_module(position_mm)
-    phase_rad = 2.0 * xp.pi * values(position_mm) / lead_mm
+    position_mm, xp = values_and_module(position_mm)
+    phase_rad = 2.0 * xp.pi * position_mm / lead_mm
     return cos_um * xp.cos(phase_rad) + sin_um * xp.sin(phase_rad)
 
 
@@ -155,9 +155,7 @@ def backlash_error_um(direction, backlash_um):
     backlash_um : float
         Reversal value B (µm).
     """
-    if isinstance(direction, (float, int)):  # scalar.is_scalar inlined: every FMU step
-        return 0.5 * backlash_um * min(1.0, max(-1.0, float(direction)))
-    return 0.5 * backlash_um * np.clip(values(direction), -1.0, 1.0)
+    return 0.5 * backlash_um * clip(direction, -1.0, 1.0)
 
 
 def play_engagement(engagement, travel_mm, backlash_um):
@@ -174,7 +172,7 @@ def play_engagement(engagement, travel_mm, backlash_um):
         return engagement
     if backlash_um == 0.0:
         return 1.0 if travel_mm > 0.0 else -1.0
-    return min(1.0, max(-1.0, engagement + 2e3 * travel_mm / abs(backlash_um)))
+    return clip(engagement + 2e3 * travel_mm / abs(backlash_um), -1.0, 1.0)
 
 
 def transmission_error_um(position_mm, direction, lead_mm, offset_um, slope_um_per_mm,

@@ -17,7 +17,9 @@ def axis_sign(fixed_end_mm):
 def screw_coordinate_m(position_mm, fixed_end_mm):
     """Distance of the nut from the fixed end (m) at axis coordinate P_x (mm).
 
-    Eq. 16: s = P_x - P_f for P_f < 0; Eq. 15: s = P_f - P_x for P_f > 0.
+    Eq. 16: s = P_x - P_f for P_f <= 0; Eq. 15: s = P_f - P_x for P_f > 0 (the sign of
+    :func:`axis_sign`, written out: this runs in every FMU step).
     """
-    offset_mm = values(position_mm) - fixed_end_mm
-    return axis_sign(fixed_end_mm) * offset_mm * 1e-3
+    if fixed_end_mm > 0:
+        return (fixed_end_mm - values(position_mm)) * 1e-3
+    return (values(position_mm) - fixed_end_mm) * 1e-3

@@ -528,12 +528,14 @@ class Servo:
         Time advances in whole internal steps of ``params.time_step_s``; a remainder is
         carried to the next call, so any communication step keeps exact time.
         """
-        require_non_negative("duration_s", duration_s)
-        require_finite("reference_mm", reference_mm)
-        require_finite("disturbance_N", disturbance_N)
+        # one test of valid inputs (every FMU step); the checks name what is wrong
+        if not (0.0 <= duration_s < math.inf and math.isfinite(reference_mm + disturbance_N)):
+            require_non_negative("duration_s", duration_s)
+            require_finite("reference_mm", reference_mm)
+            require_finite("disturbance_N", disturbance_N)
         n_steps, self.pending_s = whole_steps(self.pending_s, duration_s, self.params.time_step_s)
         if n_steps == 0:  # run_loop leaves the state as it is
-            return self.position_mm
+            return self._loop[0]
         force_V = disturbance_N / self.params.force_constant_N_per_V
         if self._compiled is not None:
             steps, references, forces = self._inputs
@@ -545,7 +547,7 @@ class Servo:
                      self._state, self._buffer, [0.0])
         else:
             self._propagate(n_steps, float(reference_mm), force_V)
-        return self.position_mm
+        return self._loop[0]  # position_mm without the property's call: every FMU step
 
     def _set_loop_form(self, state, buffer):
         """Hold ``state`` and ``buffer`` (lists) in run_loop's form."""
