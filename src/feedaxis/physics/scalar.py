@@ -44,13 +44,6 @@ def values_and_module(value):
     return np.asarray(value, dtype=float), np
 
 
-def sign(value):
-    """-1, 0 or +1 by the sign of ``value`` (element-wise for arrays), as ``np.sign``."""
-    if isinstance(value, SCALAR_TYPES):
-        return float(value > 0) - float(value < 0)
-    return np.sign(values(value))
-
-
 def clip(value, lower, upper):
     """``value`` limited to [lower, upper] (element-wise for arrays), as ``np.clip``: NaN
     stays NaN. A scalar is compared, not passed through min and max (half the cost: this
