@@ -1,4 +1,4 @@
-"""Reading, checking and writing a measurement case, format version 1.1 (../shared/data-format.md).
+"""Reading, checking and writing a measurement case, format version 1.2 (docs/case-format.md).
 
 A case is one folder: ``axis.toml`` (required), ``positioning.csv`` and/or ``tracking.csv``,
 optionally ``duty.csv``. Every rule of the format is checked; a broken file raises one
@@ -40,11 +40,16 @@ SERVO_KEYS = {
     "controller": "controller", "kp_V_per_mm": "positive", "ki_V_per_mm_s": "non_negative",
     "kd_V_s_per_mm": "non_negative", "ko_per_mm": "non_negative", "e_max_mm": "positive",
     "force_constant_N_per_V": "positive", "loop_step_s": "positive",
+    "kp_per_s": "positive", "kv_V_s_per_mm": "positive", "tn_s": "positive",
+    "velocity_feedforward": "non_negative",
 }
-SERVO_REQUIRED = ("controller", "kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm",
-                  "force_constant_N_per_V")
-NPID_REQUIRED = ("ko_per_mm", "e_max_mm")
-CONTROLLERS = ("pid", "npid")
+PID_KEYS = ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm", "e_max_mm")
+CASCADE_KEYS = ("kp_per_s", "kv_V_s_per_mm", "tn_s", "velocity_feedforward")
+SERVO_REQUIRED = {"pid": ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm"),
+                  "npid": ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm",
+                           "e_max_mm"),
+                  "cascade": ("kp_per_s", "kv_V_s_per_mm")}
+CONTROLLERS = tuple(SERVO_REQUIRED)
 DEFAULT_LOOP_STEP_S = 1e-4
 TABLES = {"screw": SCREW_KEYS, "motor": MOTOR_KEYS, "servo": SERVO_KEYS}
 # Beyond these no machine axis goes: a value outside is a typing or unit slip, refused
@@ -62,7 +67,8 @@ PHYSICAL_RANGE = {
     "reference_mm": (-1e5, 1e5), "actual_mm": (-1e5, 1e5), "disturbance_N": (-1e7, 1e7),
     "kp_V_per_mm": (1e-9, 1e6), "ki_V_per_mm_s": (0.0, 1e6), "kd_V_s_per_mm": (0.0, 1e6),
     "ko_per_mm": (0.0, 1e3), "e_max_mm": (1e-6, 1e3), "force_constant_N_per_V": (1e-6, 1e7),
-    "loop_step_s": (1e-7, 0.01),
+    "loop_step_s": (1e-7, 0.01), "kp_per_s": (1e-3, 1e5), "kv_V_s_per_mm": (1e-12, 1e6),
+    "tn_s": (1e-6, 1e3), "velocity_feedforward": (0.0, 1.0), "control_V": (-1e4, 1e4),
 }
 
 POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
@@ -70,7 +76,7 @@ POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, 
 DUTY_COLUMNS = {"start_s": True, "duration_s": True, "feed_mm_min": True, "from_mm": True,
                 "to_mm": True, "ambient_C": False}
 TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
-                    "disturbance_N": False}
+                    "disturbance_N": False, "control_V": False}
 
 
 class CaseError(InputError, ValueError):
@@ -142,6 +148,7 @@ class Tracking:
     reference_mm: np.ndarray
     actual_mm: np.ndarray
     disturbance_N: np.ndarray | None = None
+    control_V: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -223,12 +230,24 @@ def read_axis_values(path):
 
 
 def _check_servo(path, text, servo):
-    """The keys ``[servo]`` needs for its controller; ``loop_step_s`` defaulted."""
-    required = SERVO_REQUIRED + (NPID_REQUIRED if servo.get("controller") == "npid" else ())
-    for key in required:
+    """The keys ``[servo]`` needs for its controller, and none of another controller's;
+    ``loop_step_s`` defaulted."""
+    if "controller" not in servo:
+        raise CaseError(path, f"[servo] controller is required ({', '.join(CONTROLLERS)})",
+                        toml_key_line(text, "servo"), "servo.controller")
+    controller = servo["controller"]
+    for key in SERVO_REQUIRED[controller] + ("force_constant_N_per_V",):
         if key not in servo:
-            raise CaseError(path, f"[servo] {key} is required for a {servo.get('controller')} "
-                                  "controller", toml_key_line(text, "servo"), f"servo.{key}")
+            raise CaseError(path, f"[servo] {key} is required for a {controller} controller",
+                            toml_key_line(text, "servo"), f"servo.{key}")
+    foreign = PID_KEYS if controller == "cascade" else CASCADE_KEYS
+    for key in foreign:
+        if key in servo:
+            raise CaseError(path, f"[servo] {key} does not belong to a {controller} controller "
+                                  f"(its keys: {', '.join(SERVO_REQUIRED[controller])}"
+                                  + (", tn_s, velocity_feedforward" if controller == "cascade"
+                                     else "") + ")",
+                            toml_key_line(text, key, "servo"), f"servo.{key}")
     return {"loop_step_s": DEFAULT_LOOP_STEP_S, **servo}
 
 
@@ -505,7 +524,7 @@ def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
     if problem is not None:
         raise CaseError(path, problem[1], rows[problem[0]], "time_s")
     return Tracking(time_s, values["reference_mm"], values["actual_mm"],
-                    values.get("disturbance_N"))
+                    values.get("disturbance_N"), values.get("control_V"))
 
 
 def _check_travel(path, values, rows, columns, length_mm):

@@ -1,0 +1,142 @@
+"""The plant of a drive identified from its own recorded input and output (inverse dynamics).
+
+Where a drive records its controller output u (``control_V``), the plant of the loop,
+ẍ + a1·ẋ + a0·x = b·(u(t − τ) + (F − F_c·sgn ẋ − c·ẋ) / K_F) (:mod:`.servo`; K_F the force
+constant), is linear in its unknowns once divided by b:
+
+    u(t − τ) = ẍ / b + (a1 / b + c / K_F)·ẋ + (a0 / b)·x + (F_c / K_F)·sgn ẋ − F / K_F
+
+so one linear least squares on the recorded samples gives the gain b (the mass: K_F / b in
+N per mm/s²), the damping (plant and viscous friction together: they enter alike), the
+stiffness, the Coulomb friction and a constant force (Gautier & Khalil, "Direct calculation
+of minimum set of inertial parameters of serial robots", IEEE Trans. Robotics and Automation
+6 (1990); the standard inverse-dynamics identification). The derivatives come from the
+position by central differences after the same zero-phase low-pass filter is applied to
+every column and to u (a linear filter keeps the equation; it takes the encoder noise the
+double difference would amplify). Samples near standstill are left out (``SLOW_SHARE``:
+there the friction's sign flips within a sample, and a loop may stick and slip). The delay τ is the whole number of samples (up to
+``MAX_DELAY_S``) that leaves the smallest residual. sgn ẋ is smoothed as in the loop.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .servo import FRICTION_SMOOTHING_MM_S
+
+MAX_DELAY_S = 0.01
+# the filter's corner as a share of the sampling rate: a tenth keeps the motion of a
+# closed position loop (tens of hertz at 1 kHz sampling) and takes the noise above
+CORNER_SHARE = 0.1
+# samples slower than this share of the record's top speed are left out: near a reversal the
+# friction's sign changes within a sample and the loop may stick and slip, which no filtered
+# regressor follows
+SLOW_SHARE = 0.05
+COLUMNS = ("acceleration", "velocity", "position", "coulomb", "constant")
+
+
+@dataclass(frozen=True)
+class Identified:
+    """The plant from a recorded controller output, with standard uncertainties.
+
+    ``values`` and ``sigma`` are in the loop's parameter names (:class:`.servo.ServoParams`):
+    ``plant_gain_mm_per_Vs2``, ``plant_damping_per_s`` (viscous friction included),
+    ``plant_stiffness_per_s2``, ``delay_s``, ``friction_N`` (Coulomb) and ``force_N``.
+    """
+
+    values: dict
+    sigma: dict
+    residual_rms_V: float
+    samples: int
+
+
+def _lowpass(columns, step_s):
+    """Every column filtered forward and backward by a second-order Butterworth low-pass at
+    ``CORNER_SHARE`` of the sampling rate (zero phase)."""
+    from scipy.signal import butter, sosfiltfilt
+
+    sos = butter(2, 2.0 * CORNER_SHARE, output="sos")
+    return sosfiltfilt(sos, columns, axis=0)
+
+
+def regressors(time_s, actual_mm):
+    """(step_s, the inverse-dynamics columns ẍ, ẋ, x − mean, sgn ẋ, 1) of an evenly sampled
+    record, from the position filtered at ``CORNER_SHARE`` of the sampling rate."""
+    step_s = float(np.median(np.diff(time_s)))
+    position = np.asarray(actual_mm, dtype=float) - float(np.mean(actual_mm))
+    velocity = np.gradient(position, step_s)
+    # the friction's sign from the unfiltered velocity, then filtered like the rest:
+    # filtering sgn(v) is not sgn of the filtered v, and the equation holds for the former
+    coulomb = np.clip(velocity / FRICTION_SMOOTHING_MM_S, -1.0, 1.0)
+    position, velocity, coulomb = _lowpass(np.column_stack((position, velocity, coulomb)),
+                                           step_s).T
+    acceleration = np.gradient(velocity, step_s)
+    return step_s, np.column_stack((acceleration, velocity, position, coulomb,
+                                    np.ones_like(position)))
+
+
+def identify_plant(time_s, actual_mm, control_V, force_constant_N_per_V, disturbance_N=None):
+    """The plant, friction and constant force from the recorded ``control_V`` (inverse
+    dynamics, see the module), or None when the record cannot fix them (too short, no
+    motion, a singular regression).
+
+    ``disturbance_N`` (a known force) is moved to the input side. The edges (one filter
+    length at each end) are left out; the standard uncertainties are those of least squares
+    widened by the residual's integrated autocorrelation time.
+    """
+    time_s = np.asarray(time_s, dtype=float)
+    if time_s.size < 50:
+        return None
+    step_s, columns = regressors(time_s, actual_mm)
+    drive_V = np.asarray(control_V, dtype=float)
+    if disturbance_N is not None:
+        drive_V = drive_V + np.asarray(disturbance_N, dtype=float) / force_constant_N_per_V
+    drive_V = _lowpass(drive_V, step_s)
+    edge = int(np.ceil(4.0 / CORNER_SHARE))
+    max_shift = min(int(MAX_DELAY_S / step_s), time_s.size // 4)
+    rows = np.arange(edge + max_shift, time_s.size - edge)
+    speed = np.abs(columns[:, 1])
+    rows = rows[speed[rows] >= SLOW_SHARE * speed.max()] if speed.max() > 0 else rows[:0]
+    if rows.size < 20:
+        return None
+    kept = columns[rows]
+    best = None
+    for shift in range(max_shift + 1):
+        # u(t - τ) against x(t): the input ``shift`` samples before each position
+        target = drive_V[rows - shift]
+        coefficients, _, rank, _ = np.linalg.lstsq(kept, target, rcond=None)
+        if rank < columns.shape[1]:
+            continue
+        residual = target - kept @ coefficients
+        rss = float(residual @ residual)
+        if best is None or rss < best[0]:
+            best = (rss, shift, coefficients, residual)
+    if best is None or best[2][0] <= 0.0:
+        return None
+    return _identified(best, kept, step_s, force_constant_N_per_V)
+
+
+def _identified(best, columns, step_s, force_constant_N_per_V):
+    """:class:`Identified` from the best regression (rss, shift, coefficients, residual)."""
+    from ..stats.coloured import autocorrelation_time
+
+    rss, shift, (inertia, damping, stiffness, coulomb, constant), residual = best
+    n, k = columns.shape
+    variance = rss / max(n - k, 1) * autocorrelation_time(residual)
+    covariance = variance * np.linalg.inv(columns.T @ columns)
+    error = np.sqrt(np.diag(covariance))
+    gain = 1.0 / inertia
+    values = {"plant_gain_mm_per_Vs2": gain, "plant_damping_per_s": damping * gain,
+              "plant_stiffness_per_s2": stiffness * gain, "delay_s": shift * step_s,
+              "friction_N": coulomb * force_constant_N_per_V,
+              "force_N": -constant * force_constant_N_per_V}
+    relative = error[0] / inertia
+    sigma = {"plant_gain_mm_per_Vs2": gain * relative,
+             "plant_damping_per_s": abs(damping * gain) * np.hypot(error[1] / damping, relative)
+             if damping != 0.0 else error[1] * gain,
+             "plant_stiffness_per_s2": error[2] * gain, "delay_s": step_s / np.sqrt(12.0),
+             "friction_N": error[3] * force_constant_N_per_V,
+             "force_N": error[4] * force_constant_N_per_V}
+    return Identified(values, {key: float(value) for key, value in sigma.items()},
+                      float(np.sqrt(rss / n)), n)
