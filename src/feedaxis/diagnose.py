@@ -168,6 +168,7 @@ def diagnose(case, model, effects=None, progress=None, kind=None):
     stages = len(measurement.stages)
     pending, skipped = _available(measurement, model, effects)
     candidates, left = _select(measurement, base, pending, skipped, stages, notify)
+    candidates = [_final_sizes(measurement, c, left) for c in candidates]
     unexplained = _nuisance_findings(measurement, left, stages, notify)
     structures, final = find_structures(measurement, left, measurement.shapes(effects), stages,
                                         notify)
@@ -239,7 +240,7 @@ def _screened_residual(measurement, left, effect):
     so, not a fit (on a 500 s trace a fit of the loop took seconds); the effect the
     screening ranks first is then fitted in full and tested again."""
     model = left.model + effect
-    start = {**left.model.values, effect.name: dict(effect.neutral)}
+    start = {**left.model.values, effect.name: measurement.neutral(effect)}
     problem = Problem(model, [measurement])
     base_um = problem.predicted_um(start)
     columns = []
@@ -289,6 +290,22 @@ def _candidate(measurement, left, effect, result, test):
     return Candidate(effect.name, result.rms_um,
                      float(result.statistics.bic - left.statistics.bic), test,
                      f"{evidence} ({test.describe()})", effect.meaning, result, scale)
+
+
+def _final_sizes(measurement, candidate, left):
+    """``candidate`` with its sizes and evidence from the last fit of the selection, where
+    every effect named was refitted with those named after it (an effect named early, on a
+    model still missing another, is sized by the joint fit)."""
+    if candidate.effect not in left.model or candidate.result is left:
+        return candidate
+    clean = [e for e in left.model.effects if not isinstance(e, BasisEffect)]
+    values = {e.name: left.model.values[e.name] for e in clean}
+    joint = replace(left, model=Model(clean, values))
+    effect = clean[[e.name for e in clean].index(candidate.effect)]
+    contribution = measurement.components(joint.model)[effect.name]
+    evidence = effect.evidence(measurement.case, values[effect.name], contribution)
+    return replace(candidate, result=joint, error_scale=measurement.noise.error_scale(left),
+                   evidence=f"{evidence} ({candidate.test.describe()})")
 
 
 def _nuisance_findings(measurement, left, stages, notify):

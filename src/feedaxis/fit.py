@@ -211,10 +211,13 @@ def fit(model, data, progress=None, kind=None):
     if layout.size == 0:
         return evaluate(model, found)
     problem = Problem(model, found, progress)
-    start = variable_projection(problem, layout)
-    solution = (_linear_solution(problem, layout, start) if layout.nonlinear_index.size == 0
-                else least_squares(problem.residual(layout), start, bounds=layout.bounds(),
-                                   jac=problem.jacobian(layout), x_scale="jac", method="trf"))
+    with np.errstate(over="ignore"):  # a trial step may overflow; the optimiser steps back
+        start = variable_projection(problem, layout)
+        solution = (_linear_solution(problem, layout, start)
+                    if layout.nonlinear_index.size == 0
+                    else least_squares(problem.residual(layout), start, bounds=layout.bounds(),
+                                       jac=problem.jacobian(layout), x_scale="jac",
+                                       method="trf"))
     sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
                                                     solution.active_mask, layout, found)
     fitted = model.with_values(layout.values(solution.x))

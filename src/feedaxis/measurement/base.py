@@ -138,6 +138,10 @@ class Measurement:
         """The deviation (µm) ``model`` predicts at the samples, with its own values."""
         return self.predictor(model)(model.values)
 
+    def neutral(self, effect):
+        """``effect``'s values that switch it off on these samples (its ``neutral``)."""
+        return dict(effect.neutral)
+
     def components(self, model):
         """{effect: its contribution (µm) to the prediction}: an additive effect's error;
         for an effect acting inside the system, the full prediction less the prediction
@@ -149,7 +153,7 @@ class Measurement:
             if effect.additive:
                 parts[effect.name] = effect.prepare(self.case)(model.values[effect.name])
             else:
-                neutral = {**model.values, effect.name: dict(effect.neutral)}
+                neutral = {**model.values, effect.name: self.neutral(effect)}
                 parts[effect.name] = full_um - core(neutral)
         return parts
 

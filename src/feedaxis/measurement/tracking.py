@@ -18,14 +18,18 @@ has died out by then, does not bend the plant.
 """
 from __future__ import annotations
 
+import weakref
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import scipy
 
 from ..case import AXIS_FILE, CaseError
+from ..effects.tracking import PLANT_BOUNDS
 from ..fmu_map import servo_to_fmu
-from ..physics.servo import ServoParams, check_runs, simulate, step_counts
+from ..physics.identify import identify_plant, loop_start
+from ..physics.servo import (MAX_POSITION_MM, ServoParams, check_runs, simulate, step_counts)
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
                               peak_p_value, short_time_peak, spikes)
 from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
@@ -49,15 +53,108 @@ WHOLE_RECORD_SHARE = 0.75  # of the periodic test's level: the record's periodog
 ROUNDING_UM = 1e-3  # the diagnosis's resolution (diagnose.RESOLUTION_UM): below it, rounding
 
 
-def servo_params(axis, model, values=None):
-    """The loop's :class:`ServoParams`: the controller of ``[servo]``, then the model's
-    tracking effects with ``values`` (default the model's own)."""
+PLANT_KEYS = ("plant_gain_mm_per_Vs2", "plant_damping_per_s", "plant_stiffness_per_s2",
+              "delay_s")
+
+
+def servo_params(axis, model, values=None, plant=None):
+    """The loop's :class:`ServoParams`: the controller of ``[servo]`` on ``plant`` (default
+    the paper's, Anang et al. 2017 Eq. 1), then the model's tracking effects with ``values``
+    (default the model's own)."""
     values = model.values if values is None else values
-    merged = servo_to_fmu(axis.servo)
+    merged = {**servo_to_fmu(axis.servo), **(plant or {})}
     for effect in model.effects:
         if effect.measurement == "tracking":
             merged.update({**effect.neutral, **values[effect.name]})
     return ServoParams(**merged)
+
+
+class Start:
+    """Where the loop of a tracking case starts: the plant a model without ``servo_plant``
+    runs, and how it was found (``source``), or why none was (``problem``).
+
+    - With ``control_V`` recorded: the inverse-dynamics least squares of the plant on its own
+      input (:func:`feedaxis.physics.identify.identify_plant`), which also estimates the
+      Coulomb friction and a constant force (``identified``: the starts of those effects).
+    - Otherwise the paper's plant (Anang et al. 2017, Eq. 1) where it makes a stable loop
+      with a PID or NPID that follows the record, and for a cascade, or where it does not,
+      the plant a closed-loop search over the gain finds from the record
+      (:func:`feedaxis.physics.identify.loop_start`).
+
+    A start found from the record is then refined by the closed-loop fit of the plant
+    (``servo_plant`` alone), so a model without ``servo_plant`` runs the plant the record
+    shows, and an effect named on top is judged against it.
+    """
+
+    def __init__(self, plant, source, identified=None, problem=None, refine=True):
+        self.plant, self.source, self.identified, self.problem = (plant, source, identified,
+                                                                  problem)
+        self.refine = refine
+
+
+_STARTS = {}  # id(tracking record) -> (weak reference to it, Start)
+
+
+def loop_start_of(case):
+    """The :class:`Start` of ``case``'s tracking record, found once per record."""
+    trace = case.tracking
+    entry = _STARTS.get(id(trace))
+    if entry is not None and entry[0]() is trace:
+        return entry[1]
+    for key in [key for key, (ref, _) in _STARTS.items() if ref() is None]:
+        del _STARTS[key]
+    start = _find_start(case)
+    _STARTS[id(trace)] = (weakref.ref(trace), start)
+    if start.plant and start.refine:
+        start.plant = _refined(case, start.plant)
+    return start
+
+
+def _refined(case, plant):
+    """``plant`` after a closed-loop fit of ``servo_plant`` from it (the start's own
+    measurement: this runs while the unrefined start is the case's)."""
+    from ..effects import CATALOG, Model
+    from ..fit import fit
+
+    effect = CATALOG["servo_plant"]
+    result = fit(Model((effect,), {effect.name: dict(plant)}), Tracking(case))
+    return dict(result.model.values[effect.name])
+
+
+def _runs(params, trace, counts):
+    """Whether ``params`` make a loop that stays on any axis over the record."""
+    with np.errstate(all="ignore"):
+        position_mm = simulate(params, trace.time_s, trace.reference_mm, trace.disturbance_N,
+                               counts)
+    return bool(np.all(np.abs(position_mm) <= MAX_POSITION_MM))
+
+
+def _find_start(case):
+    servo = case.axis.servo
+    trace = case.tracking
+    base = ServoParams(**servo_to_fmu(servo))
+    counts = step_counts(trace.time_s, servo["loop_step_s"])
+    if trace.control_V is not None:
+        identified = identify_plant(trace.time_s, trace.actual_mm, trace.control_V,
+                                    servo["force_constant_N_per_V"], trace.disturbance_N)
+        if identified is not None:
+            plant = {key: float(np.clip(identified.values[key], *PLANT_BOUNDS[key]))
+                     for key in PLANT_KEYS}
+            if _runs(replace(base, **plant), trace, counts):
+                return Start(plant, "identified from the recorded controller output "
+                                    "(inverse dynamics)", identified)
+    if base.controller != "cascade" and _runs(base, trace, counts):
+        return Start({}, "the plant of Anang et al. 2017, Eq. 1", refine=False)
+    plant = loop_start(base, trace.time_s, trace.reference_mm, trace.actual_mm,
+                       trace.disturbance_N, START_WINDOW_S)
+    if plant is None:
+        return Start(None, "", problem=(
+            f"no plant gain from {PLANT_BOUNDS['plant_gain_mm_per_Vs2'][0]:g} to "
+            f"{PLANT_BOUNDS['plant_gain_mm_per_Vs2'][1]:g} mm/(V.s2) makes a stable loop with "
+            f"the controller of [servo] ({servo['controller']}): check its gains and units, "
+            "or record the controller output (control_V) so the plant can be identified "
+            "from its own input"))
+    return Start(plant, "found from the record by a closed-loop search over the plant gain")
 
 
 class Tracking(Measurement):
@@ -72,7 +169,7 @@ class Tracking(Measurement):
     location_key = "frequency_hz"
     location_unit = "Hz"
     coordinate_label = "time (s)"
-    reference_label = "seed 002 plant"
+    reference_label = "the starting plant"
     stages = ("drift", "effects", "structures")
     loose_share = 0.5
 
@@ -90,6 +187,13 @@ class Tracking(Measurement):
         self.time_s = self.coordinate = trace.time_s[self.index]
         self.reference_mm = trace.reference_mm[self.index]
         self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
+        self.start = loop_start_of(case)
+
+    def neutral(self, effect):
+        """``effect``'s values that switch it off: for ``servo_plant`` the starting plant."""
+        if effect.name == "servo_plant" and self.start.plant:
+            return {**effect.neutral, **self.start.plant}
+        return super().neutral(effect)
 
     @property
     def noise(self):
@@ -117,8 +221,35 @@ class Tracking(Measurement):
     def subset(self, keep):
         return Tracking(self.case, self.index[keep])
 
+    def rival(self, effect, left, result):
+        """Why one friction law is not what the data show, against the other fitted on the
+        same model (F test on the two parameters of the Stribeck rise at the policy's
+        level, each with the plant refitted: friction the start's plant absorbed would
+        otherwise pass for a rise at rest): ``stribeck_friction`` when its rise at rest is
+        not significant against Coulomb friction alone, ``coulomb_friction`` when it is.
+        Only one of them is named, the one the data show."""
+        laws = ("coulomb_friction", "stribeck_friction")
+        if effect.name not in laws or any(name in left.model for name in laws):
+            return None
+        from ..effects import CATALOG
+        from ..fit import fit
+        from ..stats.judge import accepts
+
+        base = left.model if "servo_plant" in left.model else left.model + CATALOG["servo_plant"]
+        coulomb, stribeck = (fit(base + CATALOG[law], self) for law in laws)
+        test = self.noise.extra_ss_test(coulomb.residual_um, stribeck.residual_um, 2,
+                                        stribeck.statistics.n_free)
+        rises = accepts(test.p_value, 1, len(self.stages))
+        if effect.name == laws[0] and rises:
+            return ("the friction rises at rest above its Coulomb level: Stribeck friction "
+                    f"describes the reversals better ({test.describe()})")
+        if effect.name == laws[1] and not rises:
+            return ("its rise at rest above the Coulomb level is not significant against "
+                    f"Coulomb friction alone ({test.describe()})")
+        return None
+
     def params(self, model, values=None):
-        return servo_params(self.case.axis, model, values)
+        return servo_params(self.case.axis, model, values, self.start.plant)
 
     def deviation_um(self, params, disturbance_N=None):
         """Predicted deviation position - reference (µm) at the samples under ``params``,
@@ -127,7 +258,8 @@ class Tracking(Measurement):
         force = self.disturbance_N if disturbance_N is None else disturbance_N
         position_mm = simulate(params, self.record_time_s, self.record_reference_mm, force,
                                self.counts)
-        return (position_mm - self.record_reference_mm)[self.index] * 1e3
+        with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
+            return (position_mm - self.record_reference_mm)[self.index] * 1e3
 
     def check_start(self, model, values):
         """The closed loop must not run away with ``values``

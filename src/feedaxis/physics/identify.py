@@ -140,3 +140,81 @@ def _identified(best, columns, step_s, force_constant_N_per_V):
              "force_N": error[4] * force_constant_N_per_V}
     return Identified(values, {key: float(value) for key, value in sigma.items()},
                       float(np.sqrt(rss / n)), n)
+
+
+# the plant gains the closed-loop search tries (mm/(V·s²)), a quarter decade apart: from a
+# heavy table on a weak amplifier to seed 002's small one, and beyond
+SEARCH_GAINS = np.logspace(-1.0, 7.0, 33)
+SEARCH_DAMPINGS = (0.0, 30.0, 300.0)  # 1/s
+SEARCH_SPAN_S = 5.0  # the search runs on the record's first seconds
+
+
+def loop_start(params, time_s, reference_mm, actual_mm, disturbance_N=None, skip_s=0.2):
+    """The plant (``plant_gain_mm_per_Vs2``, ``plant_damping_per_s``,
+    ``plant_stiffness_per_s2`` 0, ``delay_s`` 0) under which ``params``' controller,
+    simulated from the reference, follows ``actual_mm`` best, or None when no plant on the
+    grid makes a stable loop.
+
+    A search over :data:`SEARCH_GAINS` x :data:`SEARCH_DAMPINGS` on the first
+    :data:`SEARCH_SPAN_S` of the record (samples after ``skip_s`` compared), the best gain
+    then refined within its neighbours by a golden-section search on its logarithm: a start
+    for the closed-loop fit from the record alone, where no controller output is recorded.
+    """
+    from dataclasses import replace
+
+    from .servo import MAX_POSITION_MM, simulate, step_counts
+
+    time_s = np.asarray(time_s, dtype=float)
+    stop = max(int(np.searchsorted(time_s, time_s[0] + SEARCH_SPAN_S)), min(time_s.size, 50))
+    time_s, reference_mm = time_s[:stop], np.asarray(reference_mm, dtype=float)[:stop]
+    actual_mm = np.asarray(actual_mm, dtype=float)[:stop]
+    force = None if disturbance_N is None else np.asarray(disturbance_N, dtype=float)[:stop]
+    compared = time_s >= time_s[0] + skip_s
+    if compared.sum() < 10:
+        compared[:] = True
+    counts = step_counts(time_s, params.time_step_s)
+
+    def misfit(gain, damping):
+        trial = replace(params, plant_gain_mm_per_Vs2=float(gain),
+                        plant_damping_per_s=float(damping), plant_stiffness_per_s2=0.0,
+                        delay_s=0.0)
+        with np.errstate(all="ignore"):
+            position_mm = simulate(trial, time_s, reference_mm, force, counts)
+        if not np.all(np.abs(position_mm) <= MAX_POSITION_MM):
+            return np.inf
+        return float(np.mean((position_mm - actual_mm)[compared] ** 2))
+
+    scores = np.array([[misfit(g, d) for d in SEARCH_DAMPINGS] for g in SEARCH_GAINS])
+    if not np.isfinite(scores).any():
+        return None
+    i, j = np.unravel_index(np.argmin(scores), scores.shape)
+    damping = SEARCH_DAMPINGS[j]
+    low = np.log(SEARCH_GAINS[max(i - 1, 0)])
+    high = np.log(SEARCH_GAINS[min(i + 1, SEARCH_GAINS.size - 1)])
+    best_log = _golden(lambda log_gain: misfit(np.exp(log_gain), damping), low, high,
+                       np.log(SEARCH_GAINS[i]), scores[i, j])
+    return {"plant_gain_mm_per_Vs2": float(np.exp(best_log)),
+            "plant_damping_per_s": float(damping), "plant_stiffness_per_s2": 0.0,
+            "delay_s": 0.0}
+
+
+def _golden(function, low, high, best_x, best_value, iterations=12):
+    """The best x of ``function`` found by a golden-section search on [low, high], or
+    ``best_x`` when none beats ``best_value``."""
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    a, b = low, high
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc, fd = function(c), function(d)
+    for _ in range(iterations):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - ratio * (b - a)
+            fc = function(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + ratio * (b - a)
+            fd = function(d)
+    for x, value in ((c, fc), (d, fd)):
+        if value < best_value:
+            best_x, best_value = x, value
+    return best_x

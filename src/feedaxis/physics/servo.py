@@ -18,7 +18,8 @@ by a backward difference; the delay is a shift by whole steps. An axial force en
 plant input as an equivalent command F / force_constant, as data-format.md 1.1 states (the
 paper gives no force scaling; see :class:`ServoParams`): the known disturbance, and the
 friction of the guideways and the nut, a Coulomb force ``friction_N`` opposing the velocity
-(smoothed linearly over |v| < ``FRICTION_SMOOTHING_MM_S``) plus a viscous force
+(smoothed linearly over |v| < ``FRICTION_SMOOTHING_MM_S``, wider where a loop step could
+not resolve it: :func:`friction_smoothing_mm_s`) plus a viscous force
 ``damping_N_s_per_mm``·v, both from the velocity at the start of the step, and a Stribeck
 rise of the friction at rest (``coulomb_N`` + (``static_N`` − ``coulomb_N``)·exp(−(v/v_s)²),
 Armstrong-Hélouvry, Dupont & Canudas de Wit, "A survey of models, analysis tools and
@@ -236,13 +237,28 @@ def loop_coefficients(params):
                      else 0.0)
     require_representable("the velocity loop's integral gain kv / tn (V/mm)", integral_gain,
                           False, kv_V_s_per_mm=params.kv_V_s_per_mm, tn_s=params.tn_s)
+    smoothing_mm_s = friction_smoothing_mm_s(friction_V + max(coulomb_V, static_V),
+                                             late[1] + early[1])
     return np.array([*transition.ravel(), *late, *early, params.kp_V_per_mm,
                      params.ki_V_per_mm_s, params.kd_V_s_per_mm, params.ko_per_mm,
                      params.e_max_mm, float(params.npid), friction_V,
                      damping_V_s_per_mm, params.time_step_s, float(params.delay_steps),
                      float(cascade), params.kp_per_s, params.kv_V_s_per_mm, integral_gain,
                      params.velocity_feedforward, coulomb_V, static_V,
-                     params.stribeck_velocity_mm_s])
+                     params.stribeck_velocity_mm_s, smoothing_mm_s])
+
+
+def friction_smoothing_mm_s(friction_V, velocity_per_V):
+    """The velocity (mm/s) over which the friction's sign is smoothed linearly:
+    ``FRICTION_SMOOTHING_MM_S``, or wider where one loop step could not resolve it.
+
+    The friction is taken from the velocity at the step's start, so within the smoothing
+    it acts as a damping of friction_V / width, which one step changes the velocity by
+    ``velocity_per_V`` (mm/s per V held over the step) times: beyond 1 the step overshoots
+    zero velocity and the loop chatters there, a numerical oscillation no axis has. The
+    width is kept where that gain is 1 at most (heavy friction at a long loop step).
+    """
+    return max(FRICTION_SMOOTHING_MM_S, friction_V * abs(velocity_per_V))
 
 
 def stribeck_V(velocity_mm_s, coulomb_V, static_V, stribeck_velocity_mm_s):
@@ -254,14 +270,14 @@ def stribeck_V(velocity_mm_s, coulomb_V, static_V, stribeck_velocity_mm_s):
 
 def friction_V(velocity_mm_s, coefficients):
     """The friction opposing ``velocity_mm_s`` (V, positive along +v): Coulomb and Stribeck
-    smoothed linearly over |v| < ``FRICTION_SMOOTHING_MM_S``, plus viscous; for a float v.
+    smoothed linearly over |v| < :func:`friction_smoothing_mm_s`, plus viscous; for a float v.
     One definition for the loop (:func:`run_loop`) and the identification from a recorded
     controller output."""
     coulomb_V, damping_V_s_per_mm = coefficients[14], coefficients[15]
     rise_coulomb_V, static_V = coefficients[23], coefficients[24]
     total = damping_V_s_per_mm * velocity_mm_s
     if coulomb_V != 0.0 or rise_coulomb_V != 0.0 or static_V != 0.0:  # no division when none
-        sign = min(max(velocity_mm_s / FRICTION_SMOOTHING_MM_S, -1.0), 1.0)
+        sign = min(max(velocity_mm_s / coefficients[26], -1.0), 1.0)
         magnitude = coulomb_V
         if rise_coulomb_V != 0.0 or static_V != 0.0:
             magnitude += stribeck_V(velocity_mm_s, rise_coulomb_V, static_V, coefficients[25])
