@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy
+import scipy.stats
 
 from ..case import AXIS_FILE, CaseError
 from ..effects.tracking import PLANT_BOUNDS
@@ -31,7 +32,7 @@ from ..fmu_map import servo_to_fmu
 from ..physics.identify import identify_plant, loop_start
 from ..physics.servo import (MAX_POSITION_MM, ServoParams, check_runs, simulate, step_counts)
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
-                              peak_p_value, short_time_peak, spikes)
+                              noise_floor_um, peak_p_value, short_time_peak, spikes)
 from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
 from ..stats.noise import Coloured
 from .base import Measurement, Shape, Trial
@@ -384,7 +385,13 @@ class Tracking(Measurement):
         return [("drift", drift, drift.trial(self, None).basis)]
 
     def shapes(self, effects):
-        return (PeriodicForce(), ConstantForce(), Reversal())
+        return (ForceSteps(), PeriodicForce(), ConstantForce(), Reversal())
+
+    def step_response_um(self, model):
+        """The deviation (µm) over the record after a 1 N force step at the record's second
+        sample, from that sample on: the running sum of :meth:`impulse_response_um` (exact
+        for a linear loop, a linearisation with Coulomb or Stribeck friction)."""
+        return np.cumsum(self.impulse_response_um(model))
 
     def settled(self):
         """Mask of the samples after the record's first second (all when none is)."""
@@ -458,6 +465,185 @@ def _rss(values):
 
 def _max_abs(fitted_um):
     return float(np.max(np.abs(fitted_um)))
+
+
+MAX_EVENTS = 200
+
+
+class ForceSteps(Shape):
+    """Force steps as events in time: at each, the force on the axis changes by a size and
+    stays (a cut starting or ending, a load put down, a clamp), so the residual takes the
+    loop's step response from there on. A train of them (cuts every second) is found as
+    its events, with their times, sizes and the period when they repeat, not as the
+    harmonics of its period.
+
+    Candidates by a matching pursuit with orthogonal refits (Pati, Rezaiifar &
+    Krishnaprasad, "Orthogonal matching pursuit", 27th Asilomar Conference, 1993): the
+    loop's step response shifted to every sample compared is correlated with the residual
+    (one FFT), the best joins, all are refitted; candidates are taken while one explains
+    more than the high-frequency noise floor could at its most over the samples searched
+    (:func:`feedaxis.stats.coloured.noise_floor_um`). Then backward: each step is tested
+    against the set without it, by the extra-sum-of-squares test under the coloured-noise
+    model (n/τ of the residual left by all of them), Bonferroni over every sample it could
+    sit at, at the family-wise level; the weakest failing step leaves and the rest are
+    refitted, until every step left passes. The structure's test is the steps' joint test,
+    family-wise over the samples searched.
+    """
+
+    kind = "force_steps"
+    extra = 2  # each step's time and size
+
+    def trials(self, measurement):
+        return 1 if measurement.uniform_step_s() and measurement.size >= 20 else 0
+
+    def trial(self, measurement, current):
+        chosen, test = self._search(measurement, current.model, current.residual_um,
+                                    current.jacobian, current.statistics.n_free)
+        if chosen:  # once more on the model refitted with the steps: a plant the unmodelled
+            # steps bent would leave steps of its own
+            from ..effects import BasisEffect, Model
+            from ..fit import fit
+
+            steps = BasisEffect("force_steps", self._basis(measurement, current.model, chosen))
+            refit = fit(current.model + steps, measurement)
+            model = Model(refit.model.effects[:-1], refit.model.values)
+            jacobian = None if refit.jacobian is None else refit.jacobian[:, :-len(chosen)]
+            residual_um = refit.residual_um + steps.prepare(measurement.case)(
+                refit.model.values[steps.name])
+            chosen, test = self._search(measurement, model, residual_um, jacobian,
+                                        current.statistics.n_free)
+        if not chosen:
+            return None
+        times_s = measurement.record_time_s[np.array(chosen)]
+        return Trial(self._basis(measurement, model if test else current.model, chosen),
+                     None, test, {"event_times_s": [float(t) for t in times_s]})
+
+    @staticmethod
+    def _basis(measurement, model, chosen):
+        """The loop's response (µm) to a 1 N step at each record sample of ``chosen``, at
+        the samples compared."""
+        response = measurement.step_response_um(model)
+        return np.column_stack([_step_column(response, c, measurement.index)
+                                for c in chosen])
+
+    def _search(self, measurement, model, residual_um, jacobian, n_free):
+        """(sorted record samples of the steps found, their joint test) on ``residual_um``
+        (at the samples compared) of ``model``, its ``jacobian`` the nuisance; ([], None)
+        when none passes."""
+        response = measurement.step_response_um(model)
+        first, last = int(measurement.index[0]), int(measurement.index[-1])
+        _, residual = measurement.gridded(residual_um)
+        grid = np.arange(first, last + 1)
+        positions = grid[1:-1]
+        nuisance = (None if jacobian is None or jacobian.shape[1] == 0 else
+                    np.column_stack([measurement.gridded(c)[1] for c in jacobian.T]))
+        chosen = _pursued_steps(residual, response, first, positions, nuisance)
+        alpha = FAMILY_ALPHA / len(measurement.stages)
+        while chosen:
+            columns = np.column_stack([_step_column(response, c, grid) for c in chosen])
+            full = _leftover(residual, nuisance, columns)
+            worst = None
+            for i in range(len(chosen)):
+                without = _leftover(residual, nuisance, np.delete(columns, i, axis=1))
+                test = measurement.noise.extra_ss_test(without, full, self.extra,
+                                                       n_free + self.extra * len(chosen))
+                p_value = min(1.0, test.p_value * positions.size)
+                if worst is None or p_value > worst[0]:
+                    worst = (p_value, i)
+            if worst[0] < alpha:
+                break
+            del chosen[worst[1]]
+        if not chosen:
+            return [], None
+        joint = measurement.noise.extra_ss_test(_leftover(residual, nuisance, None), full,
+                                                self.extra * len(chosen),
+                                                n_free + self.extra * len(chosen))
+        test = Test(joint.statistic, joint.dof, min(1.0, joint.p_value * positions.size),
+                    f"{joint.name}, the steps together; each step alone family-wise over the "
+                    f"{positions.size} samples it could sit at", joint.symbol)
+        return sorted(chosen), test
+
+    def amplitude_um(self, measurement, fitted_um, location):
+        return _max_abs(fitted_um)
+
+    def describe(self, measurement, trial, fitted_um):
+        sizes_N = _regress(fitted_um, trial.basis)[0]
+        times_s = np.array(trial.extra["event_times_s"])
+        trial.extra["event_sizes_N"] = [float(size) for size in sizes_N]
+        period = _period_s(times_s)
+        trial.extra["period_s"] = period
+        listed = ", ".join(f"{t:.4g} s ({size:+.3g} N)"
+                           for t, size in zip(times_s[:12], sizes_N[:12]))
+        more = f" and {times_s.size - 12} more" if times_s.size > 12 else ""
+        repeat = (f", repeating every {period:.4g} s" if period is not None else "")
+        return (f"{times_s.size} force step{'s' if times_s.size > 1 else ''}{repeat}: the force "
+                f"on the axis changes at {listed}{more} (median size "
+                f"{np.median(np.abs(sizes_N)):.3g} N), the loop's step response after each "
+                "(a cut starting or ending, a load put down)")
+
+
+def _step_column(response, sample, rows):
+    """The loop's response (µm) to a 1 N step at record ``sample``, at record ``rows``."""
+    column = np.zeros(rows.size)
+    after = rows >= sample
+    column[after] = response[np.minimum(rows[after] - sample, response.size - 1)]
+    return column
+
+
+def _leftover(residual, nuisance, columns):
+    """``residual`` less its least-squares fit on ``nuisance`` and ``columns`` (either may
+    be None or empty)."""
+    parts = [part for part in (nuisance, columns) if part is not None and part.shape[1]]
+    if not parts:
+        return residual
+    return residual - _regress(residual, np.column_stack(parts))[1]
+
+
+def _pursued_steps(residual, response, first, positions, nuisance):
+    """Record samples of candidate steps (:class:`ForceSteps`): the pursuit stops when the
+    best step explains less than the noise floor's largest chance drop over ``positions``
+    (its variance times the χ²₁ quantile at 1 − FAMILY_ALPHA / positions) or at
+    ``MAX_EVENTS``."""
+    left = _leftover(residual, nuisance, None)
+    floor_um = noise_floor_um(left)
+    threshold = floor_um ** 2 * scipy.stats.chi2.isf(FAMILY_ALPHA / positions.size, 1)
+    chosen = []
+    grid = np.arange(first, first + residual.size)
+    while len(chosen) < MAX_EVENTS:
+        best = _best_step(left, response, first, positions, chosen)
+        if best is None or best[1] <= threshold:
+            break
+        chosen.append(best[0])
+        columns = np.column_stack([_step_column(response, c, grid) for c in chosen])
+        left = _leftover(residual, nuisance, columns)
+    return chosen
+
+
+def _best_step(residual, response, first, positions, chosen):
+    """The record sample among ``positions`` (not in ``chosen``) where the step response
+    correlates best with ``residual`` (on the grid from record sample ``first``), and the
+    drop in the residual sum of squares it alone would give; None when none does."""
+    size = residual.size
+    correlation = scipy.signal.fftconvolve(residual, response[:size][::-1])[size - 1:]
+    # correlation[j] = sum_t residual[t + j] response[t]: a step at grid sample j
+    energy = np.cumsum(response[:size] ** 2)[::-1]  # energy[j]: the response over size - j
+    offsets = positions - first
+    drop = correlation[offsets] ** 2 / np.maximum(energy[offsets], 1e-300)
+    drop[np.isin(positions, chosen)] = 0.0
+    best = int(np.argmax(drop))
+    return (int(positions[best]), float(drop[best])) if drop[best] > 0.0 else None
+
+
+def _period_s(times_s):
+    """The period (s) of event times that repeat (three or more, every interval within 10 %
+    of the median, or of half of it where a train alternates on and off), else None."""
+    if times_s.size < 3:
+        return None
+    intervals = np.diff(times_s)
+    median = float(np.median(intervals))
+    if median > 0 and np.all(np.abs(intervals - median) <= 0.1 * median):
+        return median
+    return None
 
 
 class PeriodicForce(Shape):
