@@ -169,6 +169,8 @@ def diagnose(case, model, effects=None, progress=None, kind=None):
     pending, skipped = _available(measurement, model, effects)
     candidates, left = _select(measurement, base, pending, skipped, stages, notify)
     candidates = [_final_sizes(measurement, c, left) for c in candidates]
+    recorded, left = _recorded(measurement, left, pending, stages)
+    candidates += recorded
     unexplained = _nuisance_findings(measurement, left, stages, notify)
     structures, final = find_structures(measurement, left, measurement.shapes(effects), stages,
                                         notify)
@@ -290,6 +292,26 @@ def _candidate(measurement, left, effect, result, test):
     return Candidate(effect.name, result.rms_um,
                      float(result.statistics.bic - left.statistics.bic), test,
                      f"{evidence} ({test.describe()})", effect.meaning, result, scale)
+
+
+def _recorded(measurement, left, pending, stages):
+    """(candidates, fit) for the effects a record beside the deviation shows
+    (:meth:`~feedaxis.measurement.Measurement.recorded_findings`): each joins the model
+    at the values that record gives (the deviation does not move them), with their
+    standard uncertainties."""
+    candidates = []
+    for effect, values, sigma, test, evidence in measurement.recorded_findings(left, pending,
+                                                                               stages):
+        model = left.model + effect
+        left = replace(left, model=model.with_values({**model.values, effect.name: values}),
+                       uncertainties={**left.uncertainties, effect.name: sigma})
+        clean = [e for e in left.model.effects if not isinstance(e, BasisEffect)]
+        result = replace(left, model=Model(clean, {e.name: left.model.values[e.name]
+                                                   for e in clean}))
+        candidates.append(Candidate(effect.name, left.rms_um, 0.0, test,
+                                    f"{evidence} ({test.describe()})", effect.meaning, result))
+        del pending[effect.name]
+    return candidates, left
 
 
 def _final_sizes(measurement, candidate, left):

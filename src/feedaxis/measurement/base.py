@@ -214,6 +214,12 @@ class Measurement:
         (None when they can): the verdict is then ``undetermined``, not ``adequate``."""
         return None
 
+    def recorded_findings(self, left, pending, stages):
+        """Effects of ``pending`` these samples cannot show in the deviation but a record
+        beside it can (a drive's controller output): [(effect, values, standard
+        uncertainties, test, evidence)] of those it names at the policy's level."""
+        return []
+
     def rival(self, effect, left, result):
         """Why ``effect``, significant on top of ``left`` (``result``), is not what the data
         show (None when it is): it would only stand in for a structure of another shape."""

@@ -30,10 +30,11 @@ from ..case import AXIS_FILE, CaseError
 from ..effects.tracking import PLANT_BOUNDS
 from ..fmu_map import servo_to_fmu
 from ..physics.identify import identify_plant, loop_start
-from ..physics.servo import (MAX_POSITION_MM, ServoParams, check_runs, simulate, step_counts)
+from ..physics.servo import (MAX_POSITION_MM, ServoParams, check_runs, simulate,
+                             simulate_record, step_counts)
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
                               noise_floor_um, peak_p_value, short_time_peak, spikes)
-from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
+from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, accepts, drift_basis
 from ..stats.noise import Coloured
 from .base import Measurement, Shape, Trial
 
@@ -225,6 +226,43 @@ class Tracking(Measurement):
     def subset(self, keep):
         return Tracking(self.case, self.index[keep])
 
+    def recorded_findings(self, left, pending, stages):
+        """A constant force the tracking error cannot show (an integral action holds it) but
+        the recorded controller output does: the output the fitted loop predicts is
+        subtracted from ``control_V``, and what is left regressed on the predicted output's
+        change under 1 N (the integral holds −1/K_F); F test with the effective sample count
+        n/τ of what is left, at the policy's level. The force's standard uncertainty is
+        that of the regression widened by √τ."""
+        trace = self.case.tracking
+        effect = pending.get("constant_force")
+        if trace.control_V is None or effect is None:
+            return []
+        params = self.params(left.model)
+        known = trace.disturbance_N
+        ones = np.ones(trace.time_s.size)
+        outputs = [simulate_record(params, trace.time_s, trace.reference_mm, force,
+                                   self.counts)[1][self.index]
+                   for force in (known, ones if known is None else known + ones)]
+        left_V = trace.control_V[self.index] - outputs[0]
+        column = outputs[1] - outputs[0]
+        energy = float(column @ column)
+        if energy <= 0.0:
+            return []
+        force_N = float(column @ left_V) / energy
+        after_V = left_V - force_N * column
+        test = self.noise.extra_ss_test(left_V, after_V, 1, left.statistics.n_free + 1)
+        if not accepts(test.p_value, 1, stages):
+            return []
+        variance = float(after_V @ after_V) / max(after_V.size - 1, 1)
+        sigma_N = float(np.sqrt(autocorrelation_time(after_V) * variance / energy))
+        test = Test(test.statistic, test.dof, test.p_value,
+                    f"{test.name}, on the recorded controller output", test.symbol)
+        evidence = (f"a constant force of {force_N:+.3g} N on the axis, held by the "
+                    f"controller's integral action: the recorded output carries "
+                    f"{-force_N / params.force_constant_N_per_V:+.3g} V for it, the tracking "
+                    "error nothing lasting")
+        return [(effect, {"force_N": force_N}, {"force_N": sigma_N}, test, evidence)]
+
     def rival(self, effect, left, result):
         """Why one friction law is not what the data show, against the other fitted on the
         same model (F test on the two parameters of the Stribeck rise at the policy's
@@ -237,7 +275,6 @@ class Tracking(Measurement):
             return None
         from ..effects import CATALOG
         from ..fit import fit
-        from ..stats.judge import accepts
 
         base = left.model if "servo_plant" in left.model else left.model + CATALOG["servo_plant"]
         coulomb, stribeck = (fit(base + CATALOG[law], self) for law in laws)
