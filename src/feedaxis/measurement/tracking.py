@@ -32,8 +32,9 @@ from ..fmu_map import servo_to_fmu
 from ..physics.identify import identify_plant, loop_start
 from ..physics.servo import (MAX_POSITION_MM, ServoParams, check_runs, simulate,
                              simulate_record, step_counts)
-from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
-                              noise_floor_um, peak_p_value, short_time_peak, spikes)
+from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, autoregression,
+                              locate_sinusoid, noise_floor_um, peak_p_value, short_time_peak,
+                              spikes)
 from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, accepts, drift_basis
 from ..stats.noise import Coloured
 from .base import Measurement, Shape, Trial
@@ -569,27 +570,35 @@ class ForceSteps(Shape):
     def _search(self, measurement, model, residual_um, jacobian, n_free):
         """(sorted record samples of the steps found, their joint test) on ``residual_um``
         (at the samples compared) of ``model``, its ``jacobian`` the nuisance; ([], None)
-        when none passes."""
-        response = measurement.step_response_um(model)
+        when none passes. Residual, step response and nuisance are whitened by the
+        autoregressive filter of the residual's noise (robust spectrum, persistence raised
+        by two standard errors: :meth:`feedaxis.stats.coloured.Autoregression.cautious`),
+        so the tests are those of white noise."""
         first, last = int(measurement.index[0]), int(measurement.index[-1])
         _, residual = measurement.gridded(residual_um)
+        noise = autoregression(residual, robust=True).cautious()
+        whiten = _ar_filter(noise.coefficients)
+        response = whiten(measurement.step_response_um(model))
+        residual = whiten(residual - np.mean(residual))
         grid = np.arange(first, last + 1)
         positions = grid[1:-1]
         nuisance = (None if jacobian is None or jacobian.shape[1] == 0 else
-                    np.column_stack([measurement.gridded(c)[1] for c in jacobian.T]))
+                    whiten(np.column_stack([measurement.gridded(c)[1] for c in jacobian.T])))
         chosen = _pursued_steps(residual, response, first, positions, nuisance)
-        kept, full = _pruned_steps(measurement, residual, response, grid, nuisance,
-                                         chosen, n_free, positions.size, self.extra)
+        kept, full = _pruned_steps(measurement, residual, response, grid, nuisance, chosen,
+                                   n_free, positions.size, self.extra)
         if not kept:
             return [], None
-        joint = measurement.noise.extra_ss_test(_leftover(residual, nuisance, None), full,
-                                                self.extra * len(kept),
-                                                n_free + self.extra * len(kept))
-        test = Test(joint.statistic, joint.dof, min(1.0, joint.p_value * positions.size),
-                    f"{joint.name}, the steps together; each step alone family-wise over the "
-                    f"{positions.size} samples it could sit at", joint.symbol)
-        chosen = kept
-        return sorted(chosen), test
+        extra = self.extra * len(kept)
+        before = _leftover(residual, nuisance, None)
+        dof = max(full.size - n_free - extra, 1)
+        statistic = max(_rss(before) - _rss(full), 0.0) / extra / max(_rss(full) / dof, 1e-300)
+        p_value = float(scipy.stats.f.sf(statistic, extra, dof))
+        test = Test(float(statistic), (extra, dof), min(1.0, p_value * positions.size),
+                    f"F test of the steps together on the residual whitened by its noise's "
+                    f"autoregressive filter (order {noise.order}); each step alone "
+                    f"family-wise over the {positions.size} samples it could sit at", "F")
+        return sorted(kept), test
 
     def amplitude_um(self, measurement, fitted_um, location):
         return _max_abs(fitted_um)
@@ -627,6 +636,13 @@ def _leftover(residual, nuisance, columns):
     return residual - _regress(residual, np.column_stack(parts))[1]
 
 
+def _ar_filter(coefficients):
+    """The whitening filter of an autoregression, x_k − Σ φ_j x_{k−j}, along the first axis
+    from rest (a step column, zero before its step, stays one shifted)."""
+    taps = np.concatenate(([1.0], -np.asarray(coefficients, dtype=float)))
+    return lambda values: scipy.signal.lfilter(taps, [1.0], values, axis=0)
+
+
 def _pursued_steps(residual, response, first, positions, nuisance):
     """Record samples of candidate steps (:class:`ForceSteps`), by orthogonal matching
     pursuit (each column orthogonalised against the nuisance and the steps before it): the
@@ -638,8 +654,8 @@ def _pursued_steps(residual, response, first, positions, nuisance):
     basis = (np.zeros((residual.size, 0)) if nuisance is None
              else np.linalg.qr(nuisance)[0])
     left = residual - basis @ (basis.T @ residual)
-    threshold = noise_floor_um(left) ** 2 * scipy.stats.chi2.isf(FAMILY_ALPHA / positions.size,
-                                                                 1)
+    threshold = noise_floor_um(left) ** 2 * scipy.stats.chi2.isf(
+        FAMILY_ALPHA / positions.size, 1)
     chosen = []
     while len(chosen) < MAX_EVENTS:
         best = _best_step(left, response, first, positions, chosen)
@@ -660,10 +676,10 @@ def _pursued_steps(residual, response, first, positions, nuisance):
 def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_free, searched,
                   extra):
     """(steps kept, the residual after them): backward elimination of ``chosen`` by
-    each step's extra-sum-of-squares test against the set without it (β² over the diagonal
-    of (X'X)⁻¹, one fit per round), under the coloured-noise model of the residual left
-    (n/τ), Bonferroni over the ``searched`` samples, at the family-wise level of a stage;
-    each round drops the weakest half of the steps that fail (at least one)."""
+    each step's extra-sum-of-squares F test against the set without it (β² over the
+    diagonal of (X'X)⁻¹, one fit per round) on the whitened residual, Bonferroni over the
+    ``searched`` samples, at the family-wise level of a stage; each round drops the
+    weakest half of the steps that fail (at least one)."""
     alpha = FAMILY_ALPHA / len(measurement.stages)
     chosen = list(chosen)
     offset = 0 if nuisance is None else nuisance.shape[1]
@@ -674,8 +690,7 @@ def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_fre
         full = residual - design @ coefficients
         inverse = np.diag(np.linalg.pinv(design.T @ design))[offset:]
         drops = coefficients[offset:] ** 2 / np.maximum(inverse, 1e-300)
-        n_effective = full.size / autocorrelation_time(full)
-        dof = max(n_effective - n_free - extra * len(chosen), 1.0)
+        dof = max(full.size - n_free - extra * len(chosen), 1.0)
         statistic = drops / extra / max(float(full @ full) / dof, 1e-300)
         p_values = np.minimum(1.0, scipy.stats.f.sf(statistic, extra, dof) * searched)
         failing = np.flatnonzero(p_values >= alpha)
