@@ -555,9 +555,11 @@ class ForceSteps(Shape):
                                         current.statistics.n_free)
         if not chosen:
             return None
+        basis = self._basis(measurement, model, chosen)
+        if _sinusoid_rivals(measurement, current, basis):
+            return None
         times_s = measurement.record_time_s[np.array(chosen)]
-        return Trial(self._basis(measurement, model if test else current.model, chosen),
-                     None, test, {"event_times_s": [float(t) for t in times_s]})
+        return Trial(basis, None, test, {"event_times_s": [float(t) for t in times_s]})
 
     @staticmethod
     def _basis(measurement, model, chosen):
@@ -617,6 +619,29 @@ class ForceSteps(Shape):
                 f"on the axis changes at {listed}{more} (median size "
                 f"{np.median(np.abs(sizes_N)):.3g} N), the loop's step response after each "
                 "(a cut starting or ending, a load put down)")
+
+
+def _bic(residual_um, basis, parameters):
+    """The Bayesian information criterion of ``basis`` fitted to ``residual_um``."""
+    left = residual_um - _regress(residual_um, basis)[1]
+    n = residual_um.size
+    return n * np.log(max(_rss(left) / n, 1e-300)) + parameters * np.log(n)
+
+
+def _sinusoid_rivals(measurement, current, steps):
+    """Whether the strongest sinusoid (:class:`PeriodicForce`, over the record or a window
+    of it) describes the residual of ``current`` at least as well as the force ``steps``
+    by the Bayesian information criterion (each step a time and a size; the sinusoid its
+    amplitude, phase, frequency and a window's two edges): a burst at 50 Hz is a periodic
+    force, not a hundred steps."""
+    shape = PeriodicForce()
+    if not shape.trials(measurement):
+        return False
+    trial = shape.trial(measurement, current)
+    periodic = 3 + (2 if trial.extra["localised"] else 0)
+    residual = current.residual_um
+    return (_bic(residual, trial.basis, periodic)
+            <= _bic(residual, steps, ForceSteps.extra * steps.shape[1]))
 
 
 def _step_column(response, sample, rows):
