@@ -115,10 +115,11 @@ def loop_start_of(case):
 
 def _refined(case, plant):
     """``plant`` after a closed-loop fit of ``servo_plant`` from it, Coulomb friction fitted
-    beside it as a nuisance (friction at the reversals would otherwise bend the plant's
-    damping and delay, and every effect is then judged against a plant it bent); the
-    friction is left for the diagnosis to name. The start's own measurement: this runs
-    while the unrefined start is the case's."""
+    beside it as a nuisance (friction at the reversals would otherwise draw the plant's
+    damping and delay into another optimum, and every effect would be judged against a
+    plant it bent); the friction is left for the diagnosis to name, tested with the plant
+    refitted (:meth:`Tracking.rival`). The start's own measurement: this runs while the
+    unrefined start is the case's."""
     from ..effects import CATALOG, Model
     from ..fit import fit
 
@@ -265,20 +266,30 @@ class Tracking(Measurement):
         return [(effect, {"force_N": force_N}, {"force_N": sigma_N}, test, evidence)]
 
     def rival(self, effect, left, result):
-        """Why one friction law is not what the data show, against the other fitted on the
-        same model (F test on the two parameters of the Stribeck rise at the policy's
-        level, each with the plant refitted: friction the start's plant absorbed would
-        otherwise pass for a rise at rest): ``stribeck_friction`` when its rise at rest is
-        not significant against Coulomb friction alone, ``coulomb_friction`` when it is.
-        Only one of them is named, the one the data show."""
+        """Why a friction law is not what the data show, each judged with the plant
+        refitted (the start's plant was fitted beside a friction, so a friction tested on
+        top of it alone would look more significant than it is): not significant against
+        the plant alone (F test at the policy's level over the tracking effects), or the
+        other law describes the reversals better (F test on the two parameters of the
+        Stribeck rise): ``stribeck_friction`` when its rise at rest is not significant
+        against Coulomb friction alone, ``coulomb_friction`` when it is. Only one of them
+        is named, the one the data show."""
         laws = ("coulomb_friction", "stribeck_friction")
         if effect.name not in laws or any(name in left.model for name in laws):
             return None
         from ..effects import CATALOG
+        from ..effects.tracking import TRACKING_EFFECTS
         from ..fit import fit
 
         base = left.model if "servo_plant" in left.model else left.model + CATALOG["servo_plant"]
+        plain = fit(base, self)
         coulomb, stribeck = (fit(base + CATALOG[law], self) for law in laws)
+        refitted = coulomb if effect.name == laws[0] else stribeck
+        test = self.noise.extra_ss_test(plain.residual_um, refitted.residual_um,
+                                        len(effect.parameters), refitted.statistics.n_free)
+        if not accepts(test.p_value, len(TRACKING_EFFECTS), len(self.stages)):
+            return ("with the plant refitted beside it, it is not significant "
+                    f"({test.describe()})")
         test = self.noise.extra_ss_test(coulomb.residual_um, stribeck.residual_um, 2,
                                         stribeck.statistics.n_free)
         rises = accepts(test.p_value, 1, len(self.stages))
