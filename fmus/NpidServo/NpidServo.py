@@ -63,7 +63,8 @@ class NpidServo(AxisSlave):
         self.input("disturbance_N", 0.0, "External axial force, e.g. cutting force", "N")
         self.output("position_mm", "Axial position the motor angle commands (lead x turns)", "mm")
         self.output("velocity_mm_s", "Axial velocity", "mm/s")
-        self.output("tracking_error_mm", "Reference minus position", "mm")
+        self.output("tracking_error_mm", "Position minus reference (the sign of every "
+                    "feedaxis deviation: measured - commanded)", "mm")
         self.output("control_V", "Controller output", "V")
         for field in fields(servo.ServoParams):
             limits = (None if field.name in NO_LIMITS else

@@ -451,11 +451,12 @@ class Tracking(Measurement):
         return settled if settled.any() else np.ones_like(settled)
 
     def figures(self, result):
-        """Max and RMS tracking error (reference - position, mm) measured and predicted, and
-        the residual (actual - predicted, µm), over the samples after the first second."""
+        """Max and RMS tracking error (actual − reference, mm: the sign of every deviation)
+        measured and predicted, and the residual (actual − predicted, µm), over the samples
+        after the first second."""
         settled = self.settled()
-        measured_mm = -result.measured_um[settled] * 1e-3
-        predicted_mm = -(result.measured_um - result.residual_um)[settled] * 1e-3
+        measured_mm = result.measured_um[settled] * 1e-3
+        predicted_mm = (result.measured_um - result.residual_um)[settled] * 1e-3
         residual_um = result.residual_um[settled]
         return {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "samples": int(settled.sum()),

@@ -268,19 +268,19 @@ def stribeck_V(velocity_mm_s, coulomb_V, static_V, stribeck_velocity_mm_s):
     return coulomb_V + (static_V - coulomb_V) * math.exp(-ratio * ratio)
 
 
-def friction_V(velocity_mm_s, coefficients):
+def friction_V(velocity_mm_s, coulomb_V, damping_V_s_per_mm, rise_coulomb_V, static_V,
+               stribeck_velocity_mm_s, smoothing_mm_s):
     """The friction opposing ``velocity_mm_s`` (V, positive along +v): Coulomb and Stribeck
-    smoothed linearly over |v| < :func:`friction_smoothing_mm_s`, plus viscous; for a float v.
-    One definition for the loop (:func:`run_loop`) and the identification from a recorded
-    controller output."""
-    coulomb_V, damping_V_s_per_mm = coefficients[14], coefficients[15]
-    rise_coulomb_V, static_V = coefficients[23], coefficients[24]
+    (:func:`stribeck_V`) smoothed linearly over |v| < ``smoothing_mm_s``
+    (:func:`friction_smoothing_mm_s`), plus viscous; for floats (the compiled loop passes
+    no arrays between functions: that would need numba's runtime)."""
     total = damping_V_s_per_mm * velocity_mm_s
     if coulomb_V != 0.0 or rise_coulomb_V != 0.0 or static_V != 0.0:  # no division when none
-        sign = min(max(velocity_mm_s / coefficients[26], -1.0), 1.0)
+        sign = min(max(velocity_mm_s / smoothing_mm_s, -1.0), 1.0)
         magnitude = coulomb_V
         if rise_coulomb_V != 0.0 or static_V != 0.0:
-            magnitude += stribeck_V(velocity_mm_s, rise_coulomb_V, static_V, coefficients[25])
+            magnitude += stribeck_V(velocity_mm_s, rise_coulomb_V, static_V,
+                                    stribeck_velocity_mm_s)
         total += magnitude * sign
     return total
 
@@ -317,6 +317,8 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
     kp, ki, kd, ko, e_max, nonlinear = coefficients[8:14]
     dt, delay = coefficients[16], coefficients[17]
     cascade, kp_per_s, kv, kv_tn, feedforward = coefficients[18:23]
+    coulomb_V, damping_V_s_per_mm = coefficients[14], coefficients[15]
+    rise_V, static_V, stribeck_mm_s, smoothing_mm_s = coefficients[23:27]
     x1, x2, integral, previous, start_mm = state[0], state[1], state[2], state[3], state[4]
     head = int(state[5])
     size = len(buffer)
@@ -345,7 +347,8 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
             command_late = buffer[(head - shift) % size]
             command_early = buffer[(head - shift - 1) % size]
             head = (head + 1) % size
-            force = force_V - friction_V(x2, coefficients)
+            force = force_V - friction_V(x2, coulomb_V, damping_V_s_per_mm, rise_V, static_V,
+                                         stribeck_mm_s, smoothing_mm_s)
             u_late = command_late + force
             u_early = command_early + force
             x1, x2 = (a11 * x1 + a12 * x2 + late1 * u_late + early1 * u_early,
@@ -625,14 +628,16 @@ class Servo:
 
     @property
     def tracking_error_mm(self):
-        """Reference minus position at the end of the last step (mm)."""
+        """Position minus reference at the end of the last step (mm): the sign of every
+        deviation in feedaxis (measured − commanded, ISO 230-2), of tracking.csv's
+        actual_mm − reference_mm and of the report."""
         return self.outputs()[2]
 
     def outputs(self):
         """(position_mm, velocity_mm_s, tracking_error_mm, control_V) at the end of the last
         step; control_V is the last command, the newest in the delay line."""
         loop = self._loop
-        return loop[0], loop[1], loop[4] - loop[0], self.control_V
+        return loop[0], loop[1], loop[0] - loop[4], self.control_V
 
     @property
     def control_V(self):
