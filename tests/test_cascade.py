@@ -183,3 +183,35 @@ def test_a_1_hz_train_of_force_steps_is_reported_as_events_with_their_times(tmp_
     assert np.allclose(np.abs(sizes), 2.0, rtol=0.25) and np.all(sizes[::2] > 0)
     assert not [s for s in found.unexplained if s.kind == "periodic"]
     assert main(["diagnose", str(case.folder), "--json"]) == 0
+
+
+def test_the_built_fmu_runs_a_cascade_drive_as_the_fit_simulates_it(fmu_paths):
+    """NpidServo with ``controller = "cascade"`` (its compiled loop) against the physics'
+    loop stepped alike in Python (fmpy sets each step's input at the step's start), with
+    Coulomb friction and a constant force; tracking_error_mm is position − reference."""
+    from fmpy import simulate_fmu
+
+    friction = {"friction_N": 2.0, "force_N": -1.5}
+    params = _params("P-PI ff", **friction)
+    step_s, n = 1e-3, 400
+    time_s = np.arange(n + 1) * step_s
+    reference_mm = np.array([exciting(t) for t in time_s])
+    signal = np.array(list(zip(time_s, reference_mm)),
+                      dtype=[("time", float), ("position_ref_mm", float)])
+    start = {"controller": "cascade", "time_step_s": LOOP_STEP_S,
+             "force_constant_N_per_V": FORCE_CONSTANT_N_PER_V, **PLANT, **friction,
+             **{key: value for key, value in servo_table("P-PI ff").items()
+                if key in ("kp_per_s", "kv_V_s_per_mm", "tn_s", "velocity_feedforward")}}
+    result = simulate_fmu(str(fmu_paths["NpidServo"]), stop_time=n * step_s, step_size=step_s,
+                          output_interval=step_s, input=signal, start_values=start,
+                          output=["position_mm", "tracking_error_mm", "control_V"])
+    loop = servo.Servo(params, reference_mm[0], loop=servo.run_loop)
+    expected = []
+    for i in range(n):
+        loop.advance(step_s, reference_mm[i])
+        expected.append(loop.outputs())
+    position, _, error, control = np.array(expected).T
+    np.testing.assert_allclose(result["position_mm"][1:], position, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result["control_V"][1:], control, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result["tracking_error_mm"][1:], error, rtol=0, atol=1e-9)
+    assert np.allclose(error, position - reference_mm[:n])  # each step's input, its target
