@@ -693,7 +693,13 @@ def _simulate_tracking_options(parser):
     parser.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
     parser.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
     parser.add_argument("--duration-s", type=float, default=10.0, help="default 10")
-    parser.add_argument("--controller", choices=("pid", "npid"), default="pid")
+    parser.add_argument("--controller", choices=("pid", "npid", "cascade"), default="pid",
+                        help="pid or npid (Anang et al. 2017), or cascade: a drive's P position "
+                             "loop around a velocity loop (its gains: --set NpidServo.kp_per_s=..., "
+                             "kv_V_s_per_mm, tn_s, velocity_feedforward)")
+    parser.add_argument("--record-control", action="store_true",
+                        help="write the controller output as tracking.csv's control_V, as a "
+                             "drive records it")
     parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
     parser.add_argument("--force-N", type=float,
                         help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
@@ -727,7 +733,7 @@ def _tracking_arguments(args):
     force = {} if args.force_N is None else {"force_N": args.force_N}
     return {"frequency_hz": args.frequency_hz, "amplitude_mm": args.amplitude_mm,
             "duration_s": args.duration_s, "controller": args.controller,
-            "spindle_rpm": args.spindle_rpm, **force}
+            "spindle_rpm": args.spindle_rpm, "record_control": args.record_control, **force}
 
 
 def _numbers(text, option):

@@ -218,7 +218,8 @@ def _select(measurement, left, pending, skipped, stages, notify):
                 del pending[effect.name]
                 continue
             notify(effect.name)
-            result = fit(left.model + effect, measurement) if effect.additive else None
+            result = (fit(left.model + effect, measurement)
+                      if effect.additive or not effect.screened else None)
             after_um = (result.residual_um if result else
                         _screened_residual(measurement, left, effect))
             tested.append((measurement.noise.extra_ss_test(
@@ -262,14 +263,23 @@ def _screened_residual(measurement, left, effect):
 def _best_candidate(measurement, left, tested, pending, skipped, stages):
     """The (test, effect, result) with the smallest p-value that passes the policy and is
     what the data show (a rival shape passes it over, with the reason), or None. A
-    screened candidate (no result yet) is fitted in full before it is judged."""
-    for test, effect, result in sorted(tested, key=lambda item: item[0].p_value):
-        if result is None and accepts(test.p_value, len(tested), stages):
+    screened candidate (no result yet) is fitted in full and takes its place again by the
+    full fit's test (a linearised step may promise more than the fit gives)."""
+    tries = len(tested)
+    tested = list(tested)
+    while tested:
+        tested.sort(key=lambda item: item[0].p_value)
+        test, effect, result = tested[0]
+        if result is None:
+            if not accepts(test.p_value, tries, stages):
+                return None
             result = fit(left.model + effect, measurement)
             test = measurement.noise.extra_ss_test(left.residual_um, result.residual_um,
                                                    len(effect.parameters),
                                                    result.statistics.n_free)
-        if not accepts(test.p_value, len(tested), stages) or \
+            tested[0] = (test, effect, result)
+            continue
+        if not accepts(test.p_value, tries, stages) or \
                 _explained_um(left, result) < RESOLUTION_UM:
             return None
         rival = measurement.rival(effect, left, result)
@@ -277,6 +287,7 @@ def _best_candidate(measurement, left, tested, pending, skipped, stages):
             return test, effect, result
         skipped[effect.name] = rival
         del pending[effect.name]
+        tested.pop(0)
     return None
 
 

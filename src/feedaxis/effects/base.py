@@ -67,6 +67,9 @@ class Effect:
     measurement = "positioning"
     additive = True
     probe: dict = {}
+    # an effect acting inside the system is screened by one linearised step before it is
+    # fitted (diagnose._screened_residual); False: always fitted (a step from far away)
+    screened: bool = True
 
     def __add__(self, other):
         return Model((self,)) + other

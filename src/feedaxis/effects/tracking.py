@@ -67,13 +67,14 @@ class ServoPlant(TrackingEffect):
         Parameter("plant_stiffness_per_s2", "1/s2", 0.0, 1e5, "a0 of Eq. 1"),
         Parameter("delay_s", "s", 0.0, 0.02, "transport delay of the command"))
     neutral = {p.name: SEED002_PLANT[p.name] for p in parameters}
+    screened = False  # its delay moves the loop far from a linear step: always fitted
 
     def guess(self, case, residual_um):
-        """The starting plant of the case (the loop's start,
-        :class:`feedaxis.measurement.tracking.Start`)."""
+        """The basin of the case's starting plant (the loop's start,
+        :class:`feedaxis.measurement.tracking.Start`: the plant fitted beside a friction)."""
         from ..measurement.tracking import loop_start_of
 
-        return {**self.neutral, **(loop_start_of(case).plant or {})}
+        return {**self.neutral, **(loop_start_of(case).basin or {})}
 
     def evidence(self, case, values, contribution_um):
         from ..measurement.tracking import loop_start_of

@@ -93,6 +93,7 @@ class Start:
         self.plant, self.source, self.identified, self.problem = (plant, source, identified,
                                                                   problem)
         self.refine = refine
+        self.basin = plant  # where a fit of servo_plant starts (:func:`_refined`)
 
 
 _STARTS = {}  # id(tracking record) -> (weak reference to it, Start)
@@ -109,23 +110,28 @@ def loop_start_of(case):
     start = _find_start(case)
     _STARTS[id(trace)] = (weakref.ref(trace), start)
     if start.plant and start.refine:
-        start.plant = _refined(case, start.plant)
+        start.basin, start.plant = _refined(case, start.plant)
     return start
 
 
 def _refined(case, plant):
-    """``plant`` after a closed-loop fit of ``servo_plant`` from it, Coulomb friction fitted
-    beside it as a nuisance (friction at the reversals would otherwise draw the plant's
-    damping and delay into another optimum, and every effect would be judged against a
-    plant it bent); the friction is left for the diagnosis to name, tested with the plant
-    refitted (:meth:`Tracking.rival`). The start's own measurement: this runs while the
-    unrefined start is the case's."""
+    """(basin, plant): ``plant`` after two closed-loop fits of ``servo_plant``, the first
+    with Coulomb friction beside it as a nuisance (friction at the reversals would
+    otherwise draw the search's plant into another optimum: the basin, where a fit of the
+    plant with the effects starts), the second alone from there: the model without
+    effects is the plant alone that fits the record best, so an effect is judged on top
+    of it as on any model (a plant tuned beside a friction makes the plant alone, or that
+    friction, look significant on a null). The start's own measurement: this runs while
+    the unrefined start is the case's."""
     from ..effects import CATALOG, Model
     from ..fit import fit
 
     effect, friction = CATALOG["servo_plant"], CATALOG["coulomb_friction"]
-    result = fit(Model((effect, friction), {effect.name: dict(plant)}), Tracking(case))
-    return dict(result.model.values[effect.name])
+    measurement = Tracking(case)
+    beside = fit(Model((effect, friction), {effect.name: dict(plant)}), measurement)
+    alone = fit(Model((effect,), {effect.name: dict(beside.model.values[effect.name])}),
+                measurement)
+    return (dict(beside.model.values[effect.name]), dict(alone.model.values[effect.name]))
 
 
 def _runs(params, trace, counts):
