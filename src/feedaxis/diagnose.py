@@ -218,21 +218,37 @@ def _select(measurement, left, pending, skipped, stages, notify):
                 del pending[effect.name]
                 continue
             notify(effect.name)
-            result = (fit(left.model + effect, measurement)
+            joined = _joined(left.model, effect, pending)
+            result = (fit(joined, measurement)
                       if effect.additive or not effect.screened else None)
             after_um = (result.residual_um if result else
                         _screened_residual(measurement, left, effect))
+            extra = sum(len(e.parameters) for e in (joined.effects if result else (effect,))
+                        if e.name not in left.model)
             tested.append((measurement.noise.extra_ss_test(
-                left.residual_um, after_um, len(effect.parameters),
-                left.statistics.n_free + len(effect.parameters)), effect, result))
+                left.residual_um, after_um, extra, left.statistics.n_free + extra), effect,
+                result))
         named = _best_candidate(measurement, left, tested, pending, skipped, stages)
         if named is None:
             break
         test, effect, result = named
-        candidates.append(_candidate(measurement, left, effect, result, test))
-        del pending[effect.name]
+        for joined in [e for e in result.model.effects if e.name in pending]:
+            candidates.append(_candidate(measurement, left, joined, result, test))
+            del pending[joined.name]
         left = result
     return candidates, left
+
+
+def _joined(model, effect, pending):
+    """``model`` + ``effect``, with the effects it is fitted with (``Effect.fitted_with``)
+    that the model lacks and the selection still tries: an effect that only shows with
+    another refitted beside it (a friction the starting plant absorbed) is tested with it,
+    the extra-sum-of-squares test counting both."""
+    joined = model
+    for name in effect.fitted_with:
+        if name not in model and name in pending:
+            joined = joined + pending[name]
+    return joined + effect
 
 
 def _screened_residual(measurement, left, effect):

@@ -104,6 +104,8 @@ class CoulombFriction(TrackingEffect):
     neutral = {"friction_N": 0.0}
     probe = {"friction_N": 1.0}
     from_identified = ("friction_N",)
+    screened = False  # the loop is nonlinear in it: a linear step from 0 understates it
+    fitted_with = ("servo_plant",)  # the starting plant, fitted alone, absorbed part of it
 
     def evidence(self, case, values, contribution_um):
         return f"{values['friction_N']:.3g} N of Coulomb friction: " + _reversals_text(
@@ -143,6 +145,8 @@ class StribeckFriction(TrackingEffect):
                             "velocity over which the friction falls from static to Coulomb"))
     neutral = {"coulomb_N": 0.0, "static_N": 0.0, "stribeck_velocity_mm_s": 1.0}
     probe = {"coulomb_N": 1.0, "static_N": 1.0}
+    screened = False
+    fitted_with = ("servo_plant",)
 
     def evidence(self, case, values, contribution_um):
         return (f"{values['static_N']:.3g} N at rest falling to {values['coulomb_N']:.3g} N "
