@@ -9,6 +9,7 @@ import math
 import re
 
 from .effects.base import BasisEffect
+from .kinds import kind, part
 from .stats.wording import p_text
 
 
@@ -99,12 +100,12 @@ def repeatability_text(repeatability):
 
 
 def comparison_lines(comparison):
-    """The figures of ``compare``: ISO 230-2 (positioning) or seed 002's (tracking)."""
-    return (_tracking_comparison_lines if comparison["kind"] == "tracking"
-            else _iso_comparison_lines)(comparison)
+    """The figures of ``compare``, as the kind of measurement compared writes them (its
+    ``text`` part: ISO 230-2 for positioning, seed 002's for tracking)."""
+    return part(kind(comparison["kind"]), "text")(comparison)
 
 
-def _iso_comparison_lines(comparison):
+def iso_comparison_lines(comparison):
     """ISO 230-2 figures, measured against the residual after the model."""
     lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
              f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
@@ -121,7 +122,7 @@ def _iso_comparison_lines(comparison):
     return "\n".join(lines)
 
 
-def _tracking_comparison_lines(comparison):
+def tracking_comparison_lines(comparison):
     """Seed 002's figures after the first second: measured, predicted; then the residual."""
     maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
     return "\n".join([
