@@ -5,6 +5,7 @@ command line with no other module touched; the contract refuses a kind that forg
 hook or inherits an optional one undeclared."""
 import ast
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -148,16 +149,34 @@ def test_no_module_branches_on_a_kind_outside_its_own():
     assert foreign_uses({OWNERS[kind]: {kind} for kind in OWNERS}) == {}
 
 
+def controller_mentions(tree, names):
+    """[(line, name)] of every string (docstrings too) naming one of ``names`` as a word."""
+    return [(node.lineno, name) for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str)
+            for name in names if re.search(rf"\b{name}\b", node.value, re.IGNORECASE)]
+
+
 def test_no_controller_name_outside_its_module():
+    """A controller is named only in its own module: the registry, the command line and
+    its help read the Controller objects."""
     from feedaxis.comptable import CONTROLLERS
-    owners = {(f"comptable/{controller.module}.py",): {name}
-              for name, controller in CONTROLLERS.items()}
-    assert foreign_uses(owners) == {}
+    foreign = {}
+    for path in sorted(SOURCE.rglob("*.py")):
+        relative = path.relative_to(SOURCE).as_posix()
+        names = {name for name, controller in CONTROLLERS.items()
+                 if relative != f"comptable/{controller.module}.py"}
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        found = kind_name_uses(tree, names) + controller_mentions(tree, names)
+        if found:
+            foreign[relative] = found
+    assert foreign == {}
 
 
-def test_the_check_finds_a_branch_on_a_kind(tmp_path):
+def test_the_checks_find_a_branch_on_a_kind_and_a_controller_named():
     code = ('if comparison["kind"] == "tracking":\n    pass\n'
             'size = case.positioning.size\nVIEWS = {"tracking": 1}\n'
             'write_case(folder, axis, positioning=columns)\nif kind in ("tracking",): pass\n')
     found = kind_name_uses(ast.parse(code), {"positioning", "tracking"})
     assert sorted(line for line, _ in found) == [1, 3, 4, 5, 6]
+    code = 'CHOICES = ("alpha", "beta")\nHELP = "the .COM of Alpha"\n'
+    assert sorted(controller_mentions(ast.parse(code), {"alpha"})) == [(1, "alpha"), (2, "alpha")]
