@@ -110,6 +110,23 @@ def _check_within_duty(path, time_s, rows, duty_end_s):
                "match the samples' time span")
 
 
+def iso_comparison_lines(comparison):
+    """ISO 230-2 figures, measured against the residual after the model."""
+    lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
+             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
+             f"{'ISO 230-2 figure (µm)':32s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
+    for figure in comparison["figures"].values():
+        explained = figure["explained"]
+        lines.append(f"{figure['name']:32s} {figure['measured_um']:10.4g} "
+                     f"{figure['residual_um']:10.4g} "
+                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
+    lines.append(f"{'RMS':32s} {comparison['rms_measured_um']:10.4g} "
+                 f"{comparison['rms_residual_um']:10.4g}")
+    if not comparison["bidirectional"]:
+        lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
+    return "\n".join(lines)
+
+
 @kinds.register
 class Positioning(Measurement):
     """The positioning samples of a case."""
@@ -120,7 +137,7 @@ class Positioning(Measurement):
     measured_column = ("error_um", 1.0)
     details = "feedaxis.positioning_details:positioning_details"
     views = "feedaxis.report.positioning:VIEWS"
-    text = "feedaxis.text:iso_comparison_lines"
+    text = staticmethod(iso_comparison_lines)
 
     @classmethod
     def read(cls, folder, axis, duty):

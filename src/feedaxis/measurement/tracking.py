@@ -94,6 +94,19 @@ def servo_params(axis, model, values=None):
     return ServoParams(**merged)
 
 
+def tracking_comparison_lines(comparison):
+    """Seed 002's figures after the first second: measured, predicted; then the residual."""
+    maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
+    return "\n".join([
+        f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
+        f"{', '.join(comparison['effects']) or '(seed 002 plant)'}",
+        f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
+        f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
+        f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
+        f"residual actual - predicted: max {comparison['residual_max_um']:.4g} µm, RMS "
+        f"{comparison['residual_rms_um']:.4g} µm"])
+
+
 @kinds.register
 class Tracking(Measurement):
     """The tracking record of a case, ready for repeated simulation.
@@ -108,7 +121,7 @@ class Tracking(Measurement):
     measured_column = ("actual_mm", 1e-3)
     details = "feedaxis.tracking_details:tracking_details"
     views = "feedaxis.report.tracking:VIEWS"
-    text = "feedaxis.text:tracking_comparison_lines"
+    text = staticmethod(tracking_comparison_lines)
     location_key = "frequency_hz"
     location_unit = "Hz"
     coordinate_label = "time (s)"
