@@ -47,7 +47,8 @@ def kinds():
         _loaded.append(True)
         for module in BUILT_IN:
             importlib.import_module(module)
-    return dict(_KINDS)
+    ordered = sorted(_KINDS.values(), key=lambda cls: cls.__module__ not in BUILT_IN)
+    return {cls.kind: cls for cls in ordered}
 
 
 def kind(name):
