@@ -250,8 +250,9 @@ def _compare_options(parser):
 @command("compare", help="the measurement's figures: measured against the model",
          description="Positioning: ISO 230-2 accuracy, repeatability, reversal and systematic "
                      "deviation of the measured runs and of what is left after the model, "
-                     "side by side. Tracking: seed 002's maximum and RMS tracking error "
-                     "after the first second, measured and predicted.",
+                     "side by side. Tracking: the maximum and RMS tracking error (as Anang "
+                     "et al. 2017 report them) after the first second, measured and "
+                     "predicted.",
          options=_compare_options)
 def _cmd_compare(args):
     from .analysis import compare
@@ -615,8 +616,8 @@ command_group("simulate", help="run a scenario on the co-simulated axis, write a
               description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
                           "scenario and write the result as a measurement case (data-format.md), "
                           "ready for fit, diagnose and compare. iso230 and thermal run the servo "
-                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: seed 002's "
-                          "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
+                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: the "
+                          "193.3 of Anang et al. 2017 leaves a static error of target/364); --set overrides it. Ctrl-C "
                           "stops and keeps what was computed.",
               options=_simulate_options)
 
@@ -695,23 +696,25 @@ def _simulate_tracking_options(parser):
     parser.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
     parser.add_argument("--duration-s", type=float, default=10.0, help="default 10")
     parser.add_argument("--controller", choices=("pid", "npid", "cascade"), default="pid",
-                        help="pid or npid (Anang et al. 2017), or cascade: a drive's P position "
-                             "loop around a velocity loop (its gains: --set NpidServo.kp_per_s=..., "
-                             "kv_V_s_per_mm, tn_s, velocity_feedforward)")
+                        help="pid or npid (Anang et al. 2017), or cascade: a drive's P "
+                             "position loop around a velocity loop (its gains: --set "
+                             "NpidServo.kp_per_s=..., kv_V_s_per_mm, tn_s, "
+                             "velocity_feedforward)")
     parser.add_argument("--record-control", action="store_true",
                         help="write the controller output as tracking.csv's control_V, as a "
                              "drive records it")
     parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
     parser.add_argument("--force-N", type=float,
                         help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
-                             "row of seed 002 Table 2)")
+                             "row of Table 2 of Anang et al. 2017)")
 
 
-@scenario("tracking", help="sinusoidal tracking, PID or NPID (seed 002) -> tracking.csv",
+@scenario("tracking", help="sinusoidal tracking, PID, NPID (Anang et al. 2017) or a cascade "
+                           "drive -> tracking.csv",
           description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
                       "after the first second. --spindle-rpm adds a milling force at the "
-                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, seed 002 "
-                      "publishes none). axis.toml gets the [servo] table (the controller), not "
+                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, Anang "
+                      "et al. 2017 publish none). axis.toml gets the [servo] table (the controller), not "
                       "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
                       "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).",
           options=_simulate_tracking_options)

@@ -59,8 +59,8 @@ class ServoPlant(TrackingEffect):
     """The plant G(s) = b e^{-τs} / (s² + a1 s + a0) of seed 002 Eq. 1, identified."""
 
     name = "servo_plant"
-    meaning = ("the plant (motor, screw, table) responds differently from seed 002 Eq. 1: "
-               "gain, damping, stiffness or transport delay")
+    meaning = ("the plant (motor, screw, table) responds differently from the starting "
+               "plant: gain, damping, stiffness or transport delay")
     parameters = (
         Parameter("plant_gain_mm_per_Vs2", "mm/(V.s2)", 1e-1, 1e7, "b of Eq. 1"),
         Parameter("plant_damping_per_s", "1/s", 0.0, 1e4, "a1 of Eq. 1"),

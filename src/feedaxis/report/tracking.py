@@ -13,7 +13,7 @@ def _tracking_views(analysis):
     maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
     frequency_hz, amplitude_um = details.residual_spectrum
     return [
-        "<h2>Tracking error (seed 002)</h2>",
+        "<h2>Tracking error</h2>",
         table(("after the first second", "measured (mm)", "predicted (mm)"),
               [("max tracking error", f"{maximum['measured']:.5f}", f"{maximum['predicted']:.5f}"),
                ("RMS tracking error", f"{rms['measured']:.5f}", f"{rms['predicted']:.5f}")]),
