@@ -236,11 +236,34 @@ def _select(measurement, left, pending, skipped, stages, notify):
         if named is None:
             break
         test, effect, result = named
+        result, test = _without_idle_companions(measurement, left, effect, result, test,
+                                                stages)
         for joined in [e for e in result.model.effects if e.name in pending]:
             candidates.append(_candidate(measurement, left, joined, result, test))
             del pending[joined.name]
         left = result
     return candidates, left
+
+
+def _without_idle_companions(measurement, left, effect, result, test, stages):
+    """(``result``, ``test``), or without the effects fitted beside ``effect``
+    (``Effect.fitted_with``) when they are not significant on top of ``effect`` alone (the
+    extra-sum-of-squares test at the policy's level; the test is then ``effect``'s alone):
+    they were fitted beside it to let it show, and are named only when the data need them
+    too."""
+    companions = [e for e in result.model.effects
+                  if e.name not in left.model and e is not effect]
+    if not companions:
+        return result, test
+    alone = fit(left.model + effect, measurement)
+    extra = sum(len(e.parameters) for e in companions)
+    needed = measurement.noise.extra_ss_test(alone.residual_um, result.residual_um, extra,
+                                             result.statistics.n_free)
+    if accepts(needed.p_value, len(companions), stages):
+        return result, test
+    return alone, measurement.noise.extra_ss_test(left.residual_um, alone.residual_um,
+                                                  len(effect.parameters),
+                                                  alone.statistics.n_free)
 
 
 def _joined(model, effect, pending):
