@@ -215,3 +215,36 @@ def test_the_built_fmu_runs_a_cascade_drive_as_the_fit_simulates_it(fmu_paths):
     np.testing.assert_allclose(result["control_V"][1:], control, rtol=0, atol=1e-9)
     np.testing.assert_allclose(result["tracking_error_mm"][1:], error, rtol=0, atol=1e-9)
     assert np.allclose(error, position - reference_mm[:n])  # each step's input, its target
+
+
+def test_a_drive_trace_export_is_imported_through_a_column_map(tmp_path, capsys):
+    """A drive's export (semicolon-separated, decimal comma, µm, a sample index): mapped and
+    scaled into tracking.csv with control_V; the unmapped column reported; a column the
+    export lacks and a target the format lacks are refused, named, exit 2, nothing written."""
+    time_s, reference_mm, position_mm, control_V = cascade_loop(exciting, 0.5, "P-PI")
+    lines = ["Sample;Pos_cmd [um];Pos_act [um];I_q [A];n_act [rpm]"]
+    lines += [f"{i};{r * 1e3:.6f};{a * 1e3:.6f};{u:.9f};0".replace(".", ",")
+              for i, (r, a, u) in enumerate(zip(reference_mm, position_mm, control_V))]
+    export = tmp_path / "trace.csv"
+    export.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    axis = tmp_path / "axis.toml"
+    axis.write_text('name = "drive"\n[screw]\nlead_mm = 10.0\n[servo]\ncontroller = "cascade"\n'
+                    'kp_per_s = 40.0\nkv_V_s_per_mm = 0.2\ntn_s = 0.02\n'
+                    'force_constant_N_per_V = 20.0\nloop_step_s = 0.00025\n', encoding="utf-8")
+    mapping = ["--map", "sample=Sample", "--sample-time-s", "0.001",
+               "--map", "reference_mm=Pos_cmd [um]*0.001", "--map", "actual_mm=Pos_act [um]*0.001",
+               "--map", "control_V=I_q [A]"]
+    assert main(["import", str(export), "--axis", str(axis), "--out", str(tmp_path / "case"),
+                 *mapping, "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["dropped"] == {"n_act [rpm]": "not mapped (--map TARGET=SOURCE to keep it)"}
+    trace = read_case(tmp_path / "case").tracking
+    np.testing.assert_allclose(trace.time_s, time_s, atol=1e-12)
+    np.testing.assert_allclose(trace.actual_mm, position_mm, atol=1e-9)
+    np.testing.assert_allclose(trace.control_V, control_V, atol=1e-9)
+    for wrong, named in ((["--map", "reference_mm=Pos_cmd*0.001"], "Pos_cmd"),
+                         (["--map", "velocity_mm_s=n_act [rpm]"], "velocity_mm_s")):
+        assert main(["import", str(export), "--axis", str(axis), "--out",
+                     str(tmp_path / "refused"), *mapping, *wrong]) == 2
+        assert named in capsys.readouterr().err
+        assert not (tmp_path / "refused").exists()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 from contextlib import contextmanager
@@ -326,9 +327,17 @@ def _import_options(parser):
     parser.add_argument("--axis", required=True, metavar="AXIS.toml",
                         help="axis.toml (or a case folder holding one) describing the axis")
     parser.add_argument("--out", required=True, metavar="CASE", help="case folder to create")
+    parser.add_argument("--map", action="append", metavar="TARGET=SOURCE[*SCALE]",
+                        help="a drive trace (CSV): tracking.csv's column TARGET from the "
+                             "export's column SOURCE times SCALE (repeatable), e.g. "
+                             "actual_mm=Pos_act*0.001; TARGET: time_s or sample, reference_mm, "
+                             "actual_mm, control_V, disturbance_N")
+    parser.add_argument("--sample-time-s", type=float, metavar="S",
+                        help="with --map sample=...: the drive's sampling time (s)")
 
 
-@command("import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
+@command("import", help="laser export (Renishaw .rtl, wide CSV) or a drive trace (--map) "
+                        "-> case folder",
          formatter_class=argparse.RawDescriptionHelpFormatter,
          description="Read a laser-interferometer export and write a case folder (data-format "
                      "1.1: AXIS.toml + positioning.csv), all files or none. Says which metadata "
@@ -346,6 +355,8 @@ def _import_options(parser):
                 "        lines; ';'- or tab-separated files may use a decimal comma.",
          options=_import_options)
 def _cmd_import(args):
+    if args.map:
+        return _import_drive_trace(args)
     from .importers import import_case
 
     folder, measurement, dropped = import_case(args.file, args.axis, args.out)
@@ -363,6 +374,22 @@ def _cmd_import(args):
                      + " to ".join(f"{t:g}" for t in sorted(set(payload["ambient_C"]))) + " °C")
     lines += [f"  dropped (the case format has no place for it): {key} = {value}"
               for key, value in dropped.items()]
+    _emit(args, payload, "\n".join(lines))
+
+
+def _import_drive_trace(args):
+    from .importers import import_drive_trace
+    from .importers.drive_trace import parse_map
+
+    if args.sample_time_s is not None and not 0.0 < args.sample_time_s < math.inf:
+        raise InputError("must be a finite time > 0 (s)", parameter="--sample-time-s")
+    folder, columns, dropped = import_drive_trace(args.file, args.axis, args.out,
+                                                  parse_map(args.map), args.sample_time_s)
+    payload = {"case": str(folder), "samples": int(columns["time_s"].size),
+               "columns": list(columns), "dropped": dropped}
+    lines = [f"{folder}: {payload['samples']} samples of a drive trace, tracking.csv columns "
+             f"{', '.join(columns)}"]
+    lines += [f"  dropped: {column}: {why}" for column, why in dropped.items()]
     _emit(args, payload, "\n".join(lines))
 
 
