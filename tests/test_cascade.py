@@ -248,3 +248,21 @@ def test_a_drive_trace_export_is_imported_through_a_column_map(tmp_path, capsys)
                      str(tmp_path / "refused"), *mapping, *wrong]) == 2
         assert named in capsys.readouterr().err
         assert not (tmp_path / "refused").exists()
+
+
+def test_a_record_no_plant_starts_is_undetermined_naming_what_is_missing(tmp_path, capsys,
+                                                                         monkeypatch):
+    """Where the closed-loop search finds no plant making a stable loop with the cascade of
+    [servo] (forced here: the search returns none), the empty model's diagnosis is
+    `undetermined`, the reason naming what is missing (the controller's gains, the recorded
+    output), exit 0, never 2."""
+    from feedaxis.measurement import tracking
+
+    monkeypatch.setattr(tracking, "loop_start", lambda *args, **kwargs: None)
+    record = cascade_loop(exciting, 1.0, "P-P")
+    case = read_case(write_cascade_case(tmp_path / "case", record, "P-P", 1))
+    found = diagnose(case, Model())
+    assert found.verdict == "undetermined" and not found.candidates
+    assert "control_V" in found.undetermined_reason and "gains" in found.undetermined_reason
+    assert main(["diagnose", str(case.folder)]) == 0
+    assert "undetermined" in capsys.readouterr().out

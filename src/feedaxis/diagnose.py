@@ -35,9 +35,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .effects import CATALOG, BasisEffect, Model
-from .fit import (FD_STEP, FitResult, ParameterLayout, Problem, fit, fit_with_artefacts,
-                  too_few_samples)
+from .fit import (FD_STEP, FitResult, ParameterLayout, Problem, Statistics, fit,
+                  fit_with_artefacts, too_few_samples)
 from .measurement import kinds_for, measurement_of
+from .measurement.base import NoStart
 from .physics.threads import one_blas_thread
 from .stats.judge import FAMILY_ALPHA, Test, accepts
 
@@ -167,7 +168,10 @@ def diagnose(case, model, effects=None, progress=None, kind=None, measurement=No
     notify("model")
     if measurement is None:
         measurement = measurement_of(case, kind or kinds_for([case], model)[0])
-    base = fit_with_artefacts(model, measurement)
+    try:
+        base = fit_with_artefacts(model, measurement)
+    except NoStart as missing:
+        return _unstarted(measurement, model, missing.message)
     measurement = base.measurements[0]
     stages = len(measurement.stages)
     pending, skipped = _available(measurement, model, effects)
@@ -189,6 +193,18 @@ def diagnose(case, model, effects=None, progress=None, kind=None, measurement=No
                      candidates, unexplained, skipped, base.artefacts["outlier_rows"],
                      test_used, final, base.artefacts["transient_rows"], reason,
                      measurement.repeatability())
+
+
+def _unstarted(measurement, model, reason):
+    """The ``undetermined`` diagnosis of samples no model could be started on: ``reason``
+    says what is missing; the residual shown is the deviation itself."""
+    measured = np.asarray(measurement.measured_um, dtype=float)
+    base = FitResult(model, Statistics.of(measured, measured, 0), measured, measured,
+                     measurements=[measurement])
+    noise_um, noise_source = measurement.noise.estimate_um(measured)
+    return Diagnosis(measurement.kind, measurement.file, base, noise_um, noise_source,
+                     "undetermined", [], [], {}, [], "none: no model could be started", base,
+                     [], f"no model could be started on the samples: {reason}")
 
 
 def _available(measurement, model, effects):

@@ -36,6 +36,12 @@ CAPABILITIES = {
 }
 
 
+
+class NoStart(InputError):
+    """The samples give no start for a model (a tracking record no plant makes a stable
+    loop for): the message says what is missing. ``diagnose`` reports it as an
+    ``undetermined`` verdict; a fit or comparison refuses it."""
+
 class Measurement(ABC):
     """One case's samples of one kind: the contract every kind of measurement fulfils.
 

@@ -38,7 +38,7 @@ from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, autoregression
                               spikes)
 from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, accepts, drift_basis
 from ..stats.noise import Coloured
-from .base import Measurement, Shape, Trial
+from .base import Measurement, NoStart, Shape, Trial
 
 SETTLING_S = 1.0  # seed 002 measures the tracking error after the first second
 # The start-up left out of every comparison. A record that starts mid-motion differs from the
@@ -383,7 +383,10 @@ class Tracking(Measurement):
     def check_start(self, model, values):
         """The closed loop must not run away with ``values``
         (:class:`~feedaxis.physics.servo.LoopRunsAway`); a fit's trial values may, the
-        optimiser steps back from them."""
+        optimiser steps back from them. A model without ``servo_plant`` on a record no
+        plant could be started from raises :class:`~feedaxis.measurement.base.NoStart`."""
+        if self.start.problem and "servo_plant" not in model:
+            raise NoStart(self.start.problem)
         params = self.params(model, values)
         check_runs(params, simulate(params, self.record_time_s, self.record_reference_mm,
                                     self.disturbance_N, self.counts))
