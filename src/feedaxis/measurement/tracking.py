@@ -637,7 +637,7 @@ class ForceSteps(Shape):
         if not chosen:
             return None
         basis = self._basis(measurement, model, chosen)
-        if _sinusoid_rivals(measurement, current, basis):
+        if _rivals(measurement, current, basis):
             return None
         times_s = measurement.record_time_s[np.array(chosen)]
         return Trial(basis, None, test, {"event_times_s": [float(t) for t in times_s]})
@@ -692,6 +692,16 @@ class ForceSteps(Shape):
         trial.extra["event_sizes_N"] = [float(size) for size in sizes_N]
         period = _period_s(times_s)
         trial.extra["period_s"] = period
+        spikes = _reversal_spikes(measurement, times_s, fitted_um)
+        if spikes is not None:
+            trial.extra.update(spikes)
+            decay = (f"decaying to 1/e within {1e3 * spikes['decay_s']:.3g} ms"
+                     if spikes["decay_s"] is not None else "not decaying within 0.2 s")
+            return (f"a spike at the velocity reversals (a quadrant glitch): "
+                    f"{spikes['height_um']:.3g} µm high (median over the "
+                    f"{spikes['reversals']} reversals), {decay}; the loop's response to "
+                    f"{times_s.size} force steps there: friction that rises at rest above its "
+                    "Coulomb level (stribeck_friction), stick-slip, or backlash")
         listed = ", ".join(f"{t:.4g} s ({size:+.3g} N)"
                            for t, size in zip(times_s[:12], sizes_N[:12]))
         more = f" and {times_s.size - 12} more" if times_s.size > 12 else ""
@@ -702,6 +712,41 @@ class ForceSteps(Shape):
                 "(a cut starting or ending, a load put down)")
 
 
+REVERSAL_SHARE = 0.8  # of the steps in the REVERSAL_WINDOW_S after a reversal: reversal spikes
+
+
+def _reversal_spikes(measurement, times_s, fitted_um):
+    """{reversals, height_um, decay_s} when at least ``REVERSAL_SHARE`` of the steps sit in
+    the ``REVERSAL_WINDOW_S`` after a reversal of the reference (the axis reverses later, by
+    the loop's lag; a spike at the reversals, not steps of a load), else None: the height the median over the reversals of the largest fitted
+    deviation in the ``REVERSAL_WINDOW_S`` after each, the decay the median time from that
+    peak until the deviation falls below 1/e of it (None where it does not)."""
+    reversals = measurement.reversals_s()
+    if reversals.size == 0 or times_s.size == 0:
+        return None
+    since = times_s[:, None] - reversals[None, :]
+    near = np.any((since >= 0.0) & (since <= REVERSAL_WINDOW_S), axis=1)
+    if near.mean() < REVERSAL_SHARE:
+        return None
+    heights, decays = [], []
+    for reversal in reversals:
+        inside = np.flatnonzero((measurement.time_s >= reversal)
+                                & (measurement.time_s < reversal + REVERSAL_WINDOW_S))
+        if inside.size < 2:
+            continue
+        values = np.abs(fitted_um[inside])
+        peak = int(np.argmax(values))
+        heights.append(values[peak])
+        below = np.flatnonzero(values[peak:] < values[peak] / np.e)
+        decays.append(measurement.time_s[inside[peak + below[0]]] - measurement.time_s[
+            inside[peak]] if below.size else np.nan)
+    if not heights:
+        return None
+    decay = float(np.nanmedian(decays)) if np.isfinite(decays).any() else None
+    return {"reversals": int(reversals.size), "height_um": float(np.median(heights)),
+            "decay_s": decay}
+
+
 def _bic(residual_um, basis, parameters):
     """The Bayesian information criterion of ``basis`` fitted to ``residual_um``."""
     left = residual_um - _regress(residual_um, basis)[1]
@@ -709,20 +754,24 @@ def _bic(residual_um, basis, parameters):
     return n * np.log(max(_rss(left) / n, 1e-300)) + parameters * np.log(n)
 
 
-def _sinusoid_rivals(measurement, current, steps):
-    """Whether the strongest sinusoid (:class:`PeriodicForce`, over the record or a window
-    of it) describes the residual of ``current`` at least as well as the force ``steps``
-    by the Bayesian information criterion (each step a time and a size; the sinusoid its
-    amplitude, phase, frequency and a window's two edges): a burst at 50 Hz is a periodic
-    force, not a hundred steps."""
-    shape = PeriodicForce()
-    if not shape.trials(measurement):
-        return False
-    trial = shape.trial(measurement, current)
-    periodic = 3 + (2 if trial.extra["localised"] else 0)
+def _rivals(measurement, current, steps):
+    """Whether another shape describes the residual of ``current`` at least as well as the
+    force ``steps`` by the Bayesian information criterion (each step a time and a size):
+    the strongest sinusoid (:class:`PeriodicForce`: amplitude, phase, frequency and a
+    window's two edges; a burst at 50 Hz is a periodic force, not a hundred steps), or the
+    profile locked to the velocity reversals (:class:`Reversal`: a spike at each reversal
+    is a reversal spike, not steps that happen to sit there)."""
     residual = current.residual_um
-    return (_bic(residual, trial.basis, periodic)
-            <= _bic(residual, steps, ForceSteps.extra * steps.shape[1]))
+    steps_bic = _bic(residual, steps, ForceSteps.extra * steps.shape[1])
+    for shape in (PeriodicForce(), Reversal()):
+        if not shape.trials(measurement):
+            continue
+        trial = shape.trial(measurement, current)
+        parameters = (3 + (2 if trial.extra["localised"] else 0)
+                      if isinstance(shape, PeriodicForce) else shape.extra)
+        if _bic(residual, trial.basis, parameters) <= steps_bic:
+            return True
+    return False
 
 
 def _step_column(response, sample, rows):
@@ -965,9 +1014,23 @@ class Reversal(Shape):
         return _max_abs(fitted_um)
 
     def describe(self, measurement, trial, fitted_um):
-        return (f"the residual takes a repeatable shape over {REVERSAL_WINDOW_S:g} s after "
-                f"each of the {measurement.reversals_s().size} velocity reversals: a friction "
-                "law other than Coulomb plus viscous (Stribeck, stick-slip), or backlash")
+        """The spike at each reversal with its height (the largest bin of the profile) and
+        its decay (the end of the first bin after the peak below 1/e of it), in the JSON as
+        ``height_um`` and ``decay_s``."""
+        profile = _regress(fitted_um, trial.basis)[0]
+        peak = int(np.argmax(np.abs(profile)))
+        width = REVERSAL_WINDOW_S / REVERSAL_BINS
+        below = np.flatnonzero(np.abs(profile[peak:]) < np.abs(profile[peak]) / np.e)
+        decay_s = float((peak + below[0]) * width) if below.size else None
+        trial.extra = {**(trial.extra or {}), "height_um": float(profile[peak]),
+                       "decay_s": decay_s}
+        decay = (f"decaying to 1/e within {1e3 * decay_s:.0f} ms" if decay_s is not None else
+                 f"not decayed to 1/e within {1e3 * REVERSAL_WINDOW_S:.0f} ms")
+        return (f"a spike at each of the {measurement.reversals_s().size} velocity reversals "
+                f"(a quadrant glitch): {abs(profile[peak]):.3g} µm high "
+                f"{1e3 * peak * width:.0f}-{1e3 * (peak + 1) * width:.0f} ms after the "
+                f"reversal, {decay}: a friction law other than Coulomb plus viscous (a rise at "
+                "rest, stick-slip), or backlash")
 
 
 class TimeDrift(Shape):
