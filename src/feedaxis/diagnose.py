@@ -168,6 +168,7 @@ def diagnose(case, model, effects=None, progress=None, kind=None, measurement=No
     notify("model")
     if measurement is None:
         measurement = measurement_of(case, kind or kinds_for([case], model)[0])
+    measurement.refitter = Refitter(measurement, effects)
     try:
         base = fit_with_artefacts(model, measurement)
     except NoStart as missing:
@@ -193,6 +194,26 @@ def diagnose(case, model, effects=None, progress=None, kind=None, measurement=No
                      candidates, unexplained, skipped, base.artefacts["outlier_rows"],
                      test_used, final, base.artefacts["transient_rows"], reason,
                      measurement.repeatability())
+
+
+class Refitter:
+    """Refits of a measurement's samples for its hooks (``Measurement.refitter``):
+    ``refitter(model, names)`` fits ``model`` with the catalog effects ``names`` added;
+    ``with_basis(model, basis)`` fits it with fixed columns added and returns (the fit, the
+    columns' part of its prediction)."""
+
+    def __init__(self, measurement, catalog):
+        self.measurement, self.catalog = measurement, catalog
+
+    def __call__(self, model, names=()):
+        for name in names:
+            model = model + self.catalog[name]
+        return fit(model, self.measurement)
+
+    def with_basis(self, model, basis):
+        columns = BasisEffect("columns", basis)
+        result = fit(model + columns, self.measurement)
+        return result, columns.prepare(self.measurement.case)(result.model.values["columns"])
 
 
 def _unstarted(measurement, model, reason):

@@ -13,7 +13,8 @@ from dataclasses import fields
 import numpy as np
 
 from .base import Effect, Parameter
-from ..physics.servo import ServoParams
+from .. import kinds
+from ..physics.servo import PLANT_BOUNDS, ServoParams
 
 SEED002_PLANT = {f.name: f.default for f in fields(ServoParams)}
 
@@ -42,9 +43,7 @@ class TrackingEffect(Effect):
     def guess(self, case, residual_um):
         """The neutral values, or what the identification from a recorded controller output
         found for this effect's parameters (:mod:`feedaxis.physics.identify`)."""
-        from ..measurement.tracking import loop_start_of
-
-        identified = loop_start_of(case).identified
+        identified = kinds.kind(self.measurement).start_of(case).identified
         found = identified.values if identified is not None else {}
         return {**self.neutral, **{key: value for key, value in found.items()
                                    if key in self.neutral and key in self.from_identified}}
@@ -62,24 +61,23 @@ class ServoPlant(TrackingEffect):
     meaning = ("the plant (motor, screw, table) responds differently from the starting "
                "plant: gain, damping, stiffness or transport delay")
     parameters = (
-        Parameter("plant_gain_mm_per_Vs2", "mm/(V.s2)", 1e-1, 1e7, "b of Eq. 1"),
-        Parameter("plant_damping_per_s", "1/s", 0.0, 1e4, "a1 of Eq. 1"),
-        Parameter("plant_stiffness_per_s2", "1/s2", 0.0, 1e5, "a0 of Eq. 1"),
-        Parameter("delay_s", "s", 0.0, 0.02, "transport delay of the command"))
+        Parameter("plant_gain_mm_per_Vs2", "mm/(V.s2)", *PLANT_BOUNDS["plant_gain_mm_per_Vs2"],
+                  "b of Eq. 1"),
+        Parameter("plant_damping_per_s", "1/s", *PLANT_BOUNDS["plant_damping_per_s"],
+                  "a1 of Eq. 1"),
+        Parameter("plant_stiffness_per_s2", "1/s2", *PLANT_BOUNDS["plant_stiffness_per_s2"],
+                  "a0 of Eq. 1"),
+        Parameter("delay_s", "s", *PLANT_BOUNDS["delay_s"], "transport delay of the command"))
     neutral = {p.name: SEED002_PLANT[p.name] for p in parameters}
     screened = False  # its delay moves the loop far from a linear step: always fitted
 
     def guess(self, case, residual_um):
         """The basin of the case's starting plant (the loop's start,
         :class:`feedaxis.measurement.tracking.Start`: the plant fitted beside a friction)."""
-        from ..measurement.tracking import loop_start_of
-
-        return {**self.neutral, **(loop_start_of(case).basin or {})}
+        return {**self.neutral, **(kinds.kind(self.measurement).start_of(case).basin or {})}
 
     def evidence(self, case, values, contribution_um):
-        from ..measurement.tracking import loop_start_of
-
-        start = {**self.neutral, **(loop_start_of(case).plant or {})}
+        start = {**self.neutral, **(kinds.kind(self.measurement).start_of(case).plant or {})}
         changes = ", ".join(f"{name} {start[name]:.4g} -> {values[name]:.4g}"
                             for name in self.parameter_names)
         return f"the fitted plant moves {changes}; it changes the prediction by " \
@@ -173,5 +171,5 @@ class ConstantForce(TrackingEffect):
 
 TRACKING_EFFECTS = (ServoPlant(), CoulombFriction(), ViscousFriction(), StribeckFriction(),
                     ConstantForce())
-PLANT_BOUNDS = {p.name: (p.lower, p.upper) for p in ServoPlant.parameters}
+
 

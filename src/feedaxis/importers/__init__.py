@@ -57,6 +57,7 @@ def import_drive_trace(path, axis_path, out, mapping, sample_time_s=None):
     :func:`.drive_trace.parse_map`), write case folder ``out`` (axis.toml of ``axis_path``,
     which needs its ``[servo]`` table, and tracking.csv). Returns (folder, columns,
     dropped)."""
+    from ..measurement.tracking import Tracking
     from .drive_trace import read_drive_trace
 
     axis_file = _axis_file(axis_path, out)
@@ -65,8 +66,8 @@ def import_drive_trace(path, axis_path, out, mapping, sample_time_s=None):
                          "as set in the drive)", path=axis_file, column="servo")
     columns, dropped = read_drive_trace(path, mapping, sample_time_s)
     _, axis_values = read_axis_values(axis_file)
-    folder = write_case(out, axis_values, tracking=columns,
-                        check=lambda staged: _check_case(path, staged))
+    folder = write_case(out, axis_values, check=lambda staged: _check_case(path, staged),
+                        **{Tracking.kind: columns})
     return folder, columns, dropped
 
 

@@ -207,6 +207,10 @@ class Measurement(ABC):
         """The deviation (µm) ``model`` predicts at the samples, with its own values."""
         return self.predictor(model)(model.values)
 
+    # set by the diagnosis (feedaxis.diagnose.Refitter): refits of these samples with
+    # catalog effects added, for hooks that judge a rival with the model refitted
+    refitter = None
+
     def neutral(self, effect):
         """``effect``'s values that switch it off on these samples (its ``neutral``)."""
         return dict(effect.neutral)

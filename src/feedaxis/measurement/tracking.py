@@ -24,15 +24,13 @@ from pathlib import Path
 
 import numpy as np
 import scipy
-import scipy.stats
 
 from .. import kinds
 from ..case import (AXIS_FILE, DEFAULT_LOOP_STEP_S, CaseError, _first_bad, _read_csv)
-from ..effects.tracking import PLANT_BOUNDS
 from ..fmu_map import servo_to_fmu
 from ..physics.identify import identify_plant, loop_start
-from ..physics.servo import (MAX_POSITION_MM, ServoParams, check_runs, loop_budget_problem,
-                             simulate, simulate_record, step_counts)
+from ..physics.servo import (MAX_POSITION_MM, PLANT_BOUNDS, ServoParams, check_runs,
+                             loop_budget_problem, simulate, simulate_record, step_counts)
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, autoregression,
                               locate_sinusoid, noise_floor_um, peak_p_value, short_time_peak,
                               spikes)
@@ -149,23 +147,38 @@ def loop_start_of(case):
 
 
 def _refined(case, plant):
-    """(basin, plant): ``plant`` after two closed-loop fits of ``servo_plant``, the first
-    with Coulomb friction beside it as a nuisance (friction at the reversals would
+    """(basin, plant): ``plant`` after two closed-loop least-squares fits of the plant, the
+    first with a Coulomb friction beside it as a nuisance (friction at the reversals would
     otherwise draw the search's plant into another optimum: the basin, where a fit of the
     plant with the effects starts), the second alone from there: the model without
     effects is the plant alone that fits the record best, so an effect is judged on top
     of it as on any model (a plant tuned beside a friction makes the plant alone, or that
-    friction, look significant on a null). The start's own measurement: this runs while
-    the unrefined start is the case's."""
-    from ..effects import CATALOG, Model
-    from ..fit import fit
-
-    effect, friction = CATALOG["servo_plant"], CATALOG["coulomb_friction"]
+    friction, look significant on a null). Bounded least squares on the samples compared
+    (scipy's trust-region reflective, as the fit's)."""
     measurement = Tracking(case)
-    beside = fit(Model((effect, friction), {effect.name: dict(plant)}), measurement)
-    alone = fit(Model((effect,), {effect.name: dict(beside.model.values[effect.name])}),
-                measurement)
-    return (dict(beside.model.values[effect.name]), dict(alone.model.values[effect.name]))
+    beside = _fitted_plant(measurement, plant, ("friction_N",))
+    return beside, _fitted_plant(measurement, beside, ())
+
+
+def _fitted_plant(measurement, plant, nuisances):
+    """The plant (``PLANT_KEYS``) that fits ``measurement`` best from ``plant``, the loop
+    parameters ``nuisances`` (from 0, at least 0) fitted beside it and dropped."""
+    from scipy.optimize import least_squares
+
+    keys = (*PLANT_KEYS, *nuisances)
+    lower = np.array([PLANT_BOUNDS[k][0] if k in PLANT_BOUNDS else 0.0 for k in keys])
+    upper = np.array([PLANT_BOUNDS[k][1] if k in PLANT_BOUNDS else np.inf for k in keys])
+    start = np.clip([plant[k] if k in plant else 0.0 for k in keys], lower, upper)
+    base = {**servo_to_fmu(measurement.case.axis.servo)}
+
+    def residual(x):
+        params = ServoParams(**{**base, **dict(zip(keys, x))})
+        return measurement.measured_um - measurement.deviation_um(params)
+
+    with np.errstate(over="ignore", invalid="ignore"):
+        solution = least_squares(residual, start, bounds=(lower, upper), x_scale="jac",
+                                 method="trf")
+    return {k: float(v) for k, v in zip(PLANT_KEYS, solution.x)}
 
 
 def _runs(params, trace, counts):
@@ -255,6 +268,8 @@ class Tracking(Measurement):
         self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
         self.start = loop_start_of(case)
 
+    start_of = staticmethod(loop_start_of)  # the start the tracking effects guess from
+
     def neutral(self, effect):
         """``effect``'s values that switch it off: for ``servo_plant`` the starting plant."""
         if effect.name == "servo_plant" and self.start.plant:
@@ -341,19 +356,17 @@ class Tracking(Measurement):
         against Coulomb friction alone, ``coulomb_friction`` when it is. Only one of them
         is named, the one the data show."""
         laws = ("coulomb_friction", "stribeck_friction")
-        if effect.name not in laws or any(name in left.model for name in laws):
+        if (effect.name not in laws or any(name in left.model for name in laws)
+                or self.refitter is None):
             return None
-        from ..effects import CATALOG
-        from ..effects.tracking import TRACKING_EFFECTS
-        from ..fit import fit
-
-        base = left.model if "servo_plant" in left.model else left.model + CATALOG["servo_plant"]
-        plain = fit(base, self)
-        coulomb, stribeck = (fit(base + CATALOG[law], self) for law in laws)
+        plant = () if "servo_plant" in left.model else ("servo_plant",)
+        plain = self.refitter(left.model, plant)
+        coulomb, stribeck = (self.refitter(left.model, (*plant, law)) for law in laws)
         refitted = coulomb if effect.name == laws[0] else stribeck
         test = self.noise.extra_ss_test(plain.residual_um, refitted.residual_um,
                                         len(effect.parameters), refitted.statistics.n_free)
-        if not accepts(test.p_value, len(TRACKING_EFFECTS), len(self.stages)):
+        tried = sum(e.measurement == self.kind for e in self.refitter.catalog.values())
+        if not accepts(test.p_value, tried, len(self.stages)):
             return ("with the plant refitted beside it, it is not significant "
                     f"({test.describe()})")
         test = self.noise.extra_ss_test(coulomb.residual_um, stribeck.residual_um, 2,
@@ -621,19 +634,14 @@ class ForceSteps(Shape):
     def trial(self, measurement, current):
         chosen, test = self._search(measurement, current.model, current.residual_um,
                                     current.jacobian, current.statistics.n_free)
-        if chosen:  # once more on the model refitted with the steps: a plant the unmodelled
-            # steps bent would leave steps of its own
-            from ..effects import BasisEffect, Model
-            from ..fit import fit
-
-            steps = BasisEffect("force_steps", self._basis(measurement, current.model, chosen))
-            refit = fit(current.model + steps, measurement)
-            model = Model(refit.model.effects[:-1], refit.model.values)
+        model = current.model
+        if chosen and measurement.refitter is not None:  # once more on the model refitted
+            # with the steps: a plant the unmodelled steps bent would leave steps of its own
+            basis = self._basis(measurement, current.model, chosen)
+            refit, steps_um = measurement.refitter.with_basis(current.model, basis)
             jacobian = None if refit.jacobian is None else refit.jacobian[:, :-len(chosen)]
-            residual_um = refit.residual_um + steps.prepare(measurement.case)(
-                refit.model.values[steps.name])
-            chosen, test = self._search(measurement, model, residual_um, jacobian,
-                                        current.statistics.n_free)
+            chosen, test = self._search(measurement, model, refit.residual_um + steps_um,
+                                        jacobian, current.statistics.n_free)
         if not chosen:
             return None
         basis = self._basis(measurement, model, chosen)
@@ -657,6 +665,8 @@ class ForceSteps(Shape):
         autoregressive filter of the residual's noise (robust spectrum, persistence raised
         by two standard errors: :meth:`feedaxis.stats.coloured.Autoregression.cautious`),
         so the tests are those of white noise."""
+        from scipy import stats
+
         first, last = int(measurement.index[0]), int(measurement.index[-1])
         _, residual = measurement.gridded(residual_um)
         noise = autoregression(residual, robust=True).cautious()
@@ -676,7 +686,7 @@ class ForceSteps(Shape):
         before = _leftover(residual, nuisance, None)
         dof = max(full.size - n_free - extra, 1)
         statistic = max(_rss(before) - _rss(full), 0.0) / extra / max(_rss(full) / dof, 1e-300)
-        p_value = float(scipy.stats.f.sf(statistic, extra, dof))
+        p_value = float(stats.f.sf(statistic, extra, dof))
         test = Test(float(statistic), (extra, dof), min(1.0, p_value * positions.size),
                     f"F test of the steps together on the residual whitened by its noise's "
                     f"autoregressive filter (order {noise.order}); each step alone "
@@ -805,11 +815,13 @@ def _pursued_steps(residual, response, first, positions, nuisance):
     drop over ``positions`` (its variance times the χ²₁ quantile at 1 − FAMILY_ALPHA /
     positions) or at ``MAX_EVENTS``. The floor is a lower bound under coloured noise, so
     the pursuit is liberal; :func:`_pruned_steps` tests what it found."""
+    from scipy import stats
+
     grid = np.arange(first, first + residual.size)
     basis = (np.zeros((residual.size, 0)) if nuisance is None
              else np.linalg.qr(nuisance)[0])
     left = residual - basis @ (basis.T @ residual)
-    threshold = noise_floor_um(left) ** 2 * scipy.stats.chi2.isf(
+    threshold = noise_floor_um(left) ** 2 * stats.chi2.isf(
         FAMILY_ALPHA / positions.size, 1)
     chosen = []
     while len(chosen) < MAX_EVENTS:
@@ -835,6 +847,8 @@ def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_fre
     diagonal of (X'X)⁻¹, one fit per round) on the whitened residual, Bonferroni over the
     ``searched`` samples, at the family-wise level of a stage; each round drops the
     weakest half of the steps that fail (at least one)."""
+    from scipy import stats
+
     alpha = FAMILY_ALPHA / len(measurement.stages)
     chosen = list(chosen)
     offset = 0 if nuisance is None else nuisance.shape[1]
@@ -847,7 +861,7 @@ def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_fre
         drops = coefficients[offset:] ** 2 / np.maximum(inverse, 1e-300)
         dof = max(full.size - n_free - extra * len(chosen), 1.0)
         statistic = drops / extra / max(float(full @ full) / dof, 1e-300)
-        p_values = np.minimum(1.0, scipy.stats.f.sf(statistic, extra, dof) * searched)
+        p_values = np.minimum(1.0, stats.f.sf(statistic, extra, dof) * searched)
         failing = np.flatnonzero(p_values >= alpha)
         if not failing.size:
             return chosen, full

@@ -58,6 +58,10 @@ CONTROLLERS = ("pid", "npid", "cascade")
 MAX_INTERVAL_STEPS = 10**5
 MAX_LOOP_STEPS = 10**8
 MAX_POSITION_MM = 1e5  # a simulated position beyond any axis (data-format.md): the loop ran away
+# the plant a fit may identify (servo_plant's bounds): gain mm/(V.s2), damping 1/s,
+# stiffness 1/s2, delay s
+PLANT_BOUNDS = {"plant_gain_mm_per_Vs2": (1e-1, 1e7), "plant_damping_per_s": (0.0, 1e4),
+                "plant_stiffness_per_s2": (0.0, 1e5), "delay_s": (0.0, 0.02)}
 # The delay line holds delay_s / time_step_s commands: 10^6 (8 MB) covers the tracking
 # fit's widest case, a 20 ms delay at the shortest loop step a case may have (1e-7 s).
 MAX_DELAY_STEPS = 1_000_000
