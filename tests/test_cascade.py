@@ -267,18 +267,3 @@ def test_a_record_no_plant_starts_is_undetermined_naming_what_is_missing(tmp_pat
     assert main(["diagnose", str(case.folder)]) == 0
     assert "undetermined" in capsys.readouterr().out
 
-
-def test_reversal_spikes_are_described_at_the_reversals_with_height_and_decay(tmp_path):
-    """Friction that rises at rest, diagnosed without the Stribeck effect in the catalog (a
-    law the catalog may lack): described as a spike at the velocity reversals with its
-    height and decay, not as force steps of a load nor as periodic forces."""
-    record = cascade_loop(exciting, DURATION_S, "P-PI", coulomb_N=3.0, static_N=6.0,
-                          stribeck_velocity_mm_s=2.0)
-    case = read_case(write_cascade_case(tmp_path / "case", record, "P-PI", 3))
-    without = {name: effect for name, effect in CATALOG.items()
-               if name != "stribeck_friction"}
-    found = diagnose(case, Model(), effects=without)
-    [spikes] = [s.to_json() for s in found.unexplained if s.kind == "force_steps"]
-    assert spikes["reversals"] == 9 and spikes["height_um"] > 1.0
-    assert spikes["decay_s"] is not None and 0.0 < spikes["decay_s"] < 0.2
-    assert "reversals" in spikes["evidence"]

@@ -58,13 +58,15 @@ class Candidate:
     meaning: str
     result: FitResult = field(repr=False)
     error_scale: float = 1.0
+    joint: FitResult | None = field(default=None, repr=False)  # sizes from the last fit
 
     def sizes(self):
         """{parameter: (value, standard error, unit)} of the named effect; the standard
         errors rest on the noise model's scale (the pure error where there are repeats)."""
-        effect = self.result.model.effects[self.result.model.names.index(self.effect)]
-        values = self.result.model.values[self.effect]
-        sigma = self.result.uncertainties.get(self.effect, {})
+        sized = self.joint or self.result
+        effect = sized.model.effects[sized.model.names.index(self.effect)]
+        values = sized.model.values[self.effect]
+        sigma = sized.uncertainties.get(self.effect, {})
         return {p.name: (values[p.name], self.error_scale * sigma.get(p.name, float("nan")),
                          p.unit) for p in effect.parameters}
 
@@ -289,7 +291,7 @@ def _without_idle_companions(measurement, left, effect, result, test, stages):
     they were fitted beside it to let it show, and are named only when the data need them
     too."""
     companions = [e for e in result.model.effects
-                  if e.name not in left.model and e is not effect]
+                  if e.name in effect.fitted_with and e.name not in left.model]
     if not companions:
         return result, test
     alone = fit(left.model + effect, measurement)
@@ -417,7 +419,7 @@ def _final_sizes(measurement, candidate, left):
     effect = clean[[e.name for e in clean].index(candidate.effect)]
     contribution = measurement.components(joint.model)[effect.name]
     evidence = effect.evidence(measurement.case, values[effect.name], contribution)
-    return replace(candidate, result=joint, error_scale=measurement.noise.error_scale(left),
+    return replace(candidate, joint=joint, error_scale=measurement.noise.error_scale(left),
                    evidence=f"{evidence} ({candidate.test.describe()})")
 
 

@@ -357,7 +357,8 @@ class Tracking(Measurement):
         is named, the one the data show."""
         laws = ("coulomb_friction", "stribeck_friction")
         if (effect.name not in laws or any(name in left.model for name in laws)
-                or self.refitter is None):
+                or self.refitter is None
+                or not all(name in self.refitter.catalog for name in (*laws, "servo_plant"))):
             return None
         plant = () if "servo_plant" in left.model else ("servo_plant",)
         plain = self.refitter(left.model, plant)
