@@ -57,7 +57,7 @@ def the_loop(folder):
 
 def identification(samples):
     """Seconds of one identification on ``samples`` samples of a cascade record."""
-    time_s, _, position_mm, control_V = samples
+    time_s, position_mm, control_V = samples
     started = time.perf_counter()
     found = identify_plant(time_s, position_mm, control_V, FORCE_CONSTANT_N_PER_V)
     elapsed = time.perf_counter() - started
