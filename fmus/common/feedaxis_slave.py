@@ -177,6 +177,7 @@ class AxisSlave(Fmi2Slave):
         exec(compile(source, f"<{type(self).__name__} exchange>", "exec"), namespace)
         exchange = namespace["exchange"]
         exchange.state_error = self.state_error  # the host layer's check of a state buffer
+        exchange.initialised = self.initialised  # which FMI state a restored state is in
         return exchange
 
     def _drained(self, outputs):
@@ -238,6 +239,11 @@ class AxisSlave(Fmi2Slave):
         super()._set_fmu_state(state)
         if initialised:
             self.restore_model_state(model_state)
+
+    def initialised(self):
+        """Whether the model is built (initialisation succeeded, or a state saved after it
+        was restored)."""
+        return self.model is not None
 
     def state_error(self, data):
         """Why the serialised ``data`` (bytes) is not a state of this FMU, or None."""
