@@ -41,9 +41,9 @@ def exchange(current_time, step_size, {values}):
         except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
             slave._report(f"at t = {{current_time}} s", error)
             return drained(None)
-        if not slave.log_queue:
+        if not slave.log_queue and isfinite({outputs_total}):
             return ({outputs})
-        return drained(({outputs}))
+        return drained(finite(current_time, ({outputs})))
     stepped = advance(current_time, step_size, INPUTS, {values_tuple})
     return drained(({outputs}) if stepped else None)
 """
@@ -96,6 +96,7 @@ class AxisSlave(Fmi2Slave):
         self.limits = {}
         self.model = None
         self._input_names = []
+        self._output_names = []
         _handoff().constructed[threading.get_ident()] = weakref.ref(self)
 
     def _declare(self, name, value, description, unit, limits, **kind):
@@ -118,6 +119,7 @@ class AxisSlave(Fmi2Slave):
 
     def output(self, name, description, unit=None):
         """Declare a Real output, calculated at initialisation from parameters and inputs."""
+        self._output_names.append(name)
         self._declare(name, 0.0, description, unit, None,
                       causality=Fmi2Causality.output, initial=Fmi2Initial.calculated)
 
@@ -139,10 +141,47 @@ class AxisSlave(Fmi2Slave):
 
     def exit_initialization_mode(self):
         try:
+            self._check_parameters()
             self.model = self.build()
             self.step(0.0)
+            self._check_outputs()
         except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+            self.model = None
             self._report("initialisation", error)
+
+    def _check_parameters(self):
+        """Raise ValueError naming the first number parameter that is not finite or lies
+        outside its declared limits (the host layer refuses these where they are set; a
+        build without it, or a value set before the layer saw it, is caught here)."""
+        for variable in self.vars.values():
+            value = getattr(self, variable.name)
+            if variable.causality != Fmi2Causality.parameter or isinstance(value, (bool, str)):
+                continue
+            if not math.isfinite(value):
+                raise ValueError(f"{variable.name}: must be finite, got {value!r}")
+            lower, upper = self.limits.get(variable.name, (None, None))
+            if (lower is not None and value < lower) or (upper is not None and value > upper):
+                raise ValueError(f"{variable.name} = {value!r} is outside its limits "
+                                 f"[{lower}, {upper}]")
+
+    def _check_outputs(self):
+        """Raise ValueError naming the first output that is not finite: the parameters and
+        inputs, each valid, took the model beyond a float's range (never reported as OK)."""
+        for name in self._output_names:
+            value = getattr(self, name)
+            if not math.isfinite(value):
+                raise ValueError(f"output {name} = {value!r}: the parameters and inputs take "
+                                 "the model beyond a float's range")
+
+    def _finite_outputs(self, current_time, values):
+        """``values`` (the outputs after a step) if all are finite, else None with the error
+        logged (the exchange's check when their sum is not finite)."""
+        try:
+            self._check_outputs()
+        except ValueError as error:
+            self._report(f"at t = {current_time} s", error)
+            return None
+        return values
 
     def do_step(self, current_time, step_size):
         names = self._input_names
@@ -170,9 +209,11 @@ class AxisSlave(Fmi2Slave):
             values=values, values_tuple=f"({values},)" if inputs else "()",
             assignments="".join(f"    slave.{name} = {name}\n" for name in inputs),
             total=" + ".join(inputs) or "0.0",
+            outputs_total=" + ".join(f"slave.{name}" for name in outputs) or "0.0",
             outputs=", ".join(f"slave.{name}" for name in outputs) + ",")
         namespace = {"slave": self, "step": self.step, "advance": self._advance,
-                     "drained": self._drained, "INPUTS": inputs, "inf": math.inf,
+                     "drained": self._drained, "finite": self._finite_outputs,
+                     "INPUTS": inputs, "inf": math.inf,
                      "isfinite": math.isfinite}
         exec(compile(source, f"<{type(self).__name__} exchange>", "exec"), namespace)
         exchange = namespace["exchange"]
@@ -200,15 +241,23 @@ class AxisSlave(Fmi2Slave):
                     if not math.isfinite(value):
                         raise ValueError(f"input {name} must be finite, got {value!r}")
             self.step(step_size)
+            self._check_outputs()
         except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
             return self._report(f"at t = {current_time} s", error)
         return True
 
     def _report(self, where, error):
         """Log ``error``: a ValueError (bad input) as an error, anything else (a bug) as
-        fatal with its traceback. Returns False (the step failed)."""
+        fatal with its traceback. Returns False (the step failed). A ValueError that names
+        no variable (``math domain error`` from a value beyond what the physics' functions
+        take) gets the inputs' values, which are what brought it there: the parameters are
+        checked by name before."""
         if isinstance(error, ValueError):
-            self.log(f"{where}: {error}", Fmi2Status.error, "logStatusError")
+            text = str(error)
+            if not any(variable.name in text for variable in self.vars.values()):
+                values = ", ".join(f"{n} = {getattr(self, n)!r}" for n in self._input_names)
+                text = f"{text} (the inputs: {values})"
+            self.log(f"{where}: {text}", Fmi2Status.error, "logStatusError")
         else:
             self.log(f"{where}: internal error\n{traceback.format_exc()}", Fmi2Status.fatal,
                      "logStatusFatal")
