@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 
 from feedaxis.fmu_build import FMU_NAMES
 from scenarios import OUTPUTS, STEP_SIZE_S
+from test_fmus import initialised
 
 TESTS = Path(__file__).resolve().parent
 PROBE = TESTS / "fmi2_probe.py"
@@ -111,9 +112,10 @@ def resource_cases(folder):
     ]
 
 
-def instantiate_cases(folder):
-    """(name, guid, resources, instantiable)."""
-    guid, uri = guid_of(folder), (Path(folder) / "resources").as_uri()
+def instantiate_cases(folder, guid):
+    """(name, guid, resources, instantiable) for the FMU of ``guid`` unpacked in ``folder``
+    (as its host sees the path)."""
+    uri = (Path(folder) / "resources").as_uri()
     return ([("probe", guid, resources, ok) for resources, ok in resource_cases(folder)]
             + [("<NULL>", guid, uri, False), ("", guid, uri, False),
                ("probe", "{00000000-0000-0000-0000-000000000000}", uri, False),
@@ -135,7 +137,7 @@ def check_instantiate_answer(case, instance, stepped, messages):
 def test_fmi2_instantiate_answers_every_argument_in_fmpy(unpacked):
     """One process per case, through fmpy's low-level API (fmi2Instantiate called directly)."""
     folder = unpacked["StepperError"]
-    for case in instantiate_cases(folder):
+    for case in instantiate_cases(folder, guid_of(folder)):
         result = probe("instantiate", folder, *case[:3])
         check_instantiate_answer(case, result["instance"], result["stepped"],
                                  result["messages"])
@@ -167,17 +169,9 @@ def c_host_instantiate(command, case, folder, identifier):
 
 def test_fmi2_instantiate_answers_every_argument_in_a_c_host(unpacked, c_host):
     folder = unpacked["NpidServo"]
-    for case in instantiate_cases(folder):
+    for case in instantiate_cases(folder, guid_of(folder)):
         check_instantiate_answer(case, *c_host_instantiate([str(c_host)], case, folder,
                                                            "NpidServo"))
-
-
-def initialised(loaded, name="contract"):
-    slave = loaded.instantiate(name)
-    slave.setupExperiment(startTime=0.0)
-    slave.enterInitializationMode()
-    slave.exitInitializationMode()
-    return slave
 
 
 def vr(loaded, name):

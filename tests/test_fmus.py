@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import simulate_fmu
+from fmpy import simulate_fmu, supported_platforms
 from fmpy.fmi1 import FMICallException
 from fmpy.util import read_csv
 from fmpy.validation import validate_fmu
@@ -30,6 +30,12 @@ def run_scripted(loaded, name, parameters=None, instance_name="feedaxis"):
 @pytest.mark.parametrize("name", FMU_NAMES)
 def test_fmu_passes_fmpy_validation(fmu_paths, name):
     assert validate_fmu(str(fmu_paths[name])) == []
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_fmu_declares_only_the_platform_it_carries(fmu_paths, name):
+    """fmpy lists the platforms from binaries/: linux64, not pythonfmu's stock win64."""
+    assert supported_platforms(str(fmu_paths[name])) == ["linux64"]
 
 
 @pytest.mark.parametrize("name", FMU_NAMES)

@@ -7,7 +7,7 @@ advances it in :meth:`AxisSlave.step`. Nothing raises into pythonfmu (which woul
 exception into fmi2Fatal and leave its instance holding freed objects): a ValueError (a bad
 parameter, a NaN input, a refused step) is logged with category ``logStatusError`` naming
 the variable, any other exception (a bug) with ``logStatusFatal`` and its traceback; the
-FMU's host layer (fmus/common/feedaxis_fmi_host.c) returns that status for the call.
+FMU's host layer (fmus/common/host/) returns that status for the call.
 
 While stepping, the host layer keeps the Real inputs and outputs itself and makes one call
 per doStep, to the function :func:`claim` returns (:meth:`AxisSlave.exchanger`), instead of

@@ -1,7 +1,7 @@
 """Build the four feedaxis FMUs with pythonfmu and make them loadable by any FMI host.
 
 Sources: ``fmus/<Name>/<Name>.py`` (the slave script), ``fmus/common/feedaxis_slave.py``
-(the shared adapter), ``fmus/common/feedaxis_fmi_host.c`` (the host layer) and
+(the shared adapter), ``fmus/common/host/*.c`` (the host layer) and
 ``feedaxis.physics``. Each FMU carries one package ``feedaxis_fmu_<Name>`` (its slave, the
 adapter and a copy of the physics) so FMUs sharing one Python process never import each
 other's modules, and a generated pythonfmu entry script ``<Name>.py``. It runs without
@@ -158,7 +158,7 @@ def build_fmu(name, out_dir, runtime=None):
         guid, variables = _complete_model_description(fmu_path, slave)
         missing = host_layer_missing()
         if runtime is not None:
-            _make_standalone(fmu_path, name, sources, (guid, variables), staging, runtime,
+            _make_standalone(fmu_path, name, sources, (variables, guid), staging, runtime,
                              missing)
         elif missing is None:
             _install_host_layer(fmu_path, name, _compile_host_layer(sources, variables, guid,

@@ -120,6 +120,21 @@ static int load_libpython(const char *path, const char *which)
     return check_version(get_version(), which);
 }
 
+/* An isolated Python decodes file names by the locale, ASCII in a bare root (no locale):
+ * a resource folder named in UTF-8 (what a file URI's %-escapes encode) would not import.
+ * UTF-8 mode (PEP 540) makes every file name UTF-8, as a Python in the C locale does. */
+static int preinitialise_utf8(void)
+{
+    void (*init)(PyPreConfig *) = dlsym(RTLD_DEFAULT, "PyPreConfig_InitIsolatedConfig");
+    PyStatus (*preinitialise)(const PyPreConfig *) = dlsym(RTLD_DEFAULT, "Py_PreInitialize");
+    int (*is_exception)(PyStatus) = dlsym(RTLD_DEFAULT, "PyStatus_Exception");
+    if (!init || !preinitialise || !is_exception) return -1;
+    PyPreConfig preconfig;
+    init(&preconfig);
+    preconfig.utf8_mode = 1;
+    return is_exception(preinitialise(&preconfig)) ? -1 : 0;
+}
+
 /* Start the interpreter: ``isolated`` (the FMU's own runtime: no environment variables, no
  * user site, no bytecode written) with prefix ``path``, else Python's default configuration
  * with program name ``path`` (which finds that interpreter's virtual environment). Never
@@ -137,6 +152,7 @@ static int start_interpreter(int isolated, const char *path, const char *which)
     PyThreadState *(*save_thread)(void) = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
     if (!init_config || !set_string || !initialize || !clear || !is_exception || !save_thread)
         return fail("%s lacks the PyConfig API", which);
+    if (isolated && preinitialise_utf8() != 0) return fail("cannot pre-initialise %s", which);
     PyConfig config;
     init_config(&config);
     config.install_signal_handlers = 0; /* the host owns SIGINT */
