@@ -282,3 +282,19 @@ def test_no_output_is_ever_non_finite_with_fmi2ok(loaded_fmus, capsys, name, dat
         assert errors and any(v in errors[-1] for v in [*loaded.variables, "time_step_s"]), out
     else:
         assert all(math.isfinite(x) for row in seen for x in row), (values, seen)
+
+
+@pytest.mark.parametrize("name, values, named", [
+    ("ThermalScrew", {"expansion_per_K": 1e308}, "initialisation: output error_um = "),
+    ("ThermalScrew", {"reference_ambient_C": math.nan}, "reference_ambient_C must be finite"),
+    ("GeometricError", {"backlash_um": math.inf}, "backlash_um must be finite"),
+    ("StepperError", {"harmonic2_sin_um": -math.inf}, "harmonic2_sin_um must be finite"),
+    ("NpidServo", {"position_ref_mm": 1e308}, "(the inputs: position_ref_mm = 1e+308,"),
+    ("NpidServo", {"position_ref_mm": -1e308}, "(the inputs: position_ref_mm = -1e+308,"),
+])
+def test_values_the_issue_found_reported_as_ok_are_errors_naming_them(loaded_fmus, capsys,
+                                                                      name, values, named):
+    """The cases that gave non-finite outputs with fmi2OK (issue 34): now fmi2Error."""
+    assert outcome(loaded_fmus[name], values) is None
+    errors = [line for line in capsys.readouterr().out.splitlines() if "[ERROR]" in line]
+    assert len(errors) == 1 and named in errors[0], errors

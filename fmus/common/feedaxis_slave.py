@@ -248,13 +248,14 @@ class AxisSlave(Fmi2Slave):
 
     def _report(self, where, error):
         """Log ``error``: a ValueError (bad input) as an error, anything else (a bug) as
-        fatal with its traceback. Returns False (the step failed). A ValueError that names
-        no variable (``math domain error`` from a value beyond what the physics' functions
-        take) gets the inputs' values, which are what brought it there: the parameters are
-        checked by name before."""
+        fatal with its traceback. Returns False (the step failed). A ValueError that is not
+        about one parameter (which the physics names first: ``diameter_m: must be > 0``) nor
+        names an input gets the inputs' values, which brought the model there
+        (``math domain error``, a non-finite output)."""
         if isinstance(error, ValueError):
             text = str(error)
-            if not any(variable.name in text for variable in self.vars.values()):
+            about_one = any(text.startswith(variable.name) for variable in self.vars.values())
+            if not about_one and not any(name in text for name in self._input_names):
                 values = ", ".join(f"{n} = {getattr(self, n)!r}" for n in self._input_names)
                 text = f"{text} (the inputs: {values})"
             self.log(f"{where}: {text}", Fmi2Status.error, "logStatusError")
