@@ -193,10 +193,9 @@ EXPORT fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], si
 {
     Guard *g = c;
     if (!admit(g, F_fmi2SetReal) || !references_known(g, "fmi2SetReal", 'R', vr, nvr, value)
-        || !reals_valid(g, "fmi2SetReal", vr, nvr, value))
+        || !settable(g, vr, nvr) || !reals_valid(g, "fmi2SetReal", vr, nvr, value))
         return fmi2Error;
-    if (mirror_set(g, vr, nvr, value)) return fmi2OK; /* inputs only: always settable */
-    if (!settable(g, vr, nvr)) return fmi2Error;
+    if (mirror_set(g, vr, nvr, value)) return fmi2OK; /* inputs, in step complete */
     FORWARD(fmi2SetReal, vr, nvr, value);
     slave_changed(g);
     return status;
