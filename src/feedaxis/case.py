@@ -12,6 +12,7 @@ import math
 import os
 import shutil
 import tempfile
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,12 +21,14 @@ import tomli_w
 
 from .errors import (InputError, finite_float, finite_value, read_text, read_toml,
                      shown_value, toml_key_line)
-from .output import umask_mode, writing
+from .output import staging_prefix, umask_mode, writing
 from .physics.geometry import SUPPORTS
 from .physics.servo import loop_budget_problem
 from .physics.thermal import DutySegment
 
-AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE = (
+# Set by --follow-links: read case files that are links to files outside their folder.
+FOLLOW_LINKS = ContextVar("follow_links", default=False)
+AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE = CASE_FILES = (
     "axis.toml", "positioning.csv", "duty.csv", "tracking.csv")
 
 SCREW_KEYS = {
@@ -169,6 +172,7 @@ def read_case(folder):
     folder = Path(folder)
     if not folder.is_dir():
         raise CaseError(folder, "not a case folder (expected a folder holding axis.toml)")
+    _refuse_outside_links(folder)
     axis = read_axis(folder / AXIS_FILE)
     length_mm = axis.screw["length_m"] * 1e3 if "length_m" in axis.screw else None
     duty = read_duty(folder / DUTY_FILE, length_mm) if (folder / DUTY_FILE).exists() else None
@@ -186,6 +190,20 @@ def read_case(folder):
         raise CaseError(folder, f"a case holds {POSITIONING_FILE}, {TRACKING_FILE} or both; "
                                 "neither was found")
     return Case(folder, axis, positioning, duty, tracking)
+
+
+def _refuse_outside_links(folder):
+    """Refuse a case file that resolves outside its case folder (a symbolic link to a file
+    elsewhere), before reading anything of it, unless :data:`FOLLOW_LINKS` is set."""
+    if FOLLOW_LINKS.get():
+        return
+    inside = folder.resolve()
+    for name in CASE_FILES:
+        path = folder / name
+        if (path.exists() or path.is_symlink()) and inside not in path.resolve().parents:
+            raise CaseError(path, "is a link to a file outside the case folder: not read (a "
+                                  "case must hold its own files; copy the file in, or give "
+                                  "--follow-links to read it anyway)")
 
 
 def read_axis(path):
@@ -551,7 +569,7 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, 
         raise CaseError(folder, "already exists; choose a new case folder")
     with writing(folder):
         folder.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+        staging = Path(tempfile.mkdtemp(prefix=staging_prefix(folder), dir=folder.parent))
         try:
             (staging / AXIS_FILE).write_text(tomli_w.dumps(axis_values), encoding="utf-8")
             for name, columns in ((POSITIONING_FILE, positioning), (DUTY_FILE, duty),

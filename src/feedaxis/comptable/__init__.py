@@ -8,6 +8,8 @@ convention (``SIGN``) and how to load the file (``LOAD``).
 """
 from __future__ import annotations
 
+import math
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -18,10 +20,11 @@ from ..errors import InputError
 from ..iso230 import target_clusters
 from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, safety, siemens
 from .base import reference_index
-from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
-                    from_measurement, from_model, grid_mm)
+from .table import (GRID_DECIMALS, NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable,
+                    default_spacing_mm, from_measurement, from_model, grid_mm)
 from .verify import between_targets, verify
 
+MAX_TABLE_POINTS = 100_000  # of a controller without its own limit: a file of some MB
 CONTROLLERS = {module.NAME: module for module in (linuxcnc, siemens, fanuc, heidenhain,
                                                   beckhoff, mach4)}
 
@@ -37,6 +40,8 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
     module = CONTROLLERS[controller]
     target_mm = case.positioning.target_mm
     first_mm, last_mm = _span_mm(module, target_mm)
+    if spacing_mm is not None:
+        check_spacing(module, spacing_mm, last_mm - first_mm)
     if from_measured:
         count = target_clusters(target_mm)[0].size
         if count < 2:
@@ -58,6 +63,24 @@ def safe_table(case, model, position_mm):
     unsafe = safety.unsafe_effects(case, model)
     table = from_model(case, safety.usable_model(model, unsafe), position_mm)
     return replace(table, excluded={**safety.reasons_by_effect(unsafe), **table.excluded})
+
+
+def check_spacing(module, spacing_mm, span_mm):
+    """Refuse a ``--spacing-mm`` that is not finite and > 0, longer than the travel the
+    table covers (its points would lie beyond the stroke), or so short that the table
+    would take more points than the controller (or any file: :data:`MAX_TABLE_POINTS`)."""
+    if not (math.isfinite(spacing_mm) and spacing_mm >= 10.0 ** -GRID_DECIMALS):
+        raise InputError(f"must be a number of at least {10.0 ** -GRID_DECIMALS:g} mm, got "
+                         f"{spacing_mm:g}", parameter="--spacing-mm")
+    if spacing_mm > span_mm:
+        raise InputError(f"{spacing_mm:g} mm is longer than the {span_mm:g} mm the table "
+                         "covers: its last point would lie beyond the measured travel",
+                         parameter="--spacing-mm")
+    limit = module.MAX_POINTS or MAX_TABLE_POINTS
+    if span_mm / spacing_mm + 1 > limit:
+        raise InputError(f"{span_mm / spacing_mm + 1:.0f} table points over {span_mm:g} mm; "
+                         f"{module.NAME} takes at most {limit}: choose a larger spacing",
+                         parameter="--spacing-mm")
 
 
 def _span_mm(module, target_mm):
@@ -107,7 +130,7 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     Heidenhain's ``.CMA``; the report dict for printing and ``--json``).
     """
     module = CONTROLLERS[controller]
-    axis_id = axis_id or module.DEFAULT_AXIS_ID
+    axis_id = checked_axis_id(module, axis_id)
     unsafe = safety.unsafe_effects(case, model)
     usable = safety.usable_model(model, unsafe)
     table = build_table(case, usable, controller, spacing_mm, from_measured)
@@ -135,6 +158,19 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     if force:
         report["warnings"] += safety.forced_warnings(report, unsafe)
     return files, report
+
+
+def checked_axis_id(module, axis_id):
+    """``axis_id`` (default: the controller's), refused unless it is what the controller's
+    file holds there (``module.AXIS_ID``): a newline or a word more would write a line of
+    the user's into the controller file."""
+    if axis_id is None:
+        return module.DEFAULT_AXIS_ID
+    if not re.fullmatch(module.AXIS_ID, axis_id):
+        raise InputError(f"{axis_id!r} is not an axis of a {module.NAME} file: expected "
+                         f"{module.AXIS_ID} (default {module.DEFAULT_AXIS_ID})",
+                         parameter="--axis-id")
+    return axis_id
 
 
 def _notes(case, table, module, spacing_mm):

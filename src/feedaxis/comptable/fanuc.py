@@ -33,6 +33,7 @@ EQUIDISTANT = True
 GRID_THROUGH_ZERO = True  # the reference position (machine zero) is a table point
 REFERENCE_COORDINATE = 1240  # read when present, never written
 DEFAULT_AXIS_ID = "1"
+AXIS_ID = r"[1-9][0-9]?"  # the controlled axis number of A<axis>
 DETECTION_UNIT_UM = 1.0
 MAX_VALUE = 127
 PITCH_DATA = 10000

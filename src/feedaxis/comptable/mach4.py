@@ -19,6 +19,7 @@ NAME = "mach4"
 MAX_POINTS = None
 EQUIDISTANT = True
 DEFAULT_AXIS_ID = "X"
+AXIS_ID = r"[XYZABCxyzabc]"  # one of Mach4's six coordinated axes
 SIGN = "error = measured - expected (mm), per direction"
 LOAD = ("Configure > Plugins > Machine Calibration > Linear Compensation: select the motor, "
         "Modify Inputs: start point, length, number of points; then the errors per point "

@@ -14,8 +14,6 @@ their status, with no per-step dict lookup or allocation.
 from __future__ import annotations
 
 import ctypes
-import signal
-import threading
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -26,6 +24,7 @@ from numpy.lib import recfunctions
 from fmpy.fmi1 import FMICallException
 
 from ..errors import ParameterError
+from ..stop import deferred
 from .fmu_runner import LoadedFmu
 from .physics_check import check_physics
 from .system import check_parameter_values
@@ -346,7 +345,8 @@ def _timed(function, total):
 
 
 class _StopFlag:
-    """Within ``with``: Ctrl-C sets ``requested`` instead of raising inside an FMU call.
+    """Within ``with``: a stop signal (Ctrl-C, SIGTERM, SIGHUP: :mod:`feedaxis.stop`) sets
+    ``requested`` instead of raising inside an FMU call.
 
     A KeyboardInterrupt raised in the Python code of a pythonfmu slave would surface as
     fmi2Fatal; the master instead finishes the current chunk and stops cleanly.
@@ -354,16 +354,14 @@ class _StopFlag:
 
     def __init__(self):
         self.requested = False
-        self._previous = None
+        self._deferred = deferred(self._request)
 
     def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._request)
+        self._deferred.__enter__()
         return self
 
     def __exit__(self, *exc):
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+        return self._deferred.__exit__(*exc)
 
-    def _request(self, *_):
+    def _request(self):
         self.requested = True
