@@ -118,6 +118,7 @@ def _iso_comparison_lines(comparison):
                  f"{comparison['rms_residual_um']:10.4g}")
     if not comparison["bidirectional"]:
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
+    lines += [f"note: {note}" for note in comparison.get("sampling", ())]
     return "\n".join(lines)
 
 

@@ -44,10 +44,16 @@ class LoadedFmu:
         self.variables = {v.name: v for v in self.description.modelVariables}
 
     def instantiate(self, instance_name):
-        """Return an instantiated :class:`fmpy.fmi2.FMU2Slave`; its log goes to stdout."""
-        slave = FMU2Slave(guid=self.description.guid, unzipDirectory=self.unzip_dir,
-                          modelIdentifier=self.description.coSimulation.modelIdentifier,
-                          instanceName=instance_name)
+        """Return an instantiated :class:`fmpy.fmi2.FMU2Slave`; its log goes to stdout.
+        A shared library that does not load (damaged, another platform's) is an
+        :class:`InputError` naming the FMU."""
+        try:
+            slave = FMU2Slave(guid=self.description.guid, unzipDirectory=self.unzip_dir,
+                              modelIdentifier=self.description.coSimulation.modelIdentifier,
+                              instanceName=instance_name)
+        except OSError as error:
+            raise InputError(f"its shared library does not load: {error}",
+                             path=self.path) from None
         slave.instantiate(loggingOn=True)
         return slave
 

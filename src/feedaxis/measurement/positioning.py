@@ -21,7 +21,8 @@ from functools import cached_property
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..iso230 import FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, target_clusters
+from ..iso230 import (FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, sampling_notes,
+                      target_clusters)
 from ..stats import judge
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
@@ -279,6 +280,7 @@ class Positioning(Measurement):
         return {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "targets": measured["targets"],
                 "runs_up": measured.get("runs_up", 0), "runs_down": measured.get("runs_down", 0),
+                "sampling": sampling_notes(samples.target_mm, samples.direction, samples.run),
                 "bidirectional": samples.bidirectional,
                 "rms_measured_um": result.statistics.rms_before_um,
                 "rms_residual_um": result.statistics.rms_um, "figures": figures}
