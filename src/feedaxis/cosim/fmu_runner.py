@@ -5,6 +5,7 @@ before step k (held over [t_k, t_k + h)), output value k is read after it, at t_
 """
 from __future__ import annotations
 
+import os
 import shutil
 import zipfile
 from pathlib import PurePosixPath
@@ -47,13 +48,16 @@ class LoadedFmu:
         """Return an instantiated :class:`fmpy.fmi2.FMU2Slave`; its log goes to stdout.
         A shared library that does not load (damaged, another platform's) is an
         :class:`InputError` naming the FMU."""
+        working_folder = os.getcwd()
         try:
             slave = FMU2Slave(guid=self.description.guid, unzipDirectory=self.unzip_dir,
                               modelIdentifier=self.description.coSimulation.modelIdentifier,
                               instanceName=instance_name)
-        except OSError as error:
+        except Exception as error:  # fmpy raises a bare Exception for a library not loading
             raise InputError(f"its shared library does not load: {error}",
                              path=self.path) from None
+        finally:  # fmpy changes into the library's folder and stays there when it fails
+            os.chdir(working_folder)
         slave.instantiate(loggingOn=True)
         return slave
 

@@ -191,9 +191,9 @@ def normal_factor(covariance, where):
         raise InputError("the covariance must be a symmetric matrix of finite numbers",
                          parameter=where)
     sigma = np.sqrt(np.abs(np.diag(covariance)))
-    floor = np.finfo(float).eps * max(float(np.max(np.abs(covariance), initial=0.0)),
-                                      np.finfo(float).tiny)
-    scale = np.outer(sigma, sigma) + floor
+    scale = np.outer(sigma, sigma)
+    scale[scale == 0.0] = max(float(np.max(np.abs(covariance), initial=0.0)),
+                              np.finfo(float).tiny)  # a parameter held: its row is all 0
     asymmetry = np.abs(covariance - covariance.T) / scale
     if np.any(asymmetry > SYMMETRY_TOLERANCE):
         i, j = np.unravel_index(np.argmax(asymmetry), asymmetry.shape)
