@@ -24,7 +24,7 @@ def run():
         stop.ignore_all()  # a second signal cannot cut the line
         code = fail("--json" in sys.argv[1:], stop.described("interrupted"), stop.exit_code())
     stop.ignore_all()  # nor the exit
-    sys.exit(code)
+    stop.leave(code)
 
 
 if __name__ == "__main__":

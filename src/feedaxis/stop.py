@@ -7,7 +7,9 @@ installs it before the seconds of start-up imports.
 """
 from __future__ import annotations
 
+import os
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 
@@ -37,6 +39,21 @@ def ignore_all():
 def exit_code():
     """128 + the number of the last stop signal received (130 for Ctrl-C)."""
     return 128 + int(_received[0])
+
+
+def leave(code):
+    """Exit with ``code``: a stop's code without Python's finalisation. The interrupt may
+    have been raised inside code a C extension ran (an import, an FMU's Python), which
+    leaves CPython marked to kill itself with SIGINT at exit (exit 130 or -2, never 143);
+    every ``finally`` has run by now, so only the streams are flushed."""
+    if code in {128 + int(signum) for signum in STOP_SIGNALS}:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    sys.exit(code)
 
 
 def described(message):

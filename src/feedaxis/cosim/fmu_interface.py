@@ -5,6 +5,8 @@ the variable, never a failure half-way through a simulation.
 """
 from __future__ import annotations
 
+import zipfile
+import zlib
 from functools import lru_cache
 
 from ..errors import InputError
@@ -65,10 +67,14 @@ def check_fmu(path, name):
 
 
 def intact(paths):
-    """Whether every FMU of ``paths`` ({name: path}) exists and passes :func:`check_fmu`."""
+    """Whether every FMU of ``paths`` ({name: path}) exists, passes :func:`check_fmu` and
+    holds no member whose CRC fails (a flipped byte anywhere; some 0.1 s for the four)."""
     try:
         for name, path in paths.items():
             check_fmu(path, name)
-    except (InputError, OSError):
+            with zipfile.ZipFile(path) as archive:
+                if archive.testzip() is not None:
+                    return False
+    except (InputError, OSError, zipfile.BadZipFile, zlib.error):
         return False
     return True

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 import zipfile
+import zlib
 from pathlib import PurePosixPath
 
 import numpy as np
@@ -41,7 +43,15 @@ class LoadedFmu:
     def __init__(self, fmu_path):
         self.path = str(fmu_path)
         self.description = read_model_description(self.path)
-        self.unzip_dir = extract(self.path)
+        self.unzip_dir = tempfile.mkdtemp(prefix="feedaxis_fmu_")
+        try:
+            extract(self.path, self.unzip_dir)
+        except (zipfile.BadZipFile, zlib.error, EOFError) as error:  # a damaged member
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            raise InputError(f"damaged, it does not unpack: {error}", path=fmu_path) from None
+        except BaseException:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            raise
         self.variables = {v.name: v for v in self.description.modelVariables}
 
     def instantiate(self, instance_name):

@@ -93,9 +93,13 @@ class Master:
     def __init__(self, system, fmu_paths):
         self.system = system
         self.loaded = {}
-        for component in system.components:
-            if component.fmu not in self.loaded:
-                self.loaded[component.fmu] = LoadedFmu(fmu_paths[component.fmu])
+        try:
+            for component in system.components:
+                if component.fmu not in self.loaded:
+                    self.loaded[component.fmu] = LoadedFmu(fmu_paths[component.fmu])
+        except BaseException:  # a damaged FMU or a stop signal: no extracted folder left
+            self.close()
+            raise
         self.outputs = {c.name: [v.name for v in self.loaded[c.fmu].description.modelVariables
                                  if v.causality == "output" and v.type == "Real"]
                         for c in system.components}
@@ -166,23 +170,23 @@ class Master:
         started = time.perf_counter()
         for j, source in input_values:
             signals[j] = float(_values(source, np.zeros(1))[0])
-        try:
-            with _StopFlag() as stop:
+        with _StopFlag() as stop:  # freeing the slaves runs their Python too
+            try:
                 for component in system.ordered_components():
                     plan.append(self._instantiate(system, component, signals, slaves,
                                                   fmu_time if profile else None))
                 fmu_time[0] = 0.0
                 loop_started = time.perf_counter()
-                rows = self._loop(plan, signals, table, input_values, record_steps, n_steps, h,
-                                  progress, stop)
+                rows = self._loop(plan, signals, table, input_values, record_steps, n_steps,
+                                  h, progress, stop)
                 loop_s = time.perf_counter() - loop_started
-        finally:
-            for slave in slaves:
-                slave.freeInstance()
+            finally:
+                for slave in slaves:
+                    slave.freeInstance()
         self.timing = Timing(time.perf_counter() - started, loop_s,
                              fmu_time[0] if profile else None, n_steps)
         result = self._result(table[:rows], record_steps[:rows] * h)
-        if rows < record_steps.size:
+        if rows < record_steps.size or stop.requested:  # a stop while the slaves were freed
             raise SimulationInterrupted(result)
         return result
 
