@@ -53,7 +53,8 @@ def uncertainty_lines(result):
         lines += ["", f"compensation table ({table['source']}: "
                       f"{', '.join(table['included'])}), {len(table['position_mm'])} points, "
                       f"{table['trials']} trials: largest u "
-                      f"{number(table['largest_standard_uncertainty_um'], '.2g')} µm"
+                      + number(table['largest_standard_uncertainty_um'], '.2g') + (
+                          "" if table["largest_standard_uncertainty_um"] is None else " µm")
                       + ("; shares: " + ", ".join(f"{SHORT_NAMES.get(i, i)} {_share(c['share'])}"
                                                   for i, c in table["contributions"].items())
                          if "standard_uncertainty" in result.moments else "")]
