@@ -257,6 +257,22 @@ def test_sigterm_during_sweep_keeps_the_finished_trials_and_says_so(tmp_path, fm
     assert len(list((out / ".partial").glob("part-*.parquet"))) >= (kept > 0)
 
 
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_stop_a_fit_as_ctrl_c_does(tmp_path, signum):
+    case = write_seed001_case(tmp_path / "case")
+    fit = subprocess.Popen([*FEEDAXIS, "fit", str(case), "--add", "lead_error", "--add",
+                            "assembly_eccentricity", "--out", str(tmp_path / "m.toml")],
+                           cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True)
+    time.sleep(1.5)  # within the start-up imports or the fit
+    fit.send_signal(signum)
+    _, err = fit.communicate(timeout=300)
+    name = signal.Signals(signum).name
+    assert fit.returncode == 128 + signum, err
+    assert err.strip().splitlines()[-1] == f"feedaxis: interrupted ({name})", err
+    assert not (tmp_path / "m.toml").exists() and hidden(tmp_path) == []
+
+
 def test_a_stale_staging_folder_of_a_killed_run_is_removed_and_an_old_one_reported(tmp_path):
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                           capture_output=True, text=True).stdout.strip()
