@@ -385,13 +385,17 @@ def test_a_budget_beyond_any_laser_is_refused_at_its_key(tmp_path, capsys, budge
 
 # --- 6. outputs the project itself then refuses -----------------------------------------
 
-@pytest.mark.parametrize("setting", ["GeometricError.offset_um=1e300",
-                                     "ThermalScrew.expansion_per_K=1e308"])
-def test_simulate_refuses_a_case_compare_would_refuse(tmp_path, capsys, fmu_paths, setting):
+@pytest.mark.parametrize("setting, words", [
+    ("GeometricError.offset_um=1e300", "--set: the simulated case would not be readable "
+                                       "(positioning.csv, row 2, column 'error_um'"),
+    ("ThermalScrew.expansion_per_K=1e308", "ThermalScrew.expansion_per_K: 1e+308 is beyond "
+                                           "any physical axis")])
+def test_simulate_refuses_a_case_compare_would_refuse(tmp_path, capsys, fmu_paths, setting,
+                                                      words):
     out = tmp_path / "sim"
     code, _, err = run(capsys, "simulate", "iso230", out, "--targets", 2, "--runs", 1,
                        "--set", setting, "--fmus", next(iter(fmu_paths.values())).parent)
-    assert code == 2 and "--set" in err and "would not be readable" in err, err
+    assert code == 2 and words in err, err
     assert not out.exists() and hidden(tmp_path) == []
 
 

@@ -568,11 +568,13 @@ def _counter_progress(label, unit, unit_scale=False):
 def _simulate(args, run):
     """Run one scenario into a new case folder; Ctrl-C keeps what was computed."""
     from .cosim.master import Master
+    from .cosim.scenarios import check_axis_ranges
 
     if Path(args.out).exists():
         raise InputError("already exists; choose a new case folder", path=args.out)
     check_writable_target(args.out, "folder")
     system = _axis_system(args)
+    check_axis_ranges(system)
     with Master(system, _fmu_paths(args)) as master:
         with _counter_progress("simulating", "step", True) as progress:
             return run(master, progress)

@@ -26,7 +26,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..case import PHYSICAL_RANGE, CaseError, Positioning, read_case, write_case
+from ..case import (PHYSICAL_RANGE, CaseError, Positioning, range_problem, read_case,
+                    write_case)
 from ..compensate import thermal_error_um
 from ..errors import InputError, ParameterError
 from ..iso230 import iso230_figures, per_target
@@ -521,6 +522,21 @@ class MeasurementNoise:
                 noisy[table] = {**tables[table], column: measured
                                 + mm_per_um * rng.normal(0.0, self.sigma_um, measured.size)}
         return noisy
+
+
+def check_axis_ranges(system):
+    """Refuse, before anything is simulated, an FMU parameter the simulated case's axis.toml
+    would hold (:data:`~feedaxis.fmu_map.AXIS_KEYS`) beyond any physical axis: the case
+    format's ranges, naming ``Component.parameter``."""
+    for table in AXIS_KEYS.values():
+        for component in system.components:
+            for key in table.get(component.fmu, ()):
+                value = component.parameters.get(key)
+                if isinstance(value, (int, float)) and not isinstance(value, bool):
+                    problem = range_problem(key, value)
+                    if problem:
+                        raise InputError(f"{value:g} {problem} (axis.toml of the simulated "
+                                         "case)", parameter=f"{component.name}.{key}")
 
 
 def _readable(staged):
