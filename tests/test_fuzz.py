@@ -17,6 +17,7 @@ import io
 import json
 import os
 import tracemalloc
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -403,6 +404,9 @@ SIGTERM_WRITERS = {  # a writing command on the bundled case -> the files it may
                     ["u.html"]),
     "simulate": (["simulate", "iso230", "{out}/sim", "--targets", "3", "--runs", "2",
                   "--fmus", "{fmus}"], ["sim"]),
+    "import": (["import", "{laser}/X-axis.rtl", "--axis", "{laser}/axis.toml", "--out",
+                "{out}/imported"], ["imported"]),
+    "export-ssp": (["export-ssp", "{out}/axis.ssp", "--fmus", "{fmus}"], ["axis.ssp"]),
 }
 
 
@@ -417,6 +421,9 @@ def _whole(path):
         assert path.read_text(encoding="utf-8").rstrip().endswith("</html>"), path
     elif path.suffix == ".txt":
         mach4.read(path.read_text(encoding="utf-8"), str(path))
+    elif path.suffix == ".ssp":
+        with zipfile.ZipFile(path) as archive:
+            assert archive.testzip() is None and "SystemStructure.ssd" in archive.namelist()
     else:
         read_case(path)
 
@@ -424,8 +431,8 @@ def _whole(path):
 @pytest.mark.parametrize("command", sorted(SIGTERM_WRITERS))
 def test_sigterm_at_a_random_moment_leaves_whole_outputs_or_none(tmp_path, fmu_paths,
                                                                   command):
-    """SIGTERM (a scheduler's, ``timeout``'s) at a moment drawn from 0.2 to 5 s into the
-    command, start-up included: exit 143 with one line (or 0 when it finished first), every
+    """SIGTERM (a scheduler's, ``timeout``'s) at a moment drawn from 0.2 to 5 s into each
+    writing command (demo, build-fmus and sweep: test_reliability_two.py), start-up included: exit 143 with one line (or 0 when it finished first), every
     output whole or absent, no staging file or folder left. CI draws a fixed moment."""
     import subprocess
     import signal
@@ -433,13 +440,13 @@ def test_sigterm_at_a_random_moment_leaves_whole_outputs_or_none(tmp_path, fmu_p
     import time
     import zlib
 
-    from feedaxis.examples import write_seed001_case
+    from feedaxis.examples import LASER_EXAMPLE, write_seed001_case
 
     case, out = write_seed001_case(tmp_path / "case"), tmp_path / "out"
     out.mkdir()
     argv, written = SIGTERM_WRITERS[command]
-    argv = [a.format(case=case, out=out, fmus=next(iter(fmu_paths.values())).parent)
-            for a in argv]
+    argv = [a.format(case=case, out=out, fmus=next(iter(fmu_paths.values())).parent,
+                     laser=LASER_EXAMPLE) for a in argv]
     seed = zlib.crc32(command.encode()) if os.environ.get("CI") == "true" else None
     delay_s = np.random.default_rng(seed).uniform(0.2, 5.0)
     process = subprocess.Popen([sys.executable, "-m", "feedaxis", *argv], cwd=tmp_path,
