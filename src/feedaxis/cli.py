@@ -573,9 +573,9 @@ def _simulate(args, run):
     if Path(args.out).exists():
         raise InputError("already exists; choose a new case folder", path=args.out)
     check_writable_target(args.out, "folder")
-    system = _axis_system(args)
+    system, paths = _checked_axis(args)
     check_axis_ranges(system)
-    with Master(system, _fmu_paths(args)) as master:
+    with Master(system, paths) as master:
         with _counter_progress("simulating", "step", True) as progress:
             return run(master, progress)
 
