@@ -192,7 +192,7 @@ def test_an_axis_id_with_a_newline_is_refused_by_every_controller(tmp_path, caps
                                                                    controller):
     case = runs_case(tmp_path / "c", 5)
     out = tmp_path / "table.txt"
-    axis_id = f"{CONTROLLERS[controller].DEFAULT_AXIS_ID}\nM30"
+    axis_id = f"{CONTROLLERS[controller].default_axis_id}\nM30"
     code, _, err = run(capsys, "comp-table", case, "--controller", controller,
                        "--from-measurement", "--axis-id", axis_id, "--out", out)
     assert code == 2 and "--axis-id" in err and not out.exists(), err
@@ -441,10 +441,10 @@ def test_every_file_written_is_read_by_the_commands_that_read_it(tmp_path, capsy
                     ["uncertainty", simulated, "--trials", 1000]):
         code, _, err = run(capsys, *command)
         assert code == 0, (command, err)
-    for name, module in CONTROLLERS.items():
+    for name, controller in CONTROLLERS.items():
         out = tmp_path / f"table-{name}.txt"
         code, _, err = run(capsys, "comp-table", case, "--controller", name, "--model", model,
                            "--out", out, "--force")
         assert code == 0, (name, err)
-        table = module.read(out.read_text(encoding="utf-8"), str(out))
+        table = controller.read(out.read_text(encoding="utf-8"), str(out))
         assert table.size >= 2
