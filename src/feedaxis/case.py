@@ -23,7 +23,7 @@ from .errors import (InputError, finite_float, finite_value, read_text, read_tom
 from .output import umask_mode, writing
 from .physics.geometry import SUPPORTS
 from .physics.servo import loop_budget_problem
-from .physics.thermal import DutySegment
+from .physics.thermal import Segments
 
 AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE = (
     "axis.toml", "positioning.csv", "duty.csv", "tracking.csv")
@@ -124,9 +124,10 @@ class Positioning:
 
 @dataclass(frozen=True)
 class Duty:
-    """duty.csv: consecutive segments from t = 0, with the optional ambient per segment."""
+    """duty.csv: consecutive segments from t = 0 (:class:`~feedaxis.physics.thermal.Segments`,
+    columns), with the optional ambient per segment."""
 
-    segments: tuple
+    segments: Segments
     ambient_C: np.ndarray | None = None
 
     @property
@@ -485,9 +486,7 @@ def read_duty(path, length_mm=None):
         kind = "overlaps the previous one" if start[i] < expected[i - 1] else "leaves a gap after the previous one"
         raise CaseError(path, f"segment {kind}: starts at {start[i]:g} s, the previous ends at "
                               f"{expected[i - 1]:g} s", rows[i], "start_s")
-    segments = tuple(DutySegment(*row) for row in zip(
-        start, duration, values["feed_mm_min"], values["from_mm"], values["to_mm"]))
-    return Duty(segments, values.get("ambient_C"))
+    return Duty(Segments(start, duration, feed, from_mm, to_mm), values.get("ambient_C"))
 
 
 def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
