@@ -182,6 +182,7 @@ class Serial:
 
     def __init__(self, order, white):
         self.order, self.white, self.label = order, white, white.label
+        self.reordered = bool(np.any(np.diff(order) != 1))  # not the samples' own order
         self.name = (f"{white.name}; where the residual is serially correlated, against the "
                      "noise power at the term's frequencies (AR noise model, order by BIC)")
 
@@ -249,12 +250,26 @@ class Serial:
         noise = self.autoregression(residual_um)
         if noise.order == 0:
             return variance * (jacobian.T @ jacobian)
-        ordered = jacobian[self.order]
-        n_fft = 1 << int(np.ceil(np.log2(2 * ordered.shape[0])))
-        transform = np.fft.rfft(ordered, n_fft, axis=0)
-        weights = noise.spectrum(n_fft) / n_fft
-        weights[1:-1] *= 2.0
-        return np.real((transform.conj() * weights[:, None]).T @ transform)
+        return spectral_gram(jacobian.T[:, self.order] if self.reordered else jacobian.T,
+                             noise.spectrum)
+
+
+def spectral_gram(columns, spectrum):
+    """Σ_f S(f)|C(f)|²-weighted Gram matrix of ``columns`` (one row per column, in sample
+    order): Re(C W Cᴴ) over the one-sided FFT C of each row zero-padded to the next power
+    of two ≥ 2n, W the spectrum ``spectrum(n_fft) / n_fft`` with the inner frequencies
+    doubled (a circulant Σ: J'ΣJ without forming Σ). The rows are transformed one by one
+    into one array and weighted by √W in place: it holds that transform (rows x n_fft/2
+    complex), one padded row and no copy."""
+    n_fft = 1 << int(np.ceil(np.log2(2 * columns.shape[1])))
+    weights = spectrum(n_fft) / n_fft
+    weights[1:-1] *= 2.0
+    transform = np.empty((columns.shape[0], n_fft // 2 + 1), dtype=complex)
+    for column, row in zip(columns, transform):
+        np.fft.rfft(column, n_fft, out=row)
+    transform *= np.sqrt(weights)
+    pairs = transform.view(np.float64)  # (re, im) interleaved: one real product sums both
+    return pairs @ pairs.T
 
 
 class Coloured:
