@@ -831,8 +831,8 @@ def _add_sweep_options(sub):
                      help="hold the parameters the fit could not determine at their "
                           "fitted values (without it such a model is refused)")
     sub.add_argument("--workers", type=int, metavar="N",
-                     help="local Dask worker processes (default: one per core; 0 runs "
-                          "in this process)")
+                     help="local Dask worker processes (default: in this process while "
+                          "that is sooner, else one per core; 0 runs in this process)")
     sub.add_argument("--scheduler", metavar="ADDRESS",
                      help="run on the Dask cluster of this scheduler (tcp://host:8786) "
                           "instead of a local one")
@@ -874,7 +874,8 @@ def _cmd_sweep(args):
               thermal_step_s=args.thermal_step_s, model=args.model, set_items=args.set or (),
               effects=_effects(args), fmus=args.fmus,
               workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-              progress=progress, **SCENARIO_ARGUMENTS[args.scenario](args))
+              progress=progress, echo=lambda line: print(line, file=sys.stderr),
+              **SCENARIO_ARGUMENTS[args.scenario](args))
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     _emit(args, summary, summary_lines(summary) + f"\nfiles: {args.out}/trials.parquet, "
                                                   "summary.json, summary.txt, report.html")
