@@ -145,3 +145,28 @@ def test_segments_behave_as_a_sequence():
     columns = thermal.Segments.of(segments)
     assert len(columns) == 20 and list(columns) == segments
     assert columns[-1] == segments[-1] and columns[2:4] == segments[2:4]
+
+
+def test_fit_progress_has_a_total_that_bounds_it(tmp_path):
+    """The fit announces the most evaluations it can make before it starts, and stays
+    within it (seed 003's Table 2 duty, thermal_screw from Table 3 X)."""
+    from feedaxis.case import read_case
+    from feedaxis.effects import CATALOG, Model
+    from feedaxis.examples import write_table2_case
+    from feedaxis.fit import ParameterLayout, evaluation_bound, fit_with_artefacts
+
+    write_table2_case(tmp_path / "case", 6000.0, run_every_s=900.0)
+    case = read_case(tmp_path / "case")
+    model = Model([CATALOG["thermal_screw"]])
+    totals, counted = [], []
+
+    def progress(step=None, total=None):
+        if total is None:
+            counted.append(step)
+        else:
+            totals.append(total)
+
+    fit_with_artefacts(model, case, progress=progress)
+    layout = ParameterLayout(model.with_values({"thermal_screw": {}}), case.axis)
+    assert totals[0] == evaluation_bound(layout) == 100 * (4 + 6) * (1 + 4) + 2
+    assert 0 < len(counted) <= sum(totals)

@@ -69,11 +69,15 @@ def scenario_arguments(name):
 @contextmanager
 def _progress(label, unit):
     """A tqdm counter on stderr that shows itself only when the work takes over a second;
-    the callback takes an optional label of the step under way."""
+    the callback takes an optional label of the step under way, or ``total=N``: N more
+    steps at most (the bar's total grows by N, nothing is counted)."""
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
-        def tick(step=None):
+        def tick(step=None, total=None):
+            if total is not None:
+                bar.total = (bar.total or 0) + total
+                return
             if step:
                 bar.set_postfix_str(str(step), refresh=False)
             bar.update()
