@@ -19,35 +19,26 @@ import argparse
 import os
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import arguments  # noqa: E402
+from common import arguments, run_command  # noqa: E402
 
 VARY = "NpidServo.friction_N=uniform(0,2)"
 
 
 def run_sweep(folder, trials, workers, duration_s):
-    """(wall s, CPU s) of one ``feedaxis sweep tracking`` in a fresh process."""
+    """(wall s, CPU s) of one ``feedaxis sweep tracking`` in a fresh process (CPU: the
+    command and the worker processes it started and reaped)."""
     out = Path(folder) / f"sweep-{trials}-{workers}"
     shutil.rmtree(out, ignore_errors=True)
     command = [sys.executable, "-m", "feedaxis", "sweep", "tracking", str(out), "--vary", VARY,
                "--trials", str(trials), "--duration-s", str(duration_s)]
-    if workers is not None:
-        command += ["--workers", str(workers)]
-    start = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(process.pid, 0)
-    wall_s = time.perf_counter() - start
-    error = process.stderr.read().decode()
-    if os.waitstatus_to_exitcode(status):
-        raise RuntimeError(f"feedaxis sweep failed: {error.strip().splitlines()[-1:]}")
-    return wall_s, usage.ru_utime + usage.ru_stime  # wait4: the command and its reaped workers
+    done = run_command(command + ([] if workers is None else ["--workers", str(workers)]))
+    return done.wall_s, done.cpu_s
 
 
 def line(label, runs):

@@ -25,7 +25,6 @@ import argparse
 import os
 import re
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -37,7 +36,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 sys.path.insert(0, str(HERE))
 
-from common import arguments  # noqa: E402
+from common import arguments, run_command  # noqa: E402
 from feedaxis.case import read_case, write_case  # noqa: E402
 from feedaxis.examples import TABLE2_AXIS, TABLE2_LEAD  # noqa: E402
 from feedaxis.physics import geometry, thermal  # noqa: E402
@@ -118,19 +117,14 @@ def evaluation(folder, repeats, baseline_segments):
 
 
 def run_fit(folder):
-    """(wall s, peak RSS MB, evaluations, bound) of one ``feedaxis fit --add thermal_screw``."""
-    command = [sys.executable, "-m", "feedaxis", "fit", str(folder), "--add", "thermal_screw"]
-    start = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(process.pid, 0)
-    wall_s = time.perf_counter() - start
-    out, err = process.stdout.read().decode(), process.stderr.read().decode()
-    if os.waitstatus_to_exitcode(status):
-        raise RuntimeError(f"feedaxis fit failed: {err.strip().splitlines()[-1:]}")
-    shown = [(int(n), int(total)) for n, total in re.findall(r"(\d+)/(\d+) \[", err)]
-    rms = re.search(r"RMS[^\n]*", out)
-    return (wall_s, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024,
-            max(shown, default=None), rms.group(0) if rms else "")
+    """(wall s, CPU s, peak RSS MB, the bar's last (count, total), the RMS line) of one
+    ``feedaxis fit --add thermal_screw``."""
+    done = run_command([sys.executable, "-m", "feedaxis", "fit", str(folder), "--add",
+                        "thermal_screw"])
+    shown = [(int(n), int(total)) for n, total in re.findall(r"(\d+)/(\d+) \[", done.stderr)]
+    rms = re.search(r"RMS[^\n]*", done.stdout)
+    return (done.wall_s, done.cpu_s, done.peak_mb, max(shown, default=None),
+            rms.group(0) if rms else "")
 
 
 def fitting(folder, repeats):
