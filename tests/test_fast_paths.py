@@ -58,3 +58,22 @@ def test_serial_gram_in_and_out_of_order():
     assert noise.order > 0
     np.testing.assert_allclose(in_order.gram(jacobian, correlated, 1.0),
                                plain_gram(jacobian, noise.spectrum), rtol=1e-12)
+
+
+def test_autoregression_kept_by_content():
+    """A residual seen again (equal content, another array) gets the model fitted to it;
+    another residual its own."""
+    rng = np.random.default_rng(5)
+    n = 900
+    correlated = np.zeros(n)
+    for i, innovation in enumerate(rng.normal(size=n)):
+        correlated[i] = 0.7 * correlated[i - 1] + innovation
+    serial = Serial(np.arange(n), PureError(np.repeat(np.arange(n // 3), 3)))
+    first = serial.autoregression(correlated)
+    assert serial.autoregression(correlated.copy()) is first
+    fresh = serial._autoregression(correlated)
+    np.testing.assert_array_equal(first.coefficients, fresh.coefficients)
+    other = correlated[::-1].copy()
+    assert serial.autoregression(other) is not first
+    np.testing.assert_array_equal(serial.autoregression(other).coefficients,
+                                  serial._autoregression(other).coefficients)
