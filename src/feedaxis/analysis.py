@@ -25,6 +25,7 @@ from .iso230 import per_target, target_clusters
 from .measurement import kinds_for, measurement_of
 from .physics.threads import one_blas_thread
 from .stats.coloured import periodogram
+from .standards import DEFAULT
 from .stats.spectrum import MIN_CLUSTERS, marked_wavelengths, residual_spectrum
 
 DENSE_POINTS_PER_LINE = 200   # a smooth model drawn between its targets
@@ -116,11 +117,19 @@ class Analysis:
         return self.measurement.kind
 
 
-def compare(case, model, kind=None):
-    """The figures of ``model`` (as it stands) on the ``kind`` samples of ``case``: ISO
-    230-2 for positioning, seed 002's tracking error for tracking (a dict for ``--json``)."""
+def compare(case, model, kind=None, standard=DEFAULT):
+    """The figures of ``model`` (as it stands) on the ``kind`` samples of ``case``: those of
+    ``standard`` (:mod:`feedaxis.standards`) for positioning, seed 002's tracking error for
+    tracking (a dict for ``--json``)."""
     measurement = measurement_of(case, kind or kinds_for([case], model)[0])
-    return measurement.figures(evaluate(model, measurement))
+    return _figures(measurement, evaluate(model, measurement), standard)
+
+
+def _figures(measurement, result, standard):
+    """The measurement's figures; a positioning measurement's those of ``standard``."""
+    if standard == DEFAULT or measurement.kind != "positioning":
+        return measurement.figures(result)
+    return measurement.figures(result, standard)
 
 
 def error_ladder(case, model, kind=None):
@@ -135,7 +144,8 @@ def error_ladder(case, model, kind=None):
 
 
 @one_blas_thread
-def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, progress=None):
+def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, progress=None,
+            standard=DEFAULT):
     """Analyse ``model`` (as fitted) on the ``kind`` samples of ``case``.
 
     Parameters
@@ -151,6 +161,8 @@ def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, p
         The kind of measurement (default: the model's, else the first the case holds).
     progress : callable, optional
         Called with a label before each step and each fit.
+    standard : str
+        The standard of the positioning figures (:data:`feedaxis.standards.NAMES`).
 
     Returns
     -------
@@ -169,7 +181,8 @@ def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, p
     notify("figures")
     details = DETAILS[measurement.kind](measurement, model, effects, result)
     return Analysis(case, model, effects, measurement, result, diagnosis, ladder,
-                    measurement.figures(result), measurement.components(model), details)
+                    _figures(measurement, result, standard), measurement.components(model),
+                    details)
 
 
 def _positioning_details(measurement, model, effects, result):

@@ -241,10 +241,20 @@ def _cmd_diagnose(args):
     _emit_each(args, outputs)
 
 
+def _add_standard_option(parser):
+    from .standards import DEFAULT, NAMES, parse
+
+    parser.add_argument("--standard", type=parse, default=DEFAULT, metavar="NAME",
+                        help=f"the standard and edition of the positioning figures (default "
+                             f"{DEFAULT}; 'all': side by side): {', '.join(NAMES)}. See "
+                             "docs/standards.md")
+
+
 def _compare_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "model (TOML) as fitted; without it the model is empty")
     _add_correction_option(parser)
+    _add_standard_option(parser)
 
 
 @command("compare", help="the measurement's figures: measured against the model",
@@ -259,7 +269,7 @@ def _cmd_compare(args):
     _, case, model, kinds = _case_and_model(args)
     outputs = []
     for kind in kinds:
-        comparison = compare(case, model, kind)
+        comparison = compare(case, model, kind, args.standard)
         outputs.append((kind, comparison, text.comparison_lines(comparison)))
     _emit_each(args, outputs)
 
@@ -269,6 +279,7 @@ def _report_options(parser):
     _add_model_options(parser, "fitted model (TOML); without it the model is empty")
     parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
     _add_correction_option(parser)
+    _add_standard_option(parser)
 
 
 @command("report", help="self-contained HTML page with the plots",
@@ -288,7 +299,8 @@ def _cmd_report(args):
     analyses = []
     for kind in kinds:
         with _progress(f"analysing {kind}", " steps") as tick:
-            analyses.append(analyse(case, model, effects, kind=kind, progress=tick))
+            analyses.append(analyse(case, model, effects, kind=kind, progress=tick,
+                                    standard=args.standard))
     write_report(analyses, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
@@ -441,6 +453,7 @@ def _uncertainty_options(parser):
     _add_correction_option(parser)
     parser.add_argument("--html", metavar="PAGE.html",
                         help="also write the results as a page with histograms")
+    _add_standard_option(parser)
 
 
 @command("uncertainty", help="Monte Carlo uncertainty of the ISO 230-2 figures (JCGM 101)",

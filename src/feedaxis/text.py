@@ -105,18 +105,17 @@ def comparison_lines(comparison):
 
 
 def _iso_comparison_lines(comparison):
-    """ISO 230-2 figures, measured against the residual after the model."""
+    """The figures of the comparison's standard (or of all), measured against the residual
+    after the model."""
+    from .standards.text import all_lines, standard_lines
+
     lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
-             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
-             f"{'ISO 230-2 figure (µm)':32s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
-    for figure in comparison["figures"].values():
-        explained = figure["explained"]
-        lines.append(f"{figure['name']:32s} {figure['measured_um']:10.4g} "
-                     f"{figure['residual_um']:10.4g} "
-                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
-    lines.append(f"{'RMS':32s} {comparison['rms_measured_um']:10.4g} "
-                 f"{comparison['rms_residual_um']:10.4g}")
-    if not comparison["bidirectional"]:
+             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}"]
+    if comparison["standard"] == "all":
+        return "\n".join(lines + all_lines(comparison["standards"]))
+    lines += standard_lines(comparison, (comparison["rms_measured_um"],
+                                         comparison["rms_residual_um"]))
+    if not comparison["bidirectional"] and "clause" not in comparison:
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
     return "\n".join(lines)
 

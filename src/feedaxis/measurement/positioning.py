@@ -21,7 +21,9 @@ from functools import cached_property
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ..iso230 import FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, target_clusters
+from .. import standards
+from ..iso230 import SAME_TARGET_MM, iso230_figures, target_clusters
+from ..standards import DEFAULT
 from ..stats import judge
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
@@ -264,24 +266,21 @@ class Positioning(Measurement):
                 return {"R_um": r_um, "E_um": e_um, "repeatable": bool(r_um <= e_um)}
         return None
 
-    def figures(self, result):
-        """ISO 230-2 figures of the measurement and of the residual after the model, side
-        by side; ``explained`` = 1 - residual / measured, the share the model explains."""
+    def figures(self, result, standard=DEFAULT):
+        """The figures of ``standard`` (default ISO 230-2:2014; ``all``: every standard side
+        by side) of the measurement and of the residual after the model; ``explained`` =
+        1 - residual / measured, the share the model explains (:mod:`feedaxis.standards`)."""
         samples = self.samples
         measured = iso230_figures(samples.target_mm, result.measured_um, samples.direction)
-        residual = iso230_figures(samples.target_mm, result.residual_um, samples.direction)
-        figures = {}
-        for key, name in FIGURE_NAMES.items():
-            if key in measured:
-                explained = 1 - residual[key] / measured[key] if measured[key] else None
-                figures[key] = {"name": name, "measured_um": measured[key],
-                                "residual_um": residual[key], "explained": explained}
-        return {"case": str(self.case.folder), "kind": self.kind,
+        head = {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "targets": measured["targets"],
                 "runs_up": measured.get("runs_up", 0), "runs_down": measured.get("runs_down", 0),
                 "bidirectional": samples.bidirectional,
                 "rms_measured_um": result.statistics.rms_before_um,
-                "rms_residual_um": result.statistics.rms_um, "figures": figures}
+                "rms_residual_um": result.statistics.rms_um}
+        return {**head, **standards.figures_payload(
+            standard, self.case, result.model, samples.target_mm, result.measured_um,
+            result.residual_um, samples.direction)}
 
 
 def resolved_share(position_mm, wavelength_mm):

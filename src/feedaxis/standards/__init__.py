@@ -1,0 +1,93 @@
+"""The positioning figures of every standard a calibration laboratory is asked for, from one
+engine (:mod:`.engine`) over the same per-target statistics, each standard a small
+definition (:mod:`.definitions`) citing its clauses; ISO 230-3's thermal figures for
+thermal cases (:mod:`.thermal`). docs/standards.md has the table and the sources.
+
+``--standard NAME`` on compare, report and uncertainty: :func:`parse` checks the name (an
+unknown one exits 2 naming the allowed names), :func:`comparison` gives the figures of
+``compare --json`` under ``figures`` in the shape of ISO 230-2's, with ``standard`` naming
+the standard and its edition.
+"""
+from __future__ import annotations
+
+import argparse
+
+from .definitions import ALL, DEFAULT, NAMES, STANDARDS, THERMAL, UNDEFINED
+from .engine import evaluate, needs
+
+__all__ = ["ALL", "DEFAULT", "NAMES", "STANDARDS", "THERMAL", "UNDEFINED", "comparison",
+           "entries", "evaluate", "figures_payload", "needs", "parse"]
+
+
+def parse(name):
+    """``--standard``'s value, checked: one of :data:`NAMES` (argparse exits 2 otherwise,
+    naming the value and the allowed names)."""
+    if name not in NAMES:
+        raise argparse.ArgumentTypeError(f"unknown standard '{name}'; allowed: "
+                                         f"{', '.join(NAMES)}")
+    return name
+
+
+def entries(names, measured, residual):
+    """{key: {name, measured_um, residual_um, explained}} for the keys of ``names`` the
+    measured figures hold; ``explained`` = 1 - residual / measured (None when 0)."""
+    figures = {}
+    for key, name in names.items():
+        if key in measured:
+            explained = 1 - residual[key] / measured[key] if measured[key] else None
+            figures[key] = {"name": name, "measured_um": measured[key],
+                            "residual_um": residual[key], "explained": explained}
+    return figures
+
+
+def comparison(name, target_mm, measured_um, residual_um, direction):
+    """The figures of standard ``name`` (a key of :data:`STANDARDS` or an :data:`UNDEFINED`
+    one) of the measured deviations and of the residual after the model, with the
+    standard's provenance and what it asks that the data lack."""
+    if name in UNDEFINED:
+        title, reason = UNDEFINED[name]
+        return {"standard": title, "figures": {},
+                "unavailable": f"{title}: {reason}; feedaxis gives no figures rather than "
+                               "guess (docs/standards.md)"}
+    standard = STANDARDS[name]
+    measured = evaluate(standard, target_mm, measured_um, direction)
+    residual = evaluate(standard, target_mm, residual_um, direction)
+    return {"standard": standard.title,
+            "figures": entries({f.key: f.name for f in standard.figures}, measured, residual),
+            "needs": needs(standard, target_mm, direction), **_provenance(standard)}
+
+
+def _provenance(standard):
+    described = standard.to_json()
+    return {key: described[key] for key in ("coverage_factor", "adopts", "clauses",
+                                            "confirmed_publicly", "not_confirmed_publicly")}
+
+
+def figures_payload(name, case, model, target_mm, measured_um, residual_um, direction):
+    """``compare``'s figures of standard ``name`` (``all``: every standard under
+    ``standards``, keyed by name; ``iso230-3``: the thermal figures of a thermal case)."""
+    deviations = (target_mm, measured_um, residual_um, direction)
+    if name == ALL:
+        found = {other: comparison(other, *deviations) for other in positioning_names()}
+        found[THERMAL] = _thermal_or_reason(case, model)
+        return {"standard": ALL, "standards": found}
+    if name == THERMAL:
+        from .thermal import thermal_comparison
+
+        return thermal_comparison(case, model)
+    return comparison(name, *deviations)
+
+
+def _thermal_or_reason(case, model):
+    """ISO 230-3's figures of a thermal case, or why there are none."""
+    from .thermal import THERMAL_TITLE, thermal_comparison
+
+    if not case.is_thermal:
+        return {"standard": THERMAL_TITLE, "figures": {},
+                "unavailable": "not a thermal case (duty.csv and time_s in positioning.csv)"}
+    return thermal_comparison(case, model)
+
+
+def positioning_names():
+    """The positioning standards of ``all``, in the order of :data:`NAMES`."""
+    return [name for name in NAMES if name in STANDARDS or name in UNDEFINED]

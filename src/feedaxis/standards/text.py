@@ -1,0 +1,54 @@
+"""The figures of a standard (or of all, one after the other) for the terminal."""
+from __future__ import annotations
+
+COLUMNS = {"measured_um": "measured", "residual_um": "residual", "explained": "explained",
+           "predicted_um": "model", "compensated_um": "compensated"}
+
+
+def standard_lines(block, rms=None):
+    """One standard's block of ``compare``: its figures (µm) in columns, then what the
+    standard asks that the data lack (each once, with the figures it touches), then what
+    of its definition is not confirmed publicly."""
+    if block.get("unavailable"):
+        return [f"{block['standard']}: no figures. {block['unavailable']}"]
+    figures = list(block["figures"].values())
+    columns = [key for key in COLUMNS if figures and key in figures[0]]
+    lines = [f"{block['standard'] + ' figure (µm)':40s} "
+             + " ".join(f"{COLUMNS[key]:>11s}" for key in columns)]
+    for figure in figures:
+        lines.append(f"{figure['name']:40s} " + " ".join(_cell(figure, key) for key in columns))
+    if rms and "residual_um" in columns:
+        lines.append(f"{'RMS':40s} " + " ".join(f"{value:11.4g}" for value in rms))
+    lines += _needs_lines(block) + [f"  note: {note}" for note in block.get("notes", [])]
+    if block.get("not_confirmed_publicly"):
+        lines.append(f"  not confirmed publicly: {block['not_confirmed_publicly']}")
+    return lines
+
+
+def _cell(figure, key):
+    value = figure[key]
+    if key == "explained":
+        return f"{'' if value is None else f'{100 * value:10.1f}%':>11s}"
+    return f"{'':>11s}" if value is None else f"{value:11.4g}"
+
+
+def _needs_lines(block):
+    """Each thing the data lack once, with the figures it touches."""
+    touched = {}
+    for key, items in block.get("needs", {}).items():
+        for item in items:
+            touched.setdefault(item, []).append(key)
+    names = {key: figure["name"] for key, figure in block["figures"].items()}
+    lines = []
+    for item, keys in touched.items():
+        shown = [names.get(key, key.removesuffix("_um")) for key in keys]
+        lines.append(f"  needs: {item} [{', '.join(shown)}]")
+    return lines
+
+
+def all_lines(blocks):
+    """Every standard's block, one after the other."""
+    lines = []
+    for block in blocks.values():
+        lines += [""] + standard_lines(block)
+    return lines
