@@ -182,3 +182,32 @@ def test_an_unknown_standard_is_refused_naming_it_and_the_allowed_names(tmp_path
         error = capsys.readouterr().err
         assert "unknown standard 'iso230-2:2099'" in error
         assert all(name in error for name in NAMES)
+
+
+def test_the_monte_carlo_propagates_to_every_standard(tmp_path, capsys):
+    """Same trials (same seed), figures computed two ways: VDI 3441's Pa is ISO 230-2's M
+    and its U max is ISO's B, trial by trial, so their uncertainties are equal; `all`
+    gives each standard's entries as the standard alone does."""
+    import synthetic as syn
+
+    folder = syn.iso_case(tmp_path / "case", seed=34, backlash_um=-3.0)
+    runs = {}
+    for name in ("iso230-2:2014", "vdi3441", "iso230-2:1988", "all"):
+        assert main(["uncertainty", str(folder), "--trials", "2000", "--seed", "5",
+                     "--standard", name, "--json"]) == 0
+        runs[name] = json.loads(capsys.readouterr().out)
+    iso, vdi, together = runs["iso230-2:2014"]["figures"], runs["vdi3441"]["figures"], \
+        runs["all"]["figures"]
+    assert runs["vdi3441"]["standard"] == "VDI/DGQ 3441:1977"
+    for vdi_key, iso_key in (("Pa_um", "M_um"), ("U_max_um", "B_um")):
+        for number in ("value_um", "standard_uncertainty_um", "coverage_interval_um"):
+            assert vdi[vdi_key][number] == pytest.approx(iso[iso_key][number], abs=1e-12)
+    assert vdi["P_um"]["standard_uncertainty_um"] > 0
+    for name in ("iso230-2:2014", "vdi3441", "iso230-2:1988"):
+        for key, entry in runs[name]["figures"].items():
+            assert together[f"{name}/{key}"]["coverage_interval_um"] == \
+                entry["coverage_interval_um"]
+    old = runs["iso230-2:1988"]["figures"]["A_um"]["value_um"]
+    assert old > iso["A_um"]["value_um"]  # ±3s is wider than ±2s
+    assert main(["uncertainty", str(folder), "--standard", "nmtba"]) == 2
+    assert "NMTBA" in capsys.readouterr().err

@@ -486,7 +486,7 @@ def _cmd_uncertainty(args):
             bar.update(trials)
 
         result = evaluate(case, model, budget, args.trials, args.tolerance_um, args.seed,
-                          args.correct_to_20C, progress=tick)
+                          args.correct_to_20C, progress=tick, standard=args.standard)
     payload = result.to_json()
     if args.html:
         from .uncertainty.page import write_page

@@ -15,7 +15,7 @@ import argparse
 from .definitions import ALL, DEFAULT, NAMES, STANDARDS, THERMAL, UNDEFINED
 from .engine import evaluate, needs
 
-__all__ = ["ALL", "DEFAULT", "NAMES", "STANDARDS", "THERMAL", "UNDEFINED", "comparison",
+__all__ = ["ALL", "DEFAULT", "NAMES", "STANDARDS", "THERMAL", "UNDEFINED", "FigureSet", "comparison",
            "entries", "evaluate", "figures_payload", "needs", "parse"]
 
 
@@ -86,6 +86,32 @@ def _thermal_or_reason(case, model):
         return {"standard": THERMAL_TITLE, "figures": {},
                 "unavailable": "not a thermal case (duty.csv and time_s in positioning.csv)"}
     return thermal_comparison(case, model)
+
+
+class FigureSet:
+    """The figures of one standard, or of every defined one (``all``: keys ``name/key``,
+    names headed by the standard's title), from one set of deviations or many trials'."""
+
+    def __init__(self, name=DEFAULT):
+        names = [other for other in positioning_names() if other in STANDARDS]
+        self.standards = [STANDARDS[other] for other in names] if name == ALL else [
+            STANDARDS[name]]
+        self.title = ALL if name == ALL else STANDARDS[name].title
+        self.prefixed = name == ALL
+
+    def names(self):
+        """{key: figure name} in the standards' order."""
+        return {self._key(standard, f.key): (f"{standard.title} {f.name}" if self.prefixed
+                                              else f.name)
+                for standard in self.standards for f in standard.figures}
+
+    def of(self, target_mm, error_um, direction):
+        """{key: value} of every standard's figures the data give."""
+        return {self._key(standard, key): value for standard in self.standards
+                for key, value in evaluate(standard, target_mm, error_um, direction).items()}
+
+    def _key(self, standard, key):
+        return f"{standard.name}/{key}" if self.prefixed else key
 
 
 def positioning_names():

@@ -12,7 +12,7 @@ import numpy as np
 from ..case import POSITIONING_FILE
 from ..errors import InputError
 from ..fit import fit
-from ..iso230 import FIGURE_NAMES
+from ..standards import ALL, DEFAULT, STANDARDS, UNDEFINED, FigureSet
 from . import engine
 from .budget import CONTRIBUTIONS, default_budget
 from .correction import OPTION, corrected_case, correction_for
@@ -41,6 +41,7 @@ class Uncertainty:
     correction: object
     repeatability: str
     figures: dict
+    standard: str = STANDARDS[DEFAULT].title
     parameters: dict = field(default_factory=dict)
     undetermined: dict = field(default_factory=dict)
     parameter_method: dict = field(default_factory=dict)
@@ -55,7 +56,7 @@ class Uncertainty:
                 "trials": self.trials, "seed": self.seed,
                 "adaptive": self.adaptive.to_json() if self.adaptive else None,
                 "inputs": list(self.inputs), "repeatability": self.repeatability,
-                "budget": self.budget.to_json(),
+                "budget": self.budget.to_json(), "standard": self.standard,
                 "corrected_to_20C": self.correction.to_json() if self.correction else None,
                 "figures": self.figures, "parameters": self.parameters,
                 "undetermined": self.undetermined, "parameter_method": self.parameter_method,
@@ -63,7 +64,7 @@ class Uncertainty:
 
 
 def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolerance_um=None,
-             seed=None, temperature=None, progress=None):
+             seed=None, temperature=None, progress=None, standard=DEFAULT):
     """The Monte Carlo uncertainty of a positioning case.
 
     Parameters
@@ -87,6 +88,8 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
     progress : callable, optional
         ``progress(trials, planned)`` after every chunk: the trials it ran and the trials
         planned in all (None for the adaptive procedure, which ends when it stabilises).
+    standard : str
+        The standard whose figures get their uncertainty (``all``: every defined one).
 
     Returns
     -------
@@ -101,12 +104,13 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
         raise InputError(f"must be at least {engine.MIN_TRIALS} (JCGM 101 §7.2: a 95 % "
                          "interval needs many more than 1/(1 - p) = 20 trials)",
                          parameter="--trials")
+    outputs = _figure_set(standard)
     budget = budget or default_budget()
     correction = correction_for(case, temperature) if temperature is not None else None
     case = corrected_case(case, temperature)
     fitted = (fit(model, case, kind="positioning") if model is not None and model.effects
               else None)
-    measurement = PositioningMeasurement(case, budget, correction, fitted)
+    measurement = PositioningMeasurement(case, budget, correction, fitted, outputs)
     inputs = measurement.inputs
     if not inputs:
         raise InputError("nothing to propagate: every budget contribution is 0 and the data "
@@ -124,18 +128,18 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
         values = engine.run(measurement.sample, inputs, trials, seed, chunk, progress=progress,
                             keep=keep)
     else:
-        judged = [key for key in FIGURE_NAMES if key in measurement.figures()]
+        judged = list(measurement.figures())
         values, adaptive = engine.run_adaptive(measurement.sample, inputs, tolerance_um,
                                                judged, seed, chunk, progress=progress,
                                                keep=keep)
-    done = len(values[next(key for key in values if key in FIGURE_NAMES)])
+    done = len(values[next(iter(measurement.figures()))])
     alone = engine.contributions(measurement.sample, inputs, seed, chunk,
                                  min(done, engine.CONTRIBUTION_TRIALS), progress)
     result = Uncertainty(str(case.folder), done, seed, inputs, budget, correction,
-                         measurement.repeatability.source, {}, adaptive=adaptive,
-                         notes=_notes(measurement, correction))
+                         measurement.repeatability.source, {}, outputs.title,
+                         adaptive=adaptive, notes=_notes(measurement, correction))
     shares = engine.shares(alone)
-    result.figures = _figures(measurement.figures(), values, alone, shares)
+    result.figures = _figures(outputs.names(), measurement.figures(), values, alone, shares)
     result.samples = {key: values[key][:HISTOGRAM_VALUES] for key in result.figures}
     if measurement.parameters:
         _parameters(result, measurement, values, alone, shares, seed, chunk, progress)
@@ -169,10 +173,24 @@ def _contribution_entries(alone, shares, key, index=()):
                    "share": float(shares[key][name][index])} for name in alone}
 
 
-def _figures(data_figures, values, alone, shares):
-    """{figure key: entry in µm} in the order of the ISO names, as ``compare`` keys them."""
+def _figure_set(standard):
+    """The figures of ``standard`` the Monte Carlo propagates to (refusing the standards
+    it cannot: those without a public definition, and ISO 230-3's thermal figures)."""
+    if standard in UNDEFINED:
+        title, reason = UNDEFINED[standard]
+        raise InputError(f"{title} has no figures in feedaxis: {reason}",
+                         parameter="--standard")
+    if standard != ALL and standard not in STANDARDS:
+        raise InputError(f"the Monte Carlo propagates to the positioning figures; "
+                         f"{standard}'s thermal figures get no uncertainty yet",
+                         parameter="--standard")
+    return FigureSet(standard)
+
+
+def _figures(names, data_figures, values, alone, shares):
+    """{figure key: entry in µm} in the standard's order, as ``compare`` keys them."""
     figures = {}
-    for key, name in FIGURE_NAMES.items():
+    for key, name in names.items():
         if key not in values:
             continue
         entry = _interval_entry(data_figures[key], engine.summarise(values[key]))

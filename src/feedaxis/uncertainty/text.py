@@ -34,17 +34,19 @@ def uncertainty_lines(result):
         lines.append(f"adaptive (JCGM 101 §7.9): {adaptive.blocks} blocks, numerical tolerance "
                      f"{adaptive.reached:.2g} µm of {adaptive.tolerance:g} asked"
                      + ("" if adaptive.stabilised else " -- NOT reached"))
-    lines += ["", f"{'ISO 230-2 figure (µm)':28s} {'value':>8s} {'u':>7s}  "
+    width = max([28] + [len(f["name"]) for f in result.figures.values()])
+    heading = f"{'' if result.standard == 'all' else result.standard + ' '}figure (µm)"
+    lines += ["", f"{heading:{width}s} {'value':>8s} {'u':>7s}  "
                   f"{'95 % interval':20s} {'shortest 95 %':20s}"]
     for figure in result.figures.values():
-        lines.append(f"{figure['name']:28s} {figure['value_um']:8.4g} "
+        lines.append(f"{figure['name']:{width}s} {figure['value_um']:8.4g} "
                      f"{figure['standard_uncertainty_um']:7.2g}  "
                      f"{_interval(figure['coverage_interval_um']):20s} "
                      f"{_interval(figure['shortest_coverage_interval_um']):20s}")
     lines += ["", "share of u² per input (JCGM 101 Annex B: each input varied alone)",
-              f"{'':28s} " + " ".join(f"{SHORT_NAMES.get(i, i):>8s}" for i in inputs)]
+              f"{'':{width}s} " + " ".join(f"{SHORT_NAMES.get(i, i):>8s}" for i in inputs)]
     for figure in result.figures.values():
-        lines.append(f"{figure['name']:28s} " + " ".join(
+        lines.append(f"{figure['name']:{width}s} " + " ".join(
             f"{_share(figure['contributions'][i]['share']):>8s}" for i in inputs))
     lines += _parameter_lines(result)
     if result.table:
