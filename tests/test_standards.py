@@ -211,3 +211,59 @@ def test_the_monte_carlo_propagates_to_every_standard(tmp_path, capsys):
     assert old > iso["A_um"]["value_um"]  # ±3s is wider than ±2s
     assert main(["uncertainty", str(folder), "--standard", "nmtba"]) == 2
     assert "NMTBA" in capsys.readouterr().err
+
+
+def test_iso230_3_figures_of_a_seeded_thermal_case_match_the_generating_model(tmp_path,
+                                                                              capsys):
+    """A thermal test generated from known screw parameters (seed 003 Table 1/3) with
+    0.05 µm noise: the figures of the measured drifts equal those of the generating model's
+    noiseless drifts; a fitted thermal_screw predicts them, and its compensation leaves
+    the figures of the measured drift less the model's own predicted drift."""
+    from feedaxis.case import read_case
+    from feedaxis.compensate import visits
+    from feedaxis.effects import Model
+    from feedaxis.examples import write_table2_case
+    from feedaxis.physics import thermal
+    from feedaxis.standards.thermal import thermal_figures
+
+    folder = write_table2_case(tmp_path / "thermal", 6000.0, noise_um=0.05, seed=11)
+    case = read_case(folder)
+    positioning = case.positioning
+    params = thermal.ThermalScrewParams()
+    rise_K = thermal.simulate_duty(params, thermal.table2_cycle(6000.0, 0.0, 500.0),
+                                   positioning.time_s)
+    truth_um = thermal.thermal_error_um(params, rise_K, positioning.target_mm)
+    reference = visits(positioning)[1]
+    expected = thermal_figures(positioning, truth_um - truth_um[reference])
+    assert main(["fit", str(folder), "--add", "lead_error", "--add", "thermal_screw",
+                 "--out", str(tmp_path / "m.toml")]) == 0
+    capsys.readouterr()
+    payload = _compare(capsys, folder, "--standard", "iso230-3", "--model", tmp_path / "m.toml")
+    figures = payload["figures"]
+    assert payload["standard"] == "ISO 230-3:2020" and set(figures) == set(expected)
+    assert {"drift_500mm_um", "expansion_um", "expansion_um_per_m",
+            "linear_error_change_um"} <= set(figures)
+    for key, (_, value, _, _) in expected.items():
+        assert figures[key]["measured_um"] == pytest.approx(value, abs=0.3), key
+        assert figures[key]["predicted_um"] == pytest.approx(value, abs=0.1 * abs(value) + 1)
+    assert figures["expansion_um_per_m"]["measured_um"] == pytest.approx(
+        figures["expansion_um"]["measured_um"] / 0.5)
+    from feedaxis.effects import CATALOG
+    from feedaxis.effects.files import load_model
+
+    model = load_model(tmp_path / "m.toml", CATALOG)
+    thermal_only = Model([e for e in model.effects if e.name == "thermal_screw"], model.values)
+    predicted_um = thermal_only.predict_um(case)
+    measured_drift = positioning.error_um - positioning.error_um[reference]
+    left = thermal_figures(positioning, measured_drift
+                           - (predicted_um - predicted_um[reference]))
+    for key, (_, value, _, _) in left.items():
+        assert figures[key]["compensated_um"] == pytest.approx(value, abs=1e-9), key
+    assert abs(figures["expansion_um"]["compensated_um"]) < \
+        0.2 * abs(figures["expansion_um"]["measured_um"])
+    assert abs(figures["drift_500mm_um"]["compensated_um"]) < \
+        0.2 * abs(figures["drift_500mm_um"]["measured_um"])
+    report = tmp_path / "r.html"
+    assert main(["report", str(folder), "--model", str(tmp_path / "m.toml"), "--standard",
+                 "iso230-3", "--out", str(report)]) == 0
+    assert 'alt="ISO 230-3 deviations over time with the duty"' in report.read_text()
