@@ -182,6 +182,8 @@ def test_an_unknown_standard_is_refused_naming_it_and_the_allowed_names(tmp_path
         error = capsys.readouterr().err
         assert "unknown standard 'iso230-2:2099'" in error
         assert all(name in error for name in NAMES)
+    assert main(["compare", str(folder), "--standard", "iso230-3"]) == 2
+    assert "need a thermal case" in capsys.readouterr().err
 
 
 def test_the_monte_carlo_propagates_to_every_standard(tmp_path, capsys):

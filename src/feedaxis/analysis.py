@@ -25,7 +25,8 @@ from .iso230 import per_target, target_clusters
 from .measurement import kinds_for, measurement_of
 from .physics.threads import one_blas_thread
 from .stats.coloured import periodogram
-from .standards import DEFAULT
+from .standards import ALL, DEFAULT, THERMAL
+from .standards.thermal import thermal_block, thermal_comparison
 from .stats.spectrum import MIN_CLUSTERS, marked_wavelengths, residual_spectrum
 
 DENSE_POINTS_PER_LINE = 200   # a smooth model drawn between its targets
@@ -126,10 +127,17 @@ def compare(case, model, kind=None, standard=DEFAULT):
 
 
 def _figures(measurement, result, standard):
-    """The measurement's figures; a positioning measurement's those of ``standard``."""
+    """The measurement's figures; a positioning measurement's those of ``standard``, ISO
+    230-3's of a thermal case (:mod:`feedaxis.standards`)."""
     if standard == DEFAULT or measurement.kind != "positioning":
         return measurement.figures(result)
-    return measurement.figures(result, standard)
+    if standard not in (THERMAL, ALL):
+        return measurement.figures(result, standard)
+    if standard == THERMAL:
+        return {**measurement.head(result), **thermal_comparison(measurement.case, result.model)}
+    payload = measurement.figures(result, ALL)
+    payload["standards"][THERMAL] = thermal_block(measurement.case, result.model)
+    return payload
 
 
 def error_ladder(case, model, kind=None):

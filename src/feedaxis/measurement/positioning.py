@@ -266,21 +266,26 @@ class Positioning(Measurement):
                 return {"R_um": r_um, "E_um": e_um, "repeatable": bool(r_um <= e_um)}
         return None
 
-    def figures(self, result, standard=DEFAULT):
-        """The figures of ``standard`` (default ISO 230-2:2014; ``all``: every standard side
-        by side) of the measurement and of the residual after the model; ``explained`` =
-        1 - residual / measured, the share the model explains (:mod:`feedaxis.standards`)."""
+    def head(self, result):
+        """What ``compare`` says of the test and the fit before any standard's figures."""
         samples = self.samples
         measured = iso230_figures(samples.target_mm, result.measured_um, samples.direction)
-        head = {"case": str(self.case.folder), "kind": self.kind,
+        return {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "targets": measured["targets"],
                 "runs_up": measured.get("runs_up", 0), "runs_down": measured.get("runs_down", 0),
                 "bidirectional": samples.bidirectional,
                 "rms_measured_um": result.statistics.rms_before_um,
                 "rms_residual_um": result.statistics.rms_um}
-        return {**head, **standards.figures_payload(
-            standard, self.case, result.model, samples.target_mm, result.measured_um,
-            result.residual_um, samples.direction)}
+
+    def figures(self, result, standard=DEFAULT):
+        """The figures of the positioning standard ``standard`` (default ISO 230-2:2014;
+        ``all``: every one side by side) of the measurement and of the residual after the
+        model; ``explained`` = 1 - residual / measured, the share the model explains
+        (:mod:`feedaxis.standards`)."""
+        samples = self.samples
+        return {**self.head(result), **standards.figures_payload(
+            standard, samples.target_mm, result.measured_um, result.residual_um,
+            samples.direction)}
 
 
 def resolved_share(position_mm, wavelength_mm):

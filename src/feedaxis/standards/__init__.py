@@ -63,29 +63,14 @@ def _provenance(standard):
                                             "confirmed_publicly", "not_confirmed_publicly")}
 
 
-def figures_payload(name, case, model, target_mm, measured_um, residual_um, direction):
-    """``compare``'s figures of standard ``name`` (``all``: every standard under
-    ``standards``, keyed by name; ``iso230-3``: the thermal figures of a thermal case)."""
+def figures_payload(name, target_mm, measured_um, residual_um, direction):
+    """``compare``'s figures of the positioning standard ``name`` (``all``: every one under
+    ``standards``, keyed by name; ISO 230-3's thermal block is :mod:`.thermal`'s)."""
     deviations = (target_mm, measured_um, residual_um, direction)
     if name == ALL:
-        found = {other: comparison(other, *deviations) for other in positioning_names()}
-        found[THERMAL] = _thermal_or_reason(case, model)
-        return {"standard": ALL, "standards": found}
-    if name == THERMAL:
-        from .thermal import thermal_comparison
-
-        return thermal_comparison(case, model)
+        return {"standard": ALL, "standards": {other: comparison(other, *deviations)
+                                               for other in positioning_names()}}
     return comparison(name, *deviations)
-
-
-def _thermal_or_reason(case, model):
-    """ISO 230-3's figures of a thermal case, or why there are none."""
-    from .thermal import THERMAL_TITLE, thermal_comparison
-
-    if not case.is_thermal:
-        return {"standard": THERMAL_TITLE, "figures": {},
-                "unavailable": "not a thermal case (duty.csv and time_s in positioning.csv)"}
-    return thermal_comparison(case, model)
 
 
 class FigureSet:

@@ -120,6 +120,15 @@ def thermal_comparison(case, model):
             "clauses": {key: CLAUSE for key in figures}, **PROVENANCE}
 
 
+def thermal_block(case, model):
+    """ISO 230-3's block of ``compare``: :func:`thermal_comparison` of a thermal case, or
+    why there are no figures."""
+    if not case.is_thermal:
+        return {"standard": THERMAL_TITLE, "figures": {},
+                "unavailable": "not a thermal case (duty.csv and time_s in positioning.csv)"}
+    return thermal_comparison(case, model)
+
+
 def _temperature(positioning, sample):
     """The air temperature's change from the first reading to ``sample`` (K), if recorded."""
     if positioning.ambient_C is None:
