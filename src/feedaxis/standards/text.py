@@ -1,6 +1,8 @@
 """The figures of a standard (or of all, one after the other) for the terminal."""
 from __future__ import annotations
 
+from .definitions import DEFAULT, STANDARDS
+
 COLUMNS = {"measured_um": "measured", "residual_um": "residual", "explained": "explained",
            "predicted_um": "model", "compensated_um": "compensated"}
 
@@ -8,19 +10,22 @@ COLUMNS = {"measured_um": "measured", "residual_um": "residual", "explained": "e
 def standard_lines(block, rms=None):
     """One standard's block of ``compare``: its figures (µm) in columns, then what the
     standard asks that the data lack (each once, with the figures it touches), then what
-    of its definition is not confirmed publicly."""
+    of its definition is not confirmed publicly (the default's block reads as ever)."""
     if block.get("unavailable"):
         return [f"{block['standard']}: no figures. {block['unavailable']}"]
     figures = list(block["figures"].values())
     columns = [key for key in COLUMNS if figures and key in figures[0]]
-    lines = [f"{block['standard'] + ' figure (µm)':40s} "
-             + " ".join(f"{COLUMNS[key]:>11s}" for key in columns)]
+    default = block["standard"] == STANDARDS[DEFAULT].title
+    label = f"{'ISO 230-2' if default else block['standard']} figure (µm)"
+    width = max([32, len(label)] + [len(f["name"]) + 1 for f in figures])
+    lines = [f"{label:{width}s} " + " ".join(f"{COLUMNS[key]:>10s}" for key in columns)]
     for figure in figures:
-        lines.append(f"{figure['name']:40s} " + " ".join(_cell(figure, key) for key in columns))
+        lines.append(f"{figure['name']:{width}s} "
+                     + " ".join(_cell(figure, key) for key in columns))
     if rms and "residual_um" in columns:
-        lines.append(f"{'RMS':40s} " + " ".join(f"{value:11.4g}" for value in rms))
+        lines.append(f"{'RMS':{width}s} " + " ".join(f"{value:10.4g}" for value in rms))
     lines += _needs_lines(block) + [f"  note: {note}" for note in block.get("notes", [])]
-    if block.get("not_confirmed_publicly"):
+    if block.get("not_confirmed_publicly") and not default:
         lines.append(f"  not confirmed publicly: {block['not_confirmed_publicly']}")
     return lines
 
@@ -28,8 +33,8 @@ def standard_lines(block, rms=None):
 def _cell(figure, key):
     value = figure[key]
     if key == "explained":
-        return f"{'' if value is None else f'{100 * value:10.1f}%':>11s}"
-    return f"{'':>11s}" if value is None else f"{value:11.4g}"
+        return f"{'' if value is None else f'{100 * value:9.1f}%':>10s}"
+    return f"{'':>10s}" if value is None else f"{value:10.4g}"
 
 
 def _needs_lines(block):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from ..standards import DEFAULT, STANDARDS
 from ..text import micro
 
 SHORT_NAMES = {"repeatability": "repeat.", "device_calibration": "device",
@@ -35,7 +36,8 @@ def uncertainty_lines(result):
                      f"{adaptive.reached:.2g} µm of {adaptive.tolerance:g} asked"
                      + ("" if adaptive.stabilised else " -- NOT reached"))
     width = max([28] + [len(f["name"]) for f in result.figures.values()])
-    heading = f"{'' if result.standard == 'all' else result.standard + ' '}figure (µm)"
+    heading = {STANDARDS[DEFAULT].title: "ISO 230-2 ", "all": ""}.get(
+        result.standard, result.standard + " ") + "figure (µm)"
     lines += ["", f"{heading:{width}s} {'value':>8s} {'u':>7s}  "
                   f"{'95 % interval':20s} {'shortest 95 %':20s}"]
     for figure in result.figures.values():
