@@ -213,6 +213,8 @@ def test_the_monte_carlo_propagates_to_every_standard(tmp_path, capsys):
     assert old > iso["A_um"]["value_um"]  # ±3s is wider than ±2s
     assert main(["uncertainty", str(folder), "--standard", "nmtba"]) == 2
     assert "NMTBA" in capsys.readouterr().err
+    assert main(["uncertainty", str(folder), "--standard", "iso230-3"]) == 2
+    assert "thermal figures get no uncertainty yet" in capsys.readouterr().err
 
 
 def test_iso230_3_figures_of_a_seeded_thermal_case_match_the_generating_model(tmp_path,
