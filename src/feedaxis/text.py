@@ -115,7 +115,7 @@ def _iso_comparison_lines(comparison):
         return "\n".join(lines + all_lines(comparison["standards"]))
     lines += standard_lines(comparison, (comparison["rms_measured_um"],
                                          comparison["rms_residual_um"]))
-    if not comparison["bidirectional"] and "clause" not in comparison:
+    if not comparison["bidirectional"] and comparison["standard"] == "ISO 230-2:2014":
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
     return "\n".join(lines)
 

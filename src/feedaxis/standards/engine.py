@@ -34,23 +34,25 @@ def evaluate(standard, target_mm, error_um, direction):
 def needs(standard, target_mm, direction):
     """{figure key: [what ``standard`` asks that the data lack]}: figures it cannot give
     (no second direction, no repeated runs) and figures given from a test smaller or
-    laid out otherwise than the standard's (its runs, its target count and spacing)."""
+    laid out otherwise than the standard's (its runs, directions, target count, spacing)."""
     targets_mm = np.unique(np.round(np.asarray(target_mm, float), 4))
     direction = np.asarray(direction, float)
     runs = {label: _runs(target_mm, direction, sign)
             for label, sign in (("up", 1.0), ("down", -1.0)) if np.any(direction == sign)}
+    one_way = (f"both approach directions; the data have {'+' if 'up' in runs else '-'} "
+               "only") if len(runs) < 2 else None
     common = _test_needs(standard, targets_mm, runs)
     found = {}
     for figure in standard.figures:
         missing = list(common)
-        if figure.bidirectional and len(runs) < 2:
-            present = "+" if "up" in runs else "-"
-            missing.insert(0, f"needs both approach directions; the data have {present} only")
-        elif figure.side and figure.side not in runs:
-            missing.insert(0, f"needs the {'+' if figure.side == 'up' else '-'} direction, "
-                              "which the data lack")
+        if one_way and (figure.bidirectional or standard.bidirectional):
+            missing.insert(0, one_way if figure.bidirectional
+                           else f"{one_way.split(';')[0]} ({standard.runs_clause})")
+        if figure.side and figure.side not in runs:
+            missing.insert(0, f"the {'+' if figure.side == 'up' else '-'} direction; the "
+                              "data lack it")
         if figure.repeats and min(runs.values(), default=0) < 2:
-            missing.insert(0, "needs repeated runs (a standard deviation); the data have one")
+            missing.insert(0, "repeated runs (a standard deviation); the data have one")
         if missing:
             found[figure.key] = missing
     return found
@@ -63,25 +65,21 @@ def _runs(target_mm, direction, sign):
 
 
 def _test_needs(standard, targets_mm, runs):
-    """What the test as a whole lacks for ``standard``: runs, both directions, targets."""
+    """What the test as a whole lacks for ``standard``: runs, targets, their spacing."""
     missing = []
     fewest = min(runs.values())
     if fewest < standard.runs:
-        missing.append(f"{standard.title} asks for {standard.runs} runs in each direction "
-                       f"({standard.runs_clause}); the data have {fewest}")
-    if standard.bidirectional and len(runs) < 2:
-        missing.append(f"{standard.title} asks for both approach directions")
+        missing.append(f"{standard.runs} runs in each direction ({standard.runs_clause}); "
+                       f"the data have {fewest}")
     if standard.targets_per_m:
         travel_m = float(np.ptp(targets_mm)) / 1000
         wanted = max(standard.min_targets, math.ceil(standard.targets_per_m * travel_m))
         if targets_mm.size < wanted:
-            missing.append(f"{standard.title} asks for at least {wanted} targets over "
-                           f"{travel_m * 1000:g} mm ({standard.targets_clause}); the data "
-                           f"have {targets_mm.size}")
+            missing.append(f"at least {wanted} targets over {travel_m * 1000:g} mm "
+                           f"({standard.targets_clause}); the data have {targets_mm.size}")
     if standard.uneven_spacing and targets_mm.size > 2 and _evenly_spaced(targets_mm):
-        missing.append(f"{standard.title} asks for unevenly spaced targets so that periodic "
-                       f"errors do not alias ({standard.targets_clause}); the data's targets "
-                       "are evenly spaced")
+        missing.append(f"unevenly spaced targets, so that periodic errors do not alias "
+                       f"({standard.targets_clause}); the data's are evenly spaced")
     return missing
 
 

@@ -18,7 +18,8 @@ def standard_lines(block, rms=None):
     default = block["standard"] == STANDARDS[DEFAULT].title
     label = f"{'ISO 230-2' if default else block['standard']} figure (µm)"
     width = max([32, len(label)] + [len(f["name"]) + 1 for f in figures])
-    lines = [f"{label:{width}s} " + " ".join(f"{COLUMNS[key]:>10s}" for key in columns)]
+    lines = [f"{label:{width}s} " + " ".join(f"{COLUMNS[key]:>10s}" for key in columns)
+             if figures else f"{label}: none from these data"]
     for figure in figures:
         lines.append(f"{figure['name']:{width}s} "
                      + " ".join(_cell(figure, key) for key in columns))
@@ -43,17 +44,42 @@ def _needs_lines(block):
     for key, items in block.get("needs", {}).items():
         for item in items:
             touched.setdefault(item, []).append(key)
-    names = {key: figure["name"] for key, figure in block["figures"].items()}
+    names = {f.key: f.name for standard in STANDARDS.values()
+             if standard.title == block["standard"] for f in standard.figures}
     lines = []
     for item, keys in touched.items():
-        shown = [names.get(key, key.removesuffix("_um")) for key in keys]
+        shown = [names.get(key, key) for key in keys]
         lines.append(f"  needs: {item} [{', '.join(shown)}]")
     return lines
 
 
+OVERVIEW = (("accuracy A|P", ("A_um", "P_um")), ("repeat. R|Ps max", ("R_um", "Ps_max_um")),
+            ("reversal B|U max", ("B_um", "U_max_um")), ("mean M|Pa", ("M_um", "Pa_um")))
+
+
+def overview_lines(blocks):
+    """The measured headline figures of every positioning standard side by side: accuracy
+    (ISO's A, VDI's P), repeatability (R, Ps max), reversal (B, U max) and the range of the
+    mean deviations (M, Pa; the same number)."""
+    rows = [block for block in blocks.values()
+            if block["figures"] and "residual_um" in next(iter(block["figures"].values()))]
+    if not rows:
+        return []
+    width = max(len(block["standard"]) for block in rows) + 1
+    lines = [f"{'measured (µm)':{width}s} " + " ".join(f"{label:>17s}" for label, _ in OVERVIEW)]
+    for block in rows:
+        cells = []
+        for _, keys in OVERVIEW:
+            found = [block["figures"][key]["measured_um"] for key in keys
+                     if key in block["figures"]]
+            cells.append(f"{found[0]:17.4g}" if found else f"{'-':>17s}")
+        lines.append(f"{block['standard']:{width}s} " + " ".join(cells))
+    return lines
+
+
 def all_lines(blocks):
-    """Every standard's block, one after the other."""
-    lines = []
+    """The headline figures side by side, then every standard's block in turn."""
+    lines = [""] + overview_lines(blocks)
     for block in blocks.values():
         lines += [""] + standard_lines(block)
     return lines
