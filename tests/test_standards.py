@@ -274,3 +274,41 @@ def test_iso230_3_figures_of_a_seeded_thermal_case_match_the_generating_model(tm
     assert main(["report", str(folder), "--model", str(tmp_path / "m.toml"), "--standard",
                  "iso230-3", "--out", str(report)]) == 0
     assert 'alt="ISO 230-3 deviations over time with the duty"' in report.read_text()
+
+
+def test_iso230_3_says_what_a_thermal_test_lacks(tmp_path, capsys):
+    """One target read over time: its drift, but no expansion (two targets needed); no
+    target read twice: refused."""
+    from feedaxis.case import read_case, write_case
+    from feedaxis.examples import write_table2_case
+
+    full = read_case(write_table2_case(tmp_path / "full", 6000.0, noise_um=0.05, seed=2))
+    positioning = full.positioning
+    duty = {name: [getattr(s, name) for s in full.duty.segments]
+            for name in ("start_s", "duration_s", "feed_mm_min", "from_mm", "to_mm")}
+    axis = {"name": full.axis.name, "screw": full.axis.screw}
+    one = positioning.target_mm == 250.0
+    folder = write_case(tmp_path / "one", axis, duty=duty, positioning={
+        "target_mm": positioning.target_mm[one], "error_um": positioning.error_um[one],
+        "time_s": positioning.time_s[one]})
+    payload = _compare(capsys, folder, "--standard", "iso230-3")
+    assert list(payload["figures"]) == ["drift_250mm_um"]
+    assert set(payload["needs"]) == {"expansion_um", "expansion_um_per_m",
+                                     "linear_error_change_um"}
+    assert payload["needs"]["expansion_um"][0].startswith("two targets at least")
+    first = np.arange(positioning.size) < 11  # the first run: each target once
+    folder = write_case(tmp_path / "once", axis, duty=duty, positioning={
+        "target_mm": positioning.target_mm[first], "error_um": positioning.error_um[first],
+        "time_s": positioning.time_s[first]})
+    assert main(["compare", str(folder), "--standard", "iso230-3"]) == 2
+    assert "no target is read twice" in capsys.readouterr().err
+
+
+def test_report_shows_every_standard_with_all(tmp_path):
+    folder = _write_hand_case(tmp_path / "hand")
+    out = tmp_path / "all.html"
+    assert main(["report", str(folder), "--standard", "all", "--out", str(out)]) == 0
+    page = out.read_text()
+    for standard in STANDARDS.values():
+        assert f"<h3>{standard.title}</h3>" in page
+    assert "No figures: ASME B5.54-2005" in page and "No figures: not a thermal case" in page

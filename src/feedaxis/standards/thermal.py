@@ -97,6 +97,9 @@ def thermal_comparison(case, model):
         raise InputError(f"{THERMAL_TITLE}'s figures need a thermal case (duty.csv and "
                          "time_s in positioning.csv)", path=case.folder)
     positioning = case.positioning
+    if visits(positioning)[0].max() == 0:
+        raise InputError(f"{THERMAL_TITLE}'s figures need targets read again and again; "
+                         "no target is read twice", path=case.folder)
     drift_um = thermal_error_um(positioning)
     measured = thermal_figures(positioning, drift_um)
     predicted = compensated = {}
@@ -115,8 +118,11 @@ def thermal_comparison(case, model):
                         "predicted_um": predicted[key][1] if key in predicted else None,
                         "compensated_um": compensated[key][1] if key in compensated else None,
                         "time_s": time, **_temperature(positioning, sample)}
+    two = ["two targets at least, near the ends of the travel; the data have one"]
+    lacking = {} if any(key.startswith("expansion") for key in figures) else {
+        "expansion_um": two, "expansion_um_per_m": two, "linear_error_change_um": two}
     return {"standard": THERMAL_TITLE, "figures": figures, "clause": CLAUSE,
-            "duration_s": float(np.ptp(positioning.time_s)), "needs": {}, "notes": notes,
+            "duration_s": float(np.ptp(positioning.time_s)), "needs": lacking, "notes": notes,
             "clauses": {key: CLAUSE for key in figures}, **PROVENANCE}
 
 
