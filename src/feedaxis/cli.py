@@ -261,7 +261,8 @@ def _compare_options(parser):
          description="Positioning: ISO 230-2 accuracy, repeatability, reversal and systematic "
                      "deviation of the measured runs and of what is left after the model, "
                      "side by side (--standard: another standard's, or all; a thermal case's "
-                     "ISO 230-3 figures, measured, predicted and compensated). Tracking: seed 002's maximum and RMS tracking error "
+                     "ISO 230-3 figures, measured, predicted and compensated). Tracking: "
+                     "seed 002's maximum and RMS tracking error "
                      "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):

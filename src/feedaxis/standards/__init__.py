@@ -15,8 +15,8 @@ import argparse
 from .definitions import ALL, DEFAULT, NAMES, STANDARDS, THERMAL, UNDEFINED
 from .engine import evaluate, needs
 
-__all__ = ["ALL", "DEFAULT", "NAMES", "STANDARDS", "THERMAL", "UNDEFINED", "FigureSet", "comparison",
-           "entries", "evaluate", "figures_payload", "needs", "parse"]
+__all__ = ["ALL", "DEFAULT", "NAMES", "STANDARDS", "THERMAL", "UNDEFINED", "FigureSet",
+           "comparison", "entries", "evaluate", "figures_payload", "needs", "parse"]
 
 
 def parse(name):

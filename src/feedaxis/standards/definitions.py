@@ -91,10 +91,10 @@ def _iso(coverage):
 ISO_RUNS = "the standard test cycle: five runs in each direction"
 ISO_TARGETS = "target positions: at least five per metre and five in all, unevenly spaced"
 ISO_FORMULAS = ("the formulas as feedaxis has always used them (x̄, s with n - 1, B_i, "
-                "R_i = max(2s↑ + 2s↓ + |B_i|, 4s↑, 4s↓), E, M, A with ±2s); the 2006 edition's "
-                "change from ±3 standard deviations to ±2 standard uncertainties, computed as "
-                "standard deviations, and its superseding NMTBA and VDI/DGQ 3441: AMT "
-                "(amtonline.org, article 133530)")
+                "R_i = max(2s↑ + 2s↓ + |B_i|, 4s↑, 4s↓), E, M, A with ±2s); the 2006 "
+                "edition's change from ±3 standard deviations to ±2 standard uncertainties, "
+                "computed as standard deviations, and its superseding NMTBA and VDI/DGQ "
+                "3441: AMT (amtonline.org, article 133530)")
 ISO_UNCONFIRMED = ("the clause texts themselves (sold by ISO; only scope pages are public): "
                    "the figure formulas are cited by term, not by sub-clause number")
 

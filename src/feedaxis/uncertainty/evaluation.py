@@ -267,8 +267,9 @@ def _notes(measurement, correction):
     if REPEATABILITY in measurement.inputs and counts.max() > 1:
         runs = int(np.median(counts))
         notes.append(f"the repeatability moves each target's mean by its type A uncertainty "
-                     f"(JCGM 101 §6.4.9); the standard deviations s_i in R and A are the "
-                     f"test's own, and from {runs} runs each is itself uncertain by about "
+                     f"(JCGM 101 §6.4.9); the standard deviations s_i in R and A (VDI: Ps, "
+                     f"P) are the test's own, and from {runs} runs each is itself uncertain "
+                     f"by about "
                      f"{100 / np.sqrt(2 * (runs - 1)):.0f} % (1/sqrt(2(n - 1))): the sampling "
                      "of the machine's repeatability, not a measurement uncertainty")
     return notes
