@@ -62,6 +62,7 @@ VDI = {"P_um": 11.0, "Pa_um": 4.0, "Ps_max_um": 9.0, "Ps_mean_um": 5.4, "U_max_u
        "U_mean_um": 1.2}
 EXPECTED = {"iso230-2:2014": ISO_K2, "iso230-2:2006": ISO_K2, "iso230-2:1997": ISO_K2,
             "jis-b6190-2": ISO_K2, "jis-b6192": ISO_K2, "gbt17421.2": ISO_K2,
+            "gbt17421.2:2016": ISO_K2,
             "iso230-2:1988": ISO_1988, "vdi3441": VDI}
 
 

@@ -205,7 +205,10 @@ STANDARDS = {standard.name: standard for standard in (
               "differs, it is by edition only, and the 1997 and 2006 figures are equal"),
     _adoption("gbt17421.2", "GB/T 17421.2-2000", 1997,
               "adopted as ISO 230-2:1997 (its identical adoption is not confirmed "
-              "publicly); the edition is listed by laser software (Keysight E1733A)"))}
+              "publicly); the edition is listed by laser software (Keysight E1733A)"),
+    _adoption("gbt17421.2:2016", "GB/T 17421.2-2016", 2014,
+              "adopted as ISO 230-2:2014 (the edition and its identical adoption are not "
+              "confirmed publicly)"))}
 DEFAULT = "iso230-2:2014"
 THERMAL = "iso230-3"
 ALL = "all"
