@@ -9,6 +9,7 @@ import math
 import re
 
 from .effects.base import BasisEffect
+from .kinds import kind, part
 from .stats.wording import p_text
 
 
@@ -99,38 +100,13 @@ def repeatability_text(repeatability):
 
 
 def comparison_lines(comparison):
-    """The figures of ``compare``: ISO 230-2 (positioning) or seed 002's (tracking)."""
-    return (_tracking_comparison_lines if comparison["kind"] == "tracking"
-            else _iso_comparison_lines)(comparison)
-
-
-def _iso_comparison_lines(comparison):
-    """The figures of the comparison's standard (or of all), measured against the residual
-    after the model."""
-    from .standards.text import all_lines, standard_lines
-
-    lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
-             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}"]
-    if comparison["standard"] == "all":
-        return "\n".join(lines + all_lines(comparison["standards"]))
-    lines += standard_lines(comparison, (comparison["rms_measured_um"],
-                                         comparison["rms_residual_um"]))
-    if not comparison["bidirectional"] and comparison["standard"] == "ISO 230-2:2014":
-        lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
-    return "\n".join(lines)
-
-
-def _tracking_comparison_lines(comparison):
-    """Seed 002's figures after the first second: measured, predicted; then the residual."""
-    maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
-    return "\n".join([
-        f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
-        f"{', '.join(comparison['effects']) or '(seed 002 plant)'}",
-        f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
-        f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
-        f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
-        f"residual actual - predicted: max {comparison['residual_max_um']:.4g} µm, RMS "
-        f"{comparison['residual_rms_um']:.4g} µm"])
+    """The figures of ``compare``, as the kind of measurement compared writes them (its
+    ``text`` part: ISO 230-2 for positioning, seed 002's for tracking), else one line per
+    figure."""
+    lines = part(kind(comparison["kind"]), "text")
+    if lines:
+        return lines(comparison)
+    return "\n".join(f"{key}: {value}" for key, value in comparison.items())
 
 
 def compensation_lines(result, out_path=None):
