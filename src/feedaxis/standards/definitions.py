@@ -61,6 +61,7 @@ class Standard:
     bidirectional: bool = True
     targets_per_m: float = 0.0
     min_targets: int = 0
+    rule_travel_m: float = 2.0  # the target rule holds up to this travel (ISO 230-2: 2 m)
     targets_clause: str = ""
     uneven_spacing: bool = False
     adopts: str | None = None
@@ -89,7 +90,8 @@ def _iso(coverage):
 
 
 ISO_RUNS = "the standard test cycle: five runs in each direction"
-ISO_TARGETS = "target positions: at least five per metre and five in all, unevenly spaced"
+ISO_TARGETS = ("target positions: at least five per metre and five in all over up to 2000 mm, "
+               "unevenly spaced")
 ISO_FORMULAS = ("the formulas as feedaxis has always used them (x̄, s with n - 1, B_i, "
                 "R_i = max(2s↑ + 2s↓ + |B_i|, 4s↑, 4s↓), E, M, A with ±2s); the 2006 "
                 "edition's change from ±3 standard deviations to ±2 standard uncertainties, "

@@ -71,8 +71,8 @@ def _test_needs(standard, targets_mm, runs):
     if fewest < standard.runs:
         missing.append(f"{standard.runs} runs in each direction ({standard.runs_clause}); "
                        f"the data have {fewest}")
-    if standard.targets_per_m:
-        travel_m = float(np.ptp(targets_mm)) / 1000
+    travel_m = float(np.ptp(targets_mm)) / 1000
+    if standard.targets_per_m and travel_m <= standard.rule_travel_m:
         wanted = max(standard.min_targets, math.ceil(standard.targets_per_m * travel_m))
         if targets_mm.size < wanted:
             missing.append(f"at least {wanted} targets over {travel_m * 1000:g} mm "

@@ -114,7 +114,8 @@ def thermal_comparison(case, model):
                      "compensated figures")
     figures = {}
     for key, (name, value, time, sample) in measured.items():
-        figures[key] = {"name": name, "measured_um": value,
+        figures[key] = {"name": name, "unit": "µm/m" if key.endswith("_per_m") else "µm",
+                        "measured_um": value,
                         "predicted_um": predicted[key][1] if key in predicted else None,
                         "compensated_um": compensated[key][1] if key in compensated else None,
                         "time_s": time, **_temperature(positioning, sample)}

@@ -182,7 +182,9 @@ def _figure_set(standard):
                          parameter="--standard")
     if standard != ALL and standard not in STANDARDS:
         raise InputError(f"the Monte Carlo propagates to the positioning figures; "
-                         f"{standard}'s thermal figures get no uncertainty yet",
+                         f"{standard}'s thermal figures get no uncertainty yet: its "
+                         "repeatability moves a target's readings together, which cancels in "
+                         "a drift, and a per-reading noise model is not built",
                          parameter="--standard")
     return FigureSet(standard)
 
