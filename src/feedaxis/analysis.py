@@ -18,8 +18,7 @@ from .fit import FitResult, evaluate, fit
 from .kinds import part
 from .measurement import kinds_for, measurement_of
 from .physics.threads import one_blas_thread
-from .standards import ALL, DEFAULT, THERMAL
-from .standards.thermal import thermal_block, thermal_comparison
+from .standards import DEFAULT
 
 
 @dataclass
@@ -62,17 +61,12 @@ def compare(case, model, kind=None, standard=DEFAULT):
 
 
 def _figures(measurement, result, standard):
-    """The measurement's figures; a positioning measurement's those of ``standard``, ISO
-    230-3's of a thermal case (:mod:`feedaxis.standards`)."""
-    if standard == DEFAULT or measurement.kind != "positioning":
+    """The measurement's figures; those of ``standard`` through the kind's ``standards``
+    part (positioning: :mod:`feedaxis.standards`) when it has one."""
+    of_standard = part(type(measurement), "standards")
+    if standard == DEFAULT or of_standard is None:
         return measurement.figures(result)
-    if standard not in (THERMAL, ALL):
-        return measurement.figures(result, standard)
-    if standard == THERMAL:
-        return {**measurement.head(result), **thermal_comparison(measurement.case, result.model)}
-    payload = measurement.figures(result, ALL)
-    payload["standards"][THERMAL] = thermal_block(measurement.case, result.model)
-    return payload
+    return of_standard(measurement, result, standard)
 
 
 def error_ladder(case, model, kind=None):

@@ -138,6 +138,7 @@ class Positioning(Measurement):
     details = "feedaxis.positioning_details:positioning_details"
     views = "feedaxis.report.positioning:VIEWS"
     text = staticmethod(iso_comparison_lines)
+    standards = "feedaxis.standards.compare:standard_figures"
 
     @classmethod
     def read(cls, folder, axis, duty):
