@@ -24,7 +24,7 @@ from scipy.optimize import minimize_scalar
 
 from .. import kinds, standards
 from ..case import DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, length_mm
-from ..iso230 import SAME_TARGET_MM, iso230_figures, target_clusters
+from ..iso230 import SAME_TARGET_MM, iso230_figures, sampling_notes, target_clusters
 from ..standards import DEFAULT
 from ..stats import judge
 from ..stats.coloured import peak_p_value
@@ -124,6 +124,7 @@ def iso_comparison_lines(comparison):
                                          comparison["rms_residual_um"]))
     if not comparison["bidirectional"] and comparison["standard"] == "ISO 230-2:2014":
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
+    lines += [f"note: {note}" for note in comparison.get("sampling", ())]
     return "\n".join(lines)
 
 
@@ -372,6 +373,7 @@ class Positioning(Measurement):
         return {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "targets": measured["targets"],
                 "runs_up": measured.get("runs_up", 0), "runs_down": measured.get("runs_down", 0),
+                "sampling": sampling_notes(samples.target_mm, samples.direction, samples.run),
                 "bidirectional": samples.bidirectional,
                 "rms_measured_um": result.statistics.rms_before_um,
                 "rms_residual_um": result.statistics.rms_um}
