@@ -2,8 +2,8 @@
 
 Exit codes: 0 success, 2 bad input (an :class:`~feedaxis.errors.InputError`: one message on
 stderr naming the file, row and column or the option, nothing written), 1 a bug (one line;
-``--debug`` shows the traceback), 130 Ctrl-C. With ``--json`` every result and every error is
-strict JSON on stdout (no NaN or Infinity: a value that is not finite is ``null``).
+``--debug`` shows the traceback), 130 Ctrl-C (143 SIGTERM, 129 SIGHUP). With ``--json`` every
+result and every error is strict JSON on stdout (no NaN or Infinity: a value that is not finite is ``null``).
 The numerical modules (scipy, matplotlib, pythonfmu: seconds to import) are imported by the
 commands that use them, so ``--help`` and ``effects`` answer at once.
 """
@@ -18,12 +18,13 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from . import __version__, text
-from .case import read_case
+from . import stop
+from .case import FOLLOW_LINKS, read_case
 from .comptable import CONTROLLERS
-from .console import INTERRUPTED_EXIT, fail
+from .console import fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
-from .output import write_atomically
+from .output import refuse_overwriting_inputs, write_atomically
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
 from .uncertainty.correction import corrected_case, temperature_option
 
@@ -70,11 +71,15 @@ def scenario_arguments(name):
 @contextmanager
 def _progress(label, unit):
     """A tqdm counter on stderr that shows itself only when the work takes over a second;
-    the callback takes an optional label of the step under way."""
+    the callback takes an optional label of the step under way, or ``total=N``: N more
+    steps at most (the bar's total grows by N, nothing is counted)."""
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
-        def tick(step=None):
+        def tick(step=None, total=None):
+            if total is not None:
+                bar.total = (bar.total or 0) + total
+                return
             if step:
                 bar.set_postfix_str(str(step), refresh=False)
             bar.update()
@@ -242,18 +247,29 @@ def _cmd_diagnose(args):
     _emit_each(args, outputs)
 
 
+def _add_standard_option(parser):
+    from .standards import DEFAULT, NAMES, parse
+
+    parser.add_argument("--standard", type=parse, default=DEFAULT, metavar="NAME",
+                        help=f"the standard and edition of the positioning figures (default "
+                             f"{DEFAULT}; 'all': side by side): {', '.join(NAMES)}. See "
+                             "docs/standards.md")
+
+
 def _compare_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "model (TOML) as fitted; without it the model is empty")
     _add_correction_option(parser)
+    _add_standard_option(parser)
 
 
 @command("compare", help="the measurement's figures: measured against the model",
          description="Positioning: ISO 230-2 accuracy, repeatability, reversal and systematic "
                      "deviation of the measured runs and of what is left after the model, "
-                     "side by side. Tracking: the maximum and RMS tracking error (as Anang "
-                     "et al. 2017 report them) after the first second, measured and "
-                     "predicted.",
+                     "side by side (--standard: another standard's, or all; a thermal case's "
+                     "ISO 230-3 figures, measured, predicted and compensated). Tracking: "
+                     "the maximum and RMS tracking error (as Anang et al. 2017 report them) "
+                     "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):
     from .analysis import compare
@@ -261,7 +277,7 @@ def _cmd_compare(args):
     _, case, model, kinds = _case_and_model(args)
     outputs = []
     for kind in kinds:
-        comparison = compare(case, model, kind)
+        comparison = compare(case, model, kind, args.standard)
         outputs.append((kind, comparison, text.comparison_lines(comparison)))
     _emit_each(args, outputs)
 
@@ -271,6 +287,7 @@ def _report_options(parser):
     _add_model_options(parser, "fitted model (TOML); without it the model is empty")
     parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
     _add_correction_option(parser)
+    _add_standard_option(parser)
 
 
 @command("report", help="self-contained HTML page with the plots",
@@ -290,7 +307,8 @@ def _cmd_report(args):
     analyses = []
     for kind in kinds:
         with _progress(f"analysing {kind}", " steps") as tick:
-            analyses.append(analyse(case, model, effects, kind=kind, progress=tick))
+            analyses.append(analyse(case, model, effects, kind=kind, progress=tick,
+                                    standard=args.standard))
     write_report(analyses, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
@@ -443,6 +461,7 @@ def _cmd_comp_table(args):
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
                                args.from_measurement, args.axis_id, args.force)
+    refuse_overwriting_inputs({path: "--out" for path in files}, _inputs(args))
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
@@ -470,6 +489,7 @@ def _uncertainty_options(parser):
     _add_correction_option(parser)
     parser.add_argument("--html", metavar="PAGE.html",
                         help="also write the results as a page with histograms")
+    _add_standard_option(parser)
 
 
 @command("uncertainty", help="Monte Carlo uncertainty of the ISO 230-2 figures (JCGM 101)",
@@ -502,7 +522,7 @@ def _cmd_uncertainty(args):
             bar.update(trials)
 
         result = evaluate(case, model, budget, args.trials, args.tolerance_um, args.seed,
-                          args.correct_to_20C, progress=tick)
+                          args.correct_to_20C, progress=tick, standard=args.standard)
     payload = result.to_json()
     if args.html:
         from .uncertainty.page import write_page
@@ -595,12 +615,14 @@ def _counter_progress(label, unit, unit_scale=False):
 def _simulate(args, run):
     """Run one scenario into a new case folder; Ctrl-C keeps what was computed."""
     from .cosim.master import Master
+    from .cosim.scenarios import check_axis_ranges
 
     if Path(args.out).exists():
         raise InputError("already exists; choose a new case folder", path=args.out)
     check_writable_target(args.out, "folder")
-    system = _axis_system(args)
-    with Master(system, _fmu_paths(args)) as master:
+    system, paths = _checked_axis(args)
+    check_axis_ranges(system)
+    with Master(system, paths) as master:
         with _counter_progress("simulating", "step", True) as progress:
             return run(master, progress)
 
@@ -868,8 +890,8 @@ def _add_sweep_options(sub):
                      help="hold the parameters the fit could not determine at their "
                           "fitted values (without it such a model is refused)")
     sub.add_argument("--workers", type=int, metavar="N",
-                     help="local Dask worker processes (default: one per core; 0 runs "
-                          "in this process)")
+                     help="local Dask worker processes (default: in this process while "
+                          "that is sooner, else one per core; 0 runs in this process)")
     sub.add_argument("--scheduler", metavar="ADDRESS",
                      help="run on the Dask cluster of this scheduler (tcp://host:8786) "
                           "instead of a local one")
@@ -911,7 +933,8 @@ def _cmd_sweep(args):
               thermal_step_s=args.thermal_step_s, model=args.model, set_items=args.set or (),
               effects=_effects(args), fmus=args.fmus,
               workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-              progress=progress, **SCENARIO_ARGUMENTS[args.scenario](args))
+              progress=progress, echo=lambda line: print(line, file=sys.stderr),
+              **SCENARIO_ARGUMENTS[args.scenario](args))
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     _emit(args, summary, summary_lines(summary) + f"\nfiles: {args.out}/trials.parquet, "
                                                   "summary.json, summary.txt, report.html")
@@ -971,7 +994,7 @@ def build_parser():
                     "ThermalScrew).",
         epilog="Start with `feedaxis demo`. Exit codes: 0 ok, 2 bad input (the message names "
                "the file, row and column or the option), 1 an internal error (a bug: add "
-               "--debug for the traceback), 130 interrupted.")
+               "--debug for the traceback), 130 interrupted (143 SIGTERM, 129 SIGHUP).")
     parser.add_argument("--version", action="version", version=f"feedaxis {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, parser_kwargs, options, handler in COMMANDS:
@@ -991,6 +1014,38 @@ def _add_common_options(parser):
                            help="print strict JSON on stdout (errors too: error, file, row, column)")
     parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                            help="on an internal error, show the Python traceback")
+    parser.add_argument("--follow-links", action="store_true", default=argparse.SUPPRESS,
+                        help="read case files that are links to files outside their case "
+                             "folder (refused by default: a case received must not reach "
+                             "outside itself)")
+
+
+INPUT_OPTIONS = {"case": "CASE", "cases": "CASE", "file": "FILE", "axis": "--axis",
+                 "model": "--model", "effects": "--effects", "budget": "--budget",
+                 "duty": "--duty", "from_model": "--from-model", "fmus": "--fmus"}
+OUTPUT_OPTIONS = {"out": "--out", "html": "--html"}
+
+
+def _inputs(args):
+    """Every path the command reads: the files and folders its options name, and the case
+    files and FMUs inside a folder named."""
+    from .case import case_files
+    from .fmu_build import FMU_NAMES
+
+    inside = (*case_files(), *(f"{name}.fmu" for name in FMU_NAMES))
+    found = []
+    for dest in INPUT_OPTIONS:
+        value = getattr(args, dest, None)
+        for path in map(Path, value if isinstance(value, list) else [value] if value else []):
+            found += [path, *(path / name for name in inside if (path / name).exists())]
+    return found
+
+
+def _outputs(args):
+    """{path: option} of what the command writes (``report`` without ``--out`` writes
+    ``<case>-report.html`` in the working folder, never a case file)."""
+    return {getattr(args, dest): option for dest, option in OUTPUT_OPTIONS.items()
+            if getattr(args, dest, None)}
 
 
 def _wants_json(args):
@@ -1014,7 +1069,8 @@ def main(argv=None):
     Bad input (:class:`InputError`, a usage error) exits 2 with one message naming where,
     and so does a disk that is full or read-only (naming the file); anything else is a bug:
     exit 1 with one line (``--debug`` re-raises it for the traceback). With ``--json`` the
-    message is a JSON object on stdout. Ctrl-C exits 130 with one line.
+    message is a JSON object on stdout. Ctrl-C exits 130 with one line (SIGTERM 143,
+    SIGHUP 129: :mod:`feedaxis.stop`).
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     wants_json, debug = "--json" in argv, "--debug" in argv
@@ -1022,12 +1078,14 @@ def main(argv=None):
         from threadpoolctl import threadpool_limits
 
         args = build_parser().parse_args(argv)
+        refuse_overwriting_inputs(_outputs(args), _inputs(args))
+        FOLLOW_LINKS.set(getattr(args, "follow_links", False))
         with _one_line_warnings():
             args.handler(args)
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
         message = str(stopped)
-        return fail(wants_json, message if message.startswith("interrupted") else
-                    "interrupted", INTERRUPTED_EXIT)
+        return fail(wants_json, stop.described(message if message.startswith("interrupted")
+                                               else "interrupted"), stop.exit_code())
     except BrokenPipeError:
         sys.stderr.close()
         return 0
