@@ -136,7 +136,7 @@ def test_averaged_nut_heat_is_the_exact_path_mean():
 def test_servo_discretisation_equals_scipy_expm(plant, duration_s):
     """The zero-order hold (Φ, Γ) without scipy.linalg (servo.expm, Taylor with scaling and
     squaring) equals scipy.linalg.expm of the augmented matrix with the plant's own input
-    column: seed 002's plant, a double integrator, critical damping (a1² = 4 a0), stiff."""
+    column: the plant of Anang et al. 2017, a double integrator, critical damping (a1² = 4 a0), stiff."""
     from scipy.linalg import expm
     stiffness, damping, gain = plant
     reference = expm(np.array([[0.0, 1.0, 0.0], [-stiffness, -damping, gain], [0.0, 0.0, 0.0]])

@@ -1,4 +1,4 @@
-"""Reading, checking and writing a measurement case, format version 1.1 (../shared/data-format.md).
+"""Reading, checking and writing a measurement case, format version 1.2 (docs/case-format.md).
 
 A case is one folder: ``axis.toml`` (required), ``positioning.csv`` and/or ``tracking.csv``,
 optionally ``duty.csv``. Every rule of the format is checked; a broken file raises one
@@ -24,6 +24,7 @@ from .output import umask_mode, writing
 from .physics.geometry import SUPPORTS
 from .physics.servo import loop_budget_problem
 from .physics.thermal import DutySegment
+from .plausibility import warn_implausible
 
 AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE = (
     "axis.toml", "positioning.csv", "duty.csv", "tracking.csv")
@@ -57,7 +58,7 @@ PHYSICAL_RANGE = {
     "fixed_end_mm": (-1e5, 1e5), "step_angle_deg": (1e-3, 360.0),
     "error_period_steps": (1, 1e6),
     "target_mm": (-1e5, 1e5), "error_um": (-1e5, 1e5), "time_s": (0.0, 1e9),
-    "ambient_C": (-100.0, 200.0), "start_s": (0.0, 1e9), "duration_s": (0.0, 1e9),
+    "ambient_C": (-100.0, 200.0), "material_C": (-100.0, 200.0), "start_s": (0.0, 1e9), "duration_s": (0.0, 1e9),
     "feed_mm_min": (0.0, 1e6), "from_mm": (-1e5, 1e5), "to_mm": (-1e5, 1e5),
     "reference_mm": (-1e5, 1e5), "actual_mm": (-1e5, 1e5), "disturbance_N": (-1e7, 1e7),
     "kp_V_per_mm": (1e-9, 1e6), "ki_V_per_mm_s": (0.0, 1e6), "kd_V_s_per_mm": (0.0, 1e6),
@@ -66,7 +67,9 @@ PHYSICAL_RANGE = {
 }
 
 POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
-                       "time_s": False, "ambient_C": False}
+                       "time_s": False, "ambient_C": False, "material_C": False}
+# What a column accepts, said when a cell of it is not a number at all
+ACCEPTED = {"direction": "+1 or -1", "run": "a whole number >= 1"}
 DUTY_COLUMNS = {"start_s": True, "duration_s": True, "feed_mm_min": True, "from_mm": True,
                 "to_mm": True, "ambient_C": False}
 TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
@@ -102,7 +105,8 @@ class Axis:
 
 @dataclass(frozen=True)
 class Positioning:
-    """positioning.csv as arrays; ``direction`` is ±1 (+1 when the column is absent)."""
+    """positioning.csv as arrays; ``direction`` is ±1 (+1 when the column is absent);
+    ``ambient_C`` the air and ``material_C`` the machine temperature (°C) when given."""
 
     target_mm: np.ndarray
     error_um: np.ndarray
@@ -111,6 +115,7 @@ class Positioning:
     time_s: np.ndarray | None = None
     ambient_C: np.ndarray | None = None
     has_direction: bool = False
+    material_C: np.ndarray | None = None
 
     @property
     def size(self):
@@ -185,7 +190,9 @@ def read_case(folder):
     if positioning is None and tracking is None:
         raise CaseError(folder, f"a case holds {POSITIONING_FILE}, {TRACKING_FILE} or both; "
                                 "neither was found")
-    return Case(folder, axis, positioning, duty, tracking)
+    case = Case(folder, axis, positioning, duty, tracking)
+    warn_implausible(case)
+    return case
 
 
 def read_axis(path):
@@ -418,7 +425,8 @@ def _number(path, cell, row, column):
     try:
         return finite_float(cell)
     except ValueError as problem:
-        raise CaseError(path, str(problem), row, column) from None
+        accepted = f"; {column} must be {ACCEPTED[column]}" if column in ACCEPTED else ""
+        raise CaseError(path, f"{problem}{accepted}", row, column) from None
 
 
 def _first_bad(path, mask, rows, column, message):
@@ -454,7 +462,8 @@ def read_positioning(path, duty_end_s=None, length_mm=None):
     return Positioning(values["target_mm"], values["error_um"],
                        direction if direction is not None else np.ones_like(values["target_mm"]),
                        run.astype(int) if run is not None else None, time_s,
-                       values.get("ambient_C"), has_direction=direction is not None)
+                       values.get("ambient_C"), has_direction=direction is not None,
+                       material_C=values.get("material_C"))
 
 
 def read_duty(path, length_mm=None):

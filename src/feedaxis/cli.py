@@ -22,8 +22,9 @@ from .console import INTERRUPTED_EXIT, fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
+from .importers.wide_csv import column_map
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
-from .uncertainty.correction import corrected_case, temperature_option
+from .uncertainty.correction import MATERIAL, corrected_case, temperature_option
 
 COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
@@ -325,13 +326,17 @@ def _import_options(parser):
     parser.add_argument("--axis", required=True, metavar="AXIS.toml",
                         help="axis.toml (or a case folder holding one) describing the axis")
     parser.add_argument("--out", required=True, metavar="CASE", help="case folder to create")
+    parser.add_argument("--columns", metavar="MAP", type=column_map,
+                        help="a .csv whose headers are not recognised: "
+                             "'HEADER=target:UNIT,HEADER=run1+:UNIT,HEADER=run1-:UNIT,...' "
+                             "(units mm, m, um, nm, in; a deviation defaults to um)")
 
 
 @command("import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
          formatter_class=argparse.RawDescriptionHelpFormatter,
-         description="Read a laser-interferometer export and write a case folder (data-format "
-                     "1.1: AXIS.toml + positioning.csv), all files or none. Says which metadata "
-                     "the case format cannot hold.",
+         description="Read a laser-interferometer export and write a case folder (case format "
+                     "1.2, docs/case-format.md: AXIS.toml + positioning.csv), all files or none. "
+                     "Says which metadata the case format cannot hold.",
          epilog="Formats, by extension:\n"
                 "  .rtl  Renishaw linear data file (sections HEADER::, TARGET DATA::, RUNS::,\n"
                 "        DEVIATIONS::, ...): odd runs approach in +, even runs in -.\n"
@@ -342,24 +347,35 @@ def _import_options(parser):
                 "        target_mm first (mm); then one column per run and direction,\n"
                 "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
                 "        measured - target in µm; an empty cell = not measured; '#' comment\n"
-                "        lines; ';'- or tab-separated files may use a decimal comma.",
+                "        lines; ';'- or tab-separated files may use a decimal comma.\n"
+                "        Vendor headers with units are recognised: 'Target (mm)',\n"
+                "        'Run 1 Fwd (um)', 'Run 1 Rev (um)' (fwd/forward/up, rev/reverse/\n"
+                "        bwd/backward/down; units mm, m, um, nm, in); any other layout\n"
+                "        is mapped with --columns.\n"
+                "See docs/compensation-tables.md and docs/case-format.md.",
          options=_import_options)
 def _cmd_import(args):
     from .importers import import_case
 
-    folder, measurement, dropped = import_case(args.file, args.axis, args.out)
+    folder, measurement, dropped = import_case(args.file, args.axis, args.out, args.columns)
     directions = sorted({int(d) for d in measurement.direction}, reverse=True)
     payload = {"case": str(folder), "samples": int(measurement.error_um.size),
                "targets": int(len(set(measurement.target_mm))),
                "runs": int(measurement.run.max()), "directions": directions,
                "name": read_case(folder).name, "dropped": dropped,
-               "ambient_C": None if measurement.ambient_C is None else
-               [float(measurement.ambient_C.min()), float(measurement.ambient_C.max())]}
+               **{column: None if values is None else [float(values.min()), float(values.max())]
+                  for column, values in (("ambient_C", measurement.ambient_C),
+                                         ("material_C", measurement.material_C))},
+               "expansion_per_K": measurement.expansion_per_K}
     lines = [f"{folder}: {payload['samples']} samples, {payload['targets']} targets, "
              f"{payload['runs']} runs, directions {', '.join(f'{d:+d}' for d in directions)}"]
-    if payload["ambient_C"]:
-        lines.append("  kept: the air temperature as positioning.csv ambient_C, "
-                     + " to ".join(f"{t:g}" for t in sorted(set(payload["ambient_C"]))) + " °C")
+    for column, what in (("ambient_C", "air"), ("material_C", "material")):
+        if payload[column]:
+            lines.append(f"  kept: the {what} temperature as positioning.csv {column}, "
+                         + " to ".join(f"{t:g}" for t in sorted(set(payload[column]))) + " °C")
+    if payload["expansion_per_K"] is not None and "ENVIRONMENT.EXP COEFF" not in dropped:
+        lines.append(f"  kept: the expansion coefficient as [screw] expansion_per_K = "
+                     f"{payload['expansion_per_K']:g} /K")
     lines += [f"  dropped (the case format has no place for it): {key} = {value}"
               for key, value in dropped.items()]
     _emit(args, payload, "\n".join(lines))
@@ -888,8 +904,8 @@ def _add_model_options(sub, model_help="starting model (TOML); without it the mo
 
 
 def _add_correction_option(sub):
-    sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T",
-                     type=temperature_option, help=CORRECTION_HELP)
+    sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T", nargs="?",
+                     const=MATERIAL, type=temperature_option, help=CORRECTION_HELP)
 
 
 def _add_motion_options(sub):

@@ -41,7 +41,8 @@ SERIAL_MIN_SAMPLES = 30  # an autoregressive noise model needs this many samples
 # least this share of its size apart from an offset and a slope (its amplitude's standard
 # error is then at most 1/0.3 = 3.3 times that of evenly spread phases).
 RESOLVABLE_SHARE = 0.3
-SAMPLE_COLUMNS = ("target_mm", "error_um", "direction", "run", "time_s", "ambient_C")
+SAMPLE_COLUMNS = ("target_mm", "error_um", "direction", "run", "time_s", "ambient_C",
+                  "material_C")
 
 
 class Positioning(Measurement):

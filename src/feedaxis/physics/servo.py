@@ -1,4 +1,4 @@
-"""Position servo of a ball-screw drive with a PID or NPID controller, seed 002 Eq. 1-8.
+"""Position servo of a ball-screw drive with a PID or NPID controller, Anang et al. 2017 Eq. 1-8.
 
 Plant (Eq. 1, Googol XY table, x axis): G(s) = 78020 / (s² + 163 s + 193.3), command in V,
 position in mm, with a 1.2 ms transport delay on the command. Controller (Eq. 2, 6):
@@ -54,10 +54,10 @@ MAX_PROPAGATOR_DELAY_STEPS = 64
 
 @dataclass(frozen=True)
 class ServoParams:
-    """Plant, controller and loop timing. Defaults: seed 002 Eq. 1, 6, 8.
+    """Plant, controller and loop timing. Defaults: Anang et al. 2017 Eq. 1, 6, 8.
 
     ``force_constant_N_per_V`` converts the disturbance force to the equivalent plant
-    command; seed 002 does not publish it, the default 100 N/V is an assumption.
+    command; Anang et al. 2017 does not publish it, the default 100 N/V is an assumption.
     """
 
     plant_gain_mm_per_Vs2: float = 78020.0
@@ -102,7 +102,7 @@ class ServoParams:
 
 
 def npid_gain(error_mm, ko_per_mm, e_max_mm):
-    """K(e) = cosh(KO·e), held at K(e_max) beyond ±e_max (seed 002 Eq. 8), for a float e."""
+    """K(e) = cosh(KO·e), held at K(e_max) beyond ±e_max (Anang et al. 2017 Eq. 8), for a float e."""
     return math.cosh(ko_per_mm * min(abs(error_mm), e_max_mm))
 
 

@@ -1,4 +1,4 @@
-"""Finite-difference thermal model of a ball screw fixed at one end, seed 003 Eq. 1-19.
+"""Finite-difference thermal model of a ball screw fixed at one end, Rong et al. 2023 Eq. 1-19.
 
 The screw is a 1-D rod of N = L/dx cells (Eq. 4). Heat enters from the fixed-end bearing
 (Q_B spread over L_B) and from the nut (Q_N spread over L_N, at the nut's position);
@@ -53,7 +53,7 @@ MAX_SUB_STEPS = 1e12
 
 @dataclass(frozen=True)
 class ThermalScrewParams:
-    """Screw data (seed 003 Table 1) and identified coefficients (Table 3, X axis).
+    """Screw data (Rong et al. 2023 Table 1) and identified coefficients (Table 3, X axis).
 
     k1..k4 relate convection and heat flows to the feed speed v in mm/min (Eq. 17-19):
     h = k1·v + k2, Q_B = k3·v, Q_N = k4·v.
@@ -379,7 +379,7 @@ def ambient_error_um(params, position_mm, ambient_delta_K):
 
 
 def thermal_error_um(params, rise_K, position_mm, ambient_delta_K=0.0):
-    """Positioning thermal error TE(P_x) = ±TE_m + TE_a (seed 003 Eq. 2, 15, 16), in µm;
+    """Positioning thermal error TE(P_x) = ±TE_m + TE_a (Rong et al. 2023 Eq. 2, 15, 16), in µm;
     TE_a (:func:`ambient_error_um`) is already in axis coordinates.
 
     With a 1-D ``rise_K`` (one field) the error at every position; with a 2-D ``rise_K``

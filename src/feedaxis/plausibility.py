@@ -1,0 +1,90 @@
+"""Warnings, not refusals, where a case is readable but implausible for a machine axis: the
+likely unit slip named (deviations in mm, targets in m, positions in µm).
+
+A value beyond any physical axis is refused by the reader (:data:`feedaxis.case.PHYSICAL_RANGE`);
+these are values inside those limits that a laser test or a drive trace still cannot give.
+Each check returns the message or None; :func:`warn_implausible` issues them as
+:class:`ImplausibleWarning`.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+# A laser interferometer resolves about 1 nm; a positioning test whose repeat scatter is
+# below this is deviations written in mm (µm / 1000).
+MIN_SCATTER_UM = 1e-3
+# No machine axis a tracking trace comes from travels 10 m back and forth; positions in µm
+# (mm × 1000) do.
+MAX_TRACKING_TRAVEL_MM = 1e4
+# No ball-screw or linear drive pushes 10 kN of friction; a trace in µm fits about 1000 × the
+# friction it has.
+MAX_FRICTION_N = 1e4
+
+
+class ImplausibleWarning(UserWarning):
+    """A value a machine axis cannot give: the likely unit slip."""
+
+
+def replicate_scatter_um(target_mm, direction, error_um):
+    """The pooled standard deviation (µm) of the deviations about their (target, direction)
+    means; None without replicates."""
+    groups = np.unique(np.column_stack([target_mm, direction]), axis=0, return_inverse=True)[1]
+    groups = groups.ravel()
+    counts = np.bincount(groups)
+    freedom = error_um.size - counts.size
+    if freedom < 1:
+        return None
+    means = np.bincount(groups, weights=error_um) / counts
+    return float(np.sqrt(np.sum((error_um - means[groups]) ** 2) / freedom))
+
+
+def positioning_problems(target_mm, direction, error_um, lead_mm):
+    """The messages of a positioning test's implausible values (empty when none)."""
+    problems = []
+    scatter_um = replicate_scatter_um(target_mm, direction, error_um)
+    if scatter_um is not None and 0 < scatter_um < MIN_SCATTER_UM:
+        problems.append(f"positioning.csv: the deviations scatter {scatter_um * 1e3:.3g} nm "
+                        "between repeats, below what a laser resolves: error_um in mm? "
+                        "(multiply by 1000)")
+    elif scatter_um is None and 0 < np.max(np.abs(error_um)) < MIN_SCATTER_UM:
+        problems.append(f"positioning.csv: every deviation is under {MIN_SCATTER_UM * 1e3:g} nm: "
+                        "error_um in mm? (multiply by 1000)")
+    span_mm = float(np.ptp(target_mm))
+    if 0 < span_mm < lead_mm:
+        problems.append(f"positioning.csv: the targets span {span_mm:g} mm, less than one "
+                        f"screw revolution ({lead_mm:g} mm lead): target_mm in m? "
+                        "(multiply by 1000)")
+    return problems
+
+
+def tracking_problems(reference_mm):
+    """The messages of a tracking trace's implausible values (empty when none)."""
+    travel_mm = float(np.ptp(reference_mm))
+    if travel_mm > MAX_TRACKING_TRAVEL_MM:
+        return [f"tracking.csv: the reference travels {travel_mm / 1e3:g} m, more than any "
+                "axis a trace comes from: positions in µm? (divide by 1000)"]
+    return []
+
+
+def friction_problem(friction_N):
+    """The message for a fitted friction force no drive has (None when plausible)."""
+    if abs(friction_N) > MAX_FRICTION_N:
+        return (f"a friction of {friction_N:.3g} N is beyond any feed drive: tracking.csv "
+                "positions in µm? (divide by 1000)")
+    return None
+
+
+def warn_implausible(case):
+    """Issue an :class:`ImplausibleWarning` for each implausible value of ``case``."""
+    problems = []
+    if case.positioning is not None:
+        samples = case.positioning
+        problems += positioning_problems(samples.target_mm, samples.direction,
+                                         samples.error_um, case.axis.lead_mm)
+    if case.tracking is not None:
+        problems += tracking_problems(case.tracking.reference_mm)
+    for problem in problems:
+        warnings.warn(problem, ImplausibleWarning, stacklevel=2)
+    return problems
