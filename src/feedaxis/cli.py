@@ -28,7 +28,7 @@ from .uncertainty.correction import MATERIAL, corrected_case, temperature_option
 
 COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
-             "+ tracking.csv; see data-format.md")
+             "+ tracking.csv; see docs/case-format.md")
 
 # Each command is registered beside its handler: @command(NAME, add_parser arguments,
 # options=FUNCTION adding its arguments); build_parser adds them in this file's order.
@@ -628,7 +628,7 @@ def _scenario_parsers(parser, out_help, more_options=None, handler=None):
 # the scenarios below carry the handlers
 command_group("simulate", help="run a scenario on the co-simulated axis, write a case folder",
               description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
-                          "scenario and write the result as a measurement case (data-format.md), "
+                          "scenario and write the result as a measurement case (docs/case-format.md), "
                           "ready for fit, diagnose and compare. iso230 and thermal run the servo "
                           "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: seed 002's "
                           "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "

@@ -1,4 +1,4 @@
-"""Scenarios on the co-simulated axis that write measurement cases (data-format.md).
+"""Scenarios on the co-simulated axis that write measurement cases (docs/case-format.md).
 
 - :func:`simulate_iso230`: ISO 230-2 positioning cycle -> ``axis.toml`` + ``positioning.csv``;
 - :func:`simulate_thermal`: a duty cycle with measurement passes -> + ``duty.csv``;

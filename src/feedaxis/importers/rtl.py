@@ -167,8 +167,9 @@ def read_rtl(path):
             columns["rtl_run"].append(run)
     rtl_run = np.array(columns.pop("rtl_run"))
     environment = sections.get("ENVIRONMENT", [])
-    air_C = _temperatures(path, environment, n_runs, AIR_TEMPERATURE, "Air temp")
-    material_C = _temperatures(path, environment, n_runs, MATERIAL_TEMPERATURE, "Mat temp")
+    air_C = _temperatures(path, environment, n_runs, AIR_TEMPERATURE, "Air temp", "air")
+    material_C = _temperatures(path, environment, n_runs, MATERIAL_TEMPERATURE, "Mat temp",
+                               "material")
     return Measurement(*(np.array(columns[k], dtype=float) for k in columns),
                        name=_name(sections), dropped=_dropped(sections),
                        ambient_C=None if air_C is None else air_C[rtl_run - 1],
@@ -182,7 +183,7 @@ def _name(sections):
     return " axis ".join(parts)
 
 
-def _temperatures(path, section, n_runs, pattern, field):
+def _temperatures(path, section, n_runs, pattern, field, what):
     """The temperature (°C) of each rtl run from the ENVIRONMENT lines ``pattern`` matches
     (``Air temp``; ``Mat temp 1`` to ``3``, averaged over the sensors given): each one value
     for the whole test or one per run; None when the file gives none."""
@@ -193,12 +194,12 @@ def _temperatures(path, section, n_runs, pattern, field):
             values = np.array([number(word, path, row, field)
                                for word in match.groups()[-1].replace(",", " ").split()])
             if values.size not in (1, n_runs):
-                raise LineError(path, f"{values.size} values: expected one temperature for "
+                raise LineError(path, f"{values.size} {what} temperatures: expected one for "
                                       f"the test or one per run (Run-count {n_runs})", row,
                                 field)
             low, high = PHYSICAL_RANGE["ambient_C"]
             for value in values[(values < low) | (values > high)]:
-                raise LineError(path, f"temperature {value:g} °C is beyond {low:g} to "
+                raise LineError(path, f"{what} temperature {value:g} °C is beyond {low:g} to "
                                       f"{high:g} °C", row, field)
             sensors.append(np.broadcast_to(values, (n_runs,)).astype(float))
     return np.mean(sensors, axis=0) if sensors else None

@@ -55,10 +55,10 @@ def _split_unit(path, name, line, units, default):
 def _target_column(path, name, line):
     """The factor (to mm) of the target column ``name``."""
     bare, factor = _split_unit(path, name, line, TO_MM, "mm")
-    if bare not in ("target_mm",) + TARGET_NAMES:
-        raise LineError(path, f"the first column must be the target position; accepted: "
-                              f"{ACCEPTED}", line, name)
-    return factor
+    if bare == "target_mm" or (bare in TARGET_NAMES and UNIT.match(name.strip())):
+        return factor
+    raise LineError(path, f"the first column must be the target position with its unit; "
+                          f"accepted: {ACCEPTED}", line, name)
 
 
 def _run_column(path, name, line):
