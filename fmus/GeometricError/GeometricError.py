@@ -32,7 +32,7 @@ class GeometricError(AxisSlave):
         self.parameter("diameter_m", 0.034, "Screw root diameter", "m", (0, None))
         self.parameter("density_kg_m3", 7800.0, "Screw material density", "kg/m3", (0, None))
         self.parameter("youngs_modulus_Pa", 2.1e11, "Screw Young's modulus", "Pa", (0, None))
-        self.parameter("support", "fixed-free", "fixed-free | fixed-fixed | supported-supported")
+        self.parameter("support", "fixed-free", "How the screw is held: fixed-free, fixed-fixed or supported-supported")
         self.parameter("fixed_end_mm", -141.0, "Axis coordinate P_f of the fixed end (Rong et al. 2023 Eq. 15-16)", "mm")
         self.engagement = 1.0  # in the backlash play: -1 to +1 (geometry.play_engagement)
 

@@ -73,7 +73,8 @@ def _progress(label, unit):
     the callback takes an optional label of the step under way."""
     from tqdm import tqdm
 
-    with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
+    with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr,
+              disable=None) as bar:  # None: off when stderr is no terminal (a log file)
         def tick(step=None):
             if step:
                 bar.set_postfix_str(str(step), refresh=False)
@@ -482,8 +483,8 @@ def _cmd_uncertainty(args):
     case = read_case(args.case)
     model = load_model(args.model, _effects(args)) if args.model else None
     budget = read_budget(args.budget) if args.budget else default_budget()
-    with tqdm(desc="Monte Carlo", unit="trial", unit_scale=True, delay=1.0, leave=False,
-              file=sys.stderr) as bar:
+    with tqdm(desc="Monte Carlo (the trials, then each input's share)", unit="run",
+              unit_scale=True, delay=1.0, leave=False, file=sys.stderr, disable=None) as bar:
         def tick(trials, planned):
             bar.total = planned
             bar.update(trials)
@@ -515,7 +516,7 @@ def _cmd_effects(args):
     _emit(args, payload, text.effect_lines(effects))
 
 
-STANDALONE_HELP = ("each FMU carries the Python its physics needs (21-37 MB each), for FMI "
+STANDALONE_HELP = ("each FMU carries the Python its physics needs (about 21 MB each), for FMI "
                    "hosts on machines without Python (docs/fmu-hosts.md); without it the FMUs "
                    "are small and need this machine's Python")
 
@@ -571,7 +572,7 @@ def _counter_progress(label, unit, unit_scale=False):
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, unit_scale=unit_scale, delay=1.0, leave=False,
-              file=sys.stderr) as bar:
+              file=sys.stderr, disable=None) as bar:
         def update(done, total):
             bar.total = total
             bar.update(done - bar.n)
@@ -900,7 +901,7 @@ def _add_model_options(sub, model_help="starting model (TOML); without it the mo
                        required=False):
     sub.add_argument("--model", metavar="M.toml", help=model_help, required=required)
     sub.add_argument("--effects", metavar="F.py", action="append",
-                     help="Python file with your own effects (repeatable); see the README")
+                     help="Python file with your own effects (repeatable); see docs/own-effect.md")
 
 
 def _add_correction_option(sub):

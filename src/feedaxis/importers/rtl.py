@@ -50,6 +50,9 @@ def _sections(path, lines):
             sections[current].append((row, stripped))
         elif stripped:
             raise LineError(path, "text before the first section", row)
+    if not sections:
+        raise LineError(path, "no sections: the file is empty or not a .rtl export (one holds "
+                              + ", ".join(f"{name}::" for name in REQUIRED) + ")")
     for name in REQUIRED:
         if name not in sections:
             raise LineError(path, "missing section", field=f"{name}::")

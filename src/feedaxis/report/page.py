@@ -12,6 +12,8 @@ import re
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..stats.wording import p_text
 from ..text import micro
@@ -102,6 +104,7 @@ def _positioning_views(analysis):
     parts = [
         "<h2>Measurement against model</h2>",
         image(plots.measurement_vs_model(positioning.target_mm, result.measured_um,
+                                         positioning.direction,
                                          dense.position_mm, dense.predicted_um,
                                          dense.direction, dense.line, dense.per_run),
               "measurement against model"),
@@ -117,7 +120,8 @@ def _positioning_views(analysis):
         parts.append(f"<p>No spatial spectrum: {html.escape(details.spectrum_missing)}.</p>")
     else:
         parts.append(image(plots.spectrum(details.residual_spectrum, details.measured_spectrum,
-                                          details.marks, analysis.diagnosis.unexplained),
+                                          details.marks, analysis.diagnosis.unexplained,
+                                          positioning.target_mm),
                            "spectrum"))
     if panels:
         parts.append(image(plots.residual_against(panels),
@@ -162,18 +166,19 @@ def _residual_panels(positioning, residual_um):
         panels.append(("time (min)", positioning.time_s / 60.0, residual_um))
     if positioning.bidirectional:
         panels.append(("approach direction", positioning.direction, residual_um))
-    if positioning.ambient_C is not None:
+    if positioning.ambient_C is not None and np.ptp(positioning.ambient_C) > 0:
         panels.append(("ambient (°C)", positioning.ambient_C, residual_um))
     return panels
 
 
 def _compensation_html(result):
-    """Seed 003 Fig. 13 and the before/after figures, for a thermal model on a thermal case."""
+    """Fig. 13 of Rong et al. 2023 and the before/after figures, for a thermal model on a
+    thermal case."""
     if result is None:
         return []
     summary = result.summary()
     return [
-        "<h2>Thermal compensation (seed 003 Fig. 13)</h2>",
+        "<h2>Thermal compensation (as Rong et al. 2023, Fig. 13)</h2>",
         f"<p>The thermal error is each target's drift from its first visit; the correction is "
         f"the model's thermal prediction. Max {summary['max_before_um']:.3g} µm → "
         f"{summary['max_after_um']:.3g} µm ({100 * summary['reduction']:.1f} % less), RMS "
@@ -190,16 +195,18 @@ def _compensation_html(result):
 
 
 def _tracking_views(analysis):
-    """Seed 002's tracking error, the deviation against time and velocity, the spectrum."""
+    """The tracking error figures of Anang et al. 2017 (in µm, as the plots), the deviation
+    against time and velocity, the spectrum."""
     measurement, result, details = analysis.measurement, analysis.result, analysis.details
     comparison = analysis.comparison
     maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
     frequency_hz, amplitude_um = details.residual_spectrum
     return [
-        "<h2>Tracking error (seed 002)</h2>",
-        table(("after the first second", "measured (mm)", "predicted (mm)"),
-              [("max tracking error", f"{maximum['measured']:.5f}", f"{maximum['predicted']:.5f}"),
-               ("RMS tracking error", f"{rms['measured']:.5f}", f"{rms['predicted']:.5f}")]),
+        "<h2>Tracking error (as Anang et al. 2017 report it)</h2>",
+        table(("after the first second", "measured (µm)", "predicted (µm)"),
+              [(name, f"{1e3 * figure['measured']:.4g}", f"{1e3 * figure['predicted']:.4g}")
+               for name, figure in (("max tracking error", maximum),
+                                    ("RMS tracking error", rms))]),
         image(plots.error_against_time(measurement.time_s, result.measured_um,
                                        result.measured_um - result.residual_um,
                                        details.reversals_s), "tracking deviation against time"),
