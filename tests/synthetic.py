@@ -37,7 +37,7 @@ def micro_positions_mm():
 
 
 def micro_error_um(position_mm, effects):
-    """Seed 001-like errors of the named effects (µm)."""
+    """Liu 2023-like errors of the named effects (µm)."""
     error_um = np.zeros_like(position_mm)
     if "lead_error" in effects:
         error_um += geometry.lead_error_um(position_mm, 0.25, -0.51)
@@ -99,7 +99,7 @@ def iso_case(folder, seed, backlash_um=0.0, ambient_rise_K=0.0):
 
 
 def thermal_case(folder, seed, feed_mm_min=6000.0, params=None):
-    """Seed 003 Table 2 test with a lead error, from feedaxis.examples (physics + noise)."""
+    """Rong et al. 2023 Table 2 test with a lead error, from feedaxis.examples (physics + noise)."""
     return write_table2_case(folder, feed_mm_min, params, noise_um=THERMAL_NOISE_UM, seed=seed)
 
 

@@ -10,7 +10,7 @@ from feedaxis.physics import geometry, motor, mounting, scalar, servo, thermal
 
 
 def literal_eq10_step(T, Ta, p, v, nut_center_m, dt):
-    """Seed 003 Eq. 10 exactly as printed: whole cells, case by case (1-based n)."""
+    """Rong et al. 2023 Eq. 10 exactly as printed: whole cells, case by case (1-based n)."""
     N = p.n_cells
     r = p.conductivity_W_mK * dt / (p.density_kg_m3 * p.specific_heat_J_kgK * p.cell_length_m**2)
     src = 4 * dt / (np.pi * p.diameter_m**2 * p.density_kg_m3 * p.specific_heat_J_kgK)

@@ -3,6 +3,7 @@ every page a ``--help`` names, is a file of the repository; nothing a user reads
 folder beside the checkout, and the papers are cited by name (docs/references.md), not by
 the numbers of a private source list ("seed 00x")."""
 import argparse
+import os
 import re
 from pathlib import Path
 
@@ -52,8 +53,13 @@ def test_the_source_names_no_folder_outside_and_no_seed_number():
 
 
 def help_texts(parser, path=("feedaxis",)):
-    """(command path, --help text) of the parser and every subcommand below it."""
-    found = [(" ".join(path), parser.format_help())]
+    """(command path, --help text, not wrapped) of the parser and every subcommand below it."""
+    previous = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100000"   # argparse wraps at hyphens: keep file names whole
+    try:
+        found = [(" ".join(path), parser.format_help())]
+    finally:
+        os.environ.pop("COLUMNS") if previous is None else os.environ.update(COLUMNS=previous)
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for name, sub in action.choices.items():
@@ -89,7 +95,7 @@ def test_cli_output_cites_papers_by_name(tmp_path, capsys):
     time_s = np.arange(0.0, 2.0, 1e-3)
     reference_mm = 10.0 * np.sin(2 * np.pi * 0.4 * time_s)
     (tracking / "tracking.csv").write_text("time_s,reference_mm,actual_mm\n" + "".join(
-        f"{t!r},{r!r},{r - 0.01!r}\n" for t, r in zip(time_s, reference_mm)))
+        f"{t!r},{r!r},{r - 0.01!r}\n" for t, r in zip(time_s.tolist(), reference_mm.tolist())))
     printed = []
     for argv in (["effects"], ["compare", str(case)], ["compare", str(tracking)],
                  ["compare", str(tracking), "--json"]):

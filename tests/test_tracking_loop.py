@@ -74,7 +74,7 @@ def test_bad_servo_table_names_file_row_column_and_exits_2(tmp_path, capsys, old
 
 
 def test_table1_pid_figures_through_the_fits_simulation():
-    """Seed 002 Table 1 PID column through the tracking measurement's prediction (the fit's
+    """Anang et al. 2017 Table 1 PID column through the tracking measurement's prediction (the fit's
     path)."""
     for (frequency_hz, amplitude_mm), expected_mm in TABLE1_PID_MM.items():
         t = np.arange(int((1.0 + 2.0 / frequency_hz) / 1e-3)) * 1e-3

@@ -118,7 +118,7 @@ class Analysis:
 
 def compare(case, model, kind=None):
     """The figures of ``model`` (as it stands) on the ``kind`` samples of ``case``: ISO
-    230-2 for positioning, seed 002's tracking error for tracking (a dict for ``--json``)."""
+    230-2 for positioning, the tracking error of Anang et al. 2017 for tracking (a dict for ``--json``)."""
     measurement = measurement_of(case, kind or kinds_for([case], model)[0])
     return measurement.figures(evaluate(model, measurement))
 

@@ -116,9 +116,9 @@ def _demo_options(parser):
     parser.add_argument("--out", default="feedaxis-demo", help="output folder (default: feedaxis-demo)")
 
 
-@command("demo", help="the whole loop on the bundled seed 001 case, then the FMUs",
+@command("demo", help="the whole loop on the bundled Liu 2023 case, then the FMUs",
          description="Diagnose, add the missing effect, refit, until the verdict is adequate, "
-                     "on the bundled seed 001 micro ball screw; write the model, the report "
+                     "on the bundled Liu 2023 micro ball screw; write the model, the report "
                      "and the FMUs into --out and check the FMUs reproduce the fitted model.",
          options=_demo_options)
 def _cmd_demo(args):
@@ -252,7 +252,7 @@ def _compare_options(parser):
 @command("compare", help="the measurement's figures: measured against the model",
          description="Positioning: ISO 230-2 accuracy, repeatability, reversal and systematic "
                      "deviation of the measured runs and of what is left after the model, "
-                     "side by side. Tracking: seed 002's maximum and RMS tracking error "
+                     "side by side. Tracking: the maximum and RMS tracking error of Anang et al. 2017 "
                      "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):
@@ -305,7 +305,7 @@ def _compensate_options(parser):
 
 @command("compensate", help="thermal correction at each sample and the error it leaves",
          description="Apply the model's thermal effects (thermal_screw, ambient_expansion) as "
-                     "a compensation to a thermal case, as seed 003 §5.2: the thermal error is "
+                     "a compensation to a thermal case, as Rong et al. 2023 §5.2: the thermal error is "
                      "each target's drift from its first visit; print its max and RMS before "
                      "and after, per target and over time.",
          options=_compensate_options)
@@ -631,7 +631,7 @@ command_group("simulate", help="run a scenario on the co-simulated axis, write a
               description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
                           "scenario and write the result as a measurement case (docs/case-format.md), "
                           "ready for fit, diagnose and compare. iso230 and thermal run the servo "
-                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: seed 002's "
+                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: Anang et al. 2017's "
                           "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
                           "stops and keeps what was computed.",
               options=_simulate_options)
@@ -714,13 +714,13 @@ def _simulate_tracking_options(parser):
     parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
     parser.add_argument("--force-N", type=float,
                         help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
-                             "row of seed 002 Table 2)")
+                             "row of Anang et al. 2017 Table 2)")
 
 
-@scenario("tracking", help="sinusoidal tracking, PID or NPID (seed 002) -> tracking.csv",
+@scenario("tracking", help="sinusoidal tracking, PID or NPID (Anang et al. 2017) -> tracking.csv",
           description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
                       "after the first second. --spindle-rpm adds a milling force at the "
-                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, seed 002 "
+                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, Anang et al. 2017 "
                       "publishes none). axis.toml gets the [servo] table (the controller), not "
                       "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
                       "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).",

@@ -2,13 +2,13 @@
 
 The Liu 2023 micro ball screw (the demo case):
 
-Seed 001 publishes the fitted lead error f1 and eccentricity f2 of a C3 micro ball screw
+Liu 2023 publishes the fitted lead error f1 and eccentricity f2 of a C3 micro ball screw
 (lead 1 mm, stroke 5 mm, 5-phase stepper with 0.72° steps) and a validation run of 2,501
 laser points every 0.002 mm. The motor coefficients are not published: the reconstruction
 adds a motor ripple of 0.3 µm peak to valley (0.12 / 0.09 µm, so that with the noise the
 short-wave ripple is about the paper's 0.5 µm) and 0.05 µm Gaussian measurement noise.
 
-Seed 003 thermal tests: the X axis of Table 1 + Table 3 under a Table 2 loading (stroke
+Rong et al. 2023 thermal tests: the X axis of Table 1 + Table 3 under a Table 2 loading (stroke
 0-500 mm assumed), with a lead error and 1 µm noise, sampled by + runs over 11 targets.
 
 The laser example (``data/laser_example``, shipped for ``feedaxis import``): a Renishaw

@@ -99,7 +99,7 @@ def repeatability_text(repeatability):
 
 
 def comparison_lines(comparison):
-    """The figures of ``compare``: ISO 230-2 (positioning) or seed 002's (tracking)."""
+    """The figures of ``compare``: ISO 230-2 (positioning) or Anang et al. 2017's (tracking)."""
     return (_tracking_comparison_lines if comparison["kind"] == "tracking"
             else _iso_comparison_lines)(comparison)
 
@@ -122,11 +122,11 @@ def _iso_comparison_lines(comparison):
 
 
 def _tracking_comparison_lines(comparison):
-    """Seed 002's figures after the first second: measured, predicted; then the residual."""
+    """Anang et al.'s (2017) figures after the first second: measured, predicted; then the residual."""
     maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
     return "\n".join([
         f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
-        f"{', '.join(comparison['effects']) or '(seed 002 plant)'}",
+        f"{', '.join(comparison['effects']) or '(the plant of Anang et al. 2017)'}",
         f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
         f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
         f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",

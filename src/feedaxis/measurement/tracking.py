@@ -2,7 +2,7 @@
 
 The tracking effects (:mod:`feedaxis.effects.tracking`) act inside the closed loop: they set
 the parameters of one simulation (:func:`feedaxis.physics.servo.simulate`, the NpidServo
-FMU's physics) with the controller of ``[servo]``, the plant of seed 002 Eq. 1 where the
+FMU's physics) with the controller of ``[servo]``, the plant of Anang et al. 2017 Eq. 1 where the
 model has no ``servo_plant``. The model predicts ``actual_mm`` from ``reference_mm`` (and
 ``disturbance_N``); the deviation is actual - reference in µm. The residual is serially
 correlated, so the tests use the effective sample count n/τ and the uncertainties are
@@ -32,10 +32,10 @@ from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
 from ..stats.noise import Coloured
 from .base import Measurement, Shape, Trial
 
-SETTLING_S = 1.0  # seed 002 measures the tracking error after the first second
+SETTLING_S = 1.0  # Anang et al. 2017 measures the tracking error after the first second
 # The start-up left out of every comparison. A record that starts mid-motion differs from the
 # loop simulated from rest by the free response of the loop's state at the first sample; for
-# the loops of seed 002 and the tests (closed-loop poles near 250 rad/s) it falls within
+# the loops of Anang et al. 2017 and the tests (closed-loop poles near 250 rad/s) it falls within
 # 0.1 s to 5e-6 of its peak (what is left is the integrator's slow mode), so a 100 µm
 # start-up error leaves under 1 nm after 0.2 s. Profiling the state instead (fitting it as
 # nuisance parameters) was tried: on a single-sine reference the fit then moved the plant to
@@ -72,7 +72,7 @@ class Tracking(Measurement):
     location_key = "frequency_hz"
     location_unit = "Hz"
     coordinate_label = "time (s)"
-    reference_label = "seed 002 plant"
+    reference_label = "the plant of Anang et al. 2017"
     stages = ("drift", "effects", "structures")
     loose_share = 0.5
 
@@ -331,7 +331,7 @@ def _max_abs(fitted_um):
 class PeriodicForce(Shape):
     """The strongest sinusoid in the residual, over the whole record or during part of it:
     the loop's response to a periodic force at that frequency (e.g. a cutting force at the
-    tooth-passing frequency, seed 002 Table 2), switched on and off where the residual shows
+    tooth-passing frequency, Anang et al. 2017 Table 2), switched on and off where the residual shows
     it (a cut that lasts part of the record).
 
     Two searches of the whitened residual (:mod:`feedaxis.stats.coloured`): the record's

@@ -16,7 +16,7 @@ from .scalar import values, values_and_module
 def motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps):
     """Axial wavelength of the motor error: steps × step angle / 360° × lead (mm).
 
-    Seed 001 case: 10 × 0.72° / 360° × 1 mm = 0.02 mm.
+    Liu 2023 case: 10 × 0.72° / 360° × 1 mm = 0.02 mm.
     """
     require_positive("lead_mm", lead_mm)
     require_positive("step_angle_deg", step_angle_deg)

@@ -367,7 +367,7 @@ def sample_elongation_um(params, rise_K, screw_coord_m):
 def ambient_error_um(params, position_mm, ambient_delta_K):
     """TE_a = α·ΔT_a·(X - X_ref) in axis coordinates (µm), X_ref = P_f + offset.
 
-    Seed 003 Eq. 1 writes TE_a = α·ΔT_a·X_N with X_N the axis position: a machine whose
+    Rong et al. 2023 Eq. 1 writes TE_a = α·ΔT_a·X_N with X_N the axis position: a machine whose
     zero is the screw's fixed end. A screw held in its fixed bearing grows from there, so
     the nut moves by α·ΔT_a·(X - P_f) on either side of it (P_f of either sign, the same
     s = ±(X - P_f) of Eq. 15-16); ``ambient_reference_offset_mm`` moves the reference
@@ -419,7 +419,7 @@ class DutySegment:
 
 
 def table2_cycle(feed_mm_min, from_mm=0.0, to_mm=500.0):
-    """Seed 003 Table 2 loading: warm 84 min, cool 42 min, warm 42 min at one feed speed.
+    """Rong et al. 2023 Table 2 loading: warm 84 min, cool 42 min, warm 42 min at one feed speed.
 
     The stroke is not published; 0 to 500 mm is an assumption.
     """

@@ -315,7 +315,7 @@ def residual_against(panels):
 
 
 def thermal_compensation(target_mm, visit, time_s, thermal_error_um, left_um):
-    """Seed 003 Fig. 13: thermal error against position, one line per visit coloured by time,
+    """Rong et al. 2023 Fig. 13: thermal error against position, one line per visit coloured by time,
     without and with compensation on one scale; then the max of each visit against time."""
     figure, axes_list = plt.subplots(1, 3, figsize=(12, 3.6),
                                      gridspec_kw={"width_ratios": (1, 1, 1.1)})
