@@ -26,6 +26,7 @@ from ..stats import judge
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
 from ..stats.noise import PureError, ResidualMeanSquare, Serial
+from ..stats.aliasing import aliased
 from ..stats.spectrum import amplitude_spectrum, marked_wavelengths, resolvable_band_per_mm
 from .base import Measurement, Shape, Trial
 
@@ -89,10 +90,14 @@ class Positioning(Measurement):
 
     def unresolvable(self, effect):
         """Why the targets cannot resolve a periodic effect's wavelength (None when they
-        can): its cosine and sine at the targets, taken apart from an offset and a slope
-        (the lead error every positioning model carries), keep less than
-        ``RESOLVABLE_SHARE`` of their size. Irregular targets resolve wavelengths far below
-        their spacing (ISO 230-2 staggers them for this); targets at whole multiples of the
+        can), the one rule every command applies (diagnose passes the effect over, fit
+        calls its terms undetermined, comp-table leaves it out, the report does not mark it):
+        its cosine and sine at the targets, taken apart from an offset and a slope (the lead
+        error every positioning model carries), keep less than ``RESOLVABLE_SHARE`` of their
+        size, or the targets cannot tell its wavelength from another in the band they
+        resolve (:func:`feedaxis.stats.aliasing.aliased`). Irregular targets resolve
+        wavelengths below their spacing only when they are many (ISO 230-2 staggers them so
+        that a periodic error does not sit at one phase); targets at whole multiples of the
         wavelength resolve nothing."""
         wavelength_mm = self.wavelength_mm(effect)
         if not wavelength_mm:
@@ -106,7 +111,7 @@ class Positioning(Measurement):
                     f"cosine and sine at the {centres_mm.size} targets keep {share:.2f} of "
                     f"their size apart from an offset and a slope (at least "
                     f"{RESOLVABLE_SHARE} needed)")
-        return None
+        return aliased(centres_mm, wavelength_mm)
 
     def degenerate(self):
         if np.ptp(self.position_mm) < SAME_TARGET_MM and self.samples.time_s is None:
