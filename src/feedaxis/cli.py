@@ -330,7 +330,7 @@ def _import_options(parser):
     parser.add_argument("--columns", metavar="MAP", type=column_map,
                         help="a .csv whose headers are not recognised: "
                              "'HEADER=target:UNIT,HEADER=run1+:UNIT,HEADER=run1-:UNIT,...' "
-                             "(units mm, m, um, nm, in; a deviation defaults to um)")
+                             "(units mm, m, µm, nm, in; a deviation defaults to µm)")
 
 
 @command("import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
@@ -350,8 +350,8 @@ def _import_options(parser):
                 "        measured - target in µm; an empty cell = not measured; '#' comment\n"
                 "        lines; ';'- or tab-separated files may use a decimal comma.\n"
                 "        Vendor headers with units are recognised: 'Target (mm)',\n"
-                "        'Run 1 Fwd (um)', 'Run 1 Rev (um)' (fwd/forward/up, rev/reverse/\n"
-                "        bwd/backward/down; units mm, m, um, nm, in); any other layout\n"
+                "        'Run 1 Fwd (µm)', 'Run 1 Rev (µm)' (fwd/forward/up, rev/reverse/\n"
+                "        bwd/backward/down; units mm, m, µm, nm, in); any other layout\n"
                 "        is mapped with --columns.\n"
                 "See docs/compensation-tables.md and docs/case-format.md.",
          options=_import_options)
