@@ -264,7 +264,7 @@ def test_fanuc_tape_never_sets_the_reference_position():
     np.testing.assert_allclose(shifted.position_mm, fanuc.read(text).position_mm - 100.0)
     target_mm = np.arange(5.0, 306.0, 50.0)
     case = syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=0.0 * target_mm)
-    grid = build_table(case, Model((), {}), "fanuc", spacing_mm=50.0).position_mm
+    grid = build_table(case, Model((), {}), "fanuc", spacing_mm=50.0)[0].position_mm
     np.testing.assert_allclose(grid, np.arange(0.0, 351.0, 50.0))
 
 
@@ -366,7 +366,7 @@ def test_heidenhain_writes_the_cma_beside_the_com(tmp_path, fitted, capsys):
                  "heidenhain", "--out", str(out)]) == 0
     cma = (tmp_path / "X.CMA").read_text()
     assert "X.COM" in cma and "*" in cma
-    assert heidenhain.read(out.read_text()).size == 255
+    assert heidenhain.read(out.read_text()).size == heidenhain.MAX_POINTS  # 0.1 µm not reached
 
 
 @pytest.mark.parametrize("module, old, new, line", [

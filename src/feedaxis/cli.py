@@ -22,6 +22,7 @@ from .console import INTERRUPTED_EXIT, fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
 from .output import write_atomically
+from .comptable.table import TABLE_TOLERANCE_UM
 from .importers.wide_csv import column_map
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
 from .uncertainty.correction import MATERIAL, corrected_case, temperature_option
@@ -382,6 +383,18 @@ def _cmd_import(args):
     _emit(args, payload, "\n".join(lines))
 
 
+def _positive_tolerance(text):
+    """``--tolerance-um``: a number > 0 (µm)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < float("inf"):
+        raise InputError(f"expected a tolerance in µm > 0, got {text!r}",
+                         parameter="--tolerance-um")
+    return value
+
+
 def _comp_table_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "fitted model (TOML); needed unless --from-measurement")
@@ -390,8 +403,13 @@ def _comp_table_options(parser):
     parser.add_argument("--out", required=True, metavar="FILE",
                         help="the file to write (heidenhain: the .COM; its .CMA goes beside it)")
     parser.add_argument("--spacing-mm", type=float, metavar="S",
-                        help="distance between table points (default: lead / 8, widened to the "
-                             "controller's point limit; with --from-measurement the targets)")
+                        help="distance between table points (default from the model: the "
+                             "fewest points that reproduce it within --tolerance-um under the "
+                             "controller's grid rules; with --from-measurement the targets)")
+    parser.add_argument("--tolerance-um", type=_positive_tolerance, metavar="T",
+                        default=TABLE_TOLERANCE_UM,
+                        help=f"how closely the model's table must follow the model between "
+                             f"its points (default {TABLE_TOLERANCE_UM:g} µm)")
     parser.add_argument("--from-measurement", action="store_true",
                         help="the table from the measured means at the targets, not the model")
     parser.add_argument("--axis-id", metavar="ID",
@@ -430,7 +448,8 @@ def _cmd_comp_table(args):
                          parameter="--model")
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
-                               args.from_measurement, args.axis_id, args.force)
+                               args.from_measurement, args.axis_id, args.force,
+                               args.tolerance_um)
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
