@@ -163,19 +163,24 @@ def _cmd_fit(args):
         check_available(model, cases, kind)
         before = evaluate(starting, cases, kind)
         with _progress("fitting", " evaluations") as tick:
-            results.append((before, fit_with_artefacts(model, cases, progress=tick, kind=kind)))
+            result = fit_with_artefacts(model, cases, progress=tick, kind=kind)
+        alone = evaluate(result.fitted_model(), cases, kind)
+        results.append((before, result, alone.rms_um))
     if args.out:
         write_atomically(args.out, results[0][1].fitted_model().to_toml())
-    _emit_each(args, [(result.kind, _fit_payload(before, result),
-                       text.fit_lines(result, before.rms_um, args.out))
-                      for before, result in results])
+    _emit_each(args, [(result.kind, _fit_payload(before, result, alone_um),
+                       text.fit_lines(result, before.rms_um, args.out, alone_um))
+                      for before, result, alone_um in results])
 
 
-def _fit_payload(before, result):
-    """The --json of a fit: the model's parameters, and the measurement's artefacts apart."""
+def _fit_payload(before, result, alone_um):
+    """The --json of a fit: the model's parameters, and the measurement's artefacts apart;
+    ``rms_after_um`` with the artefacts fitted beside the model, ``rms_model_alone_um`` the
+    saved model on every sample (what compare gives)."""
     fitted = result.fitted_model()
     keys = set(fitted.parameter_keys)
     return {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
+            "rms_model_alone_um": alone_um,
             "effects": list(fitted.names), "params": fitted.values,
             "uncertainties": {name: result.uncertainties[name] for name in fitted.names},
             "undetermined": {k: v for k, v in result.undetermined.items() if k in keys},
