@@ -151,6 +151,7 @@ def _fit_options(parser):
 def _cmd_fit(args):
     from .fit import check_available, evaluate, fit_with_artefacts
     from .measurement import kinds_for
+    from .plausibility import warn_implausible_fit
 
     if args.out:
         check_writable_target(args.out)
@@ -165,6 +166,7 @@ def _cmd_fit(args):
         with _progress("fitting", " evaluations") as tick:
             result = fit_with_artefacts(model, cases, progress=tick, kind=kind)
         alone = evaluate(result.fitted_model(), cases, kind)
+        warn_implausible_fit(result.fitted_model())
         results.append((before, result, alone.rms_um))
     if args.out:
         write_atomically(args.out, results[0][1].fitted_model().to_toml())

@@ -18,9 +18,10 @@ MIN_SCATTER_UM = 1e-3
 # No machine axis a tracking trace comes from travels 10 m back and forth; positions in µm
 # (mm × 1000) do.
 MAX_TRACKING_TRAVEL_MM = 1e4
-# No ball-screw or linear drive pushes 10 kN of friction; a trace in µm fits about 1000 × the
-# friction it has.
-MAX_FRICTION_N = 1e4
+# Friction takes a few per cent of a feed drive's thrust, and ball-screw axes push at most a
+# few tens of kN: 5 kN of friction is beyond any; a trace in µm fits about 1000 × the
+# friction it has (1 N becomes 1 kN).
+MAX_FRICTION_N = 5e3
 
 
 class ImplausibleWarning(UserWarning):
@@ -74,6 +75,17 @@ def friction_problem(friction_N):
         return (f"a friction of {friction_N:.3g} N is beyond any feed drive: tracking.csv "
                 "positions in µm? (divide by 1000)")
     return None
+
+
+def warn_implausible_fit(model):
+    """Issue an :class:`ImplausibleWarning` for each fitted force no drive has (a parameter
+    in newtons, ``..._N``, beyond ``MAX_FRICTION_N``)."""
+    problems = [f"{problem} ({name}.{parameter})" for name in model.names
+                for parameter, value in model.values[name].items() if parameter.endswith("_N")
+                if (problem := friction_problem(value))]
+    for problem in problems:
+        warnings.warn(problem, ImplausibleWarning, stacklevel=2)
+    return problems
 
 
 def warn_implausible(case):
