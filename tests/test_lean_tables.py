@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
-from feedaxis.case import read_case, write_case
+import synthetic as syn
+from feedaxis.case import read_case
 from feedaxis.cli import main
 from feedaxis.comptable import CONTROLLERS
 from feedaxis.comptable.table import TABLE_TOLERANCE_UM, position_error_um
 from feedaxis.effects import CATALOG, Model
-from feedaxis.physics import geometry
 
 LINEAR = {"lead_error": {"offset_um": 2.0, "slope_um_per_mm": -0.02},
           "backlash": {"backlash_um": 4.0}}
@@ -29,22 +29,8 @@ def case(tmp_path_factory):
     """81 targets 4.9 mm apart from 0 mm up (Fanuc's grid through 0 mm then needs no point
     below it), a 10 mm lead, 3 bidirectional cycles (the values do not matter: the tables
     below come from models written by hand)."""
-    rng = np.random.default_rng(2)
-    targets = np.sort(0.5 + 4.9 * np.arange(81) + rng.uniform(-0.5, 0.5, 81))
-    columns = {"target_mm": [], "error_um": [], "direction": [], "run": []}
-    for run in (1, 2, 3):
-        for direction in (1.0, -1.0):
-            error = (geometry.lead_error_um(targets, 2.0, -0.02)
-                     + geometry.eccentricity_error_um(targets, 10.0, 0.3, -0.2)
-                     + geometry.backlash_error_um(direction, 4.0)
-                     + rng.normal(0.0, 0.2, targets.size))
-            for name, values in zip(columns, (targets, error, np.full(81, direction),
-                                              np.full(81, run))):
-                columns[name] += list(values)
-    folder = tmp_path_factory.mktemp("lean") / "case"
-    write_case(folder, {"name": "lean", "screw": {"lead_mm": 10.0}},
-               positioning={k: np.array(v) for k, v in columns.items()})
-    return folder
+    return syn.staggered_case(tmp_path_factory.mktemp("lean") / "case", 2, (0.3, -0.2), 0.2,
+                              first_mm=0.5)
 
 
 def table(capsys, case, values, controller, out):

@@ -9,15 +9,14 @@ import json
 import re
 from pathlib import Path
 
-import numpy as np
 import pytest
 
+import synthetic as syn
 from feedaxis.analysis import analyse
-from feedaxis.case import read_case, write_case
+from feedaxis.case import read_case
 from feedaxis.cli import main
 from feedaxis.effects import CATALOG, load_model
 from feedaxis.examples import LASER_EXAMPLE
-from feedaxis.physics import geometry
 
 ROOT = Path(__file__).resolve().parent.parent
 THREE = ("--add", "lead_error", "--add", "assembly_eccentricity", "--add", "backlash")
@@ -95,22 +94,8 @@ def test_the_docs_say_what_the_example_does():
 def resolvable(tmp_path_factory):
     """81 targets 4.9 mm apart over 392 mm (staggered by up to ±0.5 mm), 10 mm lead,
     3 bidirectional cycles: lead error, a 1.5 µm eccentricity, B = 4 µm, 0.3 µm noise."""
-    rng = np.random.default_rng(12)
-    targets = np.sort(4.9 * np.arange(81) + rng.uniform(-0.5, 0.5, 81))
-    columns = {"target_mm": [], "error_um": [], "direction": [], "run": []}
-    for run in (1, 2, 3):
-        for direction in (1.0, -1.0):
-            error = (geometry.lead_error_um(targets, 2.0, -0.02)
-                     + geometry.eccentricity_error_um(targets, 10.0, 1.2, -0.9)
-                     + geometry.backlash_error_um(direction, 4.0)
-                     + rng.normal(0.0, 0.3, targets.size))
-            for name, values in zip(columns, (targets, error, np.full(81, direction),
-                                              np.full(81, run))):
-                columns[name] += list(values)
-    folder = tmp_path_factory.mktemp("resolvable")
-    write_case(folder / "case", {"name": "dense", "screw": {"lead_mm": 10.0}},
-               positioning={k: np.array(v) for k, v in columns.items()})
-    return folder / "case"
+    return syn.staggered_case(tmp_path_factory.mktemp("resolvable") / "case", 12, (1.2, -0.9),
+                              0.3)
 
 
 def test_a_resolvable_eccentricity_is_named_determined_and_tabled(resolvable, tmp_path, capsys):
