@@ -1,8 +1,10 @@
 """Reading, checking and writing a measurement case, format version 1.2 (docs/case-format.md).
 
-A case is one folder: ``axis.toml`` (required), ``positioning.csv`` and/or ``tracking.csv``,
-optionally ``duty.csv``. Every rule of the format is checked; a broken file raises one
-:class:`CaseError` naming the file, the row (1-based, header = row 1) and the column.
+A case is one folder: ``axis.toml`` (required), the file of each kind of measurement it
+holds (each kind reads its own: :mod:`feedaxis.kinds`), optionally ``duty.csv``. Every rule
+of the format is checked; a broken file raises one :class:`CaseError` naming the file, the
+row (1-based, header = row 1) and the column. This module holds what every file shares:
+the axis, the duty, the CSV reader and writer.
 """
 from __future__ import annotations
 
@@ -12,22 +14,21 @@ import math
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import tomli_w
 
+from . import kinds
 from .errors import (InputError, finite_float, finite_value, read_text, read_toml,
                      shown_value, toml_key_line)
 from .output import umask_mode, writing
 from .physics.geometry import SUPPORTS
-from .physics.servo import loop_budget_problem
 from .physics.thermal import DutySegment
 from .plausibility import warn_implausible
 
-AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE = (
-    "axis.toml", "positioning.csv", "duty.csv", "tracking.csv")
+AXIS_FILE, DUTY_FILE = "axis.toml", "duty.csv"
 
 SCREW_KEYS = {
     "lead_mm": "positive", "length_m": "positive", "diameter_m": "positive",
@@ -66,14 +67,10 @@ PHYSICAL_RANGE = {
     "loop_step_s": (1e-7, 0.01),
 }
 
-POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
-                       "time_s": False, "ambient_C": False, "material_C": False}
 # What a column accepts, said when a cell of it is not a number at all
 ACCEPTED = {"direction": "+1 or -1", "run": "a whole number >= 1"}
 DUTY_COLUMNS = {"start_s": True, "duration_s": True, "feed_mm_min": True, "from_mm": True,
                 "to_mm": True, "ambient_C": False}
-TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
-                    "disturbance_N": False}
 
 
 class CaseError(InputError, ValueError):
@@ -104,30 +101,6 @@ class Axis:
 
 
 @dataclass(frozen=True)
-class Positioning:
-    """positioning.csv as arrays; ``direction`` is ±1 (+1 when the column is absent);
-    ``ambient_C`` the air and ``material_C`` the machine temperature (°C) when given."""
-
-    target_mm: np.ndarray
-    error_um: np.ndarray
-    direction: np.ndarray
-    run: np.ndarray | None = None
-    time_s: np.ndarray | None = None
-    ambient_C: np.ndarray | None = None
-    has_direction: bool = False
-    material_C: np.ndarray | None = None
-
-    @property
-    def size(self):
-        return self.target_mm.size
-
-    @property
-    def bidirectional(self):
-        """True when both approach directions were measured."""
-        return self.has_direction and {-1.0, 1.0} <= set(np.unique(self.direction))
-
-
-@dataclass(frozen=True)
 class Duty:
     """duty.csv: consecutive segments from t = 0, with the optional ambient per segment."""
 
@@ -140,24 +113,23 @@ class Duty:
 
 
 @dataclass(frozen=True)
-class Tracking:
-    """tracking.csv as arrays."""
-
-    time_s: np.ndarray
-    reference_mm: np.ndarray
-    actual_mm: np.ndarray
-    disturbance_N: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
 class Case:
-    """One measurement case folder."""
+    """One measurement case folder: its axis, its ``samples`` by kind of measurement
+    ({kind: samples}, as each kind reads its file) and the duty of a thermal test.
+
+    ``case.<kind>`` reads the samples of a registered kind (None when the case holds
+    none): a kind's own modules address its samples by its name.
+    """
 
     folder: Path
     axis: Axis
-    positioning: Positioning | None = None
+    samples: dict = field(default_factory=dict)
     duty: Duty | None = None
-    tracking: Tracking | None = None
+
+    def __getattr__(self, name):
+        if name.startswith("_") or name not in kinds.kinds():
+            raise AttributeError(f"'Case' object has no attribute {name!r}")
+        return self.__dict__.get("samples", {}).get(name)
 
     @property
     def name(self):
@@ -165,8 +137,13 @@ class Case:
 
     @property
     def is_thermal(self):
-        """A thermal case: duty.csv and time-stamped positions."""
-        return self.duty is not None and self.positioning is not None
+        """A thermal case: duty.csv beside time-stamped samples (its kind's reader refuses
+        a duty without them)."""
+        return self.duty is not None
+
+    def with_samples(self, kind, samples):
+        """This case with the samples of ``kind`` replaced by ``samples``."""
+        return replace(self, samples={**self.samples, kind: samples})
 
 
 def read_case(folder):
@@ -175,24 +152,27 @@ def read_case(folder):
     if not folder.is_dir():
         raise CaseError(folder, "not a case folder (expected a folder holding axis.toml)")
     axis = read_axis(folder / AXIS_FILE)
-    length_mm = axis.screw["length_m"] * 1e3 if "length_m" in axis.screw else None
-    duty = read_duty(folder / DUTY_FILE, length_mm) if (folder / DUTY_FILE).exists() else None
-    positioning = tracking = None
-    if (folder / POSITIONING_FILE).exists():
-        positioning = read_positioning(folder / POSITIONING_FILE,
-                                       duty.end_s if duty is not None else None, length_mm)
-    elif duty is not None:
-        raise CaseError(folder / DUTY_FILE, f"a thermal test needs {POSITIONING_FILE} "
-                                            "with time_s beside duty.csv")
-    if (folder / TRACKING_FILE).exists():
-        tracking = read_tracking(folder / TRACKING_FILE,
-                                 axis.servo.get("loop_step_s", DEFAULT_LOOP_STEP_S))
-    if positioning is None and tracking is None:
-        raise CaseError(folder, f"a case holds {POSITIONING_FILE}, {TRACKING_FILE} or both; "
-                                "neither was found")
-    case = Case(folder, axis, positioning, duty, tracking)
+    duty = (read_duty(folder / DUTY_FILE, length_mm(axis)) if (folder / DUTY_FILE).exists()
+            else None)
+    registered = kinds.kinds()
+    samples = {}
+    for name, cls in registered.items():
+        read = cls.read(folder, axis, duty)
+        if read is not None:
+            samples[name] = read
+    if not samples:
+        files = ", ".join(cls.file for cls in registered.values())
+        raise CaseError(folder, f"a case holds {files} or both; neither was found"
+                        if len(registered) == 2 else
+                        f"a case holds one or more of {files}; none was found")
+    case = Case(folder, axis, samples, duty)
     warn_implausible(case)
     return case
+
+
+def length_mm(axis):
+    """The screw's length (mm), None when axis.toml does not give it."""
+    return axis.screw["length_m"] * 1e3 if "length_m" in axis.screw else None
 
 
 def read_axis(path):
@@ -436,36 +416,6 @@ def _first_bad(path, mask, rows, column, message):
         raise CaseError(path, message, rows[bad[0]], column)
 
 
-def read_positioning(path, duty_end_s=None, length_mm=None):
-    """Read positioning.csv: target and deviation, optional direction, run, time, ambient.
-
-    With ``duty_end_s`` (a thermal case) every sample needs a time within the duty; with
-    ``length_mm`` (the screw's length) the targets must span no more than the screw.
-    """
-    path = Path(path)
-    values, rows = _read_csv(path, POSITIONING_COLUMNS)
-    _check_travel(path, values, rows, ("target_mm",), length_mm)
-    direction = values.get("direction")
-    if direction is not None:
-        _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
-                   "direction must be +1 or -1")
-    run = values.get("run")
-    if run is not None:
-        _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
-                   "run must be a whole number >= 1")
-    time_s = values.get("time_s")
-    if time_s is not None:
-        _first_bad(path, time_s < 0, rows, "time_s", "time_s must be >= 0 (seconds since the "
-                                                     "start of duty.csv)")
-    if duty_end_s is not None:
-        _check_within_duty(path, time_s, rows, duty_end_s)
-    return Positioning(values["target_mm"], values["error_um"],
-                       direction if direction is not None else np.ones_like(values["target_mm"]),
-                       run.astype(int) if run is not None else None, time_s,
-                       values.get("ambient_C"), has_direction=direction is not None,
-                       material_C=values.get("material_C"))
-
-
 def read_duty(path, length_mm=None):
     """Read duty.csv: contiguous segments from t = 0, durations > 0, feeds >= 0; a segment
     at a feed travels (``from_mm`` != ``to_mm``), one standing still stays put; with
@@ -499,24 +449,6 @@ def read_duty(path, length_mm=None):
     return Duty(segments, values.get("ambient_C"))
 
 
-def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
-    """Read tracking.csv: strictly increasing time, reference and actual position.
-
-    The control loop steps ``loop_step_s`` through every interval, so samples too far apart
-    for it (:func:`feedaxis.physics.servo.loop_budget_problem`) are refused at the row.
-    """
-    path = Path(path)
-    values, rows = _read_csv(path, TRACKING_COLUMNS)
-    time_s = values["time_s"]
-    _first_bad(path, np.concatenate(([False], np.diff(time_s) <= 0)), rows, "time_s",
-               "time_s must be strictly increasing")
-    problem = loop_budget_problem(time_s, loop_step_s)
-    if problem is not None:
-        raise CaseError(path, problem[1], rows[problem[0]], "time_s")
-    return Tracking(time_s, values["reference_mm"], values["actual_mm"],
-                    values.get("disturbance_N"))
-
-
 def _check_travel(path, values, rows, columns, length_mm):
     """Raise unless the positions in ``columns`` span at most the screw's ``length_mm``."""
     if length_mm is None:
@@ -530,16 +462,7 @@ def _check_travel(path, values, rows, columns, length_mm):
                               "([screw] length_m of axis.toml)", rows[row], columns[column])
 
 
-def _check_within_duty(path, time_s, rows, duty_end_s):
-    if time_s is None:
-        raise CaseError(path, "a thermal case (duty.csv present) needs time_s on every sample",
-                        "1", "time_s")
-    _first_bad(path, time_s > duty_end_s * (1 + 1e-9), rows, "time_s",
-               f"sample lies after the end of duty.csv ({duty_end_s:g} s): the duty does not "
-               "match the samples' time span")
-
-
-def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, check=None):
+def write_case(folder, axis_values, duty=None, check=None, **samples):
     """Write a case folder atomically: all files appear together or none does.
 
     Parameters
@@ -549,12 +472,20 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, 
         meanwhile, the first to finish wins and this one is refused).
     axis_values : dict
         The content of axis.toml (``name``, ``screw``, ``motor``, optionally ``servo``).
-    positioning, duty, tracking : dict of {column: array}, optional
-        Columns of each CSV, written in the given order.
+    duty : dict of {column: array}, optional
+        Columns of duty.csv, written in the given order.
     check : callable, optional
         Called with the staged folder before it is published; what it raises leaves
         nothing behind.
+    **samples : dict of {column: array}
+        Per kind of measurement (``positioning=...``), the columns of its file.
     """
+    registered = kinds.kinds()
+    unknown = set(samples) - set(registered)
+    if unknown:
+        raise TypeError(f"no kind of measurement {', '.join(sorted(unknown))}; registered: "
+                        f"{', '.join(registered)}")
+    files = {registered[kind].file: columns for kind, columns in samples.items()}
     folder = Path(folder)
     if os.path.lexists(folder):
         raise CaseError(folder, "already exists; choose a new case folder")
@@ -563,8 +494,7 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, 
         staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
         try:
             (staging / AXIS_FILE).write_text(tomli_w.dumps(axis_values), encoding="utf-8")
-            for name, columns in ((POSITIONING_FILE, positioning), (DUTY_FILE, duty),
-                                  (TRACKING_FILE, tracking)):
+            for name, columns in {**files, DUTY_FILE: duty}.items():
                 if columns is not None:
                     _write_csv(staging / name, columns)
             if check is not None:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from . import __version__, text
 from .case import read_case
+from .comptable import CONTROLLERS
 from .console import INTERRUPTED_EXIT, fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
@@ -27,7 +28,6 @@ from .importers.wide_csv import column_map
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
 from .uncertainty.correction import MATERIAL, corrected_case, temperature_option
 
-COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
              "+ tracking.csv; see docs/case-format.md")
 
@@ -203,14 +203,14 @@ def _case_and_model(args):
 def _emit_each(args, outputs):
     """Print [(kind, payload, text)], one per kind of measurement compared: one output as
     it is (its JSON with ``measurement``), several under ``measurements``, each headed."""
-    from .measurement import KINDS
+    from .kinds import kind as kind_named
 
     payloads = [{**payload, "measurement": kind} for kind, payload, _ in outputs]
     if len(outputs) == 1:
         _emit(args, payloads[0], outputs[0][2])
         return
     _emit(args, {"measurements": payloads},
-          "\n\n".join(f"== {kind} ({KINDS[kind].file}) ==\n{lines}"
+          "\n\n".join(f"== {kind} ({kind_named(kind).file}) ==\n{lines}"
                        for kind, _, lines in outputs))
 
 
@@ -405,10 +405,12 @@ def _positive_tolerance(text):
 def _comp_table_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "fitted model (TOML); needed unless --from-measurement")
-    parser.add_argument("--controller", required=True, choices=COMP_TABLE_CONTROLLERS,
+    parser.add_argument("--controller", required=True, choices=list(CONTROLLERS),
                         help="the controller whose file, unit and sign convention to write")
     parser.add_argument("--out", required=True, metavar="FILE",
-                        help="the file to write (heidenhain: the .COM; its .CMA goes beside it)")
+                        help="the file to write" + "".join(
+                            f" ({c.name}: {c.out_note})" for c in CONTROLLERS.values()
+                            if c.out_note))
     parser.add_argument("--spacing-mm", type=float, metavar="S",
                         help="distance between table points (default from the model: the "
                              "fewest points that reproduce it within --tolerance-um under the "
@@ -420,8 +422,9 @@ def _comp_table_options(parser):
     parser.add_argument("--from-measurement", action="store_true",
                         help="the table from the measured means at the targets, not the model")
     parser.add_argument("--axis-id", metavar="ID",
-                        help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
-                             "axis number 1, fanuc axis 1: the defaults)")
+                        help="axis name in the file (" + ", ".join(
+                            f"{c.name} {c.axis_note}" for c in CONTROLLERS.values()
+                            if c.axis_note) + ": the defaults)")
     parser.add_argument("--force", action="store_true",
                         help="write the table even when it is refused (it had to leave out "
                              "effects the data cannot determine, or it is expected to raise A, "
@@ -431,8 +434,8 @@ def _comp_table_options(parser):
 
 
 @command("comp-table", help="pitch-error compensation table for a CNC controller",
-         description="Write the table a controller loads (linuxcnc, siemens, fanuc, "
-                     "heidenhain, beckhoff, mach4) from the fitted model: lead, eccentricity, "
+         description=f"Write the table a controller loads ({', '.join(CONTROLLERS)}) "
+                     "from the fitted model: lead, eccentricity, "
                      "motor and sag in both directions, backlash as a direction-dependent "
                      "table, thermal effects never (a fixed table cannot follow them). With "
                      "--from-measurement: the classical table of the measured means. Then "
@@ -444,11 +447,9 @@ def _comp_table_options(parser):
                      "anyway. See docs/compensation-tables.md.",
          options=_comp_table_options)
 def _cmd_comp_table(args):
-    from .comptable import comp_table, summary_lines
+    from .comptable import check_case, comp_table, summary_lines
 
-    case = read_case(args.case)
-    if case.positioning is None:
-        raise InputError("a compensation table needs positioning.csv", path=case.folder)
+    case = check_case(read_case(args.case))
     case = corrected_case(case, args.correct_to_20C)
     if not (args.model or args.from_measurement):
         raise InputError("give the fitted model (--model M.toml) or --from-measurement",

@@ -9,6 +9,7 @@ import math
 import re
 
 from .effects.base import BasisEffect
+from .kinds import kind, part
 from .stats.wording import p_text
 
 
@@ -114,39 +115,13 @@ def repeatability_text(repeatability):
 
 
 def comparison_lines(comparison):
-    """The figures of ``compare``: ISO 230-2 (positioning) or Anang et al. 2017's (tracking)."""
-    return (_tracking_comparison_lines if comparison["kind"] == "tracking"
-            else _iso_comparison_lines)(comparison)
-
-
-def _iso_comparison_lines(comparison):
-    """ISO 230-2 figures, measured against the residual after the model."""
-    lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
-             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
-             f"{'ISO 230-2 figure (µm)':32s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
-    for figure in comparison["figures"].values():
-        explained = figure["explained"]
-        lines.append(f"{figure['name']:32s} {figure['measured_um']:10.4g} "
-                     f"{figure['residual_um']:10.4g} "
-                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
-    lines.append(f"{'RMS':32s} {comparison['rms_measured_um']:10.4g} "
-                 f"{comparison['rms_residual_um']:10.4g}")
-    if not comparison["bidirectional"]:
-        lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
-    return "\n".join(lines)
-
-
-def _tracking_comparison_lines(comparison):
-    """Anang et al.'s (2017) figures after the first second: measured, predicted; then the residual."""
-    maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
-    return "\n".join([
-        f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
-        f"{', '.join(comparison['effects']) or '(the plant of Anang et al. 2017)'}",
-        f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
-        f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
-        f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
-        f"residual actual - predicted: max {comparison['residual_max_um']:.4g} µm, RMS "
-        f"{comparison['residual_rms_um']:.4g} µm"])
+    """The figures of ``compare``, as the kind of measurement compared writes them (its
+    ``text`` part: ISO 230-2 for positioning, Anang et al. 2017's for tracking), else one line per
+    figure."""
+    lines = part(kind(comparison["kind"]), "text")
+    if lines:
+        return lines(comparison)
+    return "\n".join(f"{key}: {value}" for key, value in comparison.items())
 
 
 def compensation_lines(result, out_path=None):

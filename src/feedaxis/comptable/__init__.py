@@ -1,10 +1,10 @@
 """Pitch-error compensation tables for CNC controllers, from the fitted model or the
 measured means, verified on the measured case before they are loaded.
 
-One module per controller (``linuxcnc``, ``siemens``, ``fanuc``, ``heidenhain``,
-``beckhoff``, ``mach4``), each with ``write(table, axis_id) -> text`` and
-``read(text) -> CompTable`` (the table as that controller applies it), its limits, its sign
-convention (``SIGN``) and how to load the file (``LOAD``).
+One module per controller, each defining its :class:`~.base.Controller` (``CONTROLLER``:
+``write(table, axis_id) -> text``, ``read(text) -> CompTable`` as that controller applies
+it, its limits, grid rules, sign convention, how to load the file, companion files and
+notes), registered in :data:`CONTROLLERS`, which the command line and its help read.
 """
 from __future__ import annotations
 
@@ -13,17 +13,28 @@ from pathlib import Path
 
 import numpy as np
 
-from ..case import POSITIONING_FILE
 from ..errors import InputError
 from ..iso230 import target_clusters
-from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, safety, siemens
-from .base import reference_index
-from .table import (NEVER_IN_TABLE, TABLE_TOLERANCE_UM, CompTable,
-                    default_spacing_mm, from_measurement, from_model, grid_mm, lean_table)
+from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
+from .base import Controller
+from .table import (NEVER_IN_TABLE, TABLE_TOLERANCE_UM, CompTable, default_spacing_mm,
+                    from_measurement, from_model, grid_mm, lean_table)
 from .verify import between_targets, verify
 
-CONTROLLERS = {module.NAME: module for module in (linuxcnc, siemens, fanuc, heidenhain,
-                                                  beckhoff, mach4)}
+# The one registry of controllers (the command line's choices and help read it). The table's
+# safety and the positioning samples load when a table is made (the fit behind them takes
+# seconds to import), so the command line can read this registry at start-up.
+CONTROLLERS = {module.CONTROLLER.name: module.CONTROLLER
+               for module in (linuxcnc, siemens, fanuc, heidenhain, beckhoff, mach4)}
+POSITIONING_FILE = "positioning.csv"
+
+
+def check_case(case):
+    """``case`` when it holds what a table is made from (positioning.csv), else
+    :class:`InputError`."""
+    if case.positioning is None:
+        raise InputError(f"a compensation table needs {POSITIONING_FILE}", path=case.folder)
+    return case
 # A controller without a point limit gets at most a point every lead / 16 from the model:
 # a once-per-revolution error followed within 2 % of its amplitude (1 − cos(π/16))
 LEAN_POINTS_PER_LEAD = 16
@@ -41,34 +52,34 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False,
     / 8, within the controller's point limit). A table from the measurement on a controller
     that takes free positions uses the targets themselves unless ``spacing_mm`` is given.
     """
-    module = CONTROLLERS[controller]
+    chosen = CONTROLLERS[controller]
     target_mm = case.positioning.target_mm
-    first_mm, last_mm = _span_mm(module, target_mm)
+    first_mm, last_mm = _span_mm(chosen, target_mm)
     if from_measured:
         count = target_clusters(target_mm)[0].size
         if count < 2:
             raise InputError(f"a table from the measurement needs at least two targets; every "
                              f"sample is at {target_mm[0]:g} mm", column="target_mm",
                              path=case.folder / POSITIONING_FILE)
-        if spacing_mm is None and not module.EQUIDISTANT:
+        if spacing_mm is None and not chosen.equidistant:
             return from_measurement(case), None
         spacing_mm = spacing_mm or (target_mm.max() - target_mm.min()) / max(count - 1, 1)
-        return from_measurement(case, _grid(module, first_mm, last_mm, spacing_mm)), None
+        return from_measurement(case, _grid(chosen, first_mm, last_mm, spacing_mm)), None
     if spacing_mm:
-        return from_model(case, model, _grid(module, first_mm, last_mm, spacing_mm)), None
-    most = module.MAX_POINTS or _count_grid(module, first_mm, last_mm, int(np.ceil(
+        return from_model(case, model, _grid(chosen, first_mm, last_mm, spacing_mm)), None
+    most = chosen.max_points or _count_grid(chosen, first_mm, last_mm, int(np.ceil(
         (last_mm - first_mm) / case.axis.lead_mm * LEAN_POINTS_PER_LEAD)) + 1).size
-    lean = lean_table(case, model, lambda count: _count_grid(module, first_mm, last_mm, count),
+    lean = lean_table(case, model, lambda count: _count_grid(chosen, first_mm, last_mm, count),
                       most, (first_mm, last_mm), tolerance_um)
     return lean.table, lean
 
 
-def _count_grid(module, first_mm, last_mm, count):
+def _count_grid(controller, first_mm, last_mm, count):
     """At most ``count`` equidistant points over the span under the controller's grid rules
     (a grid through 0 mm may need one interval more), spaced by whole micrometres."""
     for intervals in (count - 1, count - 2):
         spacing_mm = np.ceil((last_mm - first_mm) / max(intervals, 1) * 1e3) / 1e3
-        points = _grid(module, first_mm, last_mm, spacing_mm)
+        points = _grid(controller, first_mm, last_mm, spacing_mm)
         if points.size <= count or intervals <= 1:
             return points
     return points
@@ -78,25 +89,27 @@ def safe_table(case, model, position_mm):
     """The table of ``model`` at ``position_mm`` (:func:`.table.from_model`) without the
     effects a table must not use (:func:`.safety.unsafe_effects`), which ``excluded`` names
     with why."""
+    from . import safety
+
     unsafe = safety.unsafe_effects(case, model)
     table = from_model(case, safety.usable_model(model, unsafe), position_mm)
     return replace(table, excluded={**safety.reasons_by_effect(unsafe), **table.excluded})
 
 
-def _span_mm(module, target_mm):
+def _span_mm(controller, target_mm):
     """(first, last) position the table covers: the targets, and 0 mm for a controller that
-    counts its points from the reference position there (``GRID_THROUGH_ZERO``)."""
+    counts its points from the reference position there (``grid_through_zero``)."""
     first_mm, last_mm = float(target_mm.min()), float(target_mm.max())
-    if getattr(module, "GRID_THROUGH_ZERO", False):
+    if controller.grid_through_zero:
         return min(first_mm, 0.0), max(last_mm, 0.0)
     return first_mm, last_mm
 
 
-def _grid(module, first_mm, last_mm, spacing_mm):
+def _grid(controller, first_mm, last_mm, spacing_mm):
     """Table points every ``spacing_mm`` over the span from :func:`_span_mm`, through 0 mm
-    for a ``GRID_THROUGH_ZERO`` controller."""
+    for a ``grid_through_zero`` controller."""
     spacing_mm = round(float(spacing_mm), 6)
-    if getattr(module, "GRID_THROUGH_ZERO", False) and spacing_mm > 0:
+    if controller.grid_through_zero and spacing_mm > 0:
         first_mm = spacing_mm * np.floor(round(first_mm / spacing_mm, 9))
     return grid_mm(first_mm, last_mm, spacing_mm)
 
@@ -127,29 +140,35 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     with warnings saying what it risks.
 
     Returns ({path: text} of the files to write, ``out_path`` and any companion such as
-    Heidenhain's ``.CMA``; the report dict for printing and ``--json``).
+    a controller's ``companions``; the report dict for printing and ``--json``).
     """
-    module = CONTROLLERS[controller]
-    axis_id = axis_id or module.DEFAULT_AXIS_ID
+    from . import safety
+
+    chosen = CONTROLLERS[controller]
+    axis_id = axis_id or chosen.default_axis_id
     unsafe = safety.unsafe_effects(case, model)
     usable = safety.usable_model(model, unsafe)
     table, lean = build_table(case, usable, controller, spacing_mm, from_measured, tolerance_um)
-    text = module.write(table, axis_id)
-    applied = module.read(text)
+    text = chosen.write(table, axis_id)
+    applied = chosen.read(text)
     out_path = Path(out_path)
-    files = {**getattr(module, "companions", lambda *_: {})(out_path, axis_id), out_path: text}
+    files = {**chosen.companions(out_path, axis_id), out_path: text}
     report = {"controller": controller, "source": table.source, "points": table.size,
               "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),
               "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
               "included": list(table.included),
               "excluded": {} if from_measured else {**safety.reasons_by_effect(unsafe),
                                                     **table.excluded},
-              "sign": module.SIGN, "load": module.LOAD, **verify(case, applied),
+              "sign": chosen.sign, "load": chosen.load, **verify(case, applied),
               "between_targets": between_targets(case, usable, applied),
               "files": [str(path) for path in files]}
+    if chosen.suffix and out_path.suffix.upper() != chosen.suffix:
+        report["warnings"].append(
+            f"{chosen.name} finds a compensation table by its {chosen.suffix} ending: "
+            f"{out_path.name} will not be loaded; name it {out_path.stem}{chosen.suffix}")
     report["tolerance_um"] = None if lean is None else lean.tolerance_um
     report["deviation_um"] = None if lean is None else lean.deviation_um
-    report["notes"] = _lean_notes(lean, module) + _notes(table, module)
+    report["notes"] = _lean_notes(lean, chosen) + _notes(table, chosen)
     if from_measured and unsafe:
         report["notes"].append(f"the model's view between the targets leaves out "
                                f"{', '.join(unsafe)}: the data cannot determine them")
@@ -162,7 +181,7 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     return files, report
 
 
-def _lean_notes(lean, module):
+def _lean_notes(lean, controller):
     """How the model's table was sized: the tolerance and what it reached."""
     if lean is None:
         return []
@@ -172,29 +191,21 @@ def _lean_notes(lean, module):
                 f"within {lean.tolerance_um:g} µm between them (largest deviation "
                 f"{lean.deviation_um:.3g} µm, before the controller's rounding); --spacing-mm "
                 "sets the spacing, --tolerance-um the tolerance"]
-    return [f"{lean.table.size} points, the most allowed here, leave up to "
+    limit = (f"{controller.name} takes at most {controller.max_points}" if controller.max_points
+             else f"a point every lead / {LEAN_POINTS_PER_LEAD} at most")
+    return [f"{lean.table.size} points, the most allowed here ({limit}), leave up to "
             f"{lean.deviation_um:.3g} µm of the model ({held}) between them, over the "
-            f"{lean.tolerance_um:g} µm tolerance"
-            + (f" ({module.NAME} takes at most {module.MAX_POINTS})" if module.MAX_POINTS
-               else " (a point every lead / 8 at most)")]
+            f"{lean.tolerance_um:g} µm tolerance"]
 
 
-def _notes(table, module):
+def _notes(table, controller):
     """What limits this table: figures in-sample for measured means, the controller's
     reference and machine data (the point limit is said by :func:`_lean_notes`)."""
     notes = []
     if table.source == "measurement":
         notes.append("the table is the measured means at the targets: the figures after are "
                      "in-sample there (optimistic); between the targets it is blind")
-    if module.NAME in ("siemens", "fanuc"):
-        notes.append(f"values are relative to the table point nearest 0 mm "
-                     f"({table.position_mm[reference_index(table.position_mm)]:g} mm), where "
-                     "the control references; the figures are unchanged by that offset")
-    if module.NAME == "siemens":
-        notes.append(f"needs MD38000 $MA_MM_ENC_COMP_MAX_POINTS >= {table.size}"
-                     + (f" and MD18342 $MN_MM_CEC_MAX_POINTS[0] and [1] >= {table.size}"
-                        if table.bidirectional else ""))
-    return notes
+    return notes + controller.notes(table)
 
 
 def summary_lines(report):

@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..case import AXIS_FILE, PHYSICAL_RANGE, POSITIONING_FILE
+from ..case import AXIS_FILE, PHYSICAL_RANGE
 from ..errors import InputError
 from ..fmu_map import ISO_REFERENCE_TEMPERATURE_C
 from ..physics.thermal import ThermalScrewParams, ambient_error_um
@@ -99,6 +99,8 @@ def correction_for(case, temperature):
         column = SAMPLE_COLUMN[temperature]
         temperature_C = getattr(case.positioning, column)
         if temperature_C is None:
+            from ..measurement.positioning import POSITIONING_FILE  # SciPy-heavy: on error
+
             raise InputError(f"{OPTION} {temperature} needs the {column} column; or give the "
                              f"material temperature in °C, e.g. {OPTION} 21.4",
                              path=case.folder / POSITIONING_FILE, column=column)
@@ -121,5 +123,5 @@ def corrected_case(case, temperature):
     correction = correction_for(case, temperature)
     positioning = case.positioning
     error_um = positioning.error_um - correction.expansion_um(positioning.target_mm)
-    return replace(case, positioning=replace(positioning,
-                                             error_um=np.asarray(error_um, dtype=float)))
+    return case.with_samples("positioning", replace(positioning,
+                                                    error_um=np.asarray(error_um, dtype=float)))
