@@ -68,7 +68,7 @@ def left_between_targets(case, applied):
 
 
 def run_comp_table(tmp_path, folder, *options):
-    out = tmp_path / "table.out"
+    out = tmp_path / "table.COM"   # the ending Heidenhain's control needs; the others take any
     code = main(["comp-table", str(folder), "--out", str(out), "--json", *options])
     return code, out
 
@@ -400,3 +400,13 @@ def test_mach4_map_reads_back_and_refuses_a_short_line():
     np.testing.assert_allclose(back.reverse_um, table.reverse_um)
     with pytest.raises(LineError, match="line 7"):
         mach4.read(text.replace("1 10.000000 0.002000 0.000000", "1 10.000000 0.002000"))
+
+
+def test_a_heidenhain_table_not_named_com_is_written_with_a_warning(tmp_path, fitted, capsys):
+    folder, model = fitted
+    out = tmp_path / "tab.heidenhain"
+    assert main(["comp-table", str(folder), "--model", str(model), "--controller",
+                 "heidenhain", "--out", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert out.exists() and any(".COM ending" in w and "tab.COM" in w
+                                for w in report["warnings"])

@@ -73,6 +73,6 @@ def test_the_tolerance_is_met_between_the_points_as_the_controller_reads_them(
         assert worst <= TABLE_TOLERANCE_UM + ROUNDING_UM[controller]
         assert "the fewest" in report["notes"][0]
     else:
-        assert report["points"] == module.MAX_POINTS
+        assert report["points"] == module.max_points
         assert "the most allowed here" in report["notes"][0]
         assert worst <= report["deviation_um"] + ROUNDING_UM[controller]

@@ -258,7 +258,7 @@ def test_residual_against_direction_is_two_categories(eccentric):
 
 
 def test_a_constant_ambient_draws_no_panel(tmp_path):
-    from feedaxis.report.page import _residual_panels
+    from feedaxis.report.positioning import _residual_panels
 
     case = fifty_case(tmp_path / "case")
     still = case.positioning.__class__(**{**case.positioning.__dict__,

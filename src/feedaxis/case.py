@@ -26,7 +26,6 @@ from .errors import (InputError, finite_float, finite_value, read_text, read_tom
 from .output import umask_mode, writing
 from .physics.geometry import SUPPORTS
 from .physics.thermal import DutySegment
-from .plausibility import warn_implausible
 
 AXIS_FILE, DUTY_FILE = "axis.toml", "duty.csv"
 
@@ -165,9 +164,7 @@ def read_case(folder):
         raise CaseError(folder, f"a case holds {files} or both; neither was found"
                         if len(registered) == 2 else
                         f"a case holds one or more of {files}; none was found")
-    case = Case(folder, axis, samples, duty)
-    warn_implausible(case)
-    return case
+    return Case(folder, axis, samples, duty)
 
 
 def length_mm(axis):

@@ -3,7 +3,8 @@ likely unit slip named (deviations in mm, targets in m, positions in µm).
 
 A value beyond any physical axis is refused by the reader (:data:`feedaxis.case.PHYSICAL_RANGE`);
 these are values inside those limits that a laser test or a drive trace still cannot give.
-Each check returns the message or None; :func:`warn_implausible` issues them as
+Each check takes plain arrays and returns its messages; a kind of measurement runs its own
+when it reads its file and :func:`warn_implausible` issues them as
 :class:`ImplausibleWarning`.
 """
 from __future__ import annotations
@@ -88,15 +89,8 @@ def warn_implausible_fit(model):
     return problems
 
 
-def warn_implausible(case):
-    """Issue an :class:`ImplausibleWarning` for each implausible value of ``case``."""
-    problems = []
-    if case.positioning is not None:
-        samples = case.positioning
-        problems += positioning_problems(samples.target_mm, samples.direction,
-                                         samples.error_um, case.axis.lead_mm)
-    if case.tracking is not None:
-        problems += tracking_problems(case.tracking.reference_mm)
+def warn_implausible(problems):
+    """Issue each of ``problems`` (a kind's messages) as an :class:`ImplausibleWarning`."""
     for problem in problems:
-        warnings.warn(problem, ImplausibleWarning, stacklevel=2)
+        warnings.warn(problem, ImplausibleWarning, stacklevel=3)
     return problems

@@ -25,11 +25,12 @@ from scipy.optimize import minimize_scalar
 from .. import kinds
 from ..case import DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, length_mm
 from ..iso230 import FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, target_clusters
+from ..plausibility import positioning_problems, warn_implausible
 from ..stats import judge
+from ..stats.aliasing import aliased
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
 from ..stats.noise import PureError, ResidualMeanSquare, Serial
-from ..stats.aliasing import aliased
 from ..stats.spectrum import amplitude_spectrum, resolvable_band_per_mm
 from .base import Measurement, Shape, Trial
 
@@ -125,7 +126,7 @@ def iso_comparison_lines(comparison):
         lines.append(f"{figure['name']:32s} {figure['measured_um']:10.4g} "
                      f"{figure['residual_um']:10.4g} "
                      f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
-    lines.append(f"{'RMS':32s} {comparison['rms_measured_um']:10.4g} "
+    lines.append(f"{'RMS (the model alone)':32s} {comparison['rms_measured_um']:10.4g} "
                  f"{comparison['rms_residual_um']:10.4g}")
     if not comparison["bidirectional"]:
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
@@ -152,8 +153,12 @@ class Positioning(Measurement):
                 raise CaseError(Path(folder) / DUTY_FILE, f"a thermal test needs {cls.file} "
                                                           "with time_s beside duty.csv")
             return None
-        return read_positioning(path, duty.end_s if duty is not None else None,
-                                length_mm(axis))
+        samples = read_positioning(path, duty.end_s if duty is not None else None,
+                                   length_mm(axis))
+        warn_implausible(positioning_problems(samples.target_mm, samples.direction,
+                                              samples.error_um, axis.lead_mm))
+        return samples
+
     location_key = "wavelength_mm"
     location_unit = "mm"
     coordinate_label = "target position (mm)"

@@ -27,6 +27,7 @@ import scipy
 from .. import kinds
 from ..case import (AXIS_FILE, DEFAULT_LOOP_STEP_S, CaseError, _first_bad, _read_csv)
 from ..fmu_map import servo_to_fmu
+from ..plausibility import tracking_problems, warn_implausible
 from ..physics.servo import ServoParams, check_runs, loop_budget_problem, simulate, step_counts
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
                               peak_p_value, short_time_peak, spikes)
@@ -149,7 +150,9 @@ class Tracking(Measurement):
         path = Path(folder) / cls.file
         if not path.exists():
             return None
-        return read_tracking(path, axis.servo.get("loop_step_s", DEFAULT_LOOP_STEP_S))
+        samples = read_tracking(path, axis.servo.get("loop_step_s", DEFAULT_LOOP_STEP_S))
+        warn_implausible(tracking_problems(samples.reference_mm))
+        return samples
 
     @property
     def noise(self):
