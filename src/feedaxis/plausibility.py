@@ -16,6 +16,8 @@ import numpy as np
 # A laser interferometer resolves about 1 nm; a positioning test whose repeat scatter is
 # below this is deviations written in mm (µm / 1000).
 MIN_SCATTER_UM = 1e-3
+# Below a picometre the scatter is rounding: data computed without noise, not a unit slip
+ROUNDING_UM = 1e-6
 # No machine axis a tracking trace comes from travels 10 m back and forth; positions in µm
 # (mm × 1000) do.
 MAX_TRACKING_TRAVEL_MM = 1e4
@@ -46,11 +48,11 @@ def positioning_problems(target_mm, direction, error_um, lead_mm):
     """The messages of a positioning test's implausible values (empty when none)."""
     problems = []
     scatter_um = replicate_scatter_um(target_mm, direction, error_um)
-    if scatter_um is not None and 0 < scatter_um < MIN_SCATTER_UM:
+    if scatter_um is not None and ROUNDING_UM < scatter_um < MIN_SCATTER_UM:
         problems.append(f"positioning.csv: the deviations scatter {scatter_um * 1e3:.3g} nm "
                         "between repeats, below what a laser resolves: error_um in mm? "
                         "(multiply by 1000)")
-    elif scatter_um is None and 0 < np.max(np.abs(error_um)) < MIN_SCATTER_UM:
+    elif scatter_um is None and ROUNDING_UM < np.max(np.abs(error_um)) < MIN_SCATTER_UM:
         problems.append(f"positioning.csv: every deviation is under {MIN_SCATTER_UM * 1e3:g} nm: "
                         "error_um in mm? (multiply by 1000)")
     span_mm = float(np.ptp(target_mm))
