@@ -36,8 +36,9 @@ class Controller:
     it), ``notes(table) -> [str]`` (what the controller needs of the machine for this
     table), ``quantum_um`` (the value's resolution, µm; 0 when finer than a nanometre), and
     for the command line's help ``out_note`` (what ``--out`` names) and ``axis_note`` (the
-    default axis name as the manual writes it); ``suffix`` the file ending the control finds
-    its table by ("" when any name serves).
+    default axis name as the manual writes it); ``axis_id_pattern``, the regular expression
+    an ``--axis-id`` must match whole (what the file holds there: no newline, no word more); ``suffix``
+    the file ending the control finds its table by ("" when any name serves).
     """
 
     name: str
@@ -55,6 +56,7 @@ class Controller:
     out_note: str = ""
     axis_note: str = ""
     suffix: str = ""
+    axis_id_pattern: str = r"[A-Za-z0-9_]{1,16}"
 
     @property
     def module(self):
