@@ -49,8 +49,8 @@ TEETH = 2
 # with the assumed force_constant_N_per_V = 100; it then gives 0.2211 mm at 0.7 Hz, 20 mm,
 # 1500 rpm (paper 0.2217), but falls faster with spindle speed than the paper.
 CUTTING_FORCE_N = 1.4
-# Positioning tests (iso230, thermal) run the servo with a type-1 plant (a0 = 0): with seed
-# 002's a0 = 193.3 1/s² and its tiny integral gain the loop keeps a static error of about
+# Positioning tests (iso230, thermal) run the servo with a type-1 plant (a0 = 0): with the
+# a0 = 193.3 1/s² of Anang et al. 2017 and its tiny integral gain the loop keeps a static error of about
 # target/364 (1.4 mm at 500 mm), which no CNC axis shows and which would swamp the errors
 # a positioning test is about. Tracking keeps the published plant; --set overrides both.
 POSITIONING_SERVO = {"NpidServo": {"plant_stiffness_per_s2": 0.0}}

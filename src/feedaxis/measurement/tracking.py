@@ -8,8 +8,8 @@ model has no ``servo_plant``. The model predicts ``actual_mm`` from ``reference_
 correlated, so the tests use the effective sample count n/τ and the uncertainties are
 widened by τ. Structure is searched in time: a periodic force over the record or part of
 it, a steady force, error locked to the velocity reversals; a slow drift is a nuisance of
-every diagnosis, single-sample spikes are left out as outliers. ``compare`` gives seed
-002's maximum and RMS tracking error after the first second.
+every diagnosis, single-sample spikes are left out as outliers. ``compare`` gives the maximum and
+RMS tracking error after the first second, as Anang et al. 2017 report them.
 
 A record need not start at rest: the loop is simulated from rest on the first reference
 sample over the whole record, but its samples in the first ``START_WINDOW_S`` (the start-up)
