@@ -1,8 +1,10 @@
-"""Reading, checking and writing a measurement case, format version 1.1 (../shared/data-format.md).
+"""Reading, checking and writing a measurement case, format version 1.2 (docs/case-format.md).
 
 A case is one folder: ``axis.toml`` (required), ``positioning.csv`` and/or ``tracking.csv``,
-optionally ``duty.csv``. Every rule of the format is checked; a broken file raises one
-:class:`CaseError` naming the file, the row (1-based, header = row 1) and the column.
+optionally ``duty.csv``; or a circular test of two axes: ``axis.toml`` with ``[circular]``
+and one ``[axes.NAME]`` per axis, and ``circular.csv``. Every rule of the format is
+checked; a broken file raises one :class:`CaseError` naming the file, the row (1-based,
+header = row 1) and the column.
 """
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ import errno
 import io
 import math
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -25,8 +28,8 @@ from .physics.geometry import SUPPORTS
 from .physics.servo import loop_budget_problem
 from .physics.thermal import DutySegment
 
-AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE = (
-    "axis.toml", "positioning.csv", "duty.csv", "tracking.csv")
+AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE, CIRCULAR_FILE = (
+    "axis.toml", "positioning.csv", "duty.csv", "tracking.csv", "circular.csv")
 
 SCREW_KEYS = {
     "lead_mm": "positive", "length_m": "positive", "diameter_m": "positive",
@@ -63,6 +66,8 @@ PHYSICAL_RANGE = {
     "kp_V_per_mm": (1e-9, 1e6), "ki_V_per_mm_s": (0.0, 1e6), "kd_V_s_per_mm": (0.0, 1e6),
     "ko_per_mm": (0.0, 1e3), "e_max_mm": (1e-6, 1e3), "force_constant_N_per_V": (1e-6, 1e7),
     "loop_step_s": (1e-7, 0.01),
+    "radius_mm": (1e-3, 1e5), "center_mm": (-1e5, 1e5), "deviation_um": (-1e5, 1e5),
+    "angle_deg": (0.0, 360.0),
 }
 
 POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
@@ -71,6 +76,10 @@ DUTY_COLUMNS = {"start_s": True, "duration_s": True, "feed_mm_min": True, "from_
                 "to_mm": True, "ambient_C": False}
 TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
                     "disturbance_N": False}
+CIRCULAR_COLUMNS = {"angle_deg": True, "deviation_um": True, "direction": True, "run": False,
+                    "time_s": False}
+CIRCULAR_KEYS = ("axes", "radius_mm", "feed_mm_min", "center_mm")
+AXIS_NAME = re.compile(r"[A-Za-z0-9]{1,8}")
 
 
 class CaseError(InputError, ValueError):
@@ -145,14 +154,61 @@ class Tracking:
 
 
 @dataclass(frozen=True)
+class CircularTest:
+    """``[circular]`` of axis.toml: the plane's two axes (angle 0° along + the first, 90°
+    along + the second), the nominal radius, the programmed feed, the centre (machine
+    coordinates, in the order of ``axes``)."""
+
+    axes: tuple
+    radius_mm: float
+    feed_mm_min: float
+    center_mm: tuple
+
+
+@dataclass(frozen=True)
+class Machine:
+    """The axis.toml of a circular case: its name, ``[circular]`` and one :class:`Axis`
+    per ``[axes.NAME]`` (in the order of ``circular.axes``)."""
+
+    name: str
+    circular: CircularTest
+    axes: dict
+
+    def axis(self, name):
+        return self.axes[name]
+
+
+@dataclass(frozen=True)
+class Circular:
+    """circular.csv as arrays: nominal angle (deg), radial deviation (µm, + outside), the
+    direction (+1 counter-clockwise), and the optional run and time."""
+
+    angle_deg: np.ndarray
+    deviation_um: np.ndarray
+    direction: np.ndarray
+    run: np.ndarray | None = None
+    time_s: np.ndarray | None = None
+
+    @property
+    def size(self):
+        return self.angle_deg.size
+
+    @property
+    def bidirectional(self):
+        """True when both directions were measured."""
+        return {-1.0, 1.0} <= set(np.unique(self.direction))
+
+
+@dataclass(frozen=True)
 class Case:
-    """One measurement case folder."""
+    """One measurement case folder; for a circular case ``axis`` is the :class:`Machine`."""
 
     folder: Path
     axis: Axis
     positioning: Positioning | None = None
     duty: Duty | None = None
     tracking: Tracking | None = None
+    circular: Circular | None = None
 
     @property
     def name(self):
@@ -169,6 +225,8 @@ def read_case(folder):
     folder = Path(folder)
     if not folder.is_dir():
         raise CaseError(folder, "not a case folder (expected a folder holding axis.toml)")
+    if _is_circular(folder):
+        return _read_circular_case(folder)
     axis = read_axis(folder / AXIS_FILE)
     length_mm = axis.screw["length_m"] * 1e3 if "length_m" in axis.screw else None
     duty = read_duty(folder / DUTY_FILE, length_mm) if (folder / DUTY_FILE).exists() else None
@@ -195,8 +253,7 @@ def read_axis(path):
     tables = {}
     for key, value in data.items():
         if key == "name":
-            if not isinstance(value, str):
-                raise CaseError(path, "name must be a string", toml_key_line(text, key), key)
+            _check_name(path, text, value)
         elif key in TABLES and isinstance(value, dict):
             tables[key] = _check_table(path, text, key, value)
         else:
@@ -206,8 +263,121 @@ def read_axis(path):
     if "screw" not in tables or "lead_mm" not in tables["screw"]:
         raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
                         column="screw.lead_mm")
-    servo = _check_servo(path, text, tables["servo"]) if "servo" in tables else {}
-    return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}), servo)
+    return _axis_of(path, text, data.get("name", ""), tables)
+
+
+def _axis_of(path, text, name, tables, prefix=""):
+    servo = (_check_servo(path, text, tables["servo"], prefix) if "servo" in tables else {})
+    return Axis(name, tables.get("screw", {}), tables.get("motor", {}), servo)
+
+
+def _check_name(path, text, value):
+    if not isinstance(value, str):
+        raise CaseError(path, "name must be a string", toml_key_line(text, "name"), "name")
+
+
+def _is_circular(folder):
+    """A circular case: circular.csv, or ``[circular]`` in axis.toml."""
+    if (folder / CIRCULAR_FILE).exists():
+        return True
+    if not (folder / AXIS_FILE).is_file():
+        return False
+    try:
+        return "circular" in read_axis_values(folder / AXIS_FILE)[1]
+    except CaseError:
+        return False
+
+
+def _read_circular_case(folder):
+    machine = read_machine(folder / AXIS_FILE)
+    for name in (POSITIONING_FILE, DUTY_FILE, TRACKING_FILE):
+        if (folder / name).exists():
+            raise CaseError(folder / name, f"a circular case holds {CIRCULAR_FILE} alone "
+                                           f"({name} belongs to a one-axis case)")
+    if not (folder / CIRCULAR_FILE).exists():
+        raise CaseError(folder / CIRCULAR_FILE, "missing: axis.toml has [circular], so the "
+                                                "case needs circular.csv")
+    return Case(folder, machine, circular=read_circular(folder / CIRCULAR_FILE))
+
+
+def read_machine(path):
+    """Read the axis.toml of a circular case: ``name``, ``[circular]`` and one
+    ``[axes.NAME]`` (``screw``, ``motor``, ``servo``) per axis of ``[circular] axes``."""
+    path = Path(path)
+    text, data = read_axis_values(path)
+    for key, value in data.items():
+        if key == "name":
+            _check_name(path, text, value)
+        elif key not in ("circular", "axes") or not isinstance(value, dict):
+            raise CaseError(path, _unknown_key_message(key, ["name", "[circular]",
+                                                             "[axes.NAME]"])
+                            + ("; a circular case describes each axis under [axes.NAME]"
+                               if key in TABLES else ""), toml_key_line(text, key), key)
+    if "circular" not in data:
+        raise CaseError(path, "a circular case needs [circular] (axes, radius_mm, "
+                              "feed_mm_min, center_mm)", column="circular")
+    circular = _check_circular(path, text, data["circular"])
+    given = data.get("axes", {})
+    for name in given:
+        if name not in circular.axes:
+            raise CaseError(path, f"[axes.{name}] is not one of [circular] axes "
+                                  f"({', '.join(circular.axes)})",
+                            toml_key_line(text, f"axes.{name}"), f"axes.{name}")
+    axes = {name: _machine_axis(path, text, name, given.get(name, {}))
+            for name in circular.axes}
+    return Machine(data.get("name", ""), circular, axes)
+
+
+def _machine_axis(path, text, name, values):
+    """The :class:`Axis` of ``[axes.NAME]``: ``screw``, ``motor``, ``servo`` with the keys
+    and limits of a one-axis case."""
+    prefix = f"axes.{name}"
+    if not isinstance(values, dict):
+        raise CaseError(path, "must be a table ([axes.NAME.screw], ...)",
+                        toml_key_line(text, name, "axes"), prefix)
+    tables = {}
+    for key, value in values.items():
+        if key not in TABLES or not isinstance(value, dict):
+            raise CaseError(path, _unknown_key_message(key, ["[screw]", "[motor]", "[servo]"]),
+                            toml_key_line(text, key, prefix) or toml_key_line(
+                                text, f"{prefix}.{key}"), f"{prefix}.{key}")
+        tables[key] = _check_table(path, text, key, value, prefix)
+    return _axis_of(path, text, name, tables, prefix)
+
+
+def _check_circular(path, text, values):
+    """``[circular]``: two distinct axis names, radius > 0, feed > 0, a centre per axis."""
+    def fail(key, message):
+        raise CaseError(path, message, toml_key_line(text, key, "circular")
+                        or toml_key_line(text, "circular"), f"circular.{key}")
+
+    for key in values:
+        if key not in CIRCULAR_KEYS:
+            fail(key, _unknown_key_message(key, list(CIRCULAR_KEYS)))
+    for key in CIRCULAR_KEYS:
+        if key not in values:
+            fail(key, f"[circular] {key} is required")
+    axes = values["axes"]
+    if (not isinstance(axes, list) or len(axes) != 2
+            or not all(isinstance(a, str) and AXIS_NAME.fullmatch(a) for a in axes)):
+        fail("axes", "must be two axis names of 1 to 8 letters or digits, e.g. "
+                     f'["X", "Y"], got {shown_value(axes)}')
+    if axes[0] == axes[1]:
+        fail("axes", f"the two axes must differ, got {axes[0]!r} twice")
+    for key in ("radius_mm", "feed_mm_min"):
+        problem = _value_problem("positive", key, values[key])
+        if problem:
+            fail(key, f"{key} {problem}, got {shown_value(values[key])}")
+    center = values["center_mm"]
+    if not isinstance(center, list) or len(center) != 2:
+        fail("center_mm", f"must be two coordinates (mm), one per axis, got "
+                          f"{shown_value(center)}")
+    for value in center:
+        problem = _value_problem("finite", "center_mm", value)
+        if problem:
+            fail("center_mm", f"center_mm {problem}, got {shown_value(value)}")
+    return CircularTest(tuple(axes), float(values["radius_mm"]), float(values["feed_mm_min"]),
+                        tuple(float(v) for v in center))
 
 
 def read_axis_values(path):
@@ -222,13 +392,15 @@ def read_axis_values(path):
         raise CaseError(path, error.message, error.row) from None
 
 
-def _check_servo(path, text, servo):
+def _check_servo(path, text, servo, prefix=""):
     """The keys ``[servo]`` needs for its controller; ``loop_step_s`` defaulted."""
     required = SERVO_REQUIRED + (NPID_REQUIRED if servo.get("controller") == "npid" else ())
+    table = f"{prefix}.servo" if prefix else "servo"
     for key in required:
         if key not in servo:
-            raise CaseError(path, f"[servo] {key} is required for a {servo.get('controller')} "
-                                  "controller", toml_key_line(text, "servo"), f"servo.{key}")
+            raise CaseError(path, f"[{table}] {key} is required for a "
+                                  f"{servo.get('controller')} controller",
+                            toml_key_line(text, table), f"{table}.{key}")
     return {"loop_step_s": DEFAULT_LOOP_STEP_S, **servo}
 
 
@@ -240,10 +412,11 @@ def _read_text(path):
         raise CaseError(path, error.message, error.row) from None
 
 
-def _check_table(path, text, table, values):
+def _check_table(path, text, table, values, prefix=""):
     known = TABLES[table]
+    where = f"{prefix}.{table}" if prefix else table
     for key, value in values.items():
-        row, column = toml_key_line(text, key, table), f"{table}.{key}"
+        row, column = toml_key_line(text, key, where), f"{where}.{key}"
         if key not in known:
             raise CaseError(path, _unknown_key_message(key, list(known)), row, column)
         problem = _value_problem(known[key], key, value)
@@ -508,6 +681,56 @@ def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
                     values.get("disturbance_N"))
 
 
+def read_circular(path):
+    """Read circular.csv: angle in [0, 360), deviation, direction ±1, optional run and time.
+
+    The rows of one run and direction cover the circle once in the order taken: each angle
+    steps the way of the direction (less than half a turn), at most one turn in all, and
+    ``time_s`` increases.
+    """
+    path = Path(path)
+    values, rows = _read_csv(path, CIRCULAR_COLUMNS)
+    angle, direction = values["angle_deg"], values["direction"]
+    _first_bad(path, angle >= 360.0, rows, "angle_deg",
+               "angle_deg must be below 360 (0 <= angle < 360)")
+    _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
+               "direction must be +1 (counter-clockwise) or -1 (clockwise)")
+    run = values.get("run")
+    if run is not None:
+        _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
+                   "run must be a whole number >= 1")
+    time_s = values.get("time_s")
+    if time_s is not None:
+        _first_bad(path, time_s < 0, rows, "time_s", "time_s must be >= 0")
+    group = direction * 1e9 + (run if run is not None else 1)
+    for key in np.unique(group):
+        index = np.flatnonzero(group == key)
+        _check_pass(path, rows, index, angle[index], direction[index[0]],
+                    None if time_s is None else time_s[index])
+    return Circular(angle, values["deviation_um"], direction,
+                    run.astype(int) if run is not None else None, time_s)
+
+
+def _check_pass(path, rows, index, angle_deg, direction, time_s):
+    """One run in one direction: steps the direction's way, at most one turn, time rising."""
+    steps = np.mod(direction * np.diff(angle_deg), 360.0)
+    bad = np.flatnonzero((steps <= 0.0) | (steps >= 180.0))
+    if bad.size:
+        raise CaseError(path, "the angle must step "
+                              f"{'up' if direction > 0 else 'down'} from the previous row of "
+                              f"this run and direction ({'+1' if direction > 0 else '-1'}), "
+                              "by less than half a turn", rows[index[bad[0] + 1]], "angle_deg")
+    turned = np.cumsum(steps)
+    over = np.flatnonzero(turned >= 360.0)
+    if over.size:
+        raise CaseError(path, "this run and direction cover more than one turn; number "
+                              "repeated turns with the run column", rows[index[over[0] + 1]],
+                        "angle_deg")
+    if time_s is not None:
+        _first_bad(path, np.diff(time_s) <= 0, [rows[i] for i in index[1:]], "time_s",
+                   "time_s must increase within a run and direction")
+
+
 def _check_travel(path, values, rows, columns, length_mm):
     """Raise unless the positions in ``columns`` span at most the screw's ``length_mm``."""
     if length_mm is None:
@@ -530,7 +753,8 @@ def _check_within_duty(path, time_s, rows, duty_end_s):
                "match the samples' time span")
 
 
-def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, check=None):
+def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, check=None,
+               circular=None):
     """Write a case folder atomically: all files appear together or none does.
 
     Parameters
@@ -540,8 +764,9 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, 
         meanwhile, the first to finish wins and this one is refused).
     axis_values : dict
         The content of axis.toml (``name``, ``screw``, ``motor``, optionally ``servo``).
-    positioning, duty, tracking : dict of {column: array}, optional
-        Columns of each CSV, written in the given order.
+    positioning, duty, tracking, circular : dict of {column: array}, optional
+        Columns of each CSV, written in the given order (``circular`` with an
+        ``axis_values`` holding ``circular`` and ``axes``).
     check : callable, optional
         Called with the staged folder before it is published; what it raises leaves
         nothing behind.
@@ -555,7 +780,7 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, 
         try:
             (staging / AXIS_FILE).write_text(tomli_w.dumps(axis_values), encoding="utf-8")
             for name, columns in ((POSITIONING_FILE, positioning), (DUTY_FILE, duty),
-                                  (TRACKING_FILE, tracking)):
+                                  (TRACKING_FILE, tracking), (CIRCULAR_FILE, circular)):
                 if columns is not None:
                     _write_csv(staging / name, columns)
             if check is not None:
