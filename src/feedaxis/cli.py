@@ -563,21 +563,59 @@ def _counter_progress(label, unit, unit_scale=False):
         yield update
 
 
-def _simulate(args, run):
-    """Run one scenario into a new case folder; Ctrl-C keeps what was computed."""
+def _simulate(args, run, system=None):
+    """Run one scenario into a new case folder (on ``system``, default the axis of the
+    axis options); Ctrl-C keeps what was computed."""
     from .cosim.master import Master
 
     if Path(args.out).exists():
         raise InputError("already exists; choose a new case folder", path=args.out)
     check_writable_target(args.out, "folder")
-    system = _axis_system(args)
+    system = system or _axis_system(args)
     with Master(system, _fmu_paths(args)) as master:
         with _counter_progress("simulating", "step", True) as progress:
             return run(master, progress)
 
 
 def _simulate_options(parser):
-    _scenario_parsers(parser, "case folder to create (must not exist)", _noise_options)
+    scenarios = _scenario_parsers(parser, "case folder to create (must not exist)",
+                                  _noise_options)
+    sub = scenarios.add_parser(
+        "circular", help="circular test of two axes (ISO 230-4, ballbar) -> circular.csv",
+        description="Two co-simulated axes (each NpidServo, GeometricError, StepperError, "
+                    "ThermalScrew, components named X_NpidServo, ...) and their squareness; "
+                    "an interpolator commands the circle at the feed, from standing through "
+                    "a lead-in arc, one measured turn and a lead-out arc, in each direction; "
+                    "the case records the radial deviation from the nominal centre as a "
+                    "ballbar does (axis.toml with [circular] and [axes.NAME], circular.csv).")
+    _circular_options(sub)
+    sub.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
+    _noise_options(sub)
+    _add_axis_options(sub)
+    _add_common_options(sub)
+    sub.set_defaults(handler=_cmd_simulate_circular)
+
+
+def _circular_options(sub):
+    sub.add_argument("--machine", metavar="AXIS",
+                     help="axis.toml (or case folder) of a circular case: its axes, circle and "
+                          "each axis's screw, motor and servo (default: axes X and Y with the "
+                          "FMUs' defaults)")
+    sub.add_argument("--radius-mm", type=float, help="nominal radius (default 100, or the "
+                                                     "--machine's)")
+    sub.add_argument("--feed-mm-min", type=float, help="programmed feed (default 1000, or the "
+                                                       "--machine's)")
+    sub.add_argument("--center-mm", metavar="C1,C2", help="centre in machine coordinates "
+                                                          "(default R,R, or the --machine's)")
+    sub.add_argument("--directions", choices=("both", "ccw", "cw"), default="both",
+                     help="counter-clockwise then clockwise (default both)")
+    sub.add_argument("--samples-per-turn", type=int, default=3600,
+                     help="samples over the measured turn of each direction (default 3600)")
+    sub.add_argument("--lead-in-deg", type=float, default=45.0,
+                     help="arc travelled before the measured turn (default 45)")
+    sub.add_argument("--squareness-urad", type=float, default=0.0,
+                     help="out-of-squareness of the second axis towards the first, µrad "
+                          "(default 0)")
 
 
 def _noise_options(sub):
@@ -607,6 +645,7 @@ def _scenario_parsers(parser, out_help, more_options=None, handler=None):
         _add_axis_options(sub)
         _add_common_options(sub)
         sub.set_defaults(handler=handler or scenario_handler)
+    return scenarios
 
 
 # the scenarios below carry the handlers
@@ -654,6 +693,30 @@ def _iso230_arguments(args):
     return {"targets_mm": iso230_targets(args.targets, args.spacing_mm, args.first_mm),
             "runs": args.runs, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s,
             "overrun_mm": args.overrun_mm}
+
+
+def _cmd_simulate_circular(args):
+    from .cosim.circular import DIRECTIONS, simulate_circular
+    from .cosim.machine import circular_machine
+
+    if args.model:
+        raise InputError("a fitted circular model is not taken here yet; give its values with "
+                         "--set", parameter="--model")
+    system, circle = circular_machine(
+        args.machine, args.radius_mm, args.feed_mm_min,
+        _numbers(args.center_mm, "--center-mm") if args.center_mm else None,
+        args.squareness_urad, args.step_ms, args.thermal_step_s, args.set)
+    if args.samples_per_turn < 3:
+        raise InputError(f"must be at least 3, got {args.samples_per_turn}",
+                         parameter="--samples-per-turn")
+    summary = _simulate(args, lambda master, progress: simulate_circular(
+        args.out, master, _noise(args), **circle, directions=DIRECTIONS[args.directions],
+        samples_per_turn=args.samples_per_turn, lead_in_deg=args.lead_in_deg,
+        progress=progress), system)
+    figures = ", ".join(f"{k[:-3]} {v:.3f}" for k, v in summary.items()
+                        if k in ("G_um", "H_um", "F_max_um", "F_min_um"))
+    _emit(args, summary, f"{args.out}: {summary['samples']} samples "
+                         f"({', '.join(summary['directions'])}); ISO 230-4 (µm): {figures}")
 
 
 def _simulate_thermal_options(parser):

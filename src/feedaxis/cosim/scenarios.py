@@ -494,7 +494,8 @@ RUNS = {"iso230": run_iso230, "thermal": run_thermal, "tracking": run_tracking}
 
 
 # what each case file records as measured: (column, its unit per µm)
-MEASURED_COLUMNS = {"positioning": ("error_um", 1.0), "tracking": ("actual_mm", 1e-3)}
+MEASURED_COLUMNS = {"positioning": ("error_um", 1.0), "tracking": ("actual_mm", 1e-3),
+                    "circular": ("deviation_um", 1.0)}
 
 
 @dataclass(frozen=True)
