@@ -81,8 +81,18 @@ def _progress(label, unit):
         yield tick
 
 
-def _effects(args):
-    return available_effects(args.effects or ())
+def _effects(args, cases=()):
+    """The effects by name: the catalog, the user's (--effects) and, for circular cases,
+    each axis's and the machine's (``backlash@X``, ``squareness``)."""
+    effects = available_effects(args.effects or ())
+    circular = [case for case in cases if case.circular is not None]
+    if circular:
+        from .effects import CATALOG
+        from .effects.circular import circular_effects
+
+        effects = {**{name: e for name, e in effects.items() if name not in CATALOG},
+                   **circular_effects(circular[0].axis)}
+    return effects
 
 
 def _starting_model(args, effects):
@@ -151,8 +161,8 @@ def _cmd_fit(args):
 
     if args.out:
         check_writable_target(args.out)
-    effects = _effects(args)
     cases = [corrected_case(read_case(folder), args.correct_to_20C) for folder in args.cases]
+    effects = _effects(args, cases)
     starting = _starting_model(args, effects)
     model = _with_added(starting, args.add, effects)
     results = []
@@ -184,8 +194,8 @@ def _case_and_model(args):
     measurement to compare it with)."""
     from .measurement import kinds_for
 
-    effects = _effects(args)
     case = corrected_case(read_case(args.case), args.correct_to_20C)
+    effects = _effects(args, [case])
     model = _starting_model(args, effects)
     return effects, case, model, kinds_for([case], model)
 

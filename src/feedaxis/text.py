@@ -100,8 +100,32 @@ def repeatability_text(repeatability):
 
 def comparison_lines(comparison):
     """The figures of ``compare``: ISO 230-2 (positioning) or seed 002's (tracking)."""
-    return (_tracking_comparison_lines if comparison["kind"] == "tracking"
-            else _iso_comparison_lines)(comparison)
+    return {"tracking": _tracking_comparison_lines, "circular": _circular_comparison_lines}.get(
+        comparison["kind"], _iso_comparison_lines)(comparison)
+
+
+def _circular_comparison_lines(comparison):
+    """ISO 230-4 figures, measured against the residual after the model, and the set-up."""
+    setup = comparison["setup"]
+    lines = [f"circle R {comparison['radius_mm']:g} mm at {comparison['feed_mm_min']:g} mm/min, "
+             f"axes {' '.join(comparison['axes'])}; model: "
+             f"{', '.join(comparison['effects']) or '(none)'}",
+             f"{'ISO 230-4 figure (µm)':40s} {'measured':>10s} {'residual':>10s} "
+             f"{'explained':>10s}"]
+    for figure in comparison["figures"].values():
+        explained = figure["explained"]
+        lines.append(f"{figure['name']:40s} {figure['measured_um']:10.4g} "
+                     f"{figure['residual_um']:10.4g} "
+                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
+    lines.append(f"{'RMS':40s} {comparison['rms_measured_um']:10.4g} "
+                 f"{comparison['rms_residual_um']:10.4g}")
+    first, second = comparison["axes"]
+    lines.append(f"set-up (not the machine's): centre off by {setup['center_first_um']:+.3f} µm "
+                 f"along {first}, {setup['center_second_um']:+.3f} µm along {second}; radius "
+                 f"{setup['radius_um']:+.3f} µm; drift {setup['drift_um_per_s']:+.4g} µm/s")
+    if not comparison["bidirectional"]:
+        lines.append("(one direction: G per direction and H need both)")
+    return "\n".join(lines)
 
 
 def _iso_comparison_lines(comparison):

@@ -2,7 +2,8 @@
 measurement, chosen here, in one place, from the case and the model.
 
 - :mod:`.positioning`: deviations at targets (positioning.csv), ISO 230-2;
-- :mod:`.tracking`: deviations over time (tracking.csv), seed 002's closed loop.
+- :mod:`.tracking`: deviations over time (tracking.csv), seed 002's closed loop;
+- :mod:`.circular`: radial deviations of two axes on a circle (circular.csv), ISO 230-4.
 
 A model acts on one kind (its effects name it, ``Effect.measurement``); a model with no
 effect of any kind (the empty model) is compared with each kind the case holds. A new kind
@@ -12,12 +13,13 @@ from __future__ import annotations
 
 from ..errors import InputError
 from .base import Measurement, Shape, Trial
+from .circular import Circular
 from .positioning import Positioning
 from .tracking import Tracking, servo_params
 
-KINDS = {kind.kind: kind for kind in (Positioning, Tracking)}
+KINDS = {kind.kind: kind for kind in (Positioning, Tracking, Circular)}
 
-__all__ = ["KINDS", "Measurement", "Positioning", "Shape", "Tracking", "Trial", "kinds_for",
+__all__ = ["KINDS", "Circular", "Measurement", "Positioning", "Shape", "Tracking", "Trial", "kinds_for",
            "measurement_of", "model_kind", "servo_params"]
 
 

@@ -215,6 +215,11 @@ class Measurement:
         show (None when it is): it would only stand in for a structure of another shape."""
         return None
 
+    def artefacts(self, result):
+        """What the measurement fitted of its own set-up beside ``result``'s model (a dict
+        for ``artefacts`` of ``fit --json``; none by default)."""
+        return {}
+
     def repeatability(self):
         """Repeatability set against the systematic error (a dict for ``--json``), or None."""
         return None

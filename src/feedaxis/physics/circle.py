@@ -45,12 +45,28 @@ def axis_direction(angle_deg, direction, axis_index):
     return np.where(velocity >= 0, 1.0, -1.0)
 
 
-def backlash_um(angle_deg, direction, axis_index, backlash_um_value):
+def backlash_um(angle_deg, direction, axis_index, backlash_um_value, radius_mm=None,
+                lag_deg=0.0):
     """Backlash B of one axis: e = ±B/2 by its direction of motion (ISO 230-2 reversal
-    sign), a step of B·|u| in the radius at that axis's reversal points (θ = 0°, 180° for
-    the first axis, 90°, 270° for the second)."""
-    return radial_um(angle_deg, axis_index,
-                     0.5 * backlash_um_value * axis_direction(angle_deg, direction, axis_index))
+    sign), a step of B in the radius at that axis's reversal points (θ = 0°, 180° for the
+    first axis, 90°, 270° for the second).
+
+    With ``radius_mm`` the nut crosses its play as the GeometricError FMU's does
+    (:func:`feedaxis.physics.geometry.play_engagement`): after the reversal the axis has
+    travelled R(1 − cos φ), φ the angle since, so the error runs from ∓B/2 to ±B/2 over
+    the first R(1 − cos φ) = B of travel instead of stepping. ``lag_deg`` is how far the
+    axis trails the commanded angle (its servo lag times the angular speed): the reversal
+    shows that much later on the circle.
+    """
+    angle_deg = np.asarray(angle_deg, float) - direction * lag_deg
+    new_direction = axis_direction(angle_deg, direction, axis_index)
+    engagement = new_direction
+    if radius_mm is not None and backlash_um_value != 0.0:
+        phi = np.radians(since_reversal_deg(angle_deg, direction, axis_index))
+        travel_um = radius_mm * UM_PER_MM * (1.0 - np.cos(phi))
+        engagement = new_direction * np.clip(2.0 * travel_um / abs(backlash_um_value) - 1.0,
+                                             -1.0, 1.0)
+    return radial_um(angle_deg, axis_index, 0.5 * backlash_um_value * engagement)
 
 
 def squareness_um(angle_deg, radius_mm, squareness_urad):
