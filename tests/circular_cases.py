@@ -1,5 +1,8 @@
-"""Circular tests simulated on the co-simulated machine, for the circular tests' known answers."""
-from feedaxis.case import read_case
+"""Circular tests for the known answers: simulated on the co-simulated machine, or written
+from closed forms."""
+import numpy as np
+
+from feedaxis.case import read_case, write_case
 from feedaxis.cosim.circular import simulate_circular
 from feedaxis.cosim.machine import machine_from_case_axes
 from feedaxis.cosim.master import Master
@@ -28,4 +31,31 @@ def simulated_case(folder, fmu_paths, parameters=None, squareness_urad=0.0,
                           radius_mm=RADIUS_MM, feed_mm_min=FEED_MM_MIN, center_mm=CENTER_MM,
                           directions=directions, samples_per_turn=samples_per_turn,
                           parameters=parameters)
+    return read_case(folder)
+
+
+def circle_columns(samples_per_turn=720, directions=(1, -1), feed_mm_min=FEED_MM_MIN):
+    """circular.csv columns of an ideal test: each direction one turn from 0°, evenly
+    spaced, timed at the feed (the clock runs on through both directions)."""
+    step_deg = 360.0 / samples_per_turn
+    seconds_per_deg = np.radians(RADIUS_MM) / (feed_mm_min / 60.0)
+    angle = np.concatenate([np.mod(d * np.arange(samples_per_turn) * step_deg, 360.0)
+                            for d in directions])
+    direction = np.repeat(np.asarray(directions, float), samples_per_turn)
+    time_s = np.arange(angle.size) * step_deg * seconds_per_deg
+    return {"angle_deg": angle, "direction": direction, "time_s": time_s}
+
+
+def synthetic_case(folder, deviation_um, columns, motor=False):
+    """Write and read a circular case of :func:`machine` with ``deviation_um`` at the
+    samples of ``columns`` (:func:`circle_columns`)."""
+    test = machine(motor)
+    axes = {name: {"screw": dict(a.screw), **({"motor": dict(a.motor)} if a.motor else {})}
+            for name, a in test.axes.items()}
+    axis_values = {"name": test.name, "circular": {
+        "axes": list(test.circular.axes), "radius_mm": RADIUS_MM, "feed_mm_min": FEED_MM_MIN,
+        "center_mm": list(CENTER_MM)}, "axes": axes}
+    write_case(folder, axis_values, circular={
+        "angle_deg": columns["angle_deg"], "deviation_um": deviation_um,
+        "direction": columns["direction"], "time_s": columns["time_s"]})
     return read_case(folder)
