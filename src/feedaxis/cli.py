@@ -813,16 +813,39 @@ def _numbers(text, option):
 
 
 def _checked_axis(args):
-    """The axis system and FMU paths, its parameter values accepted by every FMU."""
+    """The axis system (the machine of two axes with ``--machine``) and FMU paths, its
+    parameter values accepted by every FMU."""
     from .cosim.physics_check import check_parameters
 
-    system, paths = _axis_system(args), _fmu_paths(args)
+    system, paths = _machine_or_axis(args), _fmu_paths(args)
     check_parameters(system, paths)
     return system, paths
 
 
+def _machine_or_axis(args):
+    """The machine of ``--machine`` (two axes, :mod:`feedaxis.cosim.machine`), else the axis."""
+    machine = getattr(args, "machine", None)
+    if machine is None:
+        return _axis_system(args)
+    from .cosim.machine import circular_machine
+
+    if args.model:
+        raise InputError("a fitted circular model is not taken here yet; give its values with "
+                         "--set", parameter="--model")
+    return circular_machine(machine or None, squareness_urad=args.squareness_urad,
+                            step_ms=args.step_ms, thermal_step_s=args.thermal_step_s,
+                            set_items=args.set)[0]
+
+
 def _export_ssp_options(parser):
     parser.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
+    parser.add_argument("--machine", nargs="?", const="", metavar="AXIS",
+                        help="the machine of two axes instead of one axis (components "
+                             "X_NpidServo, ...): alone the default axes X and Y, or those of "
+                             "the axis.toml (or case folder) of a circular case")
+    parser.add_argument("--squareness-urad", type=float, default=0.0,
+                        help="with --machine: the second axis out of square with the first "
+                             "(µrad), a term of the first axis's table position (printed)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
     parser.add_argument("--stop-time", type=float, default=1.0, metavar="S",
                         help="DefaultExperiment stopTime in s (default 1)")
@@ -847,13 +870,19 @@ def _cmd_export_ssp(args):
     unconnected = [{"input": connector, "unit": variable.unit, "start": variable.start,
                     "meaning": variable.description}
                    for connector, variable in open_inputs(system)]
-    _emit(args, {"ssp": str(path), "open_inputs": unconnected},
-          f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
-          f"four {'standalone ' if args.standalone else ''}FMUs\n"
-          "open inputs (unconnected: drive them from the importing tool, else they keep their "
-          "start values; position_ref_mm at 0 is a standing axis):\n"
-          + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
-                      for i in unconnected))
+    payload = {"ssp": str(path), "open_inputs": unconnected}
+    lines = (f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
+             f"four {'standalone ' if args.standalone else ''}FMUs\n"
+             "open inputs (unconnected: drive them from the importing tool, else they keep their "
+             "start values; position_ref_mm at 0 is a standing axis):\n"
+             + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
+                         for i in unconnected))
+    if args.machine is not None:
+        payload["outputs"] = {o.variable.name: o.formula() for o in system.outputs}
+        lines += ("\nthe machine's table positions (mm) from the component outputs:\n"
+                  + "\n".join(f"  {name} = {formula}"
+                              for name, formula in payload["outputs"].items()))
+    _emit(args, payload, lines)
 
 
 

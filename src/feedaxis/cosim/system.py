@@ -110,6 +110,12 @@ class AxisSystem:
                                  "or component")
         self.ordered_components()
 
+    def output_values(self, columns):
+        """{system output: values} from ``columns`` ({"Component.variable": values}), each
+        output the linear combination of its terms."""
+        return {output.variable.name: sum(factor * columns[term] for term, factor in output.terms)
+                for output in self.outputs}
+
     def component(self, name):
         """The component called ``name``."""
         for component in self.components:
