@@ -118,10 +118,10 @@ class CircleBacklash(CircularEffect):
                         "radius where the axis reverses")
 
     def prepare(self, case):
-        samples, index = case.circular, axis_index(case, self.axis)
-        radius_mm = case.axis.circular.radius_mm
-        return lambda v: circle.backlash_um(samples.angle_deg, samples.direction, index,
-                                            v["backlash_um"], radius_mm, v["lag_deg"])
+        samples = case.circular
+        radial = circle.backlash_shape(samples.angle_deg, samples.direction,
+                                       axis_index(case, self.axis), case.axis.circular.radius_mm)
+        return lambda v: radial(v["backlash_um"], v["lag_deg"])
 
     def guess(self, case, residual_um):
         samples = case.circular
@@ -163,9 +163,10 @@ class ReversalSpike(CircularEffect):
         return reason
 
     def prepare(self, case):
-        samples, index = case.circular, axis_index(case, self.axis)
-        return lambda v: circle.reversal_spike_um(samples.angle_deg, samples.direction, index,
-                                                  v["height_um"], v["decay_deg"])
+        samples = case.circular
+        radial = circle.reversal_spike_shape(samples.angle_deg, samples.direction,
+                                             axis_index(case, self.axis))
+        return lambda v: radial(v["height_um"], v["decay_deg"])
 
     def guess(self, case, residual_um):
         return {"height_um": 0.0, "decay_deg": 2.0}

@@ -36,13 +36,18 @@ def axis_positions_mm(angle_deg, radius_mm, center_mm, axis_index):
 def axis_direction(angle_deg, direction, axis_index):
     """The sign of one axis's velocity (+1 moving in +, −1 in −) on the circle.
 
-    v_x = −dir·sin θ, v_y = dir·cos θ (times R ω). At a reversal point, where the velocity
-    is zero, the sign is that of the motion after it (the nut has reversed).
+    v_x = −dir·sin θ, v_y = dir·cos θ (times R ω): in the half turn after each of its
+    reversals (:func:`since_reversal_deg`) an axis moves in −, then in +. At a reversal
+    point, where the velocity is zero, the sign is that of the motion after it.
     """
-    theta = np.radians(angle_deg)
-    step = np.radians(1e-6) * direction
-    velocity = (-np.sin(theta + step) if axis_index == 0 else np.cos(theta + step)) * direction
-    return np.where(velocity >= 0, 1.0, -1.0)
+    return np.where(_turned_deg(angle_deg, direction, axis_index) < 180.0, -1.0, 1.0)
+
+
+def _turned_deg(angle_deg, direction, axis_index):
+    """Angle travelled (deg, 0 to 360) since the axis's reversal at θ = 0° (first axis) or
+    90° (second), after which it moves in −."""
+    start = 0.0 if axis_index == 0 else 90.0
+    return np.mod(direction * (np.asarray(angle_deg, float) - start), 360.0)
 
 
 def backlash_um(angle_deg, direction, axis_index, backlash_um_value, radius_mm=None,
@@ -58,15 +63,25 @@ def backlash_um(angle_deg, direction, axis_index, backlash_um_value, radius_mm=N
     axis trails the commanded angle (its servo lag times the angular speed): the reversal
     shows that much later on the circle.
     """
-    angle_deg = np.asarray(angle_deg, float) - direction * lag_deg
-    new_direction = axis_direction(angle_deg, direction, axis_index)
-    engagement = new_direction
-    if radius_mm is not None and backlash_um_value != 0.0:
-        phi = np.radians(since_reversal_deg(angle_deg, direction, axis_index))
-        travel_um = radius_mm * UM_PER_MM * (1.0 - np.cos(phi))
-        engagement = new_direction * np.clip(2.0 * travel_um / abs(backlash_um_value) - 1.0,
-                                             -1.0, 1.0)
-    return radial_um(angle_deg, axis_index, 0.5 * backlash_um_value * engagement)
+    return backlash_shape(angle_deg, direction, axis_index, radius_mm)(backlash_um_value,
+                                                                       lag_deg)
+
+
+def backlash_shape(angle_deg, direction, axis_index, radius_mm=None):
+    """``f(B, lag_deg) -> radial µm`` of :func:`backlash_um` at these samples, what does
+    not depend on B and the lag computed once."""
+    turned = direction * (np.asarray(angle_deg, float) - (0.0 if axis_index == 0 else 90.0))
+    along = unit_vector(angle_deg, axis_index)
+
+    def radial(backlash_um_value, lag_deg=0.0):
+        since = np.mod(turned - lag_deg, 360.0)
+        engagement = np.where(since < 180.0, -1.0, 1.0)
+        if radius_mm is not None and backlash_um_value != 0.0:
+            travel_um = radius_mm * UM_PER_MM * (1.0 - np.cos(np.radians(np.mod(since, 180.0))))
+            engagement *= np.clip(2.0 * travel_um / abs(backlash_um_value) - 1.0, -1.0, 1.0)
+        return along * (0.5 * backlash_um_value) * engagement
+
+    return radial
 
 
 def squareness_um(angle_deg, radius_mm, squareness_urad):
@@ -100,14 +115,19 @@ def centring_um(angle_deg, offset_first_um, offset_second_um):
 def since_reversal_deg(angle_deg, direction, axis_index):
     """Angle travelled (deg, 0 to 180) since the last reversal of one axis: its reversals
     are at θ = 0°/180° (first axis) or 90°/270° (second)."""
-    start = 0.0 if axis_index == 0 else 90.0
-    return np.mod(direction * (np.asarray(angle_deg, float) - start), 180.0)
+    return np.mod(_turned_deg(angle_deg, direction, axis_index), 180.0)
 
 
 def reversal_spike_um(angle_deg, direction, axis_index, height_um, decay_deg):
     """A reversal spike of one axis: after each reversal the axis sticks (friction) and
     trails its new motion by h·exp(−φ/φ0), φ the angle travelled since the reversal; on the
     radius a spike outwards of height h at the reversal point."""
+    return reversal_spike_shape(angle_deg, direction, axis_index)(height_um, decay_deg)
+
+
+def reversal_spike_shape(angle_deg, direction, axis_index):
+    """``f(h, φ0) -> radial µm`` of :func:`reversal_spike_um` at these samples."""
     phi = since_reversal_deg(angle_deg, direction, axis_index)
-    trail = -height_um * axis_direction(angle_deg, direction, axis_index) * np.exp(-phi / decay_deg)
-    return radial_um(angle_deg, axis_index, trail)
+    outward = -axis_direction(angle_deg, direction, axis_index) * unit_vector(angle_deg,
+                                                                             axis_index)
+    return lambda height_um, decay_deg: height_um * outward * np.exp(-phi / decay_deg)
