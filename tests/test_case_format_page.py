@@ -60,7 +60,8 @@ def test_every_axis_key_is_listed_with_the_range_the_reader_enforces():
 @pytest.mark.parametrize("section, spec", [
     ("### positioning.csv", case_format.POSITIONING_COLUMNS),
     ("### duty.csv", case_format.DUTY_COLUMNS),
-    ("### tracking.csv", case_format.TRACKING_COLUMNS)])
+    ("### tracking.csv", case_format.TRACKING_COLUMNS),
+    ("### circular.csv", case_format.CIRCULAR_COLUMNS)])
 def test_every_csv_column_is_listed_with_its_range(section, spec):
     listed = rows(section)
     assert set(listed) == set(spec)
@@ -71,6 +72,12 @@ def test_every_csv_column_is_listed_with_its_range(section, spec):
             assert range_text(name) in cells[2] or (
                 low == 0 and f"up to {high:g}" in cells[2]), (name, cells[2])
         assert (cells[3] == "yes") == required, name
+
+
+def test_every_circular_key_is_listed():
+    listed = rows("## Circular tests")
+    assert {f"[circular] {key}" for key in case_format.CIRCULAR_KEYS} <= set(listed)
+    assert listed["[circular] radius_mm"][2].startswith(range_text("radius_mm"))
 
 
 def test_the_shipped_laser_example_is_its_generator_output():
