@@ -387,6 +387,9 @@ def _comp_table_options(parser):
                              "controller's point limit; with --from-measurement the targets)")
     parser.add_argument("--from-measurement", action="store_true",
                         help="the table from the measured means at the targets, not the model")
+    parser.add_argument("--circle-axis", metavar="NAME",
+                        help="a circular case: the axis whose table to write (X, Y, ...); the "
+                             "circle expected after it is verified")
     parser.add_argument("--axis-id", metavar="ID",
                         help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
                              "axis number 1, fanuc axis 1: the defaults)")
@@ -415,6 +418,8 @@ def _cmd_comp_table(args):
     from .comptable import comp_table, summary_lines
 
     case = read_case(args.case)
+    if case.circular is not None:
+        return _circle_comp_table(args, case)
     if case.positioning is None:
         raise InputError("a compensation table needs positioning.csv", path=case.folder)
     case = corrected_case(case, args.correct_to_20C)
@@ -424,6 +429,26 @@ def _cmd_comp_table(args):
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
                                args.from_measurement, args.axis_id, args.force)
+    for path, content in files.items():
+        write_atomically(path, content)
+    _emit(args, report, summary_lines(report))
+
+
+def _circle_comp_table(args, case):
+    """comp-table on a circular case: one axis's table from the fitted model."""
+    from .comptable import summary_lines
+    from .comptable.circle import circle_comp_table
+
+    if not args.model or args.from_measurement:
+        raise InputError("a table from a circular test comes from the fitted model (--model "
+                         "M.toml); a circle has no measured means per position",
+                         parameter="--model")
+    if not args.circle_axis:
+        raise InputError(f"name the axis whose table to write: "
+                         f"{', '.join(case.axis.circular.axes)}", parameter="--circle-axis")
+    model = load_model(args.model, _effects(args, [case]))
+    files, report = circle_comp_table(case, model, args.controller, args.out, args.circle_axis,
+                                      args.spacing_mm, args.axis_id, args.force)
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
