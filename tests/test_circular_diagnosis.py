@@ -127,3 +127,33 @@ def test_friction_through_the_servo_is_named_on_its_axis(tmp_path, fmu_paths):
     assert {axis for _, axis, _ in named(diagnosis)} == {"X"}
     assert value(diagnosis, "backlash@X", "backlash_um") == pytest.approx(
         -2 * 0.3 / 100.0 / 0.8998 * 1e3, rel=0.01)
+
+
+def test_compare_json_and_report_of_a_circular_case(tmp_path, capsys):
+    """compare --json gives the ISO 230-4 figures as the ISO 230-2 ones are given; the
+    report draws the polar trace with them; fit --json keys the parameters by ``add``."""
+    import json
+
+    from feedaxis.cli import main
+
+    form, _, _ = SIGNATURES["backlash@Y"]
+    columns = circle_columns()
+    deviation = form(columns["angle_deg"], columns["direction"]) + setup_um(columns, 9)
+    synthetic_case(tmp_path / "c", deviation, columns)
+    assert main(["compare", str(tmp_path / "c"), "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)["figures"]
+    assert set(figures) == {"G_um", "G_ccw_um", "G_cw_um", "H_um", "F_max_um", "F_min_um"}
+    assert all(set(f) == {"name", "measured_um", "residual_um", "explained"}
+               for f in figures.values())
+    assert figures["H_um"]["measured_um"] == pytest.approx(3.0, abs=0.5)
+    assert main(["fit", str(tmp_path / "c"), "--add", "backlash@Y", "--json",
+                 "--out", str(tmp_path / "m.toml")]) == 0
+    fitted = json.loads(capsys.readouterr().out)
+    assert fitted["params"]["backlash@Y"]["backlash_um"] == pytest.approx(3.0, rel=0.02)
+    assert set(fitted["artefacts"]["setup"]) == {"radius_um", "center_first_um",
+                                                 "center_second_um", "drift_um_per_s"}
+    assert fitted["artefacts"]["setup"]["center_first_um"] == pytest.approx(3.0, abs=0.05)
+    assert main(["report", str(tmp_path / "c"), "--model", str(tmp_path / "m.toml"),
+                 "--out", str(tmp_path / "r.html")]) == 0
+    page = (tmp_path / "r.html").read_text()
+    assert "polar trace of the circular test" in page and "ISO 230-4 figures" in page

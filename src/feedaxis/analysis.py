@@ -276,7 +276,8 @@ def _tracking_details(measurement, model, effects, result):
                            (frequency_hz, 2.0 * np.sqrt(power / result.residual_um.size)))
 
 
-DETAILS = {"positioning": _positioning_details, "tracking": _tracking_details}
+DETAILS = {"positioning": _positioning_details, "tracking": _tracking_details,
+           "circular": lambda measurement, model, effects, result: None}
 
 
 def iso_deviation(positioning):
