@@ -31,7 +31,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 from feedaxis.cosim.circular import run_circular
 from feedaxis.cosim.machine import MACHINE_SERVO, CircleInterpolator, machine_system
@@ -46,7 +45,7 @@ from feedaxis.physics import circle
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from circular_cases import circle_columns, synthetic_case  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import arguments  # noqa: E402
+from common import arguments, describe, rate  # noqa: E402
 
 FEED_MM_MIN = 1000.0
 
@@ -132,17 +131,6 @@ def rates(folder, trials):
     return found
 
 
-def clopper_pearson(hits, trials):
-    low = stats.beta.ppf(0.025, hits, trials - hits + 1) if hits else 0.0
-    high = stats.beta.ppf(0.975, hits + 1, trials - hits) if hits < trials else 1.0
-    return low, high
-
-
-def describe(values, unit="s"):
-    return (f"median {statistics.median(values):.3f} {unit} "
-            f"(range {min(values):.3f}-{max(values):.3f}, n = {len(values)})")
-
-
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
@@ -177,8 +165,7 @@ def main(argv=None):
     print("false alarms (any verdict but adequate) and power (backlash@Y named first), "
           "1440 samples, σ 0.1 µm:")
     for label, (hits, trials) in found.items():
-        low, high = clopper_pearson(hits, trials)
-        print(f"  {label:22s}: {hits}/{trials} = {hits / trials:.3f} (95 % {low:.3f}-{high:.3f})")
+        print(f"  {label:22s}: {rate(hits, trials)}")
 
 
 if __name__ == "__main__":

@@ -614,10 +614,7 @@ def read_positioning(path, duty_end_s=None, length_mm=None):
     if direction is not None:
         _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
                    "direction must be +1 or -1")
-    run = values.get("run")
-    if run is not None:
-        _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
-                   "run must be a whole number >= 1")
+    run = _checked_run(path, values, rows)
     time_s = values.get("time_s")
     if time_s is not None:
         _first_bad(path, time_s < 0, rows, "time_s", "time_s must be >= 0 (seconds since the "
@@ -628,6 +625,15 @@ def read_positioning(path, duty_end_s=None, length_mm=None):
                        direction if direction is not None else np.ones_like(values["target_mm"]),
                        run.astype(int) if run is not None else None, time_s,
                        values.get("ambient_C"), has_direction=direction is not None)
+
+
+def _checked_run(path, values, rows):
+    """The ``run`` column (None when absent), each a whole number >= 1."""
+    run = values.get("run")
+    if run is not None:
+        _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
+                   "run must be a whole number >= 1")
+    return run
 
 
 def read_duty(path, length_mm=None):
@@ -695,13 +701,8 @@ def read_circular(path):
                "angle_deg must be below 360 (0 <= angle < 360)")
     _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
                "direction must be +1 (counter-clockwise) or -1 (clockwise)")
-    run = values.get("run")
-    if run is not None:
-        _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
-                   "run must be a whole number >= 1")
-    time_s = values.get("time_s")
-    if time_s is not None:
-        _first_bad(path, time_s < 0, rows, "time_s", "time_s must be >= 0")
+    run = _checked_run(path, values, rows)
+    time_s = values.get("time_s")  # >= 0: the reader's range
     group = direction * 1e9 + (run if run is not None else 1)
     for key in np.unique(group):
         index = np.flatnonzero(group == key)

@@ -104,21 +104,26 @@ def comparison_lines(comparison):
         comparison["kind"], _iso_comparison_lines)(comparison)
 
 
+def _figure_table(title, width, comparison):
+    """The figures measured, residual and explained, then the RMS, ``width`` wide names."""
+    lines = [f"{title:{width}s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
+    for figure in comparison["figures"].values():
+        explained = figure["explained"]
+        lines.append(f"{figure['name']:{width}s} {figure['measured_um']:10.4g} "
+                     f"{figure['residual_um']:10.4g} "
+                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
+    lines.append(f"{'RMS':{width}s} {comparison['rms_measured_um']:10.4g} "
+                 f"{comparison['rms_residual_um']:10.4g}")
+    return lines
+
+
 def _circular_comparison_lines(comparison):
     """ISO 230-4 figures, measured against the residual after the model, and the set-up."""
     setup = comparison["setup"]
     lines = [f"circle R {comparison['radius_mm']:g} mm at {comparison['feed_mm_min']:g} mm/min, "
              f"axes {' '.join(comparison['axes'])}; model: "
              f"{', '.join(comparison['effects']) or '(none)'}",
-             f"{'ISO 230-4 figure (µm)':40s} {'measured':>10s} {'residual':>10s} "
-             f"{'explained':>10s}"]
-    for figure in comparison["figures"].values():
-        explained = figure["explained"]
-        lines.append(f"{figure['name']:40s} {figure['measured_um']:10.4g} "
-                     f"{figure['residual_um']:10.4g} "
-                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
-    lines.append(f"{'RMS':40s} {comparison['rms_measured_um']:10.4g} "
-                 f"{comparison['rms_residual_um']:10.4g}")
+             *_figure_table("ISO 230-4 figure (µm)", 40, comparison)]
     first, second = comparison["axes"]
     lines.append(f"set-up (not the machine's): centre off by {setup['center_first_um']:+.3f} µm "
                  f"along {first}, {setup['center_second_um']:+.3f} µm along {second}; radius "
@@ -132,14 +137,7 @@ def _iso_comparison_lines(comparison):
     """ISO 230-2 figures, measured against the residual after the model."""
     lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
              f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
-             f"{'ISO 230-2 figure (µm)':32s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
-    for figure in comparison["figures"].values():
-        explained = figure["explained"]
-        lines.append(f"{figure['name']:32s} {figure['measured_um']:10.4g} "
-                     f"{figure['residual_um']:10.4g} "
-                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
-    lines.append(f"{'RMS':32s} {comparison['rms_measured_um']:10.4g} "
-                 f"{comparison['rms_residual_um']:10.4g}")
+             *_figure_table("ISO 230-2 figure (µm)", 32, comparison)]
     if not comparison["bidirectional"]:
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
     return "\n".join(lines)
