@@ -1,4 +1,5 @@
 """Circular tests (ISO 230-4): the case format 1.2 reader and writer, and the figures."""
+import json
 import math
 
 import numpy as np
@@ -126,3 +127,35 @@ def test_minimum_zone_hand_worked():
     assert circular_figures(ANGLES, spike, np.ones(8)).G_um == pytest.approx(
         7.5 + 2.5 * math.sqrt(0.5))
     assert minimum_zone_um(ANGLES, spike) == pytest.approx(5 + 5 * math.sqrt(0.5))
+
+
+@pytest.mark.parametrize("argv, parameter", [
+    (["simulate", "circular", "OUT", "--radius-mm", "-1"], "--radius-mm"),
+    (["simulate", "circular", "OUT", "--center-mm", "1,2,3"], "--center-mm"),
+    (["simulate", "circular", "OUT", "--samples-per-turn", "2"], "--samples-per-turn"),
+    (["simulate", "circular", "OUT", "--step-ms", "0"], "--step-ms"),
+    (["simulate", "circular", "OUT", "--set", "X_NpidServo"], "--set X_NpidServo"),
+])
+def test_simulate_circular_refuses_bad_options(tmp_path, capsys, argv, parameter):
+    from feedaxis.cli import main
+
+    argv = [str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    assert main([*argv, "--json"]) == 2
+    error = json.loads(capsys.readouterr().out)
+    assert error["parameter"] == parameter
+    assert not (tmp_path / "out").exists()
+
+
+def test_circular_commands_refuse_what_a_circle_cannot_give(tmp_path, capsys):
+    from feedaxis.cli import main
+
+    write_case(tmp_path / "c", AXIS, circular=circle_columns())
+    case = str(tmp_path / "c")
+    assert main(["fit", case, "--add", "backlash", "--json"]) == 2
+    assert json.loads(capsys.readouterr().out)["parameter"] == "--add backlash"
+    assert main(["fit", case, "--add", "backlash@Z", "--json"]) == 2
+    capsys.readouterr()
+    assert main(["comp-table", case, "--controller", "linuxcnc", "--out",
+                 str(tmp_path / "t.tbl"), "--from-measurement", "--json"]) == 2
+    assert json.loads(capsys.readouterr().out)["parameter"] == "--model"
+    assert not (tmp_path / "t.tbl").exists()
