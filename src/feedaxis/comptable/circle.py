@@ -39,7 +39,7 @@ def axis_model(model, axis):
         fitted = model.values[effect.name]
         if isinstance(effect, OnAxis) and effect.axis == axis:
             effects.append(effect.inner)
-            values[effect.inner.name] = {**effect.held, **fitted}
+            values[effect.inner.name] = effect.inner_values(fitted)
         elif isinstance(effect, CircleBacklash) and effect.axis == axis:
             effects.append(Backlash())
             values["backlash"] = {"backlash_um": fitted["backlash_um"]}

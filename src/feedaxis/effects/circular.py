@@ -28,14 +28,15 @@ def axis_index(case, axis):
     return case.axis.circular.axes.index(axis)
 
 
-def axis_case(case, axis):
+def axis_case(case, axis, lag_deg=0.0):
     """The one-axis view of a circular case: axis ``axis`` with its positions on the circle
-    as the targets and its direction of motion as the approach direction."""
+    as the targets and its direction of motion as the approach direction, ``lag_deg``
+    behind the commanded angle."""
     samples, test = case.circular, case.axis.circular
     index = axis_index(case, axis)
-    position_mm = circle.axis_positions_mm(samples.angle_deg, test.radius_mm, test.center_mm,
-                                           index)
-    direction = circle.axis_direction(samples.angle_deg, samples.direction, index)
+    angle_deg = samples.angle_deg - samples.direction * lag_deg
+    position_mm = circle.axis_positions_mm(angle_deg, test.radius_mm, test.center_mm, index)
+    direction = circle.axis_direction(angle_deg, samples.direction, index)
     return Case(case.folder, case.axis.axes[axis],
                 Positioning(position_mm, np.zeros(position_mm.size), direction,
                             has_direction=True))
@@ -65,26 +66,49 @@ class CircularEffect(Effect):
         return f"{self.axis}_{fmu}"
 
 
+LAG = Parameter("lag_deg", "deg", 0.0, 10.0,
+                "how far the axis trails the commanded angle (servo lag x angular speed)")
+
+
 class OnAxis(CircularEffect):
     """A one-axis catalog effect ``inner`` acting on axis ``axis`` of the circle; the
-    parameters in ``held`` are held at their values (not fitted)."""
+    parameters in ``held`` are held at their values (not fitted). With ``lagged`` (an
+    error periodic along the axis, whose phase a servo lag moves) the axis's positions trail
+    the commanded angle by a fitted ``lag_deg``."""
 
-    def __init__(self, inner, axis, held=None, needs=Needs()):
+    def __init__(self, inner, axis, held=None, needs=Needs(), lagged=False):
         self.inner, self.axis, self.held = inner, axis, dict(held or {})
         self.effect = inner.name
         self.name = f"{inner.name}@{axis}"
         self.meaning = f"axis {axis}: {inner.meaning}"
-        self.parameters = tuple(p for p in inner.parameters if p.name not in self.held)
+        self.parameters = tuple(p for p in inner.parameters if p.name not in self.held) + (
+            (LAG,) if lagged else ())
         self.linear = tuple(n for n in inner.linear if n not in self.held)
+        self.probe = {LAG.name: 0.05} if lagged else {}
         self.needs = Needs(screw_keys=inner.needs.screw_keys + needs.screw_keys,
                            motor_keys=inner.needs.motor_keys)
         self.fmu = inner.fmu
 
     def prepare(self, case):
-        view = axis_case(case, self.axis)
-        evaluate = self.inner.prepare(view)
         along = circle.unit_vector(case.circular.angle_deg, axis_index(case, self.axis))
-        return lambda values: along * evaluate({**self.held, **values})
+        if LAG not in self.parameters:
+            evaluate = self.inner.prepare(axis_case(case, self.axis))
+            return lambda values: along * evaluate({**self.held, **values})
+
+        last = {}  # the inner effect prepared at the last lag (a fit's split asks thrice)
+
+        def lagged(values):
+            lag_deg = values[LAG.name]
+            if last.get("lag_deg") != lag_deg:
+                last.update(lag_deg=lag_deg,
+                            evaluate=self.inner.prepare(axis_case(case, self.axis, lag_deg)))
+            return along * last["evaluate"](self.inner_values(values))
+
+        return lagged
+
+    def inner_values(self, values):
+        """The inner catalog effect's values: the held ones, without the lag."""
+        return {**self.held, **{k: v for k, v in values.items() if k != LAG.name}}
 
     def wavelength_mm(self, axis):
         return self.inner.wavelength_mm(axis.axes[self.axis])
@@ -92,11 +116,11 @@ class OnAxis(CircularEffect):
     def fmu_parameters(self, axis, values):
         return {self.component(fmu): parameters for fmu, parameters in
                 self.inner.fmu_parameters(axis.axes[self.axis],
-                                          {**self.held, **values}).items()}
+                                          self.inner_values(values)).items()}
 
     def evidence(self, case, values, contribution_um):
         return f"axis {self.axis}: " + self.inner.evidence(axis_case(case, self.axis),
-                                                           {**self.held, **values},
+                                                           self.inner_values(values),
                                                            contribution_um)
 
 
@@ -233,8 +257,10 @@ def circular_effects(machine):
     effects = []
     for axis in machine.circular.axes:
         effects += [OnAxis(LeadError(), axis, held={"offset_um": 0.0}),
-                    OnAxis(AssemblyEccentricity(), axis, needs=Needs(screw_keys=LEAD_KEYS)),
-                    OnAxis(MotorStepError(), axis, needs=Needs(screw_keys=LEAD_KEYS)),
+                    OnAxis(AssemblyEccentricity(), axis, needs=Needs(screw_keys=LEAD_KEYS),
+                           lagged=True),
+                    OnAxis(MotorStepError(), axis, needs=Needs(screw_keys=LEAD_KEYS),
+                           lagged=True),
                     CircleBacklash(axis), ReversalSpike(axis)]
     effects += [Squareness(), ServoMismatch()]
     return {effect.name: effect for effect in effects}

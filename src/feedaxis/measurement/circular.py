@@ -83,12 +83,12 @@ class Circular(Measurement):
         return np.column_stack((np.ones_like(theta), np.cos(theta), np.sin(theta), clock))
 
     @cached_property
-    def _orthonormal(self):
+    def orthonormal(self):
         return np.linalg.qr(self.setup_basis)[0]
 
     def project(self, values):
         """``values`` (samples, or samples x k) with the set-up's least squares taken out."""
-        q = self._orthonormal
+        q = self.orthonormal
         return values - q @ (q.T @ values)
 
     def setup(self, residual_um):
@@ -254,22 +254,27 @@ class Harmonic(Shape):
     def trials(self, measurement):
         return MAX_HARMONIC - self.lowest + 1
 
-    def basis(self, measurement, n):
+    def columns(self, measurement, n):
+        """cos nθ, sin nθ (times the direction when ``flips``), before the projection."""
         theta = np.radians(measurement.angle_deg)
         columns = np.column_stack((np.cos(n * theta), np.sin(n * theta)))
-        return measurement.project(columns * measurement.direction[:, None] if self.flips
-                                   else columns)
+        return columns * measurement.direction[:, None] if self.flips else columns
 
     def trial(self, measurement, current):
-        residual = current.residual_um
+        """The harmonic explaining most of the residual r, apart from the set-up (Q its
+        orthonormal basis): with C its columns, the projected C'C is C'C − (Q'C)'(Q'C) and
+        the projected C'r is C'r (r is orthogonal to Q), a 2 x 2 solve per harmonic."""
+        residual, q = current.residual_um, measurement.orthonormal
         best, best_ss = None, -1.0
         for n in range(self.lowest, MAX_HARMONIC + 1):
-            basis = self.basis(measurement, n)
-            coefficients = np.linalg.lstsq(basis, residual, rcond=None)[0]
-            explained = float(np.sum((basis @ coefficients) ** 2))
+            columns = self.columns(measurement, n)
+            along = q.T @ columns
+            gram = columns.T @ columns - along.T @ along
+            right = columns.T @ residual
+            explained = float(right @ np.linalg.lstsq(gram, right, rcond=None)[0])
             if explained > best_ss:
                 best, best_ss = n, explained
-        return Trial(self.basis(measurement, best), float(best))
+        return Trial(measurement.project(self.columns(measurement, best)), float(best))
 
     def describe(self, measurement, trial, fitted_um):
         way = "changing sign with the direction" if self.flips else "the same both ways"

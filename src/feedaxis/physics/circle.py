@@ -75,10 +75,14 @@ def backlash_shape(angle_deg, direction, axis_index, radius_mm=None):
 
     def radial(backlash_um_value, lag_deg=0.0):
         since = np.mod(turned - lag_deg, 360.0)
-        engagement = np.where(since < 180.0, -1.0, 1.0)
+        second_half = since >= 180.0
+        engagement = np.where(second_half, 1.0, -1.0)
         if radius_mm is not None and backlash_um_value != 0.0:
-            travel_um = radius_mm * UM_PER_MM * (1.0 - np.cos(np.radians(np.mod(since, 180.0))))
-            engagement *= np.clip(2.0 * travel_um / abs(backlash_um_value) - 1.0, -1.0, 1.0)
+            play = abs(backlash_um_value) / (radius_mm * UM_PER_MM)   # 1 - cos φ at the end
+            phi_deg = since - 180.0 * second_half
+            crossing = np.flatnonzero(phi_deg < np.degrees(np.arccos(max(1.0 - play, -1.0))))
+            travel = 1.0 - np.cos(np.radians(phi_deg[crossing]))
+            engagement[crossing] *= np.clip(2.0 * travel / play - 1.0, -1.0, 1.0)
         return along * (0.5 * backlash_um_value) * engagement
 
     return radial
