@@ -223,7 +223,8 @@ class Squareness(CircularEffect):
 
 class ServoMismatch(CircularEffect):
     """The two axes' servo loops lag their commands by different times T_1, T_2:
-    F·(T_1 − T_2)/2·sin 2θ, changing sign with the direction."""
+    F·(T_1 − T_2)/2·sin 2θ, changing sign with the direction. The plants are never in
+    axis.toml (a ``[servo]`` holds the controller), so the lag difference is fitted."""
 
     name = effect = "servo_mismatch"
     meaning = ("the two axes' position loops lag by different times (unequal gains): an "
@@ -231,12 +232,6 @@ class ServoMismatch(CircularEffect):
     parameters = (Parameter("lag_difference_ms", "ms", -1e3, 1e3,
                             "T_1 − T_2: lag of the first axis less that of the second"),)
     linear = ("lag_difference_ms",)
-
-    def unavailable(self, case):
-        reason = super().unavailable(case)
-        if reason is None and all(a.servo for a in case.axis.axes.values()):
-            return "both axes' [servo] are given: their loops set the lags"
-        return reason
 
     def prepare(self, case):
         samples, test = case.circular, case.axis.circular
