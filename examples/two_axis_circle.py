@@ -11,7 +11,8 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from feedaxis.case import Axis, CircularTest, Machine
+from feedaxis.case import Axis
+from feedaxis.circular_case import CircularTest, Machine
 from feedaxis.cosim.fmu_cache import cached_fmus
 from feedaxis.cosim.machine import CircleInterpolator, machine_from_case_axes
 

@@ -7,7 +7,8 @@ from feedaxis.cosim.circular import simulate_circular
 from feedaxis.cosim.machine import machine_from_case_axes
 from feedaxis.cosim.master import Master
 from feedaxis.cosim.scenarios import MeasurementNoise
-from feedaxis.case import CircularTest, Machine, Axis
+from feedaxis.case import Axis
+from feedaxis.circular_case import CircularTest, Machine
 
 RADIUS_MM, FEED_MM_MIN, CENTER_MM = 20.0, 1000.0, (60.0, 40.0)
 

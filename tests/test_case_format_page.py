@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from feedaxis import case as case_format
+from feedaxis import circular_case
 from feedaxis.case import read_axis, read_case
 from feedaxis.cli import main
 from feedaxis.effects import CATALOG, Model
@@ -61,7 +62,7 @@ def test_every_axis_key_is_listed_with_the_range_the_reader_enforces():
     ("### positioning.csv", case_format.POSITIONING_COLUMNS),
     ("### duty.csv", case_format.DUTY_COLUMNS),
     ("### tracking.csv", case_format.TRACKING_COLUMNS),
-    ("### circular.csv", case_format.CIRCULAR_COLUMNS)])
+    ("### circular.csv", circular_case.CIRCULAR_COLUMNS)])
 def test_every_csv_column_is_listed_with_its_range(section, spec):
     listed = rows(section)
     assert set(listed) == set(spec)
@@ -76,7 +77,7 @@ def test_every_csv_column_is_listed_with_its_range(section, spec):
 
 def test_every_circular_key_is_listed():
     listed = rows("## Circular tests")
-    assert {f"[circular] {key}" for key in case_format.CIRCULAR_KEYS} <= set(listed)
+    assert {f"[circular] {key}" for key in circular_case.CIRCULAR_KEYS} <= set(listed)
     assert listed["[circular] radius_mm"][2].startswith(range_text("radius_mm"))
 
 

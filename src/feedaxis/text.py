@@ -100,11 +100,13 @@ def repeatability_text(repeatability):
 
 def comparison_lines(comparison):
     """The figures of ``compare``: ISO 230-2 (positioning) or seed 002's (tracking)."""
-    return {"tracking": _tracking_comparison_lines, "circular": _circular_comparison_lines}.get(
+    from .measurement.circular import comparison_lines as circular_lines
+
+    return {"tracking": _tracking_comparison_lines, "circular": circular_lines}.get(
         comparison["kind"], _iso_comparison_lines)(comparison)
 
 
-def _figure_table(title, width, comparison):
+def figure_table(title, width, comparison):
     """The figures measured, residual and explained, then the RMS, ``width`` wide names."""
     lines = [f"{title:{width}s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
     for figure in comparison["figures"].values():
@@ -117,27 +119,11 @@ def _figure_table(title, width, comparison):
     return lines
 
 
-def _circular_comparison_lines(comparison):
-    """ISO 230-4 figures, measured against the residual after the model, and the set-up."""
-    setup = comparison["setup"]
-    lines = [f"circle R {comparison['radius_mm']:g} mm at {comparison['feed_mm_min']:g} mm/min, "
-             f"axes {' '.join(comparison['axes'])}; model: "
-             f"{', '.join(comparison['effects']) or '(none)'}",
-             *_figure_table("ISO 230-4 figure (µm)", 40, comparison)]
-    first, second = comparison["axes"]
-    lines.append(f"set-up (not the machine's): centre off by {setup['center_first_um']:+.3f} µm "
-                 f"along {first}, {setup['center_second_um']:+.3f} µm along {second}; radius "
-                 f"{setup['radius_um']:+.3f} µm; drift {setup['drift_um_per_s']:+.4g} µm/s")
-    if not comparison["bidirectional"]:
-        lines.append("(one direction: G per direction and H need both)")
-    return "\n".join(lines)
-
-
 def _iso_comparison_lines(comparison):
     """ISO 230-2 figures, measured against the residual after the model."""
     lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
              f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
-             *_figure_table("ISO 230-2 figure (µm)", 32, comparison)]
+             *figure_table("ISO 230-2 figure (µm)", 32, comparison)]
     if not comparison["bidirectional"]:
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
     return "\n".join(lines)

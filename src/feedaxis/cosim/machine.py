@@ -98,7 +98,7 @@ def _renamed(end, axis):
 
 def machine_from_case_axes(machine, squareness_urad=0.0, macro_step_s=1e-3,
                            thermal_step_s=DEFAULT_THERMAL_STEP_S):
-    """The system of a circular case's machine (:class:`feedaxis.case.Machine`): each axis
+    """The system of a circular case's machine (:class:`feedaxis.circular_case.Machine`): each axis
     with StepperError where its ``[motor]`` is given, ThermalScrew where its screw has
     every thermal key, its ``[servo]`` controller in NpidServo, the axis.toml keys in the
     FMUs that take them; every catalog effect switched off (its neutral values)."""
@@ -119,7 +119,7 @@ def circular_machine(machine_path=None, radius_mm=None, feed_mm_min=None, center
     step_s, thermal_step_s = option_steps(step_ms, thermal_step_s)
     circle = {"radius_mm": 100.0, "feed_mm_min": 1000.0, "center_mm": None}
     if machine_path:
-        from ..case import read_machine
+        from ..circular_case import read_machine
 
         path = Path(machine_path)
         machine = read_machine(path / "axis.toml" if path.is_dir() else path)

@@ -247,7 +247,7 @@ class ServoMismatch(CircularEffect):
 
 
 def circular_effects(machine):
-    """{add name: effect} of a circular case's machine (:class:`feedaxis.case.Machine`):
+    """{add name: effect} of a circular case's machine (:class:`feedaxis.circular_case.Machine`):
     each axis's effects, then the machine's."""
     effects = []
     for axis in machine.circular.axes:

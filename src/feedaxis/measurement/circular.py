@@ -29,6 +29,7 @@ from ..iso230_4 import circular_figures
 from ..physics import circle
 from ..stats import judge
 from ..stats.noise import ResidualMeanSquare, Serial
+from ..text import figure_table
 from .base import Measurement, Shape, Trial
 
 MAX_HARMONIC = 90  # structure searched up to 90 cycles per turn (4° on the circle)
@@ -280,3 +281,19 @@ class Harmonic(Shape):
         way = "changing sign with the direction" if self.flips else "the same both ways"
         return (f"{int(trial.location)} cycles per turn, {np.ptp(fitted_um) / 2:.3g} µm, {way}: "
                 "no effect of either axis explains it")
+
+
+def comparison_lines(comparison):
+    """ISO 230-4 figures, measured against the residual after the model, and the set-up."""
+    setup = comparison["setup"]
+    lines = [f"circle R {comparison['radius_mm']:g} mm at {comparison['feed_mm_min']:g} mm/min, "
+             f"axes {' '.join(comparison['axes'])}; model: "
+             f"{', '.join(comparison['effects']) or '(none)'}",
+             *figure_table("ISO 230-4 figure (µm)", 40, comparison)]
+    first, second = comparison["axes"]
+    lines.append(f"set-up (not the machine's): centre off by {setup['center_first_um']:+.3f} µm "
+                 f"along {first}, {setup['center_second_um']:+.3f} µm along {second}; radius "
+                 f"{setup['radius_um']:+.3f} µm; drift {setup['drift_um_per_s']:+.4g} µm/s")
+    if not comparison["bidirectional"]:
+        lines.append("(one direction: G per direction and H need both)")
+    return "\n".join(lines)

@@ -17,7 +17,7 @@ from ..stats.wording import p_text
 from ..text import micro
 from ..output import write_atomically
 from ..text import repeatability_text
-from . import plots
+from . import circular, plots
 from .compensation_table import compensation_table_html
 
 STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}
@@ -212,47 +212,10 @@ def _tracking_views(analysis):
     ]
 
 
-def _circular_views(analysis):
-    """The polar trace: measured, model and residual (the set-up taken out of each), both
-    directions, with their ISO 230-4 figures."""
-    measurement, result = analysis.measurement, analysis.result
-    figures = analysis.comparison["figures"]
-    model_um = measurement.measured_um - result.residual_um
-
-    def text(column):
-        return ", ".join(f"{key[:-3].replace('_', ' ')} {figures[key][column]:.3g}"
-                         for key in ("G_um", "H_um") if key in figures) + " µm"
-
-    traces = {"measured": measurement.measured_um, "model": model_um,
-              "residual": result.residual_um}
-    return ["<h2>The circle (polar trace)</h2>",
-            image(plots.polar_traces(measurement.angle_deg, measurement.direction, traces,
-                                     {"measured": text("measured_um"),
-                                      "residual": text("residual_um")}),
-                  "polar trace of the circular test")]
-
-
-def _circular_figures(analysis):
-    comparison = analysis.comparison
-    rows = [(f["name"], f"{f['measured_um']:.4g}", f"{f['residual_um']:.4g}",
-             "" if f["explained"] is None else f"{100 * f['explained']:.1f} %")
-            for f in comparison["figures"].values()]
-    setup = comparison["setup"]
-    first, second = comparison["axes"]
-    return ["<h2>ISO 230-4 figures</h2>",
-            table(("ISO 230-4 figure", "measured (µm)", "residual (µm)", "explained"), rows),
-            "<h2>The set-up (not the machine's)</h2>",
-            table(("set-up", "value"),
-                  [(f"centre offset along {first}", f"{setup['center_first_um']:.4g} µm"),
-                   (f"centre offset along {second}", f"{setup['center_second_um']:.4g} µm"),
-                   ("radius", f"{setup['radius_um']:.4g} µm"),
-                   ("drift of the instrument", f"{setup['drift_um_per_s']:.4g} µm/s")])]
-
-
 # per kind: its views, its figures, its contributions plot
 VIEWS = {"positioning": (_positioning_views, _positioning_figures, _positioning_contributions),
          "tracking": (_tracking_views, lambda analysis: [], _sample_contributions),
-         "circular": (_circular_views, _circular_figures, _sample_contributions)}
+         "circular": (circular.views, circular.figures, _sample_contributions)}
 
 
 def _sections(analysis):
