@@ -27,7 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import synthetic as syn  # noqa: E402
 from common import arguments  # noqa: E402
 from feedaxis.analysis import analyse  # noqa: E402
-from feedaxis.case import Axis, Case, Tracking  # noqa: E402
+from feedaxis.case import Axis, Case  # noqa: E402
+from feedaxis.measurement.tracking import TrackingSamples  # noqa: E402
 from feedaxis.diagnose import diagnose  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
 from feedaxis.fit import fit  # noqa: E402
@@ -71,7 +72,7 @@ def tracking_trace(duration_s, seed=3):
                            reference_mm)
     actual_mm = position_mm + noise_um(time_s.size, seed) * 1e-3
     return Case(Path("generated"), Axis("trace", {"lead_mm": 10.0}, {}, dict(AXIS["servo"])),
-                tracking=Tracking(time_s, reference_mm, actual_mm))
+                {"tracking": TrackingSamples(time_s, reference_mm, actual_mm)})
 
 
 def measure(job, repeats):

@@ -107,13 +107,14 @@ def in_memory_case(axis_values, **columns):
     """A Case held in memory (no folder written), for the many generated trials."""
     from pathlib import Path
 
-    from feedaxis.case import Axis, Case, Positioning
+    from feedaxis.case import Axis, Case
+    from feedaxis.measurement.positioning import PositioningSamples
 
     has_direction = "direction" in columns
     direction = columns.pop("direction", np.ones_like(columns["target_mm"]))
     axis = Axis(axis_values["name"], axis_values["screw"], axis_values.get("motor", {}))
-    return Case(Path("generated"), axis, Positioning(direction=direction,
-                                                     has_direction=has_direction, **columns))
+    return Case(Path("generated"), axis, {"positioning": PositioningSamples(
+        direction=direction, has_direction=has_direction, **columns)})
 
 
 def run_clock(run):

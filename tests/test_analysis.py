@@ -5,8 +5,11 @@ import pytest
 import feedaxis.analysis
 import feedaxis.diagnose
 import feedaxis.fit
+import feedaxis.kinds
 import feedaxis.measurement
 import feedaxis.physics.servo
+import feedaxis.positioning_details
+import feedaxis.tracking_details
 from feedaxis.analysis import analyse, error_ladder
 from feedaxis.case import read_case
 from feedaxis.demo import improve, ladder_of
@@ -64,12 +67,13 @@ def test_the_report_computes_nothing(kind, loop, tracking_analysis, tmp_path, mo
     for module, name in [(feedaxis.fit, "fit"), (feedaxis.fit, "evaluate"),
                          (feedaxis.diagnose, "diagnose"), (feedaxis.analysis, "fit"),
                          (feedaxis.analysis, "diagnose"), (feedaxis.analysis, "compare"),
-                         (feedaxis.analysis, "compensate"), (feedaxis.analysis, "verify"),
-                         (feedaxis.analysis, "periodogram"),
-                         (feedaxis.analysis, "residual_spectrum"),
+                         (feedaxis.positioning_details, "compensate"),
+                         (feedaxis.positioning_details, "verify"),
+                         (feedaxis.tracking_details, "periodogram"),
+                         (feedaxis.positioning_details, "residual_spectrum"),
                          (feedaxis.physics.servo, "simulate")]:
         monkeypatch.setattr(module, name, refuse)
-    for measurement in feedaxis.measurement.KINDS.values():
+    for measurement in feedaxis.kinds.kinds().values():
         for name in ("predictor", "separable", "components", "figures", "core"):
             monkeypatch.setattr(measurement, name, refuse)
     page = write_report(analysis, tmp_path / "r.html").read_text(encoding="utf-8")

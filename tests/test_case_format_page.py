@@ -14,6 +14,7 @@ from feedaxis import circular_case
 from feedaxis.case import read_axis, read_case
 from feedaxis.cli import main
 from feedaxis.effects import CATALOG, Model
+from feedaxis.measurement import positioning, tracking
 from feedaxis.examples import (LASER_BACKLASH_UM, LASER_EXAMPLE, LASER_LEAD, LASER_NOISE_UM,
                                laser_example_rtl)
 from feedaxis.fit import fit
@@ -59,9 +60,9 @@ def test_every_axis_key_is_listed_with_the_range_the_reader_enforces():
 
 
 @pytest.mark.parametrize("section, spec", [
-    ("### positioning.csv", case_format.POSITIONING_COLUMNS),
+    ("### positioning.csv", positioning.POSITIONING_COLUMNS),
     ("### duty.csv", case_format.DUTY_COLUMNS),
-    ("### tracking.csv", case_format.TRACKING_COLUMNS),
+    ("### tracking.csv", tracking.TRACKING_COLUMNS),
     ("### circular.csv", circular_case.CIRCULAR_COLUMNS)])
 def test_every_csv_column_is_listed_with_its_range(section, spec):
     listed = rows(section)

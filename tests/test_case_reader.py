@@ -16,8 +16,10 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from feedaxis.case import (PHYSICAL_RANGE, POSITIONING_COLUMNS, TRACKING_COLUMNS, CaseError,
-                           _check_header, _read_csv, _read_text, _row_label, range_problem)
+from feedaxis.case import (PHYSICAL_RANGE, CaseError, _check_header, _read_csv, _read_text,
+                           _row_label, range_problem)
+from feedaxis.measurement.positioning import POSITIONING_COLUMNS
+from feedaxis.measurement.tracking import TRACKING_COLUMNS
 from feedaxis.errors import finite_float, text_lines
 from test_fuzz import CONTENT, FUZZ
 

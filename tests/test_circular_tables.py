@@ -49,13 +49,13 @@ def test_each_axis_table_shrinks_the_circle(fitted, controller, tmp_path):
 def test_both_tables_leave_the_squareness(fitted):
     """After X's and Y's tables the circle is the squareness's ellipse, α R / 2 = 0.6 µm."""
     case, model = fitted
-    module = CONTROLLERS["linuxcnc"]
+    controller = CONTROLLERS["linuxcnc"]
     after = case
     for axis in ("X", "Y"):
-        table, _ = circle_table(case, model, axis, module)
-        applied = module.read(module.write(table, "0"))
-        after = replace(after, circular=replace(after.circular, deviation_um=circle_after_um(
-            after, model, axis, applied)))
+        table, _ = circle_table(case, model, axis, controller)
+        applied = controller.read(controller.write(table, "0"))
+        after = after.with_samples("circular", replace(
+            after.circular, deviation_um=circle_after_um(after, model, axis, applied)))
     left = after.circular.deviation_um - circle.squareness_um(after.circular.angle_deg,
                                                               RADIUS_MM, 60.0)
     assert np.std(left) < 0.12   # the 0.05 µm noise and the play crossed at the reversals

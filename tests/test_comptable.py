@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from feedaxis.case import Positioning, read_case, write_case
+from feedaxis.case import read_case, write_case
+from feedaxis.measurement.positioning import PositioningSamples as Positioning
 from feedaxis.cli import main
 import synthetic as syn
 from feedaxis.comptable import CONTROLLERS, build_table, from_model, grid_mm, verify
@@ -90,7 +91,7 @@ def test_round_trip_removes_lead_eccentricity_and_backlash_between_targets(
     figures = report["figures"]
     assert figures["E_um"]["after_um"] < 0.2 * figures["E_um"]["before_um"]
     # a table held in whole detection units (Fanuc: 1 µm) may leave one unit of reversal
-    quantum_um = getattr(CONTROLLERS[controller], "DETECTION_UNIT_UM", 0.0)
+    quantum_um = CONTROLLERS[controller].quantum_um
     assert figures["B_um"]["after_um"] < 0.2 * figures["B_um"]["before_um"] + quantum_um
     assert not report["warnings"]
     between = report["between_targets"]  # the fitted model's view, close to the truth's
@@ -381,10 +382,12 @@ def test_readers_refuse_positions_not_increasing(module, old, new, line):
         module.read(text.replace(old, new))
 
 
-def test_the_cli_offers_every_controller():
-    from feedaxis.cli import COMP_TABLE_CONTROLLERS
+def test_the_cli_offers_every_controller(capsys):
+    from feedaxis.cli import main
 
-    assert set(COMP_TABLE_CONTROLLERS) == set(CONTROLLERS)
+    with pytest.raises(SystemExit):
+        main(["comp-table", "--help"])
+    assert f"--controller {{{','.join(CONTROLLERS)}}}" in capsys.readouterr().out
 
 
 def test_mach4_map_reads_back_and_refuses_a_short_line():

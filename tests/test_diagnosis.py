@@ -14,6 +14,7 @@ from feedaxis import fit as fit_module
 from feedaxis.case import write_case
 from feedaxis.cli import main
 from feedaxis.diagnose import diagnose
+from feedaxis.measurement.positioning import marked_wavelengths
 from feedaxis.stats.spectrum import residual_spectrum
 from feedaxis.stats.spectrum import MAX_FREQUENCIES
 from feedaxis.effects import CATALOG, Model
@@ -162,7 +163,8 @@ def test_spectrum_of_jittered_targets_is_bounded():
     rng = np.random.default_rng(20)
     target_mm = np.tile(np.arange(11) * 50.0, 10) + rng.uniform(-1e-6, 1e-6, 110)
     case = syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=rng.normal(0, 1, 110))
-    spectrum = residual_spectrum(case, case.positioning.error_um, CATALOG)
+    spectrum = residual_spectrum(case.positioning.target_mm, case.positioning.error_um,
+                                 marked_wavelengths(case.axis, CATALOG))
     assert 0 < spectrum.wavelength_mm.size <= MAX_FREQUENCIES
     assert spectrum.wavelength_mm.min() >= 100.0 * (1 - 1e-9)
 

@@ -319,7 +319,7 @@ def _controller_text(draw, module):
 
     position_mm = np.arange(0.0, 50.0, 10.0)
     table = CompTable(position_mm, 0.1 * position_mm, 0.1 * position_mm + 2.0, "model")
-    lines = module.write(table, module.DEFAULT_AXIS_ID).splitlines()
+    lines = module.write(table, module.default_axis_id).splitlines()
     extreme = draw(st.sampled_from(["2147483648", "1e-9", "-1e9", "1e400", "nan", "0", "-1",
                                     "9" * 5000, "1023", "1024", ""]))
     index = draw(st.integers(0, len(lines) - 1))

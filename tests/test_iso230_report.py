@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import synthetic as syn
-from feedaxis.case import Positioning, read_case
+from feedaxis.case import read_case
+from feedaxis.measurement.positioning import PositioningSamples as Positioning
 from feedaxis.cli import main
 from feedaxis.cosim.replay import replay_positioning
 from feedaxis.effects import CATALOG, Model
@@ -116,7 +117,8 @@ def test_report_names_what_a_metrologist_signs(tmp_path):
     import re
 
     from feedaxis import __version__
-    from feedaxis.case import Positioning, read_case
+    from feedaxis.case import read_case
+    from feedaxis.measurement.positioning import PositioningSamples as Positioning
     from feedaxis.effects import CATALOG, Model
     from feedaxis.fit import fit
 

@@ -193,7 +193,7 @@ def test_unknown_or_unavailable_effect_exits_2(tmp_path, capsys):
 
 
 def test_repeat_groups_keep_targets_and_directions_apart():
-    from feedaxis.case import Positioning
+    from feedaxis.measurement.positioning import PositioningSamples as Positioning
     from feedaxis.iso230 import target_groups
     # 0.5 mm approached in - and 0 mm approached in + once shared a group key (4x + dir)
     positioning = Positioning(np.array([0.0, 0.5, 0.0, 0.5]), np.zeros(4),

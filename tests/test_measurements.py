@@ -12,7 +12,8 @@ from feedaxis.case import read_case, write_case
 from feedaxis.cli import main
 from feedaxis.effects import CATALOG, Model
 from feedaxis.examples import BUNDLED_CASE
-from feedaxis.measurement import KINDS, Tracking, measurement_of
+from feedaxis.kinds import kinds
+from feedaxis.measurement import Tracking, measurement_of
 from tracking_synthetic import AXIS as SERVO_AXIS, step_loop, two_sines, write_tracking_case
 
 MICRO_ALL = ("lead_error", "assembly_eccentricity", "motor_step_error")
@@ -213,7 +214,7 @@ def test_every_effect_keeps_the_measurement_contract(name, tmp_path):
     sample, and an effect acting inside the system contributes nothing at its neutral
     values; the measurement of the other kind refuses it."""
     effect, rng = CATALOG[name], np.random.default_rng(9)
-    assert effect.measurement in KINDS
+    assert effect.measurement in kinds()
     case = _case_of(effect.measurement, tmp_path)
     measurement = measurement_of(case, effect.measurement)
     assert measurement.unavailable(effect) is None, measurement.unavailable(effect)
@@ -227,7 +228,7 @@ def test_every_effect_keeps_the_measurement_contract(name, tmp_path):
     if not effect.additive:
         switched_off = measurement.components(model.with_values({name: dict(effect.neutral)}))
         np.testing.assert_allclose(switched_off[name], 0.0, atol=1e-9)
-    other = next(k for k in KINDS if k != effect.measurement)
+    other = next(k for k in kinds() if k != effect.measurement)
     assert "acts on" in measurement_of(_case_of(other, tmp_path), other).unavailable(effect)
 
 

@@ -11,14 +11,15 @@ import pytest
 
 import feedaxis.report.plots as plots
 import synthetic as syn
-from feedaxis.analysis import POINTS_PER_PERIOD, analyse
+from feedaxis.analysis import analyse
+from feedaxis.positioning_details import POINTS_PER_PERIOD
 from feedaxis.case import read_case, write_case
 from feedaxis.effects import CATALOG, Model
 from feedaxis.examples import write_table2_case
 from feedaxis.measurement import measurement_of
 from feedaxis.physics import geometry
 from feedaxis.report import write_report
-from feedaxis.report.page import _positioning_contributions
+from feedaxis.report.positioning import _positioning_contributions
 
 LEAD = {"offset_um": 1.5, "slope_um_per_mm": -0.5}
 ECCENTRICITY = {"cos_um": 100.0, "sin_um": -100.0}   # 141 µm, invisible at the targets

@@ -87,9 +87,10 @@ def test_table1_pid_figures_through_the_fits_simulation():
 
 
 def _case_from_arrays(time_s, reference_mm):
-    from feedaxis.case import Axis, Case, Tracking
+    from feedaxis.case import Axis, Case
+    from feedaxis.measurement.tracking import TrackingSamples
     return Case(None, Axis("x", {"lead_mm": 1.0}, {}, {**AXIS["servo"]}),
-                tracking=Tracking(time_s, reference_mm, reference_mm))
+                {"tracking": TrackingSamples(time_s, reference_mm, reference_mm)})
 
 
 def test_generator_and_fast_loop_agree(friction_run):

@@ -153,9 +153,10 @@ def test_measured_means_table_of_a_trial_is_that_trials_table(tmp_path):
     trials = case.positioning.error_um + np.random.default_rng(0).normal(0, 1, (3, 110))
     got = measurement.table.of(trials, None)["table_um"]
     for values, table in zip(trials, got):
-        case_t = case.__class__(case.folder, case.axis, case.positioning.__class__(
+        samples = case.positioning.__class__(
             case.positioning.target_mm, values, case.positioning.direction,
-            case.positioning.run, has_direction=True))
+            case.positioning.run, has_direction=True)
+        case_t = case.__class__(case.folder, case.axis, {"positioning": samples})
         expected = from_measurement(case_t, measurement.table.position_mm)
         assert table == pytest.approx(np.stack((expected.forward_um, expected.reverse_um), -1),
                                       abs=1e-12)

@@ -1,10 +1,12 @@
 """Reading, checking and writing a measurement case, format version 1.2 (docs/case-format.md).
 
-A case is one folder: ``axis.toml`` (required), ``positioning.csv`` and/or ``tracking.csv``,
-optionally ``duty.csv``; or a circular test of two axes: ``axis.toml`` with ``[circular]``
-and one ``[axes.NAME]`` per axis, and ``circular.csv``. Every rule of the format is
-checked; a broken file raises one :class:`CaseError` naming the file, the row (1-based,
-header = row 1) and the column.
+A case is one folder: ``axis.toml`` (required), the file of each kind of measurement it
+holds (each kind reads its own: :mod:`feedaxis.kinds`), optionally ``duty.csv``. A kind may
+own the axis.toml too (its ``axis_tables``: the circular test's machine of two axes); its
+case then holds that kind's file alone. Every rule of the format is checked; a broken file
+raises one :class:`CaseError` naming the file, the row (1-based, header = row 1) and the
+column. This module holds what every file shares: the axis, the duty, the CSV reader and
+writer.
 """
 from __future__ import annotations
 
@@ -14,21 +16,20 @@ import math
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import tomli_w
 
+from . import kinds
 from .errors import (InputError, finite_float, finite_value, read_text, read_toml,
                      shown_value, toml_key_line)
 from .output import umask_mode, writing
 from .physics.geometry import SUPPORTS
-from .physics.servo import loop_budget_problem
 from .physics.thermal import DutySegment
 
-AXIS_FILE, POSITIONING_FILE, DUTY_FILE, TRACKING_FILE, CIRCULAR_FILE = (
-    "axis.toml", "positioning.csv", "duty.csv", "tracking.csv", "circular.csv")
+AXIS_FILE, DUTY_FILE = "axis.toml", "duty.csv"
 
 SCREW_KEYS = {
     "lead_mm": "positive", "length_m": "positive", "diameter_m": "positive",
@@ -69,12 +70,8 @@ PHYSICAL_RANGE = {
     "angle_deg": (0.0, 360.0),
 }
 
-POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
-                       "time_s": False, "ambient_C": False}
 DUTY_COLUMNS = {"start_s": True, "duration_s": True, "feed_mm_min": True, "from_mm": True,
                 "to_mm": True, "ambient_C": False}
-TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
-                    "disturbance_N": False}
 
 
 class CaseError(InputError, ValueError):
@@ -105,28 +102,6 @@ class Axis:
 
 
 @dataclass(frozen=True)
-class Positioning:
-    """positioning.csv as arrays; ``direction`` is ±1 (+1 when the column is absent)."""
-
-    target_mm: np.ndarray
-    error_um: np.ndarray
-    direction: np.ndarray
-    run: np.ndarray | None = None
-    time_s: np.ndarray | None = None
-    ambient_C: np.ndarray | None = None
-    has_direction: bool = False
-
-    @property
-    def size(self):
-        return self.target_mm.size
-
-    @property
-    def bidirectional(self):
-        """True when both approach directions were measured."""
-        return self.has_direction and {-1.0, 1.0} <= set(np.unique(self.direction))
-
-
-@dataclass(frozen=True)
 class Duty:
     """duty.csv: consecutive segments from t = 0, with the optional ambient per segment."""
 
@@ -139,25 +114,23 @@ class Duty:
 
 
 @dataclass(frozen=True)
-class Tracking:
-    """tracking.csv as arrays."""
-
-    time_s: np.ndarray
-    reference_mm: np.ndarray
-    actual_mm: np.ndarray
-    disturbance_N: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
 class Case:
-    """One measurement case folder; for a circular case ``axis`` is the :class:`Machine`."""
+    """One measurement case folder: its axis, its ``samples`` by kind of measurement
+    ({kind: samples}, as each kind reads its file) and the duty of a thermal test.
+
+    ``case.<kind>`` reads the samples of a registered kind (None when the case holds
+    none): a kind's own modules address its samples by its name.
+    """
 
     folder: Path
     axis: Axis
-    positioning: Positioning | None = None
+    samples: dict = field(default_factory=dict)
     duty: Duty | None = None
-    tracking: Tracking | None = None
-    circular: object = None
+
+    def __getattr__(self, name):
+        if name.startswith("_") or name not in kinds.kinds():
+            raise AttributeError(f"'Case' object has no attribute {name!r}")
+        return self.__dict__.get("samples", {}).get(name)
 
     @property
     def name(self):
@@ -165,8 +138,13 @@ class Case:
 
     @property
     def is_thermal(self):
-        """A thermal case: duty.csv and time-stamped positions."""
-        return self.duty is not None and self.positioning is not None
+        """A thermal case: duty.csv beside time-stamped samples (its kind's reader refuses
+        a duty without them)."""
+        return self.duty is not None
+
+    def with_samples(self, kind, samples):
+        """This case with the samples of ``kind`` replaced by ``samples``."""
+        return replace(self, samples={**self.samples, kind: samples})
 
 
 def read_case(folder):
@@ -174,25 +152,57 @@ def read_case(folder):
     folder = Path(folder)
     if not folder.is_dir():
         raise CaseError(folder, "not a case folder (expected a folder holding axis.toml)")
-    if _is_circular(folder):
-        return _read_circular_case(folder)
+    owner = _axis_owner(folder)
+    if owner is not None:
+        return _read_owned_case(folder, owner)
     axis = read_axis(folder / AXIS_FILE)
-    length_mm = axis.screw["length_m"] * 1e3 if "length_m" in axis.screw else None
-    duty = read_duty(folder / DUTY_FILE, length_mm) if (folder / DUTY_FILE).exists() else None
-    positioning = tracking = None
-    if (folder / POSITIONING_FILE).exists():
-        positioning = read_positioning(folder / POSITIONING_FILE,
-                                       duty.end_s if duty is not None else None, length_mm)
-    elif duty is not None:
-        raise CaseError(folder / DUTY_FILE, f"a thermal test needs {POSITIONING_FILE} "
-                                            "with time_s beside duty.csv")
-    if (folder / TRACKING_FILE).exists():
-        tracking = read_tracking(folder / TRACKING_FILE,
-                                 axis.servo.get("loop_step_s", DEFAULT_LOOP_STEP_S))
-    if positioning is None and tracking is None:
-        raise CaseError(folder, f"a case holds {POSITIONING_FILE}, {TRACKING_FILE} or both; "
-                                "neither was found")
-    return Case(folder, axis, positioning, duty, tracking)
+    duty = (read_duty(folder / DUTY_FILE, length_mm(axis)) if (folder / DUTY_FILE).exists()
+            else None)
+    registered = kinds.kinds()
+    samples = {}
+    for name, cls in registered.items():
+        read = cls.read(folder, axis, duty)
+        if read is not None:
+            samples[name] = read
+    if not samples:
+        files = ", ".join(cls.file for cls in registered.values())
+        raise CaseError(folder, f"a case holds {files} or both; neither was found"
+                        if len(registered) == 2 else
+                        f"a case holds one or more of {files}; none was found")
+    return Case(folder, axis, samples, duty)
+
+
+def _axis_owner(folder):
+    """The kind whose own tables axis.toml holds (its ``axis_tables``), None for an axis."""
+    if not (folder / AXIS_FILE).is_file():
+        return None
+    tables = set(read_axis_values(folder / AXIS_FILE)[1])
+    return next((cls for cls in kinds.kinds().values()
+                 if tables & set(getattr(cls, "axis_tables", ()))), None)
+
+
+def _read_owned_case(folder, owner):
+    """A case whose axis.toml ``owner`` (a kind) reads: its file alone."""
+    axis = owner.read_axis(folder / AXIS_FILE)
+    for cls in kinds.kinds().values():
+        if cls is not owner and (folder / cls.file).exists():
+            raise CaseError(folder / cls.file, f"a case whose axis.toml has "
+                                               f"{', '.join(f'[{t}]' for t in owner.axis_tables)} "
+                                               f"holds {owner.file} alone ({cls.file} belongs "
+                                               "to a one-axis case)")
+    if (folder / DUTY_FILE).exists():
+        raise CaseError(folder / DUTY_FILE, f"a case of {owner.file} has no duty.csv")
+    samples = owner.read(folder, axis, None)
+    if samples is None:
+        raise CaseError(folder / owner.file, f"missing: axis.toml has "
+                                             f"[{owner.axis_tables[0]}], so the case needs "
+                                             f"{owner.file}")
+    return Case(folder, axis, {owner.kind: samples})
+
+
+def length_mm(axis):
+    """The screw's length (mm), None when axis.toml does not give it."""
+    return axis.screw["length_m"] * 1e3 if "length_m" in axis.screw else None
 
 
 def read_axis(path):
@@ -202,9 +212,9 @@ def read_axis(path):
     tables = {}
     for key, value in data.items():
         if key == "name":
-            _check_name(path, text, value)
+            check_name(path, text, value)
         elif key in TABLES and isinstance(value, dict):
-            tables[key] = _check_table(path, text, key, value)
+            tables[key] = check_table(path, text, key, value)
         else:
             raise CaseError(path, _unknown_key_message(key, ["name", "[screw]", "[motor]",
                                                              "[servo]"]),
@@ -212,43 +222,20 @@ def read_axis(path):
     if "screw" not in tables or "lead_mm" not in tables["screw"]:
         raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
                         column="screw.lead_mm")
-    return _axis_of(path, text, data.get("name", ""), tables)
+    return axis_of(path, text, data.get("name", ""), tables)
 
 
-def _axis_of(path, text, name, tables, prefix=""):
+def axis_of(path, text, name, tables, prefix=""):
+    """The :class:`Axis` of checked ``tables`` ([screw], [motor], [servo]; ``prefix`` the
+    TOML table they stand under, ``axes.X`` in a machine)."""
     servo = (_check_servo(path, text, tables["servo"], prefix) if "servo" in tables else {})
     return Axis(name, tables.get("screw", {}), tables.get("motor", {}), servo)
 
 
-def _check_name(path, text, value):
+def check_name(path, text, value):
+    """Refuse a ``name`` that is not a string."""
     if not isinstance(value, str):
         raise CaseError(path, "name must be a string", toml_key_line(text, "name"), "name")
-
-
-def _is_circular(folder):
-    """A circular case: circular.csv, or ``[circular]`` in axis.toml."""
-    if (folder / CIRCULAR_FILE).exists():
-        return True
-    if not (folder / AXIS_FILE).is_file():
-        return False
-    try:
-        return "circular" in read_axis_values(folder / AXIS_FILE)[1]
-    except CaseError:
-        return False
-
-
-def _read_circular_case(folder):
-    from .circular_case import read_circular, read_machine
-
-    machine = read_machine(folder / AXIS_FILE)
-    for name in (POSITIONING_FILE, DUTY_FILE, TRACKING_FILE):
-        if (folder / name).exists():
-            raise CaseError(folder / name, f"a circular case holds {CIRCULAR_FILE} alone "
-                                           f"({name} belongs to a one-axis case)")
-    if not (folder / CIRCULAR_FILE).exists():
-        raise CaseError(folder / CIRCULAR_FILE, "missing: axis.toml has [circular], so the "
-                                                "case needs circular.csv")
-    return Case(folder, machine, circular=read_circular(folder / CIRCULAR_FILE))
 
 
 def read_axis_values(path):
@@ -283,7 +270,9 @@ def _read_text(path):
         raise CaseError(path, error.message, error.row) from None
 
 
-def _check_table(path, text, table, values, prefix=""):
+def check_table(path, text, table, values, prefix=""):
+    """``[table]`` (under ``prefix``, ``axes.X`` in a machine) with every key known and
+    every value within its rule and range."""
     known = TABLES[table]
     where = f"{prefix}.{table}" if prefix else table
     for key, value in values.items():
@@ -465,46 +454,20 @@ def _number(path, cell, row, column):
         raise CaseError(path, str(problem), row, column) from None
 
 
-def _first_bad(path, mask, rows, column, message):
-    """Raise naming the first row where ``mask`` is True."""
-    bad = np.flatnonzero(mask)
-    if bad.size:
-        raise CaseError(path, message, rows[bad[0]], column)
-
-
-def read_positioning(path, duty_end_s=None, length_mm=None):
-    """Read positioning.csv: target and deviation, optional direction, run, time, ambient.
-
-    With ``duty_end_s`` (a thermal case) every sample needs a time within the duty; with
-    ``length_mm`` (the screw's length) the targets must span no more than the screw.
-    """
-    path = Path(path)
-    values, rows = _read_csv(path, POSITIONING_COLUMNS)
-    _check_travel(path, values, rows, ("target_mm",), length_mm)
-    direction = values.get("direction")
-    if direction is not None:
-        _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
-                   "direction must be +1 or -1")
-    run = _checked_run(path, values, rows)
-    time_s = values.get("time_s")
-    if time_s is not None:
-        _first_bad(path, time_s < 0, rows, "time_s", "time_s must be >= 0 (seconds since the "
-                                                     "start of duty.csv)")
-    if duty_end_s is not None:
-        _check_within_duty(path, time_s, rows, duty_end_s)
-    return Positioning(values["target_mm"], values["error_um"],
-                       direction if direction is not None else np.ones_like(values["target_mm"]),
-                       run.astype(int) if run is not None else None, time_s,
-                       values.get("ambient_C"), has_direction=direction is not None)
-
-
-def _checked_run(path, values, rows):
+def checked_run(path, values, rows):
     """The ``run`` column (None when absent), each a whole number >= 1."""
     run = values.get("run")
     if run is not None:
         _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
                    "run must be a whole number >= 1")
     return run
+
+
+def _first_bad(path, mask, rows, column, message):
+    """Raise naming the first row where ``mask`` is True."""
+    bad = np.flatnonzero(mask)
+    if bad.size:
+        raise CaseError(path, message, rows[bad[0]], column)
 
 
 def read_duty(path, length_mm=None):
@@ -540,24 +503,6 @@ def read_duty(path, length_mm=None):
     return Duty(segments, values.get("ambient_C"))
 
 
-def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
-    """Read tracking.csv: strictly increasing time, reference and actual position.
-
-    The control loop steps ``loop_step_s`` through every interval, so samples too far apart
-    for it (:func:`feedaxis.physics.servo.loop_budget_problem`) are refused at the row.
-    """
-    path = Path(path)
-    values, rows = _read_csv(path, TRACKING_COLUMNS)
-    time_s = values["time_s"]
-    _first_bad(path, np.concatenate(([False], np.diff(time_s) <= 0)), rows, "time_s",
-               "time_s must be strictly increasing")
-    problem = loop_budget_problem(time_s, loop_step_s)
-    if problem is not None:
-        raise CaseError(path, problem[1], rows[problem[0]], "time_s")
-    return Tracking(time_s, values["reference_mm"], values["actual_mm"],
-                    values.get("disturbance_N"))
-
-
 def _check_travel(path, values, rows, columns, length_mm):
     """Raise unless the positions in ``columns`` span at most the screw's ``length_mm``."""
     if length_mm is None:
@@ -571,17 +516,7 @@ def _check_travel(path, values, rows, columns, length_mm):
                               "([screw] length_m of axis.toml)", rows[row], columns[column])
 
 
-def _check_within_duty(path, time_s, rows, duty_end_s):
-    if time_s is None:
-        raise CaseError(path, "a thermal case (duty.csv present) needs time_s on every sample",
-                        "1", "time_s")
-    _first_bad(path, time_s > duty_end_s * (1 + 1e-9), rows, "time_s",
-               f"sample lies after the end of duty.csv ({duty_end_s:g} s): the duty does not "
-               "match the samples' time span")
-
-
-def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, check=None,
-               circular=None):
+def write_case(folder, axis_values, duty=None, check=None, **samples):
     """Write a case folder atomically: all files appear together or none does.
 
     Parameters
@@ -591,13 +526,20 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, 
         meanwhile, the first to finish wins and this one is refused).
     axis_values : dict
         The content of axis.toml (``name``, ``screw``, ``motor``, optionally ``servo``).
-    positioning, duty, tracking, circular : dict of {column: array}, optional
-        Columns of each CSV, written in the given order (``circular`` with an
-        ``axis_values`` holding ``circular`` and ``axes``).
+    duty : dict of {column: array}, optional
+        Columns of duty.csv, written in the given order.
     check : callable, optional
         Called with the staged folder before it is published; what it raises leaves
         nothing behind.
+    **samples : dict of {column: array}
+        Per kind of measurement (``positioning=...``), the columns of its file.
     """
+    registered = kinds.kinds()
+    unknown = set(samples) - set(registered)
+    if unknown:
+        raise TypeError(f"no kind of measurement {', '.join(sorted(unknown))}; registered: "
+                        f"{', '.join(registered)}")
+    files = {registered[kind].file: columns for kind, columns in samples.items()}
     folder = Path(folder)
     if os.path.lexists(folder):
         raise CaseError(folder, "already exists; choose a new case folder")
@@ -606,8 +548,7 @@ def write_case(folder, axis_values, positioning=None, duty=None, tracking=None, 
         staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
         try:
             (staging / AXIS_FILE).write_text(tomli_w.dumps(axis_values), encoding="utf-8")
-            for name, columns in ((POSITIONING_FILE, positioning), (DUTY_FILE, duty),
-                                  (TRACKING_FILE, tracking), (CIRCULAR_FILE, circular)):
+            for name, columns in {**files, DUTY_FILE: duty}.items():
                 if columns is not None:
                     _write_csv(staging / name, columns)
             if check is not None:

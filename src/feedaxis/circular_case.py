@@ -12,11 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .case import (TABLES, CaseError, _axis_of, _check_name, _check_table, _first_bad,
-                   _read_csv, _unknown_key_message, _value_problem, read_axis_values,
-                   _checked_run)
+from .case import (TABLES, CaseError, _first_bad, _read_csv, _unknown_key_message,
+                   _value_problem, axis_of, check_name, check_table, checked_run,
+                   read_axis_values)
 from .errors import shown_value, toml_key_line
 
+CIRCULAR_FILE = "circular.csv"
 CIRCULAR_COLUMNS = {"angle_deg": True, "deviation_um": True, "direction": True, "run": False,
                     "time_s": False}
 CIRCULAR_KEYS = ("axes", "radius_mm", "feed_mm_min", "center_mm")
@@ -76,7 +77,7 @@ def read_machine(path):
     text, data = read_axis_values(path)
     for key, value in data.items():
         if key == "name":
-            _check_name(path, text, value)
+            check_name(path, text, value)
         elif key not in ("circular", "axes") or not isinstance(value, dict):
             raise CaseError(path, _unknown_key_message(key, ["name", "[circular]",
                                                              "[axes.NAME]"])
@@ -110,8 +111,8 @@ def _machine_axis(path, text, name, values):
             raise CaseError(path, _unknown_key_message(key, ["[screw]", "[motor]", "[servo]"]),
                             toml_key_line(text, key, prefix) or toml_key_line(
                                 text, f"{prefix}.{key}"), f"{prefix}.{key}")
-        tables[key] = _check_table(path, text, key, value, prefix)
-    return _axis_of(path, text, name, tables, prefix)
+        tables[key] = check_table(path, text, key, value, prefix)
+    return axis_of(path, text, name, tables, prefix)
 
 
 def _check_circular(path, text, values):
@@ -163,7 +164,7 @@ def read_circular(path):
                "angle_deg must be below 360 (0 <= angle < 360)")
     _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
                "direction must be +1 (counter-clockwise) or -1 (clockwise)")
-    run = _checked_run(path, values, rows)
+    run = checked_run(path, values, rows)
     time_s = values.get("time_s")  # >= 0: the reader's range
     group = direction * 1e9 + (run if run is not None else 1)
     for key in np.unique(group):

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from . import __version__, text
 from .case import read_case
+from .comptable import CONTROLLERS
 from .console import INTERRUPTED_EXIT, fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
@@ -25,7 +26,6 @@ from .output import write_atomically
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
 from .uncertainty.correction import corrected_case, temperature_option
 
-COMP_TABLE_CONTROLLERS = ("linuxcnc", "siemens", "fanuc", "heidenhain", "beckhoff", "mach4")
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
              "+ tracking.csv; see data-format.md")
 
@@ -82,16 +82,17 @@ def _progress(label, unit):
 
 
 def _effects(args, cases=()):
-    """The effects by name: the catalog, the user's (--effects) and, for circular cases,
-    each axis's and the machine's (``backlash@X``, ``squareness``)."""
+    """The effects by name: the catalog, the user's (--effects) and those a case's kind
+    makes for it (a circular test: each axis's and the machine's, ``backlash@X``), without
+    those acting on kinds the case does not hold."""
     effects = available_effects(args.effects or ())
-    circular = [case for case in cases if case.circular is not None]
-    if circular:
-        from .effects import CATALOG
-        from .effects.circular import circular_effects
-
-        effects = {**{name: e for name, e in effects.items() if name not in CATALOG},
-                   **circular_effects(circular[0].axis)}
+    for case in cases:
+        own = _kind_part(case, "case_effects")
+        if own is not None:
+            held = set(case.samples)
+            effects = {**{name: e for name, e in effects.items()
+                          if e.measurement is None or e.measurement in held},
+                       **own(case)}
     return effects
 
 
@@ -203,14 +204,14 @@ def _case_and_model(args):
 def _emit_each(args, outputs):
     """Print [(kind, payload, text)], one per kind of measurement compared: one output as
     it is (its JSON with ``measurement``), several under ``measurements``, each headed."""
-    from .measurement import KINDS
+    from .kinds import kind as kind_named
 
     payloads = [{**payload, "measurement": kind} for kind, payload, _ in outputs]
     if len(outputs) == 1:
         _emit(args, payloads[0], outputs[0][2])
         return
     _emit(args, {"measurements": payloads},
-          "\n\n".join(f"== {kind} ({KINDS[kind].file}) ==\n{lines}"
+          "\n\n".join(f"== {kind} ({kind_named(kind).file}) ==\n{lines}"
                        for kind, _, lines in outputs))
 
 
@@ -378,10 +379,12 @@ def _cmd_import(args):
 def _comp_table_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "fitted model (TOML); needed unless --from-measurement")
-    parser.add_argument("--controller", required=True, choices=COMP_TABLE_CONTROLLERS,
+    parser.add_argument("--controller", required=True, choices=list(CONTROLLERS),
                         help="the controller whose file, unit and sign convention to write")
     parser.add_argument("--out", required=True, metavar="FILE",
-                        help="the file to write (heidenhain: the .COM; its .CMA goes beside it)")
+                        help="the file to write" + "".join(
+                            f" ({c.name}: {c.out_note})" for c in CONTROLLERS.values()
+                            if c.out_note))
     parser.add_argument("--spacing-mm", type=float, metavar="S",
                         help="distance between table points (default: lead / 8, widened to the "
                              "controller's point limit; with --from-measurement the targets)")
@@ -391,8 +394,9 @@ def _comp_table_options(parser):
                         help="a circular case: the axis whose table to write (X, Y, ...); the "
                              "circle expected after it is verified")
     parser.add_argument("--axis-id", metavar="ID",
-                        help="axis name in the file (siemens X1, heidenhain X, beckhoff logical "
-                             "axis number 1, fanuc axis 1: the defaults)")
+                        help="axis name in the file (" + ", ".join(
+                            f"{c.name} {c.axis_note}" for c in CONTROLLERS.values()
+                            if c.axis_note) + ": the defaults)")
     parser.add_argument("--force", action="store_true",
                         help="write the table even when it is refused (it had to leave out "
                              "effects the data cannot determine, or it is expected to raise A, "
@@ -402,8 +406,8 @@ def _comp_table_options(parser):
 
 
 @command("comp-table", help="pitch-error compensation table for a CNC controller",
-         description="Write the table a controller loads (linuxcnc, siemens, fanuc, "
-                     "heidenhain, beckhoff, mach4) from the fitted model: lead, eccentricity, "
+         description=f"Write the table a controller loads ({', '.join(CONTROLLERS)}) "
+                     "from the fitted model: lead, eccentricity, "
                      "motor and sag in both directions, backlash as a direction-dependent "
                      "table, thermal effects never (a fixed table cannot follow them). With "
                      "--from-measurement: the classical table of the measured means. Then "
@@ -415,13 +419,13 @@ def _comp_table_options(parser):
                      "anyway. See docs/compensation-tables.md.",
          options=_comp_table_options)
 def _cmd_comp_table(args):
-    from .comptable import comp_table, summary_lines
+    from .comptable import check_case, comp_table, summary_lines
 
     case = read_case(args.case)
-    if case.circular is not None:
-        return _circle_comp_table(args, case)
-    if case.positioning is None:
-        raise InputError("a compensation table needs positioning.csv", path=case.folder)
+    kind_table = _kind_part(case, "comp_table")
+    if kind_table is not None:
+        return _kind_comp_table(args, case, kind_table)
+    case = check_case(case)
     case = corrected_case(case, args.correct_to_20C)
     if not (args.model or args.from_measurement):
         raise InputError("give the fitted model (--model M.toml) or --from-measurement",
@@ -434,21 +438,26 @@ def _cmd_comp_table(args):
     _emit(args, report, summary_lines(report))
 
 
-def _circle_comp_table(args, case):
-    """comp-table on a circular case: one axis's table from the fitted model."""
+def _kind_part(case, name):
+    """The part ``name`` of the first kind of measurement ``case`` holds that has one."""
+    from .kinds import kind, part
+
+    return next((found for found in (part(kind(held), name) for held in case.samples)
+                 if found), None)
+
+
+def _kind_comp_table(args, case, kind_table):
+    """comp-table on a case whose kind writes its own tables (a circular test: one axis's
+    table from the fitted model, ``--circle-axis``)."""
     from .comptable import summary_lines
-    from .comptable.circle import circle_comp_table
 
     if not args.model or args.from_measurement:
-        raise InputError("a table from a circular test comes from the fitted model (--model "
-                         "M.toml); a circle has no measured means per position",
+        raise InputError("a table from this case comes from the fitted model (--model "
+                         "M.toml); it has no measured means per position",
                          parameter="--model")
-    if not args.circle_axis:
-        raise InputError(f"name the axis whose table to write: "
-                         f"{', '.join(case.axis.circular.axes)}", parameter="--circle-axis")
     model = load_model(args.model, _effects(args, [case]))
-    files, report = circle_comp_table(case, model, args.controller, args.out, args.circle_axis,
-                                      args.spacing_mm, args.axis_id, args.force)
+    files, report = kind_table(case, model, args.controller, args.out, args.circle_axis,
+                               args.spacing_mm, args.axis_id, args.force)
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))

@@ -152,7 +152,7 @@ class Diagnosis:
 
 
 @one_blas_thread
-def diagnose(case, model, effects=None, progress=None, kind=None):
+def diagnose(case, model, effects=None, progress=None, kind=None, measurement=None):
     """Diagnose ``model`` on ``case``: refit, name missing effects, describe the rest.
 
     Parameters
@@ -165,11 +165,15 @@ def diagnose(case, model, effects=None, progress=None, kind=None):
         Called with a label before each fit.
     kind : str, optional
         The kind of measurement (default: the model's, else the first the case holds).
+    measurement : Measurement, optional
+        The samples of ``case`` already chosen (by :func:`feedaxis.analysis.analyse`).
     """
     effects = CATALOG if effects is None else effects
     notify = progress or (lambda label: None)
     notify("model")
-    base = fit_with_artefacts(model, measurement_of(case, kind or kinds_for([case], model)[0]))
+    if measurement is None:
+        measurement = measurement_of(case, kind or kinds_for([case], model)[0])
+    base = fit_with_artefacts(model, measurement)
     measurement = base.measurements[0]
     stages = len(measurement.stages)
     pending, skipped = _available(measurement, model, effects)

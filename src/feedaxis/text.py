@@ -9,6 +9,7 @@ import math
 import re
 
 from .effects.base import BasisEffect
+from .kinds import kind, part
 from .stats.wording import p_text
 
 
@@ -99,15 +100,18 @@ def repeatability_text(repeatability):
 
 
 def comparison_lines(comparison):
-    """The figures of ``compare``: ISO 230-2 (positioning) or seed 002's (tracking)."""
-    from .measurement.circular import comparison_lines as circular_lines
-
-    return {"tracking": _tracking_comparison_lines, "circular": circular_lines}.get(
-        comparison["kind"], _iso_comparison_lines)(comparison)
+    """The figures of ``compare``, as the kind of measurement compared writes them (its
+    ``text`` part: ISO 230-2 for positioning, seed 002's for tracking), else one line per
+    figure."""
+    lines = part(kind(comparison["kind"]), "text")
+    if lines:
+        return lines(comparison)
+    return "\n".join(f"{key}: {value}" for key, value in comparison.items())
 
 
 def figure_table(title, width, comparison):
-    """The figures measured, residual and explained, then the RMS, ``width`` wide names."""
+    """The figures of ``compare`` measured, residual and explained, then the RMS, the names
+    ``width`` wide (the text of a kind whose figures have that shape)."""
     lines = [f"{title:{width}s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
     for figure in comparison["figures"].values():
         explained = figure["explained"]
@@ -117,29 +121,6 @@ def figure_table(title, width, comparison):
     lines.append(f"{'RMS':{width}s} {comparison['rms_measured_um']:10.4g} "
                  f"{comparison['rms_residual_um']:10.4g}")
     return lines
-
-
-def _iso_comparison_lines(comparison):
-    """ISO 230-2 figures, measured against the residual after the model."""
-    lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
-             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
-             *figure_table("ISO 230-2 figure (µm)", 32, comparison)]
-    if not comparison["bidirectional"]:
-        lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
-    return "\n".join(lines)
-
-
-def _tracking_comparison_lines(comparison):
-    """Seed 002's figures after the first second: measured, predicted; then the residual."""
-    maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
-    return "\n".join([
-        f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
-        f"{', '.join(comparison['effects']) or '(seed 002 plant)'}",
-        f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
-        f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
-        f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
-        f"residual actual - predicted: max {comparison['residual_max_um']:.4g} µm, RMS "
-        f"{comparison['residual_rms_um']:.4g} µm"])
 
 
 def compensation_lines(result, out_path=None):

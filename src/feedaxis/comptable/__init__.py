@@ -1,10 +1,10 @@
 """Pitch-error compensation tables for CNC controllers, from the fitted model or the
 measured means, verified on the measured case before they are loaded.
 
-One module per controller (``linuxcnc``, ``siemens``, ``fanuc``, ``heidenhain``,
-``beckhoff``, ``mach4``), each with ``write(table, axis_id) -> text`` and
-``read(text) -> CompTable`` (the table as that controller applies it), its limits, its sign
-convention (``SIGN``) and how to load the file (``LOAD``).
+One module per controller, each defining its :class:`~.base.Controller` (``CONTROLLER``:
+``write(table, axis_id) -> text``, ``read(text) -> CompTable`` as that controller applies
+it, its limits, grid rules, sign convention, how to load the file, companion files and
+notes), registered in :data:`CONTROLLERS`, which the command line and its help read.
 """
 from __future__ import annotations
 
@@ -13,17 +13,28 @@ from pathlib import Path
 
 import numpy as np
 
-from ..case import POSITIONING_FILE
 from ..errors import InputError
 from ..iso230 import target_clusters
-from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, safety, siemens
-from .base import reference_index
+from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
+from .base import Controller
 from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
                     from_measurement, from_model, grid_mm)
 from .verify import between_targets, verify
 
-CONTROLLERS = {module.NAME: module for module in (linuxcnc, siemens, fanuc, heidenhain,
-                                                  beckhoff, mach4)}
+# The one registry of controllers (the command line's choices and help read it). The table's
+# safety and the positioning samples load when a table is made (the fit behind them takes
+# seconds to import), so the command line can read this registry at start-up.
+CONTROLLERS = {module.CONTROLLER.name: module.CONTROLLER
+               for module in (linuxcnc, siemens, fanuc, heidenhain, beckhoff, mach4)}
+POSITIONING_FILE = "positioning.csv"
+
+
+def check_case(case):
+    """``case`` when it holds what a table is made from (positioning.csv), else
+    :class:`InputError`."""
+    if case.positioning is None:
+        raise InputError(f"a compensation table needs {POSITIONING_FILE}", path=case.folder)
+    return case
 
 
 def build_table(case, model, controller, spacing_mm=None, from_measured=False):
@@ -34,46 +45,48 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
     controller that takes free positions uses the targets themselves unless ``spacing_mm``
     is given.
     """
-    module = CONTROLLERS[controller]
+    chosen = CONTROLLERS[controller]
     target_mm = case.positioning.target_mm
-    first_mm, last_mm = _span_mm(module, target_mm)
+    first_mm, last_mm = _span_mm(chosen, target_mm)
     if from_measured:
         count = target_clusters(target_mm)[0].size
         if count < 2:
             raise InputError(f"a table from the measurement needs at least two targets; every "
                              f"sample is at {target_mm[0]:g} mm", column="target_mm",
                              path=case.folder / POSITIONING_FILE)
-        if spacing_mm is None and not module.EQUIDISTANT:
+        if spacing_mm is None and not chosen.equidistant:
             return from_measurement(case)
         spacing_mm = spacing_mm or (target_mm.max() - target_mm.min()) / max(count - 1, 1)
-        return from_measurement(case, _grid(module, first_mm, last_mm, spacing_mm))
-    spacing_mm = spacing_mm or default_spacing_mm(case, module.MAX_POINTS, last_mm - first_mm)
-    return from_model(case, model, _grid(module, first_mm, last_mm, spacing_mm))
+        return from_measurement(case, _grid(chosen, first_mm, last_mm, spacing_mm))
+    spacing_mm = spacing_mm or default_spacing_mm(case, chosen.max_points, last_mm - first_mm)
+    return from_model(case, model, _grid(chosen, first_mm, last_mm, spacing_mm))
 
 
 def safe_table(case, model, position_mm):
     """The table of ``model`` at ``position_mm`` (:func:`.table.from_model`) without the
     effects a table must not use (:func:`.safety.unsafe_effects`), which ``excluded`` names
     with why."""
+    from . import safety
+
     unsafe = safety.unsafe_effects(case, model)
     table = from_model(case, safety.usable_model(model, unsafe), position_mm)
     return replace(table, excluded={**safety.reasons_by_effect(unsafe), **table.excluded})
 
 
-def _span_mm(module, target_mm):
+def _span_mm(controller, target_mm):
     """(first, last) position the table covers: the targets, and 0 mm for a controller that
-    counts its points from the reference position there (``GRID_THROUGH_ZERO``)."""
+    counts its points from the reference position there (``grid_through_zero``)."""
     first_mm, last_mm = float(target_mm.min()), float(target_mm.max())
-    if getattr(module, "GRID_THROUGH_ZERO", False):
+    if controller.grid_through_zero:
         return min(first_mm, 0.0), max(last_mm, 0.0)
     return first_mm, last_mm
 
 
-def _grid(module, first_mm, last_mm, spacing_mm):
+def _grid(controller, first_mm, last_mm, spacing_mm):
     """Table points every ``spacing_mm`` over the span from :func:`_span_mm`, through 0 mm
-    for a ``GRID_THROUGH_ZERO`` controller."""
+    for a ``grid_through_zero`` controller."""
     spacing_mm = round(float(spacing_mm), 6)
-    if getattr(module, "GRID_THROUGH_ZERO", False) and spacing_mm > 0:
+    if controller.grid_through_zero and spacing_mm > 0:
         first_mm = spacing_mm * np.floor(round(first_mm / spacing_mm, 9))
     return grid_mm(first_mm, last_mm, spacing_mm)
 
@@ -104,27 +117,29 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     with warnings saying what it risks.
 
     Returns ({path: text} of the files to write, ``out_path`` and any companion such as
-    Heidenhain's ``.CMA``; the report dict for printing and ``--json``).
+    a controller's ``companions``; the report dict for printing and ``--json``).
     """
-    module = CONTROLLERS[controller]
-    axis_id = axis_id or module.DEFAULT_AXIS_ID
+    from . import safety
+
+    chosen = CONTROLLERS[controller]
+    axis_id = axis_id or chosen.default_axis_id
     unsafe = safety.unsafe_effects(case, model)
     usable = safety.usable_model(model, unsafe)
     table = build_table(case, usable, controller, spacing_mm, from_measured)
-    text = module.write(table, axis_id)
-    applied = module.read(text)
+    text = chosen.write(table, axis_id)
+    applied = chosen.read(text)
     out_path = Path(out_path)
-    files = {**getattr(module, "companions", lambda *_: {})(out_path, axis_id), out_path: text}
+    files = {**chosen.companions(out_path, axis_id), out_path: text}
     report = {"controller": controller, "source": table.source, "points": table.size,
               "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),
               "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
               "included": list(table.included),
               "excluded": {} if from_measured else {**safety.reasons_by_effect(unsafe),
                                                     **table.excluded},
-              "sign": module.SIGN, "load": module.LOAD, **verify(case, applied),
+              "sign": chosen.sign, "load": chosen.load, **verify(case, applied),
               "between_targets": between_targets(case, usable, applied),
               "files": [str(path) for path in files]}
-    report["notes"] = _notes(case, table, module, spacing_mm)
+    report["notes"] = _notes(case, table, chosen, spacing_mm)
     if from_measured and unsafe:
         report["notes"].append(f"the model's view between the targets leaves out "
                                f"{', '.join(unsafe)}: the data cannot determine them")
@@ -137,7 +152,7 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     return files, report
 
 
-def _notes(case, table, module, spacing_mm):
+def _notes(case, table, controller, spacing_mm):
     """What limits this table: the point limit forcing a spacing over lead / 8, figures
     in-sample for measured means, the controller's reference and machine data."""
     notes = []
@@ -145,22 +160,14 @@ def _notes(case, table, module, spacing_mm):
     if (table.source == "model" and spacing_mm is None
             and "assembly_eccentricity" in table.included
             and table.spacing_mm > lead_mm / POINTS_PER_WAVELENGTH + 1e-9):
-        notes.append(f"{module.NAME} takes at most {module.MAX_POINTS} points: "
+        notes.append(f"{controller.name} takes at most {controller.max_points} points: "
                      f"{table.spacing_mm:.4g} mm between points (over lead / "
                      f"{POINTS_PER_WAVELENGTH} = {lead_mm / POINTS_PER_WAVELENGTH:.4g} mm) "
                      "follows the once-per-revolution error only roughly")
     if table.source == "measurement":
         notes.append("the table is the measured means at the targets: the figures after are "
                      "in-sample there (optimistic); between the targets it is blind")
-    if module.NAME in ("siemens", "fanuc"):
-        notes.append(f"values are relative to the table point nearest 0 mm "
-                     f"({table.position_mm[reference_index(table.position_mm)]:g} mm), where "
-                     "the control references; the figures are unchanged by that offset")
-    if module.NAME == "siemens":
-        notes.append(f"needs MD38000 $MA_MM_ENC_COMP_MAX_POINTS >= {table.size}"
-                     + (f" and MD18342 $MN_MM_CEC_MAX_POINTS[0] and [1] >= {table.size}"
-                        if table.bidirectional else ""))
-    return notes
+    return notes + controller.notes(table)
 
 
 def summary_lines(report):

@@ -1,8 +1,11 @@
-"""What every controller format shares: assignments read back with the line they came from,
-the point limit, the equidistant grid, the reference point and integer units."""
+"""What every controller format shares: the :class:`Controller` each controller's module
+defines, assignments read back with the line they came from, the point limit, the
+equidistant grid, the reference point and integer units."""
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -10,6 +13,58 @@ from ..errors import InputError
 from ..linefile import LineError
 
 UM_PER_MM = 1000.0
+
+
+def _no_companions(out_path, axis_id):
+    return {}
+
+
+def _no_notes(table):
+    return []
+
+
+@dataclass(frozen=True)
+class Controller:
+    """One CNC controller's compensation file, as its module defines it (``CONTROLLER``) and
+    :data:`feedaxis.comptable.CONTROLLERS` registers it.
+
+    ``write(table, axis_id) -> text`` and ``read(text) -> CompTable`` (the table as the
+    controller applies it); ``max_points`` (None: set on the machine), ``equidistant``
+    (points on an even grid), ``grid_through_zero`` (the reference position at 0 mm is a
+    table point), ``sign`` and ``load`` (the sign convention and how to load the file, for
+    the output), ``companions(out_path, axis_id) -> {path: text}`` (files written beside
+    it), ``notes(table) -> [str]`` (what the controller needs of the machine for this
+    table), ``quantum_um`` (the value's resolution, µm; 0 when finer than a nanometre), and
+    for the command line's help ``out_note`` (what ``--out`` names) and ``axis_note`` (the
+    default axis name as the manual writes it).
+    """
+
+    name: str
+    write: Callable
+    read: Callable
+    max_points: int | None
+    equidistant: bool
+    default_axis_id: str
+    sign: str
+    load: str
+    grid_through_zero: bool = False
+    companions: Callable = _no_companions
+    notes: Callable = _no_notes
+    quantum_um: float = 0.0
+    out_note: str = ""
+    axis_note: str = ""
+
+    @property
+    def module(self):
+        """The name of the module defining it."""
+        return self.write.__module__.rsplit(".", 1)[-1]
+
+
+def reference_note(table):
+    """The note of a controller that references its values to the table point nearest 0 mm."""
+    return (f"values are relative to the table point nearest 0 mm "
+            f"({table.position_mm[reference_index(table.position_mm)]:g} mm), where "
+            "the control references; the figures are unchanged by that offset")
 
 
 def assignments(text, path, pattern):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..linefile import LineError, number
-from .base import assignments, check_equidistant, check_points, quantized, require
+from .base import Controller, assignments, check_equidistant, check_points, quantized, require
 from .table import CompTable
 
 NAME = "beckhoff"
@@ -67,3 +67,7 @@ def read(text, path="achskw.lis"):
         key = f"kw.ssfk.table[{index + 1}].setpoint"
         raise LineError(path, "setpoints must increase", found[key][1], key)
     return CompTable(setpoint_mm, columns["pos"] * UNIT_UM, columns["neg"] * UNIT_UM, "file")
+
+
+CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        axis_note=f"logical axis number {DEFAULT_AXIS_ID}")

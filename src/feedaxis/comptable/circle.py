@@ -50,20 +50,21 @@ def axis_model(model, axis):
     return Model(effects, values), excluded
 
 
-def circle_table(case, model, axis, module, spacing_mm=None):
-    """(CompTable of ``axis`` for the controller ``module``, what was left out)."""
+def circle_table(case, model, axis, controller, spacing_mm=None):
+    """(CompTable of ``axis`` for ``controller`` (a Controller), what was left out)."""
     if axis not in case.axis.circular.axes:
-        raise InputError(f"the circular case's axes are {', '.join(case.axis.circular.axes)}",
-                         parameter=f"--circle-axis {axis}")
+        raise InputError(f"name the axis whose table to write, one of the circular case's "
+                         f"axes {', '.join(case.axis.circular.axes)}",
+                         parameter=f"--circle-axis {axis}" if axis else "--circle-axis")
     one_axis, excluded = axis_model(model, axis)
     view = axis_case(case, axis)
     test = case.axis.circular
     index = axis_index(case, axis)
     first_mm, last_mm = test.center_mm[index] - test.radius_mm, test.center_mm[index] + test.radius_mm
     if spacing_mm is None:
-        spacing_mm = (default_spacing_mm(view, module.MAX_POINTS, last_mm - first_mm)
+        spacing_mm = (default_spacing_mm(view, controller.max_points, last_mm - first_mm)
                       if "lead_mm" in view.axis.screw else (last_mm - first_mm) / NO_LEAD_POINTS)
-    table = from_model(view, one_axis, _grid(module, first_mm, last_mm, spacing_mm))
+    table = from_model(view, one_axis, _grid(controller, first_mm, last_mm, spacing_mm))
     return table, {**excluded, **table.excluded}
 
 
@@ -97,13 +98,13 @@ def circle_comp_table(case, model, controller, out_path, axis, spacing_mm=None, 
     ``figures`` are the ISO 230-4 figures before and after. Raises :class:`RefusedTable`
     when the table would raise G (both directions) or holds nothing, unless ``force``.
     """
-    module = CONTROLLERS[controller]
-    table, excluded = circle_table(case, model, axis, module, spacing_mm)
-    axis_id = axis_id or module.DEFAULT_AXIS_ID
-    text = module.write(table, axis_id)
-    applied = module.read(text)
+    chosen = CONTROLLERS[controller]
+    table, excluded = circle_table(case, model, axis, chosen, spacing_mm)
+    axis_id = axis_id or chosen.default_axis_id
+    text = chosen.write(table, axis_id)
+    applied = chosen.read(text)
     out_path = Path(out_path)
-    files = {**getattr(module, "companions", lambda *_: {})(out_path, axis_id), out_path: text}
+    files = {**chosen.companions(out_path, axis_id), out_path: text}
     samples = case.circular
     before = circular_figures(samples.angle_deg, samples.deviation_um, samples.direction)
     after = circular_figures(samples.angle_deg, circle_after_um(case, model, axis, applied),
@@ -116,7 +117,7 @@ def circle_comp_table(case, model, controller, out_path, axis, spacing_mm=None, 
               "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),
               "spacing_mm": table.spacing_mm, "direction_dependent": table.bidirectional,
               "included": [f"{name}@{axis}" for name in table.included], "excluded": excluded,
-              "sign": module.SIGN, "load": module.LOAD, "figures": figures,
+              "sign": chosen.sign, "load": chosen.load, "figures": figures,
               "files": [str(path) for path in files], "notes": [], "warnings": []}
     reasons = []
     if not table.included:

@@ -24,7 +24,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..linefile import LineError
-from .base import check_equidistant, check_points, quantized, reference_index
+from .base import (Controller, check_equidistant, check_points, quantized, reference_index,
+                   reference_note)
 from .table import CompTable
 
 NAME = "fanuc"
@@ -147,3 +148,9 @@ def read(text, path="PITCH.TXT"):
         reverse = _absolute(data, start, start + highest - lowest, start + reference - lowest,
                             parameters[3627]) * unit
     return CompTable(position_mm, -forward, -reverse, "file")
+
+
+CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        grid_through_zero=GRID_THROUGH_ZERO,
+                        notes=lambda table: [reference_note(table)],
+                        quantum_um=DETECTION_UNIT_UM, axis_note=f"axis {DEFAULT_AXIS_ID}")

@@ -16,7 +16,7 @@ import re
 import numpy as np
 
 from ..linefile import LineError, number
-from .base import UM_PER_MM, check_points
+from .base import Controller, UM_PER_MM, check_points
 from .table import CompTable
 
 NAME = "heidenhain"
@@ -76,3 +76,8 @@ def read(text, path="X.COM"):
     for index in np.flatnonzero(np.diff(position_mm) <= 0):
         raise LineError(path, "AXISPOS must increase", header_at + index + 3, "AXISPOS")
     return CompTable(position_mm, forward_um, reverse_um, "file")
+
+
+CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        companions=companions,
+                        out_note="the .COM; its .CMA goes beside it", axis_note=DEFAULT_AXIS_ID)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..linefile import LineError
-from .base import UM_PER_MM, check_points
+from .base import Controller, UM_PER_MM, check_points
 from .table import CompTable
 
 NAME = "linuxcnc"
@@ -56,3 +56,6 @@ def read(text, path="COMP_FILE"):
                         ("nominal", "forward", "reverse")[bad[0][1]])
     return CompTable(values[:, 0], -values[:, 1] * UM_PER_MM, -values[:, 2] * UM_PER_MM,
                      "file")
+
+
+CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..linefile import LineError, number
-from .base import UM_PER_MM, assignments, check_equidistant, check_points, require
+from .base import Controller, UM_PER_MM, assignments, check_equidistant, check_points, require
 from .table import CompTable
 
 NAME = "mach4"
@@ -64,3 +64,6 @@ def read(text, path="screwmap.txt"):
                        for line_number, fields in rows])
     position_mm = values["Start point"] + values["Length"] * np.linspace(0.0, 1.0, count)
     return CompTable(position_mm, errors[:, 0] * UM_PER_MM, errors[:, 1] * UM_PER_MM, "file")
+
+
+CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD)

@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..linefile import LineError, number
-from .base import (UM_PER_MM, assignments, check_equidistant, check_points, reference_index,
-                   require)
+from .base import (UM_PER_MM, Controller, assignments, check_equidistant, check_points,
+                   reference_index, reference_note, require)
 from .table import CompTable
 
 NAME = "siemens"
@@ -114,3 +114,15 @@ def read(text, path="AX_EEC.INI"):
         direction_um[sign] = -np.interp(position_mm, cec_mm, correction_um)
     return CompTable(position_mm, mean_um + direction_um[1.0], mean_um + direction_um[-1.0],
                      "file")
+
+
+def notes(table):
+    """The reference point and the machine data the table needs."""
+    return [reference_note(table),
+            f"needs MD38000 $MA_MM_ENC_COMP_MAX_POINTS >= {table.size}"
+            + (f" and MD18342 $MN_MM_CEC_MAX_POINTS[0] and [1] >= {table.size}"
+               if table.bidirectional else "")]
+
+
+CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        notes=notes, axis_note=DEFAULT_AXIS_ID)

@@ -8,11 +8,11 @@ means at the targets (:func:`from_measurement`, the classical table).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..case import Case, Positioning
+from ..case import Case
 from ..effects import Model
 from ..errors import InputError
 from ..iso230 import per_target
@@ -91,8 +91,10 @@ def default_spacing_mm(case, max_points, span_mm=None):
 def _grid_case(case, position_mm, direction):
     """A case at ``position_mm`` (one direction) on ``case``'s axis, for model evaluation."""
     direction = np.full(position_mm.size, float(direction))
-    return Case(case.folder, case.axis, Positioning(position_mm, np.zeros(position_mm.size),
-                                                    direction, has_direction=True))
+    samples = replace(case.positioning, target_mm=position_mm,
+                      error_um=np.zeros(position_mm.size), direction=direction, run=None,
+                      time_s=None, ambient_C=None, has_direction=True)
+    return Case(case.folder, case.axis, {"positioning": samples})
 
 
 def _effect_on(effect, values, case, position_mm, direction):

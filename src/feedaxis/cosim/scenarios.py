@@ -26,7 +26,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..case import PHYSICAL_RANGE, Positioning, write_case
+from ..case import PHYSICAL_RANGE, write_case
+from ..kinds import kinds
+from ..measurement.positioning import PositioningSamples
 from ..compensate import thermal_error_um
 from ..errors import ParameterError
 from ..iso230 import iso230_figures, per_target
@@ -365,9 +367,9 @@ def run_thermal(master, duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0
     until_s = None if completed else float(positioning["time_s"][-1])
     name = "simulated thermal test" + ("" if completed else
                                        f" (interrupted at t = {until_s:g} s)")
-    samples = Positioning(positioning["target_mm"], positioning["error_um"],
-                          np.asarray(positioning["direction"], dtype=float),
-                          time_s=np.asarray(positioning["time_s"]), has_direction=True)
+    samples = PositioningSamples(positioning["target_mm"], positioning["error_um"],
+                                 np.asarray(positioning["direction"], dtype=float),
+                                 time_s=np.asarray(positioning["time_s"]), has_direction=True)
     drift_um = thermal_error_um(samples)
     figures = {"max_thermal_error_um": float(np.max(np.abs(drift_um))),
                "rms_thermal_error_um": float(np.sqrt(np.mean(drift_um ** 2))),
@@ -493,11 +495,6 @@ def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, contr
 RUNS = {"iso230": run_iso230, "thermal": run_thermal, "tracking": run_tracking}
 
 
-# what each case file records as measured: (column, its unit per µm)
-MEASURED_COLUMNS = {"positioning": ("error_um", 1.0), "tracking": ("actual_mm", 1e-3),
-                    "circular": ("deviation_um", 1.0)}
-
-
 @dataclass(frozen=True)
 class MeasurementNoise:
     """White Gaussian noise added to what a case records as measured (the positioning
@@ -516,7 +513,8 @@ class MeasurementNoise:
         """``tables`` with the noise added to their measured column."""
         rng = np.random.default_rng(self.seed)
         noisy = dict(tables)
-        for table, (column, mm_per_um) in MEASURED_COLUMNS.items():
+        for table, kind in kinds().items():
+            column, mm_per_um = kind.measured_column
             if table in tables:
                 measured = np.asarray(tables[table][column], dtype=float)
                 noisy[table] = {**tables[table], column: measured

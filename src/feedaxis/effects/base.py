@@ -42,16 +42,18 @@ class Needs:
 
 
 class Effect:
-    """A physical effect; by default one that adds to the positioning error (µm) at each
-    sample.
+    """A physical effect, neutral as to the kind of measurement: each kind has its own base
+    (:class:`feedaxis.effects.positioning.PositioningEffect`,
+    :class:`feedaxis.effects.tracking.TrackingEffect`) naming the kind and what it needs
+    of the kind's samples.
 
     Subclasses set ``name``, ``meaning``, ``parameters`` and ``needs`` and implement
     :meth:`prepare`; :meth:`guess`, :meth:`fmu_parameters`, :meth:`evidence` and
     :meth:`wavelength_mm` have sensible defaults. ``linear`` names the parameters the error
     is linear in (error = base + Σ value·column, base and columns set by the others); the fit
     solves for them exactly at each step (variable projection). ``measurement`` is the kind
-    of measurement the effect acts on (``"positioning"``, ``"tracking"``; None: any, as a
-    structure's basis); ``additive`` is False for an effect acting inside the measured
+    of measurement the effect acts on (a registered kind's name, :mod:`feedaxis.kinds`;
+    None: any, as a structure's basis); ``additive`` is False for an effect acting inside the measured
     system (the tracking effects set the closed loop's parameters), whose prediction the
     measurement computes from its values and, to take it out, its ``neutral`` values.
     ``probe`` gives, per parameter, a step for a linearised first guess where the fit has no
@@ -64,7 +66,7 @@ class Effect:
     linear: tuple = ()
     needs = Needs()
     fmu = None
-    measurement = "positioning"
+    measurement = None
     additive = True
     probe: dict = {}
     axis = None  # the machine axis the effect acts on (circular tests), None for one axis
@@ -85,18 +87,8 @@ class Effect:
         return tuple(p.name for p in self.parameters)
 
     def unavailable(self, case):
-        """Why this effect cannot be used on ``case`` (None when it can)."""
-        positioning = case.positioning
-        if positioning is None:
-            return "the case has no positioning.csv"
-        for column in self.needs.columns:
-            if getattr(positioning, column, None) is None or (
-                    column == "direction" and not positioning.has_direction):
-                return f"needs the '{column}' column of positioning.csv"
-        if self.needs.both_directions and not positioning.bidirectional:
-            return "needs samples approached in both directions"
-        if self.needs.duty and case.duty is None:
-            return "needs duty.csv (the motion history of a thermal test)"
+        """Why this effect cannot be used on ``case`` (None when it can): by default, the
+        axis.toml keys it needs; a kind's effect base adds what it needs of its samples."""
         missing = (case.axis.missing("screw", self.needs.screw_keys)
                    + case.axis.missing("motor", self.needs.motor_keys))
         if missing:
@@ -104,7 +96,7 @@ class Effect:
         return None
 
     def prepare(self, case):
-        """Return ``f(values) -> error_um`` at the case's positioning samples."""
+        """Return ``f(values) -> error_um`` at the samples of its kind in ``case``."""
         raise NotImplementedError
 
     def prepare_separable(self, case):
@@ -149,49 +141,9 @@ class Effect:
         return f"explains {np.std(contribution_um):.3g} µm RMS of the residual"
 
 
-class FunctionEffect(Effect):
-    """An effect from a plain function ``f(case, **values) -> error_um`` (the user API)."""
-
-    def __init__(self, function, name, meaning, parameters, needs=Needs(), wavelength_mm=None,
-                 guess=None):
-        self.function, self.name, self.meaning = function, name, meaning
-        self.parameters, self.needs = tuple(parameters), needs
-        self._wavelength_mm, self._guess = wavelength_mm, guess
-
-    def prepare(self, case):
-        return lambda values: np.asarray(self.function(case, **values))
-
-    def guess(self, case, residual_um):
-        return self._guess(case, residual_um) if self._guess else super().guess(case, residual_um)
-
-    def wavelength_mm(self, axis):
-        return self._wavelength_mm
-
-
-def effect(name, meaning, parameters, needs=Needs(), wavelength_mm=None, guess=None):
-    """Decorator turning ``f(case, **params) -> error_um`` into an :class:`Effect`.
-
-    Example (a file loaded with ``--effects my_effects.py``)::
-
-        from feedaxis.effects import Parameter, effect
-
-        @effect("coupling_ripple", "ripple of a worn coupling, period 0.37 mm",
-                [Parameter("cos_um", "um", -10, 10), Parameter("sin_um", "um", -10, 10)],
-                wavelength_mm=0.37)
-        def coupling_ripple(case, cos_um, sin_um):
-            phase = 2 * np.pi * case.positioning.target_mm / 0.37
-            return cos_um * np.cos(phase) + sin_um * np.sin(phase)
-    """
-    def wrap(function):
-        return FunctionEffect(function, name, meaning, parameters, needs, wavelength_mm, guess)
-    return wrap
-
-
 class BasisEffect(Effect):
     """Fixed linear columns (samples x k) added to any measurement's prediction: a
     structure found in the residual or a nuisance (a drift), refitted with the model."""
-
-    measurement = None
 
     def __init__(self, name, basis):
         self.name, self.basis = name, basis

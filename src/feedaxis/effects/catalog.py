@@ -13,7 +13,8 @@ from ..fmu_map import ISO_REFERENCE_TEMPERATURE_C, fmu_axis_keys
 from ..physics import geometry, motor, thermal
 from ..physics.mounting import screw_coordinate_m
 from .tracking import TRACKING_EFFECTS
-from .base import Effect, Needs, Parameter
+from .base import Needs, Parameter
+from .positioning import PositioningEffect
 
 THERMAL_SCREW_KEYS = fmu_axis_keys("screw", "ThermalScrew")  # what Eq. 1-19 need
 SAG_KEYS = ("length_m", "diameter_m", "density_kg_m3", "youngs_modulus_Pa", "support",
@@ -24,7 +25,7 @@ def _targets(case):
     return case.positioning.target_mm
 
 
-class _PeriodicEffect(Effect):
+class _PeriodicEffect(PositioningEffect):
     """An effect periodic along the travel; parameters: cosine and sine amplitude (µm)."""
 
     @property
@@ -39,7 +40,7 @@ class _PeriodicEffect(Effect):
         return dict(zip(self.parameter_names, coefficients[:2]))
 
 
-class LeadError(Effect):
+class LeadError(PositioningEffect):
     """Cumulative lead deviation f1 = a1·y + b1 (seed 001, low-frequency part)."""
 
     name = "lead_error"
@@ -66,7 +67,7 @@ class LeadError(Effect):
                 f"{values['slope_um_per_mm'] * span_mm:+.2f} µm over {span_mm:g} mm of travel")
 
 
-class GravitySag(Effect):
+class GravitySag(PositioningEffect):
     """Axial error of the nut on the screw bent by its own weight (seed 000 Eq. 3-5).
 
     Computed from the axis geometry and material, nothing fitted.
@@ -155,7 +156,7 @@ class MotorStepError(_PeriodicEffect):
                 f"amplitude {np.hypot(values['harmonic1_cos_um'], values['harmonic1_sin_um']):.3f} µm")
 
 
-class Backlash(Effect):
+class Backlash(PositioningEffect):
     """Reversal offset ±B/2 by approach direction (ISO 230-2 reversal value B)."""
 
     name = "backlash"
@@ -183,7 +184,7 @@ class Backlash(Effect):
                 "at every target")
 
 
-class ThermalScrew(Effect):
+class ThermalScrew(PositioningEffect):
     """Feed-driven screw heating TE_m (seed 003 Eq. 3-19) through a duty.csv."""
 
     name = "thermal_screw"
@@ -253,7 +254,7 @@ class ThermalScrew(Effect):
                 f"(duty.csv), up to {np.max(np.abs(contribution_um)):.1f} µm")
 
 
-class AmbientExpansion(Effect):
+class AmbientExpansion(PositioningEffect):
     """TE_a = α·(T_a - 20 °C)·(X - X_ref), X_ref = P_f + offset (seed 003 Eq. 1 from the
     fixed end, :func:`~feedaxis.physics.thermal.ambient_error_um`); α and P_f from
     axis.toml, the offset fitted (linear, starting at 0: the screw grows from its fixed end).

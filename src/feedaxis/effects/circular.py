@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..case import Case, Positioning
+from ..case import Case
+from ..measurement.positioning import Positioning, PositioningSamples
 from ..physics import circle
 from .base import Effect, Needs, Parameter
 from .catalog import AssemblyEccentricity, LeadError, MotorStepError
@@ -37,9 +38,9 @@ def axis_case(case, axis, lag_deg=0.0):
     angle_deg = samples.angle_deg - samples.direction * lag_deg
     position_mm = circle.axis_positions_mm(angle_deg, test.radius_mm, test.center_mm, index)
     direction = circle.axis_direction(angle_deg, samples.direction, index)
-    return Case(case.folder, case.axis.axes[axis],
-                Positioning(position_mm, np.zeros(position_mm.size), direction,
-                            has_direction=True))
+    samples = PositioningSamples(position_mm, np.zeros(position_mm.size), direction,
+                                 has_direction=True)
+    return Case(case.folder, case.axis.axes[axis]).with_samples(Positioning.kind, samples)
 
 
 class CircularEffect(Effect):
@@ -51,7 +52,7 @@ class CircularEffect(Effect):
     effect = ""
 
     def unavailable(self, case):
-        if getattr(case, "circular", None) is None:
+        if case.circular is None:
             return "the case has no circular.csv"
         if self.axis is None:
             return None
@@ -259,3 +260,8 @@ def circular_effects(machine):
                     CircleBacklash(axis), ReversalSpike(axis)]
     effects += [Squareness(), ServoMismatch()]
     return {effect.name: effect for effect in effects}
+
+
+def case_effects(case):
+    """The effects of a circular case (:func:`circular_effects` of its machine)."""
+    return circular_effects(case.axis)

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..case import PHYSICAL_RANGE
 from ..errors import InputError, finite_value, read_text, read_toml, shown_value
+from ..kinds import kind, kinds
 from .base import FIT_TABLE, Effect, FitRecord, Model
 from .catalog import CATALOG
 
@@ -41,6 +42,11 @@ def load_user_effects(path):
                          if clash[0] in CATALOG else f"effect name '{clash[0]}' is reserved "
                          "for the model file's fit record", path=path)
     for user_effect in found.values():
+        if user_effect.measurement not in kinds():
+            raise InputError(f"effect {user_effect.name} names no registered kind of "
+                             f"measurement ({user_effect.measurement!r}): subclass a kind's "
+                             "effect base (feedaxis.effects.PositioningEffect) or use @effect",
+                             path=path)
         _check_parameters(path, user_effect)
         user_effect.prepare = _checked_prepare(user_effect, path)
         user_effect.guess = _checked_guess(user_effect, path)
@@ -76,8 +82,8 @@ def _check_parameters(path, user_effect):
 
 
 def _checked_prepare(user_effect, path):
-    """``user_effect.prepare`` held to the contract: one real error_um per positioning
-    sample, within the ±1e5 µm any axis can err; a breach or an exception in the user's
+    """``user_effect.prepare`` held to the contract: one real error_um per sample of its
+    kind, within the ±1e5 µm any axis can err; a breach or an exception in the user's
     code is an :class:`InputError` naming the file and the effect."""
     prepare = user_effect.prepare
     what = f"effect {user_effect.name}"
@@ -85,13 +91,14 @@ def _checked_prepare(user_effect, path):
 
     def checked(case):
         evaluate = _user_call(path, what, prepare, case)
-        size = case.positioning.size
+        size = kind(user_effect.measurement)(case).size
 
         def run(values):
             error_um = np.asarray(_user_call(path, what, evaluate, values))
             if error_um.shape != (size,):
                 raise InputError(f"{what} returned shape {error_um.shape} for {size} samples; "
-                                 "it must return one error_um per positioning sample",
+                                 f"it must return one error_um per {user_effect.measurement} "
+                                 "sample",
                                  path=path)
             if error_um.dtype.kind not in "iuf" or not np.all(np.isfinite(error_um)):
                 raise InputError(f"{what} returned values that are not finite real numbers "

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..case import POSITIONING_FILE, CaseError, read_axis, read_axis_values, read_case, write_case
+from ..case import CaseError, read_axis, read_axis_values, read_case, write_case
+from ..measurement.positioning import POSITIONING_FILE
 from ..errors import InputError, check_writable_target
 
 

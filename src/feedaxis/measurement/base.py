@@ -14,6 +14,7 @@ predicts the deviation they give.
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +22,35 @@ import numpy as np
 from ..errors import InputError
 
 
-class Measurement:
-    """One case's samples of one kind; subclasses set the class attributes and the hooks.
+# The optional capabilities a kind may declare in ``Measurement.capabilities``, with the
+# hooks each one lets it define; without the capability the hooks keep the base's neutral
+# answer (no outlier, no nuisance, no shape, no table).
+CAPABILITIES = {
+    "outliers": ("outliers", "transients"),
+    "nuisances": ("nuisances",),
+    "shapes": ("shapes", "irregular", "undetermined", "rival"),
+    "tables": ("repeatability",),
+    "resolution": ("unresolvable",),
+    "core": ("core", "check_start"),
+    "correlated": ("noise_gram", "confounded"),
+    "setup": ("artefacts",),
+}
+
+
+class Measurement(ABC):
+    """One case's samples of one kind: the contract every kind of measurement fulfils.
+
+    A kind must define (abstract): ``kind`` and ``file`` (class attributes), :meth:`read`
+    (its file into samples), ``__init__`` taking its samples from a case (through
+    :meth:`samples_of`) into ``measured_um`` and ``coordinate``, :attr:`noise`,
+    :meth:`subset` and :meth:`figures`. The prediction of a model is this base's
+    (:meth:`predictor`: each additive effect's error, plus :meth:`core` when the kind
+    declares one). Optional capabilities are named in ``capabilities``
+    (:data:`CAPABILITIES`): a kind overriding a hook of a capability it does not name, or
+    naming one whose hooks it does not define, is refused when registered
+    (:func:`feedaxis.kinds.register`), so no kind inherits another's behaviour by accident.
+    Its parts above the fit (``details``, ``views``, ``text``, ``scenario``) are given as
+    callables or ``"module:name"`` (:func:`feedaxis.kinds.part`).
 
     ``kind`` is the name effects give in ``Effect.measurement``; ``location_key`` is the
     JSON key placing a structure (``wavelength_mm``, ``frequency_hz``) and
@@ -41,6 +69,11 @@ class Measurement:
     reference_label = ""
     stages = ()
     loose_share = None
+    measured_column = ("", 1.0)
+    capabilities = ()
+    details = None
+    views = None
+    text = None
 
     def __init__(self, case):
         self.case = case
@@ -48,9 +81,40 @@ class Measurement:
         self.coordinate = np.zeros(0)
 
     @classmethod
+    def check_contract(cls):
+        """Raise TypeError when the kind leaves an abstract method undefined, overrides a
+        hook of a capability it does not declare, or declares one it does not define."""
+        if getattr(cls, "__abstractmethods__", None):
+            raise TypeError(f"kind {cls.__name__} must define "
+                            f"{', '.join(sorted(cls.__abstractmethods__))}")
+        unknown = set(cls.capabilities) - set(CAPABILITIES)
+        if unknown:
+            raise TypeError(f"kind {cls.__name__} declares unknown capabilities "
+                            f"{sorted(unknown)}; known: {', '.join(CAPABILITIES)}")
+        for capability, hooks in CAPABILITIES.items():
+            defined = [hook for hook in hooks if _overrides(cls, hook)]
+            if capability in cls.capabilities and not defined:
+                raise TypeError(f"kind {cls.__name__} declares {capability!r} but defines "
+                                f"none of {', '.join(hooks)}")
+            if capability not in cls.capabilities and defined:
+                raise TypeError(f"kind {cls.__name__} defines {', '.join(defined)} without "
+                                f"declaring the capability {capability!r}")
+
+    @classmethod
+    @abstractmethod
+    def read(cls, folder, axis, duty):
+        """The samples of this kind in case ``folder`` (its file, checked row by row against
+        ``axis`` and the case's ``duty``), None when the folder holds no such file."""
+
+    @classmethod
+    def samples_of(cls, case):
+        """This kind's samples in ``case`` (None when it holds none)."""
+        return case.samples.get(cls.kind)
+
+    @classmethod
     def holds(cls, case):
         """True when ``case`` holds samples of this kind."""
-        return getattr(case, cls.kind, None) is not None
+        return cls.samples_of(case) is not None
 
     @property
     def size(self):
@@ -171,9 +235,9 @@ class Measurement:
     # -- diagnosis ------------------------------------------------------------------------
 
     @property
+    @abstractmethod
     def noise(self):
         """The noise model the samples support (:mod:`feedaxis.stats.noise`)."""
-        raise NotImplementedError
 
     def outliers(self, residual_um):
         """Indices (0-based) of samples to keep out as outliers."""
@@ -187,9 +251,9 @@ class Measurement:
         """The 1-based data rows of the file (header = row 1) of sample ``indices``."""
         return [int(i) + 2 for i in indices]
 
+    @abstractmethod
     def subset(self, keep):
         """These samples without those where ``keep`` (boolean mask) is False."""
-        raise NotImplementedError
 
     def nuisances(self):
         """[(name, shape, basis)] fitted with every model before the selection (a drift
@@ -224,14 +288,20 @@ class Measurement:
         """Repeatability set against the systematic error (a dict for ``--json``), or None."""
         return None
 
+    @abstractmethod
     def figures(self, result):
         """The figures ``compare`` prints for the model of ``result`` (a FitResult on
-        these samples), measured against predicted or residual."""
-        raise NotImplementedError
+        these samples), measured against predicted or residual: a dict for ``--json``
+        holding ``kind``."""
 
     def describe(self):
         """One line: the samples (for headers)."""
         return f"{self.size} samples ({self.file})"
+
+
+def _overrides(cls, name):
+    """True when ``cls`` defines ``name`` itself rather than inheriting the base's."""
+    return getattr(cls, name) is not getattr(Measurement, name)
 
 
 class Shape:

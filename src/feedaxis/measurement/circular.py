@@ -22,9 +22,13 @@ from __future__ import annotations
 
 from dataclasses import replace
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 
+from .. import kinds
+from ..case import AXIS_FILE, CaseError
+from ..circular_case import CIRCULAR_FILE, Machine, read_circular, read_machine
 from ..iso230_4 import circular_figures
 from ..physics import circle
 from ..stats import judge
@@ -42,20 +46,45 @@ FIGURE_NAMES = {"G_um": "circular deviation G (both directions)",
                 "F_min_um": "radial deviation F min"}
 
 
+@kinds.register
 class Circular(Measurement):
-    """The circular samples of a case."""
+    """The circular samples of a case; the case's axis is the :class:`Machine` of two axes
+    (this kind reads axis.toml's ``axis_tables``)."""
 
     kind = "circular"
-    file = "circular.csv"
+    file = CIRCULAR_FILE
     location_key = "harmonic_per_turn"
     location_unit = "cycles per turn"
     coordinate_label = "angle (deg)"
     reference_label = "measured"
     stages = ("effects", "structures")
+    measured_column = ("deviation_um", 1.0)
+    capabilities = ("resolution", "shapes", "correlated", "setup")
+    axis_tables = ("circular", "axes")
+    text = "feedaxis.measurement.circular:comparison_lines"
+    views = "feedaxis.report.circular:VIEWS"
+    case_effects = "feedaxis.effects.circular:case_effects"
+    comp_table = "feedaxis.comptable.circle:circle_comp_table"
+
+    @classmethod
+    def read(cls, folder, axis, duty):
+        path = Path(folder) / cls.file
+        if not path.exists():
+            return None
+        if not isinstance(axis, Machine):
+            raise CaseError(Path(folder) / AXIS_FILE, f"{cls.file} is a circular test of two "
+                                                      "axes: axis.toml needs [circular] and "
+                                                      "[axes.NAME]", column="circular")
+        return read_circular(path)
+
+    @classmethod
+    def read_axis(cls, path):
+        """The machine of axis.toml (``[circular]``, ``[axes.NAME]``)."""
+        return read_machine(path)
 
     def __init__(self, case):
         super().__init__(case)
-        self.samples = case.circular
+        self.samples = self.samples_of(case)
         self.test = case.axis.circular
         self.angle_deg = self.coordinate = self.samples.angle_deg
         self.direction = self.samples.direction
@@ -165,7 +194,7 @@ class Circular(Measurement):
         kept = {name: None if getattr(self.samples, name) is None else
                 getattr(self.samples, name)[keep]
                 for name in ("angle_deg", "deviation_um", "direction", "run", "time_s")}
-        return Circular(replace(self.case, circular=replace(self.samples, **kept)))
+        return Circular(self.case.with_samples(self.kind, replace(self.samples, **kept)))
 
     def shapes(self, effects):
         """Harmonics of the angle the same both ways and, in both directions, flipping with

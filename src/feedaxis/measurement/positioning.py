@@ -15,18 +15,23 @@ residual.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from .. import kinds
+from ..case import (DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, checked_run,
+                    length_mm)
 from ..iso230 import FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, target_clusters
 from ..stats import judge
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
 from ..stats.noise import PureError, ResidualMeanSquare, Serial
-from ..stats.spectrum import amplitude_spectrum, marked_wavelengths, resolvable_band_per_mm
+from ..stats.spectrum import amplitude_spectrum, resolvable_band_per_mm
+from ..text import figure_table
 from .base import Measurement, Shape, Trial
 
 MAX_TREND_DEGREE = 3
@@ -42,13 +47,100 @@ SERIAL_MIN_SAMPLES = 30  # an autoregressive noise model needs this many samples
 # error is then at most 1/0.3 = 3.3 times that of evenly spread phases).
 RESOLVABLE_SHARE = 0.3
 SAMPLE_COLUMNS = ("target_mm", "error_um", "direction", "run", "time_s", "ambient_C")
+POSITIONING_FILE = "positioning.csv"
+POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
+                       "time_s": False, "ambient_C": False}
 
 
+@dataclass(frozen=True)
+class PositioningSamples:
+    """positioning.csv as arrays; ``direction`` is ±1 (+1 when the column is absent)."""
+
+    target_mm: np.ndarray
+    error_um: np.ndarray
+    direction: np.ndarray
+    run: np.ndarray | None = None
+    time_s: np.ndarray | None = None
+    ambient_C: np.ndarray | None = None
+    has_direction: bool = False
+
+    @property
+    def size(self):
+        return self.target_mm.size
+
+    @property
+    def bidirectional(self):
+        """True when both approach directions were measured."""
+        return self.has_direction and {-1.0, 1.0} <= set(np.unique(self.direction))
+
+
+def read_positioning(path, duty_end_s=None, length_mm=None):
+    """Read positioning.csv: target and deviation, optional direction, run, time, ambient.
+
+    With ``duty_end_s`` (a thermal case) every sample needs a time within the duty; with
+    ``length_mm`` (the screw's length) the targets must span no more than the screw.
+    """
+    path = Path(path)
+    values, rows = _read_csv(path, POSITIONING_COLUMNS)
+    _check_travel(path, values, rows, ("target_mm",), length_mm)
+    direction = values.get("direction")
+    if direction is not None:
+        _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
+                   "direction must be +1 or -1")
+    run = checked_run(path, values, rows)
+    time_s = values.get("time_s")
+    if time_s is not None:
+        _first_bad(path, time_s < 0, rows, "time_s", "time_s must be >= 0 (seconds since the "
+                                                     "start of duty.csv)")
+    if duty_end_s is not None:
+        _check_within_duty(path, time_s, rows, duty_end_s)
+    return PositioningSamples(values["target_mm"], values["error_um"],
+                              direction if direction is not None else np.ones_like(values["target_mm"]),
+                              run.astype(int) if run is not None else None, time_s,
+                              values.get("ambient_C"), has_direction=direction is not None)
+
+
+def _check_within_duty(path, time_s, rows, duty_end_s):
+    if time_s is None:
+        raise CaseError(path, "a thermal case (duty.csv present) needs time_s on every sample",
+                        "1", "time_s")
+    _first_bad(path, time_s > duty_end_s * (1 + 1e-9), rows, "time_s",
+               f"sample lies after the end of duty.csv ({duty_end_s:g} s): the duty does not "
+               "match the samples' time span")
+
+
+def iso_comparison_lines(comparison):
+    """ISO 230-2 figures, measured against the residual after the model."""
+    lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
+             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
+             *figure_table("ISO 230-2 figure (µm)", 32, comparison)]
+    if not comparison["bidirectional"]:
+        lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
+    return "\n".join(lines)
+
+
+@kinds.register
 class Positioning(Measurement):
     """The positioning samples of a case."""
 
     kind = "positioning"
-    file = "positioning.csv"
+    file = POSITIONING_FILE
+    capabilities = ("outliers", "nuisances", "shapes", "tables", "resolution", "correlated")
+    measured_column = ("error_um", 1.0)
+    details = "feedaxis.positioning_details:positioning_details"
+    views = "feedaxis.report.positioning:VIEWS"
+    text = staticmethod(iso_comparison_lines)
+
+    @classmethod
+    def read(cls, folder, axis, duty):
+        path = Path(folder) / cls.file
+        if not path.exists():
+            if duty is not None:
+                raise CaseError(Path(folder) / DUTY_FILE, f"a thermal test needs {cls.file} "
+                                                          "with time_s beside duty.csv")
+            return None
+        return read_positioning(path, duty.end_s if duty is not None else None,
+                                length_mm(axis))
     location_key = "wavelength_mm"
     location_unit = "mm"
     coordinate_label = "target position (mm)"
@@ -57,7 +149,7 @@ class Positioning(Measurement):
 
     def __init__(self, case):
         super().__init__(case)
-        self.samples = case.positioning
+        self.samples = self.samples_of(case)
         self.measured_um = np.asarray(self.samples.error_um, dtype=float)
         self.position_mm = self.coordinate = self.samples.target_mm
         self.direction = self.samples.direction
@@ -165,7 +257,7 @@ class Positioning(Measurement):
     def subset(self, keep):
         kept = {name: None if getattr(self.samples, name) is None else
                 getattr(self.samples, name)[keep] for name in SAMPLE_COLUMNS}
-        return Positioning(replace(self.case, positioning=replace(self.samples, **kept)))
+        return Positioning(self.case.with_samples(self.kind, replace(self.samples, **kept)))
 
     def rival(self, effect, left, result):
         """Why a periodic catalog effect is not what the data show (None when it is): it
@@ -282,6 +374,19 @@ class Positioning(Measurement):
                 "bidirectional": samples.bidirectional,
                 "rms_measured_um": result.statistics.rms_before_um,
                 "rms_residual_um": result.statistics.rms_um, "figures": figures}
+
+
+def marked_wavelengths(axis, effects):
+    """{effect name: wavelength (mm)} of the periodic effects this axis defines."""
+    marks = {}
+    for name, effect in effects.items():
+        try:
+            wavelength = effect.wavelength_mm(axis)
+        except KeyError:
+            continue
+        if wavelength:
+            marks[name] = float(wavelength)
+    return marks
 
 
 def resolved_share(position_mm, wavelength_mm):

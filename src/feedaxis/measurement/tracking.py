@@ -18,14 +18,16 @@ has died out by then, does not bend the plant.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import scipy
 
-from ..case import AXIS_FILE, CaseError
+from .. import kinds
+from ..case import (AXIS_FILE, DEFAULT_LOOP_STEP_S, CaseError, _first_bad, _read_csv)
 from ..fmu_map import servo_to_fmu
-from ..physics.servo import ServoParams, check_runs, simulate, step_counts
+from ..physics.servo import ServoParams, check_runs, loop_budget_problem, simulate, step_counts
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
                               peak_p_value, short_time_peak, spikes)
 from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
@@ -47,6 +49,38 @@ UNIFORM_SAMPLING_TOLERANCE = 0.01
 WHOLE_RECORD_SHARE = 0.75  # of the periodic test's level: the record's periodogram, the rest
 # the short-time periodogram's
 ROUNDING_UM = 1e-3  # the diagnosis's resolution (diagnose.RESOLUTION_UM): below it, rounding
+TRACKING_FILE = "tracking.csv"
+
+TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
+                    "disturbance_N": False}
+
+
+@dataclass(frozen=True)
+class TrackingSamples:
+    """tracking.csv as arrays."""
+
+    time_s: np.ndarray
+    reference_mm: np.ndarray
+    actual_mm: np.ndarray
+    disturbance_N: np.ndarray | None = None
+
+
+def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
+    """Read tracking.csv: strictly increasing time, reference and actual position.
+
+    The control loop steps ``loop_step_s`` through every interval, so samples too far apart
+    for it (:func:`feedaxis.physics.servo.loop_budget_problem`) are refused at the row.
+    """
+    path = Path(path)
+    values, rows = _read_csv(path, TRACKING_COLUMNS)
+    time_s = values["time_s"]
+    _first_bad(path, np.concatenate(([False], np.diff(time_s) <= 0)), rows, "time_s",
+               "time_s must be strictly increasing")
+    problem = loop_budget_problem(time_s, loop_step_s)
+    if problem is not None:
+        raise CaseError(path, problem[1], rows[problem[0]], "time_s")
+    return TrackingSamples(time_s, values["reference_mm"], values["actual_mm"],
+                           values.get("disturbance_N"))
 
 
 def servo_params(axis, model, values=None):
@@ -60,6 +94,20 @@ def servo_params(axis, model, values=None):
     return ServoParams(**merged)
 
 
+def tracking_comparison_lines(comparison):
+    """Seed 002's figures after the first second: measured, predicted; then the residual."""
+    maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
+    return "\n".join([
+        f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
+        f"{', '.join(comparison['effects']) or '(seed 002 plant)'}",
+        f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
+        f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
+        f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
+        f"residual actual - predicted: max {comparison['residual_max_um']:.4g} µm, RMS "
+        f"{comparison['residual_rms_um']:.4g} µm"])
+
+
+@kinds.register
 class Tracking(Measurement):
     """The tracking record of a case, ready for repeated simulation.
 
@@ -68,7 +116,12 @@ class Tracking(Measurement):
     """
 
     kind = "tracking"
-    file = "tracking.csv"
+    file = TRACKING_FILE
+    capabilities = ("outliers", "nuisances", "shapes", "core", "correlated")
+    measured_column = ("actual_mm", 1e-3)
+    details = "feedaxis.tracking_details:tracking_details"
+    views = "feedaxis.report.tracking:VIEWS"
+    text = staticmethod(tracking_comparison_lines)
     location_key = "frequency_hz"
     location_unit = "Hz"
     coordinate_label = "time (s)"
@@ -81,7 +134,7 @@ class Tracking(Measurement):
         if not case.axis.servo:
             raise CaseError(Path(case.folder or ".") / AXIS_FILE, "a tracking case needs the "
                             "[servo] table (the controller as set in the drive)", column="servo")
-        trace = case.tracking
+        trace = self.samples_of(case)
         self.record_time_s, self.record_reference_mm = trace.time_s, trace.reference_mm
         self.disturbance_N = trace.disturbance_N
         self.counts = step_counts(trace.time_s, case.axis.servo["loop_step_s"])
@@ -90,6 +143,13 @@ class Tracking(Measurement):
         self.time_s = self.coordinate = trace.time_s[self.index]
         self.reference_mm = trace.reference_mm[self.index]
         self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
+
+    @classmethod
+    def read(cls, folder, axis, duty):
+        path = Path(folder) / cls.file
+        if not path.exists():
+            return None
+        return read_tracking(path, axis.servo.get("loop_step_s", DEFAULT_LOOP_STEP_S))
 
     @property
     def noise(self):

@@ -40,3 +40,6 @@ def figures(analysis):
                    (f"centre offset along {second}", f"{setup['center_second_um']:.4g} µm"),
                    ("radius", f"{setup['radius_um']:.4g} µm"),
                    ("drift of the instrument", f"{setup['drift_um_per_s']:.4g} µm/s")])]
+
+
+VIEWS = (views, figures, page.sample_contributions)

@@ -1,8 +1,9 @@
 """The self-contained HTML report: tables and PNG plots embedded as data URIs.
 
-One page for every kind of measurement: the header, the diagnosis, the kind's own views,
-each effect's contribution, the error ladder, the figures and the model's parameters. It
-only formats :class:`~feedaxis.analysis.Analysis` objects: every number comes from them.
+One page for every kind of measurement: the header, the diagnosis, the kind's own views
+(each kind's module in this package: :mod:`.positioning`, :mod:`.tracking`), each effect's
+contribution, the error ladder, the figures and the model's parameters. It only formats
+:class:`~feedaxis.analysis.Analysis` objects: every number comes from them.
 """
 from __future__ import annotations
 
@@ -13,12 +14,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .. import __version__
-from ..stats.wording import p_text
-from ..text import micro
+from ..kinds import part
 from ..output import write_atomically
-from ..text import repeatability_text
-from . import circular, plots
-from .compensation_table import compensation_table_html
+from ..stats.wording import p_text
+from ..text import micro, repeatability_text
+from . import plots
 
 STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;
@@ -93,134 +93,22 @@ def _diagnosis_html(analysis):
     return "".join(parts)
 
 
-def _positioning_views(analysis):
-    """Measurement against model, the residual and its spectrum, the thermal compensation
-    and the compensation table."""
-    case, result, details = analysis.case, analysis.result, analysis.details
-    positioning, dense = case.positioning, details.dense
-    panels = _residual_panels(positioning, result.residual_um)
-    parts = [
-        "<h2>Measurement against model</h2>",
-        image(plots.measurement_vs_model(positioning.target_mm, result.measured_um,
-                                         dense.position_mm, dense.predicted_um,
-                                         dense.direction, dense.line, dense.per_run),
-              "measurement against model"),
-        "<h2>Residual</h2>",
-        image(plots.residual_vs_position(positioning.target_mm, result.residual_um,
-                                         details.marks), "residual against position"),
-    ]
-    if details.unresolved:
-        parts.append("<p>Not marked, the targets cannot resolve them: " + "; ".join(
-            f"{html.escape(name)} ({html.escape(reason)})"
-            for name, reason in details.unresolved.items()) + ".</p>")
-    if details.spectrum_missing:
-        parts.append(f"<p>No spatial spectrum: {html.escape(details.spectrum_missing)}.</p>")
-    else:
-        parts.append(image(plots.spectrum(details.residual_spectrum, details.measured_spectrum,
-                                          details.marks, analysis.diagnosis.unexplained),
-                           "spectrum"))
-    if panels:
-        parts.append(image(plots.residual_against(panels),
-                           "residual against time, direction, ambient"))
-    return parts + _compensation_html(details.compensation) + compensation_table_html(
-        analysis, image, table)
-
-
-def _positioning_contributions(analysis):
-    """Each effect's contribution between the targets, a short period also over a window
-    (at the samples when no line joins two targets)."""
-    dense = analysis.details.dense
-    if not dense.position_mm.size:
-        return _sample_contributions(analysis)
-    return plots.contributions(dense.position_mm, dense.components, "position (mm)",
-                               dense.line, dense.direction, dense.windows)
-
-
-def _sample_contributions(analysis):
+def sample_contributions(analysis):
     """Each effect's contribution at the samples, against their coordinate."""
     measurement = analysis.measurement
     return plots.contributions(measurement.coordinate, analysis.components,
                                measurement.coordinate_label)
 
 
-def _positioning_figures(analysis):
-    comparison, details = analysis.comparison, analysis.details
-    rows = [(f["name"], f"{f['measured_um']:.4g}", f"{f['residual_um']:.4g}",
-             "" if f["explained"] is None else f"{100 * f['explained']:.1f} %")
-            for f in comparison["figures"].values()]
-    rows.append(("RMS", f"{comparison['rms_measured_um']:.4g}",
-                 f"{comparison['rms_residual_um']:.4g}", ""))
-    return ["<h2>ISO 230-2 figures</h2>",
-            image(plots.iso230_deviation(details.iso_deviation, details.iso_line),
-                  "ISO 230-2 deviation"),
-            table(("ISO 230-2 figure", "measured (µm)", "residual (µm)", "explained"), rows)]
-
-
-def _residual_panels(positioning, residual_um):
-    panels = []
-    if positioning.time_s is not None:
-        panels.append(("time (min)", positioning.time_s / 60.0, residual_um))
-    if positioning.bidirectional:
-        panels.append(("approach direction", positioning.direction, residual_um))
-    if positioning.ambient_C is not None:
-        panels.append(("ambient (°C)", positioning.ambient_C, residual_um))
-    return panels
-
-
-def _compensation_html(result):
-    """Seed 003 Fig. 13 and the before/after figures, for a thermal model on a thermal case."""
-    if result is None:
-        return []
-    summary = result.summary()
-    return [
-        "<h2>Thermal compensation (seed 003 Fig. 13)</h2>",
-        f"<p>The thermal error is each target's drift from its first visit; the correction is "
-        f"the model's thermal prediction. Max {summary['max_before_um']:.3g} µm → "
-        f"{summary['max_after_um']:.3g} µm ({100 * summary['reduction']:.1f} % less), RMS "
-        f"{summary['rms_before_um']:.3g} → {summary['rms_after_um']:.3g} µm.</p>",
-        image(plots.thermal_compensation(result.target_mm, result.visit, result.time_s,
-                                         result.thermal_error_um, result.left_um),
-              "thermal error without and with compensation"),
-        table(("target (mm)", "dir", "max before (µm)", "max after (µm)", "RMS before (µm)",
-               "RMS after (µm)"),
-              [(f"{r['target_mm']:g}", f"{r['direction']:+d}", f"{r['max_before_um']:.3g}",
-                f"{r['max_after_um']:.3g}", f"{r['rms_before_um']:.3g}",
-                f"{r['rms_after_um']:.3g}") for r in result.by_target()]),
-    ]
-
-
-def _tracking_views(analysis):
-    """Seed 002's tracking error, the deviation against time and velocity, the spectrum."""
-    measurement, result, details = analysis.measurement, analysis.result, analysis.details
-    comparison = analysis.comparison
-    maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
-    frequency_hz, amplitude_um = details.residual_spectrum
-    return [
-        "<h2>Tracking error (seed 002)</h2>",
-        table(("after the first second", "measured (mm)", "predicted (mm)"),
-              [("max tracking error", f"{maximum['measured']:.5f}", f"{maximum['predicted']:.5f}"),
-               ("RMS tracking error", f"{rms['measured']:.5f}", f"{rms['predicted']:.5f}")]),
-        image(plots.error_against_time(measurement.time_s, result.measured_um,
-                                       result.measured_um - result.residual_um,
-                                       details.reversals_s), "tracking deviation against time"),
-        image(plots.error_against_velocity(details.velocity_mm_s, result.measured_um,
-                                           result.residual_um),
-              "tracking deviation against velocity"),
-        "<h2>Residual spectrum</h2>",
-        image(plots.frequency_spectrum(frequency_hz, amplitude_um,
-                                       analysis.diagnosis.unexplained), "residual spectrum"),
-    ]
-
-
-# per kind: its views, its figures, its contributions plot
-VIEWS = {"positioning": (_positioning_views, _positioning_figures, _positioning_contributions),
-         "tracking": (_tracking_views, lambda analysis: [], _sample_contributions),
-         "circular": (circular.views, circular.figures, _sample_contributions)}
+def _no_views(analysis):
+    return []
 
 
 def _sections(analysis):
-    """The page's sections for one analysis."""
-    views, figures, contributions = VIEWS[analysis.kind]
+    """The page's sections for one analysis: the kind's views, figures and contributions
+    plot (:func:`feedaxis.kinds.part` ``views``), each where the page places it."""
+    views, figures, contributions = (part(type(analysis.measurement), "views")
+                                     or (_no_views, _no_views, sample_contributions))
     measurement, result, model = analysis.measurement, analysis.result, analysis.model
     steps = analysis.ladder
     return [

@@ -51,7 +51,7 @@ class Layout:
     @classmethod
     def of(cls, positioning, clusters=None):
         groups = target_groups(positioning, clusters)
-        clock, unit = test_clock(positioning)
+        clock, unit = clock_of(positioning)
         return cls(groups, int(groups.max()) + 1, clock, unit)
 
     @property
@@ -83,7 +83,7 @@ class Layout:
         return bool(np.ptp(self.clock - self.group_means(self.clock)) > 0)
 
 
-def test_clock(positioning):
+def clock_of(positioning):
     """(clock per sample, unit): hours from ``time_s``, else run + place in the run."""
     if positioning.time_s is not None and np.ptp(positioning.time_s) > 0:
         return positioning.time_s / 3600.0, "h"

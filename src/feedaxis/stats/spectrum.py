@@ -103,23 +103,10 @@ def _on_even_grid(centres_mm, means_um, step_mm):
     return grid_mm, np.interp(grid_mm, grid_mm[filled], sums[filled] / counts[filled])
 
 
-def marked_wavelengths(axis, effects):
-    """{effect name: wavelength (mm)} of the periodic effects this axis defines."""
-    marks = {}
-    for name, effect in effects.items():
-        try:
-            wavelength = effect.wavelength_mm(axis)
-        except KeyError:
-            continue
-        if wavelength:
-            marks[name] = float(wavelength)
-    return marks
-
-
-def residual_spectrum(case, residual_um, effects):
-    """Amplitude spectrum of the residual along the travel with the effects' wavelengths."""
-    marks = marked_wavelengths(case.axis, effects)
-    spectrum = amplitude_spectrum(case.positioning.target_mm, residual_um)
+def residual_spectrum(position_mm, residual_um, marks):
+    """Amplitude spectrum of ``residual_um`` at ``position_mm`` along the travel, with
+    ``marks`` ({name: wavelength mm}) to draw on it."""
+    spectrum = amplitude_spectrum(position_mm, residual_um)
     if spectrum is None:
         return Spectrum(np.array([]), np.array([]), marks)
     return Spectrum(spectrum.wavelength_mm, spectrum.amplitude_um, marks)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..case import AXIS_FILE, PHYSICAL_RANGE, POSITIONING_FILE
+from ..case import AXIS_FILE, PHYSICAL_RANGE
 from ..errors import InputError
 from ..fmu_map import ISO_REFERENCE_TEMPERATURE_C
 from ..physics.thermal import ThermalScrewParams, ambient_error_um
@@ -91,6 +91,8 @@ def correction_for(case, temperature):
                          column="screw.expansion_per_K")
     if temperature == AMBIENT:
         if case.positioning.ambient_C is None:
+            from ..measurement.positioning import POSITIONING_FILE  # SciPy-heavy: on error
+
             raise InputError(f"{OPTION} {AMBIENT} needs the ambient_C column",
                              path=case.folder / POSITIONING_FILE, column="ambient_C")
         temperature_C, source = case.positioning.ambient_C, "ambient_C of each sample"
@@ -112,5 +114,5 @@ def corrected_case(case, temperature):
     correction = correction_for(case, temperature)
     positioning = case.positioning
     error_um = positioning.error_um - correction.expansion_um(positioning.target_mm)
-    return replace(case, positioning=replace(positioning,
-                                             error_um=np.asarray(error_um, dtype=float)))
+    return case.with_samples("positioning", replace(positioning,
+                                                    error_um=np.asarray(error_um, dtype=float)))

@@ -9,7 +9,7 @@ from functools import partial
 
 import numpy as np
 
-from ..case import POSITIONING_FILE
+from ..measurement.positioning import POSITIONING_FILE
 from ..errors import InputError
 from ..fit import fit
 from ..iso230 import FIGURE_NAMES

@@ -188,8 +188,8 @@ class PositioningMeasurement:
 
     def refit(self, deviation_um):
         """The model refitted on the case with the deviations ``deviation_um``."""
-        case = replace(self.case, positioning=replace(self.case.positioning,
-                                                      error_um=deviation_um))
+        case = self.case.with_samples("positioning", replace(self.case.positioning,
+                                                             error_um=deviation_um))
         return fit(self.fitted.model, case, kind="positioning").model
 
     def refit_sample(self, streams, trials, active, skip=frozenset()):
@@ -306,7 +306,7 @@ class _TableMap:
         for sign in self.sides:
             for target in np.unique(cluster[positioning.direction == sign]):
                 probe = ((positioning.direction == sign) & (cluster == target)).astype(float)
-                probed = replace(case, positioning=replace(positioning, error_um=probe))
+                probed = case.with_samples("positioning", replace(positioning, error_um=probe))
                 columns.append(self._values(from_measurement(probed, self.position_mm)).ravel())
         return sparse.csr_matrix(np.array(columns))
 

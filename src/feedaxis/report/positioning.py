@@ -1,0 +1,103 @@
+"""The positioning views of the report: measurement against the model between the targets,
+the residual and its spatial spectrum, the ISO 230-2 deviation and figures, the thermal
+compensation and the compensation table."""
+from __future__ import annotations
+
+import html
+
+from . import plots
+from .compensation_table import compensation_table_html
+from .page import image, sample_contributions, table
+
+
+def _positioning_views(analysis):
+    """Measurement against model, the residual and its spectrum, the thermal compensation
+    and the compensation table."""
+    case, result, details = analysis.case, analysis.result, analysis.details
+    positioning, dense = case.positioning, details.dense
+    panels = _residual_panels(positioning, result.residual_um)
+    parts = [
+        "<h2>Measurement against model</h2>",
+        image(plots.measurement_vs_model(positioning.target_mm, result.measured_um,
+                                         dense.position_mm, dense.predicted_um,
+                                         dense.direction, dense.line, dense.per_run),
+              "measurement against model"),
+        "<h2>Residual</h2>",
+        image(plots.residual_vs_position(positioning.target_mm, result.residual_um,
+                                         details.marks), "residual against position"),
+    ]
+    if details.unresolved:
+        parts.append("<p>Not marked, the targets cannot resolve them: " + "; ".join(
+            f"{html.escape(name)} ({html.escape(reason)})"
+            for name, reason in details.unresolved.items()) + ".</p>")
+    if details.spectrum_missing:
+        parts.append(f"<p>No spatial spectrum: {html.escape(details.spectrum_missing)}.</p>")
+    else:
+        parts.append(image(plots.spectrum(details.residual_spectrum, details.measured_spectrum,
+                                          details.marks, analysis.diagnosis.unexplained),
+                           "spectrum"))
+    if panels:
+        parts.append(image(plots.residual_against(panels),
+                           "residual against time, direction, ambient"))
+    return parts + _compensation_html(details.compensation) + compensation_table_html(
+        analysis, image, table)
+
+
+def _positioning_contributions(analysis):
+    """Each effect's contribution between the targets, a short period also over a window
+    (at the samples when no line joins two targets)."""
+    dense = analysis.details.dense
+    if not dense.position_mm.size:
+        return sample_contributions(analysis)
+    return plots.contributions(dense.position_mm, dense.components, "position (mm)",
+                               dense.line, dense.direction, dense.windows)
+
+
+def _positioning_figures(analysis):
+    comparison, details = analysis.comparison, analysis.details
+    rows = [(f["name"], f"{f['measured_um']:.4g}", f"{f['residual_um']:.4g}",
+             "" if f["explained"] is None else f"{100 * f['explained']:.1f} %")
+            for f in comparison["figures"].values()]
+    rows.append(("RMS", f"{comparison['rms_measured_um']:.4g}",
+                 f"{comparison['rms_residual_um']:.4g}", ""))
+    return ["<h2>ISO 230-2 figures</h2>",
+            image(plots.iso230_deviation(details.iso_deviation, details.iso_line),
+                  "ISO 230-2 deviation"),
+            table(("ISO 230-2 figure", "measured (µm)", "residual (µm)", "explained"), rows)]
+
+
+def _residual_panels(positioning, residual_um):
+    panels = []
+    if positioning.time_s is not None:
+        panels.append(("time (min)", positioning.time_s / 60.0, residual_um))
+    if positioning.bidirectional:
+        panels.append(("approach direction", positioning.direction, residual_um))
+    if positioning.ambient_C is not None:
+        panels.append(("ambient (°C)", positioning.ambient_C, residual_um))
+    return panels
+
+
+def _compensation_html(result):
+    """Seed 003 Fig. 13 and the before/after figures, for a thermal model on a thermal case."""
+    if result is None:
+        return []
+    summary = result.summary()
+    return [
+        "<h2>Thermal compensation (seed 003 Fig. 13)</h2>",
+        f"<p>The thermal error is each target's drift from its first visit; the correction is "
+        f"the model's thermal prediction. Max {summary['max_before_um']:.3g} µm → "
+        f"{summary['max_after_um']:.3g} µm ({100 * summary['reduction']:.1f} % less), RMS "
+        f"{summary['rms_before_um']:.3g} → {summary['rms_after_um']:.3g} µm.</p>",
+        image(plots.thermal_compensation(result.target_mm, result.visit, result.time_s,
+                                         result.thermal_error_um, result.left_um),
+              "thermal error without and with compensation"),
+        table(("target (mm)", "dir", "max before (µm)", "max after (µm)", "RMS before (µm)",
+               "RMS after (µm)"),
+              [(f"{r['target_mm']:g}", f"{r['direction']:+d}", f"{r['max_before_um']:.3g}",
+                f"{r['max_after_um']:.3g}", f"{r['rms_before_um']:.3g}",
+                f"{r['rms_after_um']:.3g}") for r in result.by_target()]),
+    ]
+
+
+# the page's views, figures and contributions plot of a positioning analysis
+VIEWS = (_positioning_views, _positioning_figures, _positioning_contributions)

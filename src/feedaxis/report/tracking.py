@@ -1,0 +1,34 @@
+"""The tracking views of the report: seed 002's tracking error, the deviation against time
+and velocity, the residual's spectrum."""
+from __future__ import annotations
+
+from . import plots
+from .page import image, sample_contributions, table
+
+
+def _tracking_views(analysis):
+    """Seed 002's tracking error, the deviation against time and velocity, the spectrum."""
+    measurement, result, details = analysis.measurement, analysis.result, analysis.details
+    comparison = analysis.comparison
+    maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
+    frequency_hz, amplitude_um = details.residual_spectrum
+    return [
+        "<h2>Tracking error (seed 002)</h2>",
+        table(("after the first second", "measured (mm)", "predicted (mm)"),
+              [("max tracking error", f"{maximum['measured']:.5f}", f"{maximum['predicted']:.5f}"),
+               ("RMS tracking error", f"{rms['measured']:.5f}", f"{rms['predicted']:.5f}")]),
+        image(plots.error_against_time(measurement.time_s, result.measured_um,
+                                       result.measured_um - result.residual_um,
+                                       details.reversals_s), "tracking deviation against time"),
+        image(plots.error_against_velocity(details.velocity_mm_s, result.measured_um,
+                                           result.residual_um),
+              "tracking deviation against velocity"),
+        "<h2>Residual spectrum</h2>",
+        image(plots.frequency_spectrum(frequency_hz, amplitude_um,
+                                       analysis.diagnosis.unexplained), "residual spectrum"),
+    ]
+
+
+# the page's views, figures (none beyond the views') and contributions plot of a tracking
+# analysis
+VIEWS = (_tracking_views, lambda analysis: [], sample_contributions)
