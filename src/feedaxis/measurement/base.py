@@ -304,6 +304,20 @@ def _overrides(cls, name):
     return getattr(cls, name) is not getattr(Measurement, name)
 
 
+def figure_table(title, width, comparison):
+    """The figures of ``compare`` measured, residual and explained, then the RMS, the names
+    ``width`` wide (the text of a kind whose figures have that shape)."""
+    lines = [f"{title:{width}s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
+    for figure in comparison["figures"].values():
+        explained = figure["explained"]
+        lines.append(f"{figure['name']:{width}s} {figure['measured_um']:10.4g} "
+                     f"{figure['residual_um']:10.4g} "
+                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
+    lines.append(f"{'RMS':{width}s} {comparison['rms_measured_um']:10.4g} "
+                 f"{comparison['rms_residual_um']:10.4g}")
+    return lines
+
+
 class Shape:
     """A shape of structure the residual may show: ``kind``, ``extra`` parameters it adds,
     how many distinct shapes its search tries (counted in the family-wise correction),

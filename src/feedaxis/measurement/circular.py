@@ -33,8 +33,7 @@ from ..iso230_4 import circular_figures
 from ..physics import circle
 from ..stats import judge
 from ..stats.noise import ResidualMeanSquare, Serial
-from ..text import figure_table
-from .base import Measurement, Shape, Trial
+from .base import Measurement, Shape, Trial, figure_table
 
 MAX_HARMONIC = 90  # structure searched up to 90 cycles per turn (4° on the circle)
 ONE_DIRECTION = ("squareness", "servo_mismatch")

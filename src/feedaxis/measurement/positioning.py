@@ -31,8 +31,7 @@ from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
 from ..stats.noise import PureError, ResidualMeanSquare, Serial
 from ..stats.spectrum import amplitude_spectrum, resolvable_band_per_mm
-from ..text import figure_table
-from .base import Measurement, Shape, Trial
+from .base import Measurement, Shape, Trial, figure_table
 
 MAX_TREND_DEGREE = 3
 MIN_TREND_TARGETS = 8  # a cubic through fewer targets follows any zig-zag
