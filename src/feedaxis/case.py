@@ -165,9 +165,11 @@ def read_case(folder):
         if read is not None:
             samples[name] = read
     if not samples:
-        files = ", ".join(cls.file for cls in registered.values())
+        one_axis = [cls.file for cls in registered.values()
+                    if not getattr(cls, "axis_tables", ())]
+        files = ", ".join(one_axis)
         raise CaseError(folder, f"a case holds {files} or both; neither was found"
-                        if len(registered) == 2 else
+                        if len(one_axis) == 2 else
                         f"a case holds one or more of {files}; none was found")
     return Case(folder, axis, samples, duty)
 
