@@ -10,8 +10,12 @@ from __future__ import annotations
 import os
 import platform
 import statistics
+import subprocess
 import sys
+import tempfile
+import time
 from datetime import datetime, timezone
+from typing import NamedTuple
 
 
 def arguments(parser, argv, **smoke):
@@ -46,6 +50,31 @@ def rate(count, trials):
     """``count`` of ``trials`` as a rate with its 95 % Clopper-Pearson interval."""
     low, high = clopper_pearson(count, trials)
     return f"{count:3d}/{trials} ({100 * count / trials:5.2f} %, 95 % {100 * low:.2f}-{100 * high:.2f})"
+class Command(NamedTuple):
+    """What one command cost and printed: wall and CPU seconds (its own and its reaped
+    children's, as wait4 gives them), peak resident memory (MB), its output."""
+
+    wall_s: float
+    cpu_s: float
+    peak_mb: float
+    stdout: str
+    stderr: str
+
+
+def run_command(command):
+    """:class:`Command` of ``command`` (a list) run to its end; a failure raises."""
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        start = time.perf_counter()
+        process = subprocess.Popen(command, stdout=out, stderr=err)
+        _, status, usage = os.wait4(process.pid, 0)
+        wall_s = time.perf_counter() - start
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read().decode(), err.read().decode()
+    if os.waitstatus_to_exitcode(status):
+        raise RuntimeError(f"{' '.join(command[2:5])} failed: {stderr.strip().splitlines()[-1:]}")
+    return Command(wall_s, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, stdout,
+                   stderr)
 
 
 def machine():

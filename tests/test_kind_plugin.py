@@ -97,7 +97,7 @@ OWNERS = {
                     "effects/catalog.py", "positioning_details.py", "report/positioning.py",
                     "report/compensation_table.py", "comptable/", "compensate.py",
                     "uncertainty/", "importers/", "examples.py", "demo.py",
-                    "cosim/scenarios.py", "cosim/replay.py"),
+                    "cosim/scenarios.py", "cosim/replay.py", "standards/"),
     "tracking": ("measurement/tracking.py", "effects/tracking.py", "tracking_details.py",
                  "report/tracking.py", "cosim/scenarios.py"),
     "circular": ("measurement/circular.py", "circular_case.py", "effects/circular.py",

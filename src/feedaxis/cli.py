@@ -70,11 +70,15 @@ def scenario_arguments(name):
 @contextmanager
 def _progress(label, unit):
     """A tqdm counter on stderr that shows itself only when the work takes over a second;
-    the callback takes an optional label of the step under way."""
+    the callback takes an optional label of the step under way, or ``total=N``: N more
+    steps at most (the bar's total grows by N, nothing is counted)."""
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
-        def tick(step=None):
+        def tick(step=None, total=None):
+            if total is not None:
+                bar.total = (bar.total or 0) + total
+                return
             if step:
                 bar.set_postfix_str(str(step), refresh=False)
             bar.update()
@@ -253,16 +257,28 @@ def _cmd_diagnose(args):
     _emit_each(args, outputs)
 
 
+def _add_standard_option(parser):
+    from .standards import DEFAULT, NAMES, parse
+
+    parser.add_argument("--standard", type=parse, default=DEFAULT, metavar="NAME",
+                        help=f"the standard and edition of the positioning figures (default "
+                             f"{DEFAULT}; 'all': side by side): {', '.join(NAMES)}. See "
+                             "docs/standards.md")
+
+
 def _compare_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "model (TOML) as fitted; without it the model is empty")
     _add_correction_option(parser)
+    _add_standard_option(parser)
 
 
 @command("compare", help="the measurement's figures: measured against the model",
          description="Positioning: ISO 230-2 accuracy, repeatability, reversal and systematic "
                      "deviation of the measured runs and of what is left after the model, "
-                     "side by side. Tracking: seed 002's maximum and RMS tracking error "
+                     "side by side (--standard: another standard's, or all; a thermal case's "
+                     "ISO 230-3 figures, measured, predicted and compensated). Tracking: "
+                     "seed 002's maximum and RMS tracking error "
                      "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):
@@ -271,7 +287,7 @@ def _cmd_compare(args):
     _, case, model, kinds = _case_and_model(args)
     outputs = []
     for kind in kinds:
-        comparison = compare(case, model, kind)
+        comparison = compare(case, model, kind, args.standard)
         outputs.append((kind, comparison, text.comparison_lines(comparison)))
     _emit_each(args, outputs)
 
@@ -281,6 +297,7 @@ def _report_options(parser):
     _add_model_options(parser, "fitted model (TOML); without it the model is empty")
     parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
     _add_correction_option(parser)
+    _add_standard_option(parser)
 
 
 @command("report", help="self-contained HTML page with the plots",
@@ -300,7 +317,8 @@ def _cmd_report(args):
     analyses = []
     for kind in kinds:
         with _progress(f"analysing {kind}", " steps") as tick:
-            analyses.append(analyse(case, model, effects, kind=kind, progress=tick))
+            analyses.append(analyse(case, model, effects, kind=kind, progress=tick,
+                                    standard=args.standard))
     write_report(analyses, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
@@ -487,6 +505,7 @@ def _uncertainty_options(parser):
     _add_correction_option(parser)
     parser.add_argument("--html", metavar="PAGE.html",
                         help="also write the results as a page with histograms")
+    _add_standard_option(parser)
 
 
 @command("uncertainty", help="Monte Carlo uncertainty of the ISO 230-2 figures (JCGM 101)",
@@ -519,7 +538,7 @@ def _cmd_uncertainty(args):
             bar.update(trials)
 
         result = evaluate(case, model, budget, args.trials, args.tolerance_um, args.seed,
-                          args.correct_to_20C, progress=tick)
+                          args.correct_to_20C, progress=tick, standard=args.standard)
     payload = result.to_json()
     if args.html:
         from .uncertainty.page import write_page
@@ -977,8 +996,8 @@ def _add_sweep_options(sub):
                      help="hold the parameters the fit could not determine at their "
                           "fitted values (without it such a model is refused)")
     sub.add_argument("--workers", type=int, metavar="N",
-                     help="local Dask worker processes (default: one per core; 0 runs "
-                          "in this process)")
+                     help="local Dask worker processes (default: in this process while "
+                          "that is sooner, else one per core; 0 runs in this process)")
     sub.add_argument("--scheduler", metavar="ADDRESS",
                      help="run on the Dask cluster of this scheduler (tcp://host:8786) "
                           "instead of a local one")
@@ -1020,7 +1039,8 @@ def _cmd_sweep(args):
               thermal_step_s=args.thermal_step_s, model=args.model, set_items=args.set or (),
               effects=_effects(args), fmus=args.fmus,
               workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-              progress=progress, **SCENARIO_ARGUMENTS[args.scenario](args))
+              progress=progress, echo=lambda line: print(line, file=sys.stderr),
+              **SCENARIO_ARGUMENTS[args.scenario](args))
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     _emit(args, summary, summary_lines(summary) + f"\nfiles: {args.out}/trials.parquet, "
                                                   "summary.json, summary.txt, report.html")
