@@ -34,7 +34,7 @@ from .system import (DEFAULT_THERMAL_STEP_S, AxisSystem, Component, Connection, 
 AXIS_PARTS = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 ERROR_PARTS = ("StepperError", "GeometricError", "ThermalScrew")
 # Each axis runs its servo with a type-1 plant (a0 = 0), as the positioning tests do: with
-# seed 002's a0 and its tiny integral gain the loop keeps a static error of position/364.
+# the a0 of Anang et al. 2017 and its tiny integral gain the loop keeps a static error of position/364.
 MACHINE_SERVO = {"plant_stiffness_per_s2": 0.0}
 
 
