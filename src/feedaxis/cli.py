@@ -25,11 +25,13 @@ from .console import fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
 from .output import refuse_overwriting_inputs, write_atomically
+from .comptable.table import TABLE_TOLERANCE_UM
+from .importers.wide_csv import column_map
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
-from .uncertainty.correction import corrected_case, temperature_option
+from .uncertainty.correction import MATERIAL, corrected_case, temperature_option
 
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
-             "+ tracking.csv; see data-format.md")
+             "+ tracking.csv; see docs/case-format.md")
 
 # Each command is registered beside its handler: @command(NAME, add_parser arguments,
 # options=FUNCTION adding its arguments); build_parser adds them in this file's order.
@@ -75,7 +77,8 @@ def _progress(label, unit):
     steps at most (the bar's total grows by N, nothing is counted)."""
     from tqdm import tqdm
 
-    with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
+    with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr,
+              disable=None) as bar:  # None: off when stderr is no terminal (a log file)
         def tick(step=None, total=None):
             if total is not None:
                 bar.total = (bar.total or 0) + total
@@ -87,8 +90,19 @@ def _progress(label, unit):
         yield tick
 
 
-def _effects(args):
-    return available_effects(args.effects or ())
+def _effects(args, cases=()):
+    """The effects by name: the catalog, the user's (--effects) and those a case's kind
+    makes for it (a circular test: each axis's and the machine's, ``backlash@X``), without
+    those acting on kinds the case does not hold."""
+    effects = available_effects(args.effects or ())
+    for case in cases:
+        own = _kind_part(case, "case_effects")
+        if own is not None:
+            held = set(case.samples)
+            effects = {**{name: e for name, e in effects.items()
+                          if e.measurement is None or e.measurement in held},
+                       **own(case)}
+    return effects
 
 
 def _starting_model(args, effects):
@@ -120,9 +134,9 @@ def _demo_options(parser):
     parser.add_argument("--out", default="feedaxis-demo", help="output folder (default: feedaxis-demo)")
 
 
-@command("demo", help="the whole loop on the bundled seed 001 case, then the FMUs",
+@command("demo", help="the whole loop on the bundled Liu 2023 case, then the FMUs",
          description="Diagnose, add the missing effect, refit, until the verdict is adequate, "
-                     "on the bundled seed 001 micro ball screw; write the model, the report "
+                     "on the bundled Liu 2023 micro ball screw; write the model, the report "
                      "and the FMUs into --out and check the FMUs reproduce the fitted model.",
          options=_demo_options)
 def _cmd_demo(args):
@@ -154,11 +168,12 @@ def _fit_options(parser):
 def _cmd_fit(args):
     from .fit import check_available, evaluate, fit_with_artefacts
     from .measurement import kinds_for
+    from .plausibility import warn_implausible_fit
 
     if args.out:
         check_writable_target(args.out)
-    effects = _effects(args)
     cases = [corrected_case(read_case(folder), args.correct_to_20C) for folder in args.cases]
+    effects = _effects(args, cases)
     starting = _starting_model(args, effects)
     model = _with_added(starting, args.add, effects)
     results = []
@@ -166,19 +181,25 @@ def _cmd_fit(args):
         check_available(model, cases, kind)
         before = evaluate(starting, cases, kind)
         with _progress("fitting", " evaluations") as tick:
-            results.append((before, fit_with_artefacts(model, cases, progress=tick, kind=kind)))
+            result = fit_with_artefacts(model, cases, progress=tick, kind=kind)
+        alone = evaluate(result.fitted_model(), cases, kind)
+        warn_implausible_fit(result.fitted_model())
+        results.append((before, result, alone.rms_um))
     if args.out:
         write_atomically(args.out, results[0][1].fitted_model().to_toml())
-    _emit_each(args, [(result.kind, _fit_payload(before, result),
-                       text.fit_lines(result, before.rms_um, args.out))
-                      for before, result in results])
+    _emit_each(args, [(result.kind, _fit_payload(before, result, alone_um),
+                       text.fit_lines(result, before.rms_um, args.out, alone_um))
+                      for before, result, alone_um in results])
 
 
-def _fit_payload(before, result):
-    """The --json of a fit: the model's parameters, and the measurement's artefacts apart."""
+def _fit_payload(before, result, alone_um):
+    """The --json of a fit: the model's parameters, and the measurement's artefacts apart;
+    ``rms_after_um`` with the artefacts fitted beside the model, ``rms_model_alone_um`` the
+    saved model on every sample (what compare gives)."""
     fitted = result.fitted_model()
     keys = set(fitted.parameter_keys)
     return {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
+            "rms_model_alone_um": alone_um,
             "effects": list(fitted.names), "params": fitted.values,
             "uncertainties": {name: result.uncertainties[name] for name in fitted.names},
             "undetermined": {k: v for k, v in result.undetermined.items() if k in keys},
@@ -190,8 +211,8 @@ def _case_and_model(args):
     measurement to compare it with)."""
     from .measurement import kinds_for
 
-    effects = _effects(args)
     case = corrected_case(read_case(args.case), args.correct_to_20C)
+    effects = _effects(args, [case])
     model = _starting_model(args, effects)
     return effects, case, model, kinds_for([case], model)
 
@@ -323,7 +344,7 @@ def _compensate_options(parser):
 
 @command("compensate", help="thermal correction at each sample and the error it leaves",
          description="Apply the model's thermal effects (thermal_screw, ambient_expansion) as "
-                     "a compensation to a thermal case, as seed 003 §5.2: the thermal error is "
+                     "a compensation to a thermal case, as Rong et al. 2023 §5.2: the thermal error is "
                      "each target's drift from its first visit; print its max and RMS before "
                      "and after, per target and over time.",
          options=_compensate_options)
@@ -352,14 +373,18 @@ def _import_options(parser):
                              "actual_mm, control_V, disturbance_N")
     parser.add_argument("--sample-time-s", type=float, metavar="S",
                         help="with --map sample=...: the drive's sampling time (s)")
+    parser.add_argument("--columns", metavar="MAP", type=column_map,
+                        help="a .csv whose headers are not recognised: "
+                             "'HEADER=target:UNIT,HEADER=run1+:UNIT,HEADER=run1-:UNIT,...' "
+                             "(units mm, m, µm, nm, in; a deviation defaults to µm)")
 
 
 @command("import", help="laser export (Renishaw .rtl, wide CSV) or a drive trace (--map) "
                         "-> case folder",
          formatter_class=argparse.RawDescriptionHelpFormatter,
-         description="Read a laser-interferometer export and write a case folder (data-format "
-                     "1.1: AXIS.toml + positioning.csv), all files or none. Says which metadata "
-                     "the case format cannot hold.",
+         description="Read a laser-interferometer export and write a case folder (case format "
+                     "1.2, docs/case-format.md: AXIS.toml + positioning.csv), all files or none. "
+                     "Says which metadata the case format cannot hold.",
          epilog="Formats, by extension:\n"
                 "  .rtl  Renishaw linear data file (sections HEADER::, TARGET DATA::, RUNS::,\n"
                 "        DEVIATIONS::, ...): odd runs approach in +, even runs in -.\n"
@@ -370,26 +395,37 @@ def _import_options(parser):
                 "        target_mm first (mm); then one column per run and direction,\n"
                 "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
                 "        measured - target in µm; an empty cell = not measured; '#' comment\n"
-                "        lines; ';'- or tab-separated files may use a decimal comma.",
+                "        lines; ';'- or tab-separated files may use a decimal comma.\n"
+                "        Vendor headers with units are recognised: 'Target (mm)',\n"
+                "        'Run 1 Fwd (µm)', 'Run 1 Rev (µm)' (fwd/forward/up, rev/reverse/\n"
+                "        bwd/backward/down; units mm, m, µm, nm, in); any other layout\n"
+                "        is mapped with --columns.\n"
+                "See docs/compensation-tables.md and docs/case-format.md.",
          options=_import_options)
 def _cmd_import(args):
     if args.map:
         return _import_drive_trace(args)
     from .importers import import_case
 
-    folder, measurement, dropped = import_case(args.file, args.axis, args.out)
+    folder, measurement, dropped = import_case(args.file, args.axis, args.out, args.columns)
     directions = sorted({int(d) for d in measurement.direction}, reverse=True)
     payload = {"case": str(folder), "samples": int(measurement.error_um.size),
                "targets": int(len(set(measurement.target_mm))),
                "runs": int(measurement.run.max()), "directions": directions,
                "name": read_case(folder).name, "dropped": dropped,
-               "ambient_C": None if measurement.ambient_C is None else
-               [float(measurement.ambient_C.min()), float(measurement.ambient_C.max())]}
+               **{column: None if values is None else [float(values.min()), float(values.max())]
+                  for column, values in (("ambient_C", measurement.ambient_C),
+                                         ("material_C", measurement.material_C))},
+               "expansion_per_K": measurement.expansion_per_K}
     lines = [f"{folder}: {payload['samples']} samples, {payload['targets']} targets, "
              f"{payload['runs']} runs, directions {', '.join(f'{d:+d}' for d in directions)}"]
-    if payload["ambient_C"]:
-        lines.append("  kept: the air temperature as positioning.csv ambient_C, "
-                     + " to ".join(f"{t:g}" for t in sorted(set(payload["ambient_C"]))) + " °C")
+    for column, what in (("ambient_C", "air"), ("material_C", "material")):
+        if payload[column]:
+            lines.append(f"  kept: the {what} temperature as positioning.csv {column}, "
+                         + " to ".join(f"{t:g}" for t in sorted(set(payload[column]))) + " °C")
+    if payload["expansion_per_K"] is not None and "ENVIRONMENT.EXP COEFF" not in dropped:
+        lines.append(f"  kept: the expansion coefficient as [screw] expansion_per_K = "
+                     f"{payload['expansion_per_K']:g} /K")
     lines += [f"  dropped (the case format has no place for it): {key} = {value}"
               for key, value in dropped.items()]
     _emit(args, payload, "\n".join(lines))
@@ -409,6 +445,16 @@ def _import_drive_trace(args):
              f"{', '.join(columns)}"]
     lines += [f"  dropped: {column}: {why}" for column, why in dropped.items()]
     _emit(args, payload, "\n".join(lines))
+def _positive_tolerance(text):
+    """``--tolerance-um``: a number > 0 (µm)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < float("inf"):
+        raise InputError(f"expected a tolerance in µm > 0, got {text!r}",
+                         parameter="--tolerance-um")
+    return value
 
 
 def _comp_table_options(parser):
@@ -421,10 +467,18 @@ def _comp_table_options(parser):
                             f" ({c.name}: {c.out_note})" for c in CONTROLLERS.values()
                             if c.out_note))
     parser.add_argument("--spacing-mm", type=float, metavar="S",
-                        help="distance between table points (default: lead / 8, widened to the "
-                             "controller's point limit; with --from-measurement the targets)")
+                        help="distance between table points (default from the model: the "
+                             "fewest points that reproduce it within --tolerance-um under the "
+                             "controller's grid rules; with --from-measurement the targets)")
+    parser.add_argument("--tolerance-um", type=_positive_tolerance, metavar="T",
+                        default=TABLE_TOLERANCE_UM,
+                        help=f"how closely the model's table must follow the model between "
+                             f"its points (default {TABLE_TOLERANCE_UM:g} µm)")
     parser.add_argument("--from-measurement", action="store_true",
                         help="the table from the measured means at the targets, not the model")
+    parser.add_argument("--circle-axis", metavar="NAME",
+                        help="a circular case: the axis whose table to write (X, Y, ...); the "
+                             "circle expected after it is verified")
     parser.add_argument("--axis-id", metavar="ID",
                         help="axis name in the file (" + ", ".join(
                             f"{c.name} {c.axis_note}" for c in CONTROLLERS.values()
@@ -453,15 +507,45 @@ def _comp_table_options(parser):
 def _cmd_comp_table(args):
     from .comptable import check_case, comp_table, summary_lines
 
-    case = check_case(read_case(args.case))
+    case = read_case(args.case)
+    kind_table = _kind_part(case, "comp_table")
+    if kind_table is not None:
+        return _kind_comp_table(args, case, kind_table)
+    case = check_case(case)
     case = corrected_case(case, args.correct_to_20C)
     if not (args.model or args.from_measurement):
         raise InputError("give the fitted model (--model M.toml) or --from-measurement",
                          parameter="--model")
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
-                               args.from_measurement, args.axis_id, args.force)
+                               args.from_measurement, args.axis_id, args.force,
+                               args.tolerance_um)
     refuse_overwriting_inputs({path: "--out" for path in files}, _inputs(args))
+    for path, content in files.items():
+        write_atomically(path, content)
+    _emit(args, report, summary_lines(report))
+
+
+def _kind_part(case, name):
+    """The part ``name`` of the first kind of measurement ``case`` holds that has one."""
+    from .kinds import kind, part
+
+    return next((found for found in (part(kind(held), name) for held in case.samples)
+                 if found), None)
+
+
+def _kind_comp_table(args, case, kind_table):
+    """comp-table on a case whose kind writes its own tables (a circular test: one axis's
+    table from the fitted model, ``--circle-axis``)."""
+    from .comptable import summary_lines
+
+    if not args.model or args.from_measurement:
+        raise InputError("a table from this case comes from the fitted model (--model "
+                         "M.toml); it has no measured means per position",
+                         parameter="--model")
+    model = load_model(args.model, _effects(args, [case]))
+    files, report = kind_table(case, model, args.controller, args.out, args.circle_axis,
+                               args.spacing_mm, args.axis_id, args.force)
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
@@ -515,8 +599,8 @@ def _cmd_uncertainty(args):
     case = read_case(args.case)
     model = load_model(args.model, _effects(args)) if args.model else None
     budget = read_budget(args.budget) if args.budget else default_budget()
-    with tqdm(desc="Monte Carlo", unit="trial", unit_scale=True, delay=1.0, leave=False,
-              file=sys.stderr) as bar:
+    with tqdm(desc="Monte Carlo (the trials, then each input's share)", unit="run",
+              unit_scale=True, delay=1.0, leave=False, file=sys.stderr, disable=None) as bar:
         def tick(trials, planned):
             bar.total = planned
             bar.update(trials)
@@ -548,7 +632,7 @@ def _cmd_effects(args):
     _emit(args, payload, text.effect_lines(effects))
 
 
-STANDALONE_HELP = ("each FMU carries the Python its physics needs (21-37 MB each), for FMI "
+STANDALONE_HELP = ("each FMU carries the Python its physics needs (about 21 MB each), for FMI "
                    "hosts on machines without Python (docs/fmu-hosts.md); without it the FMUs "
                    "are small and need this machine's Python")
 
@@ -604,7 +688,7 @@ def _counter_progress(label, unit, unit_scale=False):
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, unit_scale=unit_scale, delay=1.0, leave=False,
-              file=sys.stderr) as bar:
+              file=sys.stderr, disable=None) as bar:
         def update(done, total):
             bar.total = total
             bar.update(done - bar.n)
@@ -612,15 +696,22 @@ def _counter_progress(label, unit, unit_scale=False):
         yield update
 
 
-def _simulate(args, run):
-    """Run one scenario into a new case folder; Ctrl-C keeps what was computed."""
+def _simulate(args, run, system=None):
+    """Run one scenario into a new case folder (on ``system``, default the axis of the
+    axis options); Ctrl-C keeps what was computed."""
     from .cosim.master import Master
     from .cosim.scenarios import check_axis_ranges
 
     if Path(args.out).exists():
         raise InputError("already exists; choose a new case folder", path=args.out)
     check_writable_target(args.out, "folder")
-    system, paths = _checked_axis(args)
+    if system is None:
+        system, paths = _checked_axis(args)
+    else:
+        from .cosim.physics_check import check_parameters
+
+        paths = _fmu_paths(args)
+        check_parameters(system, paths)
     check_axis_ranges(system)
     with Master(system, paths) as master:
         with _counter_progress("simulating", "step", True) as progress:
@@ -628,7 +719,44 @@ def _simulate(args, run):
 
 
 def _simulate_options(parser):
-    _scenario_parsers(parser, "case folder to create (must not exist)", _noise_options)
+    scenarios = _scenario_parsers(parser, "case folder to create (must not exist)",
+                                  _noise_options)
+    sub = scenarios.add_parser(
+        "circular", help="circular test of two axes (ISO 230-4, ballbar) -> circular.csv",
+        description="Two co-simulated axes (each NpidServo, GeometricError, StepperError, "
+                    "ThermalScrew, components named X_NpidServo, ...) and their squareness; "
+                    "an interpolator commands the circle at the feed, from standing through "
+                    "a lead-in arc, one measured turn and a lead-out arc, in each direction; "
+                    "the case records the radial deviation from the nominal centre as a "
+                    "ballbar does (axis.toml with [circular] and [axes.NAME], circular.csv).")
+    _circular_options(sub)
+    sub.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
+    _noise_options(sub)
+    _add_axis_options(sub)
+    _add_common_options(sub)
+    sub.set_defaults(handler=_cmd_simulate_circular)
+
+
+def _circular_options(sub):
+    sub.add_argument("--machine", metavar="AXIS",
+                     help="axis.toml (or case folder) of a circular case: its axes, circle and "
+                          "each axis's screw, motor and servo (default: axes X and Y with the "
+                          "FMUs' defaults)")
+    sub.add_argument("--radius-mm", type=float, help="nominal radius (default 100, or the "
+                                                     "--machine's)")
+    sub.add_argument("--feed-mm-min", type=float, help="programmed feed (default 1000, or the "
+                                                       "--machine's)")
+    sub.add_argument("--center-mm", metavar="C1,C2", help="centre in machine coordinates "
+                                                          "(default R,R, or the --machine's)")
+    sub.add_argument("--directions", choices=("both", "ccw", "cw"), default="both",
+                     help="counter-clockwise then clockwise (default both)")
+    sub.add_argument("--samples-per-turn", type=int, default=3600,
+                     help="samples over the measured turn of each direction (default 3600)")
+    sub.add_argument("--lead-in-deg", type=float, default=45.0,
+                     help="arc travelled before the measured turn (default 45)")
+    sub.add_argument("--squareness-urad", type=float, default=0.0,
+                     help="out-of-squareness of the second axis towards the first, µrad "
+                          "(default 0)")
 
 
 def _noise_options(sub):
@@ -658,15 +786,16 @@ def _scenario_parsers(parser, out_help, more_options=None, handler=None):
         _add_axis_options(sub)
         _add_common_options(sub)
         sub.set_defaults(handler=handler or scenario_handler)
+    return scenarios
 
 
 # the scenarios below carry the handlers
 command_group("simulate", help="run a scenario on the co-simulated axis, write a case folder",
               description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
-                          "scenario and write the result as a measurement case (data-format.md), "
+                          "scenario and write the result as a measurement case (docs/case-format.md), "
                           "ready for fit, diagnose and compare. iso230 and thermal run the servo "
-                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: the "
-                          "193.3 of Anang et al. 2017 leaves a static error of target/364); --set overrides it. Ctrl-C "
+                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: Anang et al. 2017's "
+                          "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
                           "stops and keeps what was computed.",
               options=_simulate_options)
 
@@ -705,6 +834,30 @@ def _iso230_arguments(args):
     return {"targets_mm": iso230_targets(args.targets, args.spacing_mm, args.first_mm),
             "runs": args.runs, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s,
             "overrun_mm": args.overrun_mm}
+
+
+def _cmd_simulate_circular(args):
+    from .cosim.circular import DIRECTIONS, simulate_circular
+    from .cosim.machine import circular_machine
+
+    if args.model:
+        raise InputError("a fitted circular model is not taken here yet; give its values with "
+                         "--set", parameter="--model")
+    system, circle = circular_machine(
+        args.machine, args.radius_mm, args.feed_mm_min,
+        _numbers(args.center_mm, "--center-mm") if args.center_mm else None,
+        args.squareness_urad, args.step_ms, args.thermal_step_s, args.set)
+    if args.samples_per_turn < 3:
+        raise InputError(f"must be at least 3, got {args.samples_per_turn}",
+                         parameter="--samples-per-turn")
+    summary = _simulate(args, lambda master, progress: simulate_circular(
+        args.out, master, _noise(args), **circle, directions=DIRECTIONS[args.directions],
+        samples_per_turn=args.samples_per_turn, lead_in_deg=args.lead_in_deg,
+        progress=progress), system)
+    figures = ", ".join(f"{k[:-3]} {v:.3f}" for k, v in summary.items()
+                        if k in ("G_um", "H_um", "F_max_um", "F_min_um"))
+    _emit(args, summary, f"{args.out}: {summary['samples']} samples "
+                         f"({', '.join(summary['directions'])}); ISO 230-4 (µm): {figures}")
 
 
 def _simulate_thermal_options(parser):
@@ -763,7 +916,7 @@ def _simulate_tracking_options(parser):
           description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
                       "after the first second. --spindle-rpm adds a milling force at the "
                       "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, Anang "
-                      "et al. 2017 publish none). axis.toml gets the [servo] table (the controller), not "
+                      "et al. 2017 publishes none). axis.toml gets the [servo] table (the controller), not "
                       "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
                       "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).",
           options=_simulate_tracking_options)
@@ -799,16 +952,39 @@ def _numbers(text, option):
 
 
 def _checked_axis(args):
-    """The axis system and FMU paths, its parameter values accepted by every FMU."""
+    """The axis system (the machine of two axes with ``--machine``) and FMU paths, its
+    parameter values accepted by every FMU."""
     from .cosim.physics_check import check_parameters
 
-    system, paths = _axis_system(args), _fmu_paths(args)
+    system, paths = _machine_or_axis(args), _fmu_paths(args)
     check_parameters(system, paths)
     return system, paths
 
 
+def _machine_or_axis(args):
+    """The machine of ``--machine`` (two axes, :mod:`feedaxis.cosim.machine`), else the axis."""
+    machine = getattr(args, "machine", None)
+    if machine is None:
+        return _axis_system(args)
+    from .cosim.machine import circular_machine
+
+    if args.model:
+        raise InputError("a fitted circular model is not taken here yet; give its values with "
+                         "--set", parameter="--model")
+    return circular_machine(machine or None, squareness_urad=args.squareness_urad,
+                            step_ms=args.step_ms, thermal_step_s=args.thermal_step_s,
+                            set_items=args.set)[0]
+
+
 def _export_ssp_options(parser):
     parser.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
+    parser.add_argument("--machine", nargs="?", const="", metavar="AXIS",
+                        help="the machine of two axes instead of one axis (components "
+                             "X_NpidServo, ...): alone the default axes X and Y, or those of "
+                             "the axis.toml (or case folder) of a circular case")
+    parser.add_argument("--squareness-urad", type=float, default=0.0,
+                        help="with --machine: the second axis out of square with the first "
+                             "(µrad), a term of the first axis's table position (printed)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
     parser.add_argument("--stop-time", type=float, default=1.0, metavar="S",
                         help="DefaultExperiment stopTime in s (default 1)")
@@ -833,13 +1009,19 @@ def _cmd_export_ssp(args):
     unconnected = [{"input": connector, "unit": variable.unit, "start": variable.start,
                     "meaning": variable.description}
                    for connector, variable in open_inputs(system)]
-    _emit(args, {"ssp": str(path), "open_inputs": unconnected},
-          f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
-          f"four {'standalone ' if args.standalone else ''}FMUs\n"
-          "open inputs (unconnected: drive them from the importing tool, else they keep their "
-          "start values; position_ref_mm at 0 is a standing axis):\n"
-          + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
-                      for i in unconnected))
+    payload = {"ssp": str(path), "open_inputs": unconnected}
+    lines = (f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
+             f"four {'standalone ' if args.standalone else ''}FMUs\n"
+             "open inputs (unconnected: drive them from the importing tool, else they keep their "
+             "start values; position_ref_mm at 0 is a standing axis):\n"
+             + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
+                         for i in unconnected))
+    if args.machine is not None:
+        payload["outputs"] = {o.variable.name: o.formula() for o in system.outputs}
+        lines += ("\nthe machine's table positions (mm) from the component outputs:\n"
+                  + "\n".join(f"  {name} = {formula}"
+                              for name, formula in payload["outputs"].items()))
+    _emit(args, payload, lines)
 
 
 
@@ -944,12 +1126,12 @@ def _add_model_options(sub, model_help="starting model (TOML); without it the mo
                        required=False):
     sub.add_argument("--model", metavar="M.toml", help=model_help, required=required)
     sub.add_argument("--effects", metavar="F.py", action="append",
-                     help="Python file with your own effects (repeatable); see the README")
+                     help="Python file with your own effects (repeatable); see docs/own-effect.md")
 
 
 def _add_correction_option(sub):
-    sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T",
-                     type=temperature_option, help=CORRECTION_HELP)
+    sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T", nargs="?",
+                     const=MATERIAL, type=temperature_option, help=CORRECTION_HELP)
 
 
 def _add_motion_options(sub):

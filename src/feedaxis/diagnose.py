@@ -60,6 +60,11 @@ class Candidate:
     error_scale: float = 1.0
     joint: FitResult | None = field(default=None, repr=False)  # sizes from the last fit
 
+    @property
+    def named(self):
+        """The named effect (an :class:`~feedaxis.effects.Effect`)."""
+        return self.result.model.effects[self.result.model.names.index(self.effect)]
+
     def sizes(self):
         """{parameter: (value, standard error, unit)} of the named effect; the standard
         errors rest on the noise model's scale (the pure error where there are repeats)."""
@@ -73,7 +78,8 @@ class Candidate:
     def to_json(self):
         sizes = {name: {"value": value, "standard_error": None if np.isnan(error) else error,
                         "unit": unit} for name, (value, error, unit) in self.sizes().items()}
-        return {"effect": self.effect, "rms_after_um": self.rms_after_um,
+        return {"effect": self.named.effect, "axis": self.named.axis, "add": self.effect,
+                "rms_after_um": self.rms_after_um,
                 "delta_bic": self.delta_bic, "evidence": self.evidence, "parameters": sizes,
                 **self.test.to_json()}
 

@@ -1,8 +1,8 @@
-"""Scenarios on the co-simulated axis that write measurement cases (data-format.md).
+"""Scenarios on the co-simulated axis that write measurement cases (docs/case-format.md).
 
 - :func:`simulate_iso230`: ISO 230-2 positioning cycle -> ``axis.toml`` + ``positioning.csv``;
 - :func:`simulate_thermal`: a duty cycle with measurement passes -> + ``duty.csv``;
-- :func:`simulate_tracking`: sinusoidal tracking (seed 002) -> ``axis.toml`` + ``tracking.csv``.
+- :func:`simulate_tracking`: sinusoidal tracking (Anang et al. 2017) -> ``axis.toml`` + ``tracking.csv``.
 
 Each writes what its in-memory twin (:func:`run_iso230`, :func:`run_thermal`,
 :func:`run_tracking`, by name in :data:`RUNS`) returns: a :class:`ScenarioRun` holding the
@@ -45,12 +45,12 @@ MAX_TRAVEL_MM = PHYSICAL_RANGE["reference_mm"][1]  # beyond any physical axis
 MAX_SAMPLES = 100_000  # samples of one simulated test (ISO 230-2: 5 runs x 2 x ~20 targets)
 MAX_MACRO_STEPS = 1e9  # 11.6 days of axis time at 1 ms: days of computing
 TEETH = 2
-# F0 (N) calibrated on one row of seed 002 Table 2 (PID, 0.4 Hz, 10 mm, 1500 rpm: 0.0757 mm)
+# F0 (N) calibrated on one row of Anang et al. 2017 Table 2 (PID, 0.4 Hz, 10 mm, 1500 rpm: 0.0757 mm)
 # with the assumed force_constant_N_per_V = 100; it then gives 0.2211 mm at 0.7 Hz, 20 mm,
 # 1500 rpm (paper 0.2217), but falls faster with spindle speed than the paper.
 CUTTING_FORCE_N = 1.4
-# Positioning tests (iso230, thermal) run the servo with a type-1 plant (a0 = 0): with seed
-# 002's a0 = 193.3 1/s² and its tiny integral gain the loop keeps a static error of about
+# Positioning tests (iso230, thermal) run the servo with a type-1 plant (a0 = 0): with the
+# a0 = 193.3 1/s² of Anang et al. 2017 and its tiny integral gain the loop keeps a static error of about
 # target/364 (1.4 mm at 500 mm), which no CNC axis shows and which would swamp the errors
 # a positioning test is about. Tracking keeps the published plant; --set overrides both.
 POSITIONING_SERVO = {"NpidServo": {"plant_stiffness_per_s2": 0.0}}
@@ -393,10 +393,10 @@ def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
 
 
 def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
-    """Milling force at the tooth-passing frequency, an assumption (seed 002 gives none).
+    """Milling force at the tooth-passing frequency, an assumption (Anang et al. 2017 gives none).
 
     F(t) = F0 · (1500 / n) · (1 + sin(2π z n / 60 · t)) / 2: the mean force falls with
-    spindle speed n as the feed per tooth does (seed 002's explanation of Table 2), z teeth.
+    spindle speed n as the feed per tooth does (Anang et al. 2017 explain Table 2 so), z teeth.
     """
     _require_positive(spindle_rpm=spindle_rpm)
     scale = force_N * 1500.0 / spindle_rpm
@@ -406,7 +406,7 @@ def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
 def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid",
                  spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None,
                  record_control=False):
-    """Sinusoidal tracking (seed 002) in memory.
+    """Sinusoidal tracking (Anang et al. 2017) in memory.
 
     Parameters
     ----------
@@ -414,10 +414,10 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     frequency_hz, amplitude_mm, duration_s : float
         Reference A sin(2π f t) (mm) for ``duration_s`` seconds.
     controller : {"pid", "npid", "cascade"}
-        PID (seed 002 Eq. 6), NPID (Eq. 8) or a drive's cascade (NpidServo's ``kp_per_s``,
-        ``kv_V_s_per_mm``, ``tn_s``, ``velocity_feedforward``).
+        PID (Anang et al. 2017 Eq. 6), NPID (Eq. 8) or a drive's cascade (NpidServo's
+        ``kp_per_s``, ``kv_V_s_per_mm``, ``tn_s``, ``velocity_feedforward``).
     spindle_rpm : float, optional
-        Adds the cutting force of :func:`cutting_force_N` (1500/2500/3500 rpm in seed 002).
+        Adds the cutting force of :func:`cutting_force_N` (1500/2500/3500 rpm in Anang et al. 2017).
     force_N : float
         Cutting-force amplitude F0 at 1500 rpm (N); see :data:`CUTTING_FORCE_N`.
     record_control : bool
@@ -427,7 +427,7 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     -------
     ScenarioRun
         Figures: ``max_tracking_error_mm`` and ``rms_tracking_error_mm`` over t > 1 s (after
-        the start-up transient, as the seed 002 Table 1 reproduction); series: the tracking
+        the start-up transient, as the Anang et al. 2017 Table 1 reproduction); series: the tracking
         error against time at :data:`TRACKING_SERIES_POINTS` evenly spaced steps.
     """
     _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,

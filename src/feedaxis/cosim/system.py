@@ -110,6 +110,12 @@ class AxisSystem:
                                  "or component")
         self.ordered_components()
 
+    def output_values(self, columns):
+        """{system output: values} from ``columns`` ({"Component.variable": values}), each
+        output the linear combination of its terms."""
+        return {output.variable.name: sum(factor * columns[term] for term, factor in output.terms)
+                for output in self.outputs}
+
     def component(self, name):
         """The component called ``name``."""
         for component in self.components:
@@ -217,7 +223,7 @@ def fmi_text(value):
 
 
 def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
-    """The four-FMU feed axis with the FMUs' default physics (seeds 000-003).
+    """The four-FMU feed axis with the FMUs' default physics (the four papers).
 
     Parameters
     ----------
@@ -227,7 +233,7 @@ def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
         Communication step of NpidServo, StepperError and GeometricError (s).
     thermal_step_s : float
         Communication step of ThermalScrew (s); its field is advanced in sub-steps of at
-        most its ``time_step_s`` (0.1 s, seed 003).
+        most its ``time_step_s`` (0.1 s, Rong et al. 2023).
     """
     inputs = (
         Variable("position_ref_mm", "mm", "commanded axis position"),
@@ -239,12 +245,12 @@ def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
                   {"nonlinear": False, "time_step_s": 1e-4},
                   "position loop, PID or NPID (Anang et al. 2017, Eq. 1-8) or a drive's cascade"),
         Component("StepperError", "StepperError", servo_step_s, {},
-                  "motor step error (seed 000 Eq. 6, 9, 10)"),
+                  "motor step error (Liu 2022 Eq. 6, 9, 10)"),
         Component("GeometricError", "GeometricError", servo_step_s, {"sag_enabled": True},
-                  "lead, eccentricity, backlash, sag (seed 000/001)"),
+                  "lead, eccentricity, backlash, sag (Liu 2022/2023)"),
         Component("ThermalScrew", "ThermalScrew", thermal_step_s,
                   {"reference_ambient_C": 20.0, "time_step_s": 0.1},
-                  "screw heating (seed 003 Eq. 1-19)"),
+                  "screw heating (Rong et al. 2023 Eq. 1-19)"),
     )
     connections = (
         Connection("position_ref_mm", "NpidServo.position_ref_mm"),
@@ -290,6 +296,15 @@ def axis_from_options(step_ms, thermal_step_s=None, model_path=None, axis_path=N
     InputError
         Naming the option (``--step-ms``, ``--thermal-step-s``, ``--model``, ``--set ...``).
     """
+    step_s, thermal_step_s = option_steps(step_ms, thermal_step_s)
+    overrides = axis_overrides(model_path, axis_path, set_items, effects)
+    return default_axis(step_s, step_s, thermal_step_s).with_parameters(overrides)
+
+
+def option_steps(step_ms, thermal_step_s=None):
+    """(macro step, ThermalScrew step) in s from ``--step-ms`` and ``--thermal-step-s``
+    (default 0.1 s rounded up to a whole number of macro steps); :class:`InputError`
+    naming the option."""
     for option, value in (("--step-ms", step_ms), ("--thermal-step-s", thermal_step_s)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"must be > 0, got {value:g}", parameter=option)
@@ -299,8 +314,7 @@ def axis_from_options(step_ms, thermal_step_s=None, model_path=None, axis_path=N
     elif whole_ratio(thermal_step_s, step_s) is None:
         raise InputError(f"{thermal_step_s:g} s must be a whole multiple of the macro step "
                          f"--step-ms {step_ms:g}", parameter="--thermal-step-s")
-    overrides = axis_overrides(model_path, axis_path, set_items, effects)
-    return default_axis(step_s, step_s, thermal_step_s).with_parameters(overrides)
+    return step_s, thermal_step_s
 
 
 def axis_overrides(model_path=None, axis_path=None, set_items=(), effects=None):

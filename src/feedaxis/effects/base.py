@@ -75,6 +75,12 @@ class Effect:
     # effects fitted beside it when the model lacks them (diagnose._joined): a friction
     # inside a loop whose plant was fitted without it shows only with the plant refitted
     fitted_with: tuple = ()
+    axis = None  # the machine axis the effect acts on (circular tests), None for one axis
+
+    @property
+    def effect(self):
+        """The catalog name (the same on every axis of a machine)."""
+        return self.name
 
     def __add__(self, other):
         return Model((self,)) + other

@@ -55,7 +55,7 @@ class TrackingEffect(Effect):
 
 
 class ServoPlant(TrackingEffect):
-    """The plant G(s) = b e^{-τs} / (s² + a1 s + a0) of seed 002 Eq. 1, identified."""
+    """The plant G(s) = b e^{-τs} / (s² + a1 s + a0) of Anang et al. 2017 Eq. 1, identified."""
 
     name = "servo_plant"
     meaning = ("the plant (motor, screw, table) responds differently from the starting "
