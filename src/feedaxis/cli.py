@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 from contextlib import contextmanager
@@ -288,7 +289,7 @@ def _compare_options(parser):
                      "deviation of the measured runs and of what is left after the model, "
                      "side by side (--standard: another standard's, or all; a thermal case's "
                      "ISO 230-3 figures, measured, predicted and compensated). Tracking: "
-                     "the maximum and RMS tracking error of Anang et al. 2017 "
+                     "the maximum and RMS tracking error (as Anang et al. 2017 report them) "
                      "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):
@@ -365,13 +366,21 @@ def _import_options(parser):
     parser.add_argument("--axis", required=True, metavar="AXIS.toml",
                         help="axis.toml (or a case folder holding one) describing the axis")
     parser.add_argument("--out", required=True, metavar="CASE", help="case folder to create")
+    parser.add_argument("--map", action="append", metavar="TARGET=SOURCE[*SCALE]",
+                        help="a drive trace (CSV): tracking.csv's column TARGET from the "
+                             "export's column SOURCE times SCALE (repeatable), e.g. "
+                             "actual_mm=Pos_act*0.001; TARGET: time_s or sample, reference_mm, "
+                             "actual_mm, control_V, disturbance_N")
+    parser.add_argument("--sample-time-s", type=float, metavar="S",
+                        help="with --map sample=...: the drive's sampling time (s)")
     parser.add_argument("--columns", metavar="MAP", type=column_map,
                         help="a .csv whose headers are not recognised: "
                              "'HEADER=target:UNIT,HEADER=run1+:UNIT,HEADER=run1-:UNIT,...' "
                              "(units mm, m, µm, nm, in; a deviation defaults to µm)")
 
 
-@command("import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
+@command("import", help="laser export (Renishaw .rtl, wide CSV) or a drive trace (--map) "
+                        "-> case folder",
          formatter_class=argparse.RawDescriptionHelpFormatter,
          description="Read a laser-interferometer export and write a case folder (case format "
                      "1.2, docs/case-format.md: AXIS.toml + positioning.csv), all files or none. "
@@ -394,6 +403,8 @@ def _import_options(parser):
                 "See docs/compensation-tables.md and docs/case-format.md.",
          options=_import_options)
 def _cmd_import(args):
+    if args.map:
+        return _import_drive_trace(args)
     from .importers import import_case
 
     folder, measurement, dropped = import_case(args.file, args.axis, args.out, args.columns)
@@ -420,6 +431,20 @@ def _cmd_import(args):
     _emit(args, payload, "\n".join(lines))
 
 
+def _import_drive_trace(args):
+    from .importers import import_drive_trace
+    from .importers.drive_trace import parse_map
+
+    if args.sample_time_s is not None and not 0.0 < args.sample_time_s < math.inf:
+        raise InputError("must be a finite time > 0 (s)", parameter="--sample-time-s")
+    folder, columns, dropped = import_drive_trace(args.file, args.axis, args.out,
+                                                  parse_map(args.map), args.sample_time_s)
+    payload = {"case": str(folder), "samples": int(columns["time_s"].size),
+               "columns": list(columns), "dropped": dropped}
+    lines = [f"{folder}: {payload['samples']} samples of a drive trace, tracking.csv columns "
+             f"{', '.join(columns)}"]
+    lines += [f"  dropped: {column}: {why}" for column, why in dropped.items()]
+    _emit(args, payload, "\n".join(lines))
 def _positive_tolerance(text):
     """``--tolerance-um``: a number > 0 (µm)."""
     try:
@@ -872,18 +897,26 @@ def _simulate_tracking_options(parser):
     parser.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
     parser.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
     parser.add_argument("--duration-s", type=float, default=10.0, help="default 10")
-    parser.add_argument("--controller", choices=("pid", "npid"), default="pid")
+    parser.add_argument("--controller", choices=("pid", "npid", "cascade"), default="pid",
+                        help="pid or npid (Anang et al. 2017), or cascade: a drive's P "
+                             "position loop around a velocity loop (its gains: --set "
+                             "NpidServo.kp_per_s=..., kv_V_s_per_mm, tn_s, "
+                             "velocity_feedforward)")
+    parser.add_argument("--record-control", action="store_true",
+                        help="write the controller output as tracking.csv's control_V, as a "
+                             "drive records it")
     parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
     parser.add_argument("--force-N", type=float,
                         help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
-                             "row of Anang et al. 2017 Table 2)")
+                             "row of Table 2 of Anang et al. 2017)")
 
 
-@scenario("tracking", help="sinusoidal tracking, PID or NPID (Anang et al. 2017) -> tracking.csv",
+@scenario("tracking", help="sinusoidal tracking, PID, NPID (Anang et al. 2017) or a cascade "
+                           "drive -> tracking.csv",
           description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
                       "after the first second. --spindle-rpm adds a milling force at the "
-                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, Anang et al. 2017 "
-                      "publishes none). axis.toml gets the [servo] table (the controller), not "
+                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, Anang "
+                      "et al. 2017 publishes none). axis.toml gets the [servo] table (the controller), not "
                       "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
                       "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).",
           options=_simulate_tracking_options)
@@ -906,7 +939,7 @@ def _tracking_arguments(args):
     force = {} if args.force_N is None else {"force_N": args.force_N}
     return {"frequency_hz": args.frequency_hz, "amplitude_mm": args.amplitude_mm,
             "duration_s": args.duration_s, "controller": args.controller,
-            "spindle_rpm": args.spindle_rpm, **force}
+            "spindle_rpm": args.spindle_rpm, "record_control": args.record_control, **force}
 
 
 def _numbers(text, option):

@@ -404,7 +404,8 @@ def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
 
 
 def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid",
-                 spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
+                 spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None,
+                 record_control=False):
     """Sinusoidal tracking (Anang et al. 2017) in memory.
 
     Parameters
@@ -412,12 +413,15 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     master : Master
     frequency_hz, amplitude_mm, duration_s : float
         Reference A sin(2π f t) (mm) for ``duration_s`` seconds.
-    controller : {"pid", "npid"}
-        PID (Anang et al. 2017 Eq. 6) or NPID (Eq. 8).
+    controller : {"pid", "npid", "cascade"}
+        PID (Anang et al. 2017 Eq. 6), NPID (Eq. 8) or a drive's cascade (NpidServo's
+        ``kp_per_s``, ``kv_V_s_per_mm``, ``tn_s``, ``velocity_feedforward``).
     spindle_rpm : float, optional
         Adds the cutting force of :func:`cutting_force_N` (1500/2500/3500 rpm in Anang et al. 2017).
     force_N : float
         Cutting-force amplitude F0 at 1500 rpm (N); see :data:`CUTTING_FORCE_N`.
+    record_control : bool
+        Write the controller output as tracking.csv's ``control_V``, as a drive records it.
 
     Returns
     -------
@@ -439,10 +443,11 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
         raise ParameterError(f"must exceed {SETTLE_S:g} s: the tracking error is measured "
                              f"after the first {SETTLE_S:g} s (the start-up transient), got "
                              f"{duration_s:g}", "duration_s")
-    if controller not in ("pid", "npid"):
-        raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
+    if controller not in ("pid", "npid", "cascade"):
+        raise ParameterError(f"must be pid, npid or cascade, got {controller!r}", "controller")
     overrides = {**(parameters or {})}
-    overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
+    overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": False,
+                              "controller": controller}
     stop_s = _stop_time_s(duration_s, h)
     servo = master.system.with_parameters(overrides).component("NpidServo").parameters
     _check_loop_budget(h, stop_s, servo.get("time_step_s", ServoParams.time_step_s))
@@ -464,6 +469,8 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
                 "actual_mm": rows["NpidServo.position_mm"]}
     if spindle_rpm is not None:
         tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
+    if record_control:
+        tracking["control_V"] = rows["NpidServo.control_V"]
     name = "simulated tracking test" + ("" if completed else
                                         f" (interrupted at t = {rows['time'][-1]:g} s)")
     settled = rows["time"] > SETTLE_S
@@ -483,12 +490,12 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
 
 def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, controller="pid",
                       spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None,
-                      noise=None):
+                      noise=None, record_control=False):
     """Sinusoidal tracking (:func:`run_tracking`) written as tracking.csv into the case
     folder ``out``; return the case folder, the run's settings and its max and RMS
     tracking error (mm)."""
     run = run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller,
-                       spindle_rpm, force_N, parameters, progress)
+                       spindle_rpm, force_N, parameters, progress, record_control)
     return write_run(out, master, run, noise)
 
 
@@ -614,7 +621,7 @@ def axis_values(master, parameters, name, with_servo=False):
 
     axis = {"name": name, **{table: axis_table(table, values) for table in AXIS_KEYS}}
     if with_servo:
-        axis["servo"] = servo_from_fmu(values("NpidServo", SERVO_KEYS.values()))
+        axis["servo"] = servo_from_fmu(values("NpidServo", [*SERVO_KEYS.values(), "nonlinear"]))
     return axis
 
 
