@@ -143,7 +143,8 @@ def test_effects_command_lists_the_catalog(capsys):
     catalog = json.loads(capsys.readouterr().out)
     assert list(catalog) == ["lead_error", "gravity_sag", "assembly_eccentricity",
                              "motor_step_error", "backlash", "thermal_screw", "ambient_expansion",
-                             "servo_plant", "coulomb_friction", "viscous_friction"]
+                             "servo_plant", "coulomb_friction", "viscous_friction",
+                             "stribeck_friction", "constant_force"]
     assert catalog["backlash"]["parameters"]["backlash_um"]["unit"] == "um"
 
 
