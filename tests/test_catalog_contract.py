@@ -20,7 +20,7 @@ import pytest
 from fmpy import read_model_description
 
 from feedaxis.case import Axis
-from feedaxis.cosim.scenarios import axis_table
+from feedaxis.cosim.scenarios.base import axis_table
 from feedaxis.effects import CATALOG, Model
 from feedaxis.fmu_map import AXIS_KEYS, servo_from_fmu, servo_to_fmu
 from synthetic import ISO_AXIS, LONG_AXIS, MICRO_AXIS, in_memory_case, iso_layout, thermal_case

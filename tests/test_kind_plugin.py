@@ -97,9 +97,9 @@ OWNERS = {
                     "effects/catalog.py", "positioning_details.py", "report/positioning.py",
                     "report/compensation_table.py", "comptable/", "compensate.py",
                     "uncertainty/", "importers/", "examples.py", "demo.py",
-                    "cosim/scenarios.py", "cosim/replay.py"),
+                    "cosim/scenarios/positioning.py", "cosim/replay.py"),
     "tracking": ("measurement/tracking.py", "effects/tracking.py", "tracking_details.py",
-                 "report/tracking.py", "cosim/scenarios.py"),
+                 "report/tracking.py", "cosim/scenarios/tracking.py"),
 }
 
 

@@ -179,7 +179,7 @@ def test_bad_input_exits_2_with_one_message_and_writes_nothing(tmp_path, capsys,
 
 
 def test_positioning_scenarios_default_to_a_type1_servo_that_set_overrides():
-    from feedaxis.cosim.scenarios import _positioning_parameters
+    from feedaxis.cosim.scenarios.positioning import _positioning_parameters
     assert _positioning_parameters(None)["NpidServo"] == {"plant_stiffness_per_s2": 0.0}
     published = {"NpidServo": {"plant_stiffness_per_s2": 193.3, "nonlinear": True}}
     assert _positioning_parameters(published) == published

@@ -9,7 +9,8 @@ import pytest
 import synthetic as syn
 from feedaxis import text
 from feedaxis.case import read_case
-from feedaxis.cli import COMMANDS, SCENARIOS, build_parser, main
+from feedaxis.cli import COMMANDS, build_parser, main
+from feedaxis.kinds import scenarios as registered_scenarios
 from feedaxis.diagnose import diagnose
 from feedaxis.effects import CATALOG, Model
 from feedaxis.measurement import measurement_of
@@ -134,13 +135,14 @@ def help_texts():
     choices = parser._subparsers._group_actions[0].choices
     found = [(name, choices[name].format_help()) for name, *_ in COMMANDS]
     scenarios = choices["simulate"]._subparsers._group_actions[0].choices
-    found += [(f"simulate {name}", scenarios[name].format_help()) for name, *_ in SCENARIOS]
+    found += [(f"simulate {name}", scenarios[name].format_help())
+              for name in registered_scenarios()]
     return found
 
 
 def test_help_texts_describe_the_method_used():
     helps = dict(help_texts())
-    assert len(helps) == len(COMMANDS) + len(SCENARIOS)
+    assert len(helps) == len(COMMANDS) + len(registered_scenarios())
     for name, help_text in helps.items():
         assert not MICRONS_AS_UM.search(help_text), name
     diagnose_help = " ".join(helps["diagnose"].split())

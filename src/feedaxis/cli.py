@@ -32,8 +32,6 @@ CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.tom
 # Each command is registered beside its handler: @command(NAME, add_parser arguments,
 # options=FUNCTION adding its arguments); build_parser adds them in this file's order.
 COMMANDS = []
-SCENARIOS = []
-SCENARIO_ARGUMENTS = {}  # scenario name -> args -> its keyword arguments (simulate and sweep)
 
 
 def command(name, options=None, **parser_kwargs):
@@ -46,24 +44,8 @@ def command(name, options=None, **parser_kwargs):
 
 def command_group(name, options, **parser_kwargs):
     """Register ``feedaxis NAME`` whose subcommands (added by ``options``) carry the
-    handlers, as ``simulate`` and its scenarios."""
+    handlers, as ``simulate`` and the scenarios of the kinds of measurement."""
     COMMANDS.append((name, parser_kwargs, options, None))
-
-
-def scenario(name, options=None, **parser_kwargs):
-    """Register the decorated handler as ``feedaxis simulate NAME``."""
-    def register(handler):
-        SCENARIOS.append((name, parser_kwargs, options, handler))
-        return handler
-    return register
-
-
-def scenario_arguments(name):
-    """Register the decorated ``args -> keyword arguments`` of scenario NAME's run."""
-    def register(function):
-        SCENARIO_ARGUMENTS[name] = function
-        return function
-    return register
 
 
 @contextmanager
@@ -596,21 +578,32 @@ def _noise(args):
 
 
 def _scenario_parsers(parser, out_help, more_options=None, handler=None):
-    """One subparser per scenario: its options, OUT, ``more_options``, the axis options;
-    run by ``handler`` (default: the scenario's own)."""
+    """One subparser per scenario of the registered kinds (:func:`feedaxis.kinds.scenarios`):
+    its options, OUT, ``more_options``, the axis options; run by ``handler`` (default:
+    :func:`_cmd_simulate`)."""
+    from .kinds import scenarios as registered_scenarios
+
     scenarios = parser.add_subparsers(dest="scenario", required=True, metavar="SCENARIO")
-    for name, parser_kwargs, options, scenario_handler in SCENARIOS:
-        sub = scenarios.add_parser(name, **parser_kwargs)
-        options(sub)
+    for name, scenario in registered_scenarios().items():
+        sub = scenarios.add_parser(name, help=scenario.help, description=scenario.description)
+        scenario.options(sub)
         sub.add_argument("out", metavar="OUT", help=out_help)
         if more_options:
             more_options(sub)
         _add_axis_options(sub)
         _add_common_options(sub)
-        sub.set_defaults(handler=handler or scenario_handler)
+        sub.set_defaults(handler=handler or _cmd_simulate, run_scenario=scenario)
 
 
-# the scenarios below carry the handlers
+def _cmd_simulate(args):
+    scenario = args.run_scenario
+    keywords = scenario.arguments(args)
+    summary = _simulate(args, lambda master, progress: scenario.simulate(
+        args.out, master, progress=progress, noise=_noise(args), **keywords))
+    _emit(args, summary, scenario.line(args, summary))
+
+
+# the scenarios of the kinds carry the handlers
 command_group("simulate", help="run a scenario on the co-simulated axis, write a case folder",
               description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
                           "scenario and write the result as a measurement case (data-format.md), "
@@ -619,125 +612,6 @@ command_group("simulate", help="run a scenario on the co-simulated axis, write a
                           "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
                           "stops and keeps what was computed.",
               options=_simulate_options)
-
-
-def _simulate_iso230_options(parser):
-    parser.add_argument("--targets", type=int, default=11, help="number of targets (default 11)")
-    parser.add_argument("--spacing-mm", type=float, default=50.0,
-                        help="target spacing p (default 50)")
-    parser.add_argument("--first-mm", type=float, default=0.0, help="P_1 before offset (default 0)")
-    parser.add_argument("--runs", type=int, default=5, help="runs each direction (default 5)")
-    parser.add_argument("--overrun-mm", type=float, default=2.0, help="default 2")
-    _add_motion_options(parser)
-
-
-@scenario("iso230", help="ISO 230-2 positioning test -> positioning.csv + duty.csv",
-          description="Targets P_i = (i-1) p + r_i (r_i a different small offset at each), "
-                      "RUNS runs approaching every target in + and in -, overrun beyond the "
-                      "end targets, dwell, then the deviation table position - target; "
-                      "duty.csv holds the motion simulated (it warms the screw), "
-                      "positioning.csv the samples with their time.",
-          options=_simulate_iso230_options)
-def _cmd_simulate_iso230(args):
-    from .cosim.scenarios import simulate_iso230
-
-    summary = _simulate(args, lambda master, progress: simulate_iso230(
-        args.out, master, **_iso230_arguments(args), progress=progress, noise=_noise(args)))
-    _emit(args, summary, f"{args.out}: {summary['samples']} samples, {args.targets} targets x "
-                         f"{args.runs} runs each direction; deviation "
-                         f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} µm")
-
-
-@scenario_arguments("iso230")
-def _iso230_arguments(args):
-    from .cosim.scenarios import iso230_targets
-
-    return {"targets_mm": iso230_targets(args.targets, args.spacing_mm, args.first_mm),
-            "runs": args.runs, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s,
-            "overrun_mm": args.overrun_mm}
-
-
-def _simulate_thermal_options(parser):
-    parser.add_argument("--duty", required=True, metavar="duty.csv", help="the heating duty")
-    parser.add_argument("--targets", required=True, metavar="X1,X2,...",
-                        help="targets of each measurement pass (mm), visited in this order")
-    parser.add_argument("--every-s", type=float, default=600.0,
-                        help="duty time between measurement passes (default 600 s)")
-    _add_motion_options(parser)
-
-
-@scenario("thermal", help="duty cycle with measurement passes -> + duty.csv",
-          description="Drive the axis through DUTY (duty.csv format) with a measurement pass "
-                      "over --targets at t = 0, every --every-s of duty time and at the end; "
-                      "write the motion as duty.csv and the samples (with time_s) as "
-                      "positioning.csv.",
-          options=_simulate_thermal_options)
-def _cmd_simulate_thermal(args):
-    from .cosim.scenarios import simulate_thermal
-
-    summary = _simulate(args, lambda master, progress: simulate_thermal(
-        args.out, master, **_thermal_arguments(args), progress=progress, noise=_noise(args)))
-    _emit(args, summary, f"{args.out}: {summary['samples']} samples (duty.csv + "
-                         f"positioning.csv); deviation {summary['error_min_um']:.3f} to "
-                         f"{summary['error_max_um']:.3f} µm")
-
-
-@scenario_arguments("thermal")
-def _thermal_arguments(args):
-    from .case import read_duty
-
-    return {"duty": read_duty(args.duty), "targets_mm": _numbers(args.targets, "--targets"),
-            "every_s": args.every_s, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s}
-
-
-def _simulate_tracking_options(parser):
-    parser.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
-    parser.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
-    parser.add_argument("--duration-s", type=float, default=10.0, help="default 10")
-    parser.add_argument("--controller", choices=("pid", "npid"), default="pid")
-    parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
-    parser.add_argument("--force-N", type=float,
-                        help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
-                             "row of seed 002 Table 2)")
-
-
-@scenario("tracking", help="sinusoidal tracking, PID or NPID (seed 002) -> tracking.csv",
-          description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
-                      "after the first second. --spindle-rpm adds a milling force at the "
-                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, seed 002 "
-                      "publishes none). axis.toml gets the [servo] table (the controller), not "
-                      "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
-                      "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).",
-          options=_simulate_tracking_options)
-def _cmd_simulate_tracking(args):
-    from .cosim.scenarios import simulate_tracking
-
-    summary = _simulate(args, lambda master, progress: simulate_tracking(
-        args.out, master, **_tracking_arguments(args), progress=progress, noise=_noise(args)))
-    _emit(args, summary, f"{args.out}/tracking.csv: {args.controller.upper()}, "
-                         f"{args.frequency_hz:g} Hz, {args.amplitude_mm:g} mm"
-                         + (f", cutting force at {args.spindle_rpm:g} rpm"
-                            if args.spindle_rpm else "")
-                         + f"; after the first second: max tracking error "
-                           f"{summary['max_tracking_error_mm']:.4f} mm, RMS "
-                           f"{summary['rms_tracking_error_mm']:.4f} mm")
-
-
-@scenario_arguments("tracking")
-def _tracking_arguments(args):
-    force = {} if args.force_N is None else {"force_N": args.force_N}
-    return {"frequency_hz": args.frequency_hz, "amplitude_mm": args.amplitude_mm,
-            "duration_s": args.duration_s, "controller": args.controller,
-            "spindle_rpm": args.spindle_rpm, **force}
-
-
-def _numbers(text, option):
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise InputError("expected comma-separated numbers, e.g. 10,100,190",
-                         parameter=f"{option} {text}") from None
-    return values
 
 
 def _checked_axis(args):
@@ -875,7 +749,7 @@ def _cmd_sweep(args):
               thermal_step_s=args.thermal_step_s, model=args.model, set_items=args.set or (),
               effects=_effects(args), fmus=args.fmus,
               workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-              progress=progress, **SCENARIO_ARGUMENTS[args.scenario](args))
+              progress=progress, **args.run_scenario.arguments(args))
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     _emit(args, summary, summary_lines(summary) + f"\nfiles: {args.out}/trials.parquet, "
                                                   "summary.json, summary.txt, report.html")
@@ -891,13 +765,6 @@ def _add_model_options(sub, model_help="starting model (TOML); without it the mo
 def _add_correction_option(sub):
     sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T",
                      type=temperature_option, help=CORRECTION_HELP)
-
-
-def _add_motion_options(sub):
-    sub.add_argument("--feed-mm-min", type=float, default=3000.0,
-                     help="feed of the moves between targets (default 3000 mm/min)")
-    sub.add_argument("--dwell-s", type=float, default=0.5,
-                     help="dwell at each target before the sample (default 0.5 s)")
 
 
 def _add_axis_options(sub, thermal_step=True):
@@ -924,8 +791,9 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(f"{message} (see {self.prog} --help)")
 
 
-def build_parser():
-    """The argparse parser with every subcommand."""
+def build_parser(command=None):
+    """The argparse parser with every subcommand; with ``command`` only that one's options
+    are added (``simulate`` and ``sweep`` load the kinds' scenarios for theirs)."""
     parser = _Parser(
         prog="feedaxis",
         description="Digital twin of a ball-screw feed axis. Compare a model with "
@@ -940,7 +808,7 @@ def build_parser():
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, parser_kwargs, options, handler in COMMANDS:
         sub = commands.add_parser(name, **parser_kwargs)
-        if options:
+        if options and command in (None, name):
             options(sub)
         _add_common_options(sub)
         if handler:
@@ -985,7 +853,7 @@ def main(argv=None):
     try:
         from threadpoolctl import threadpool_limits
 
-        args = build_parser().parse_args(argv)
+        args = build_parser(argv[0] if argv else None).parse_args(argv)
         with _one_line_warnings():
             args.handler(args)
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once

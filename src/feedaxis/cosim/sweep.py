@@ -1,7 +1,7 @@
 """Many co-simulations of one scenario: ``feedaxis sweep`` and :func:`sweep`.
 
-A sweep runs a scenario of :mod:`.scenarios` (``iso230``, ``thermal``, ``tracking``) once
-per trial, each trial with its own FMU parameter values (:mod:`.sweep_specs`: ``--vary``
+A sweep runs a scenario of a kind of measurement (:func:`feedaxis.kinds.scenarios`:
+``iso230``, ``thermal``, ``tracking``) once per trial, each trial with its own FMU parameter values (:mod:`.sweep_specs`: ``--vary``
 specs, a fitted model's covariance), and keeps each trial's figures and curve with its
 inputs in one table (:mod:`pyarrow`, written as Parquet).
 
@@ -20,7 +20,6 @@ Ctrl-C writes the outputs of the trials finished so far and keeps the rest for
 from __future__ import annotations
 
 import hashlib
-import inspect
 import io
 import json
 import logging
@@ -40,10 +39,10 @@ import numpy as np
 
 from .. import __version__
 from ..errors import InputError, ParameterError, json_safe
+from ..kinds import scenarios as registered_scenarios
 from ..output import write_atomically
 from .master import FmuStepError, Master, _StopFlag
 from .physics_check import check_parameters, fmu_variables
-from .scenarios import RUNS
 from .sweep_specs import design as make_design, model_draws
 
 PARTIAL = ".partial"
@@ -109,6 +108,7 @@ class TrialRunner:
                 paths[name] = Path(self.folder) / f"{name}.fmu"
                 paths[name].write_bytes(data)
         self.master = Master(job.system, paths)
+        self.scenario = scenario_named(job.scenario)
         self.series_axis = None
 
     def run(self, trial, overrides):
@@ -120,7 +120,7 @@ class TrialRunner:
             When Ctrl-C stopped the run (the trial did not finish).
         """
         try:
-            run = RUNS[self.job.scenario](self.master, **self.job.options, parameters=overrides)
+            run = self.scenario.run(self.master, **self.job.options, parameters=overrides)
         except (ParameterError, FmuStepError) as error:
             return TrialResult(trial, (), np.zeros(0), str(error))
         if not run.completed:
@@ -203,7 +203,7 @@ class Plan:
         """The plan as JSON-ready data: two sweeps with equal identities give equal tables."""
         return json_safe({
             "feedaxis": __version__, "scenario": self.scenario,
-            "options": _plain(scenario_arguments(self.scenario, self.options)),
+            "options": _plain(scenario_named(self.scenario).with_defaults(self.options)),
             "vary": [s.text for s in self.design.specs],
             "seed": self.design.seed, "trials": self.trials,
             "from_model": self.model_path, "held": dict(self.draws.held) if self.draws else {},
@@ -213,13 +213,14 @@ class Plan:
             "fmus": fmu_digest})
 
 
-def scenario_arguments(scenario, options):
-    """The scenario run's keyword arguments with their defaults filled in, so options given
-    and options left at their default describe the same plan."""
-    bound = inspect.signature(RUNS[scenario]).bind_partial(**options)
-    bound.apply_defaults()
-    return {k: v for k, v in bound.arguments.items()
-            if k not in ("master", "parameters", "progress")}
+def scenario_named(name):
+    """The registered scenario ``name`` (:func:`feedaxis.kinds.scenarios`); InputError
+    naming the known ones otherwise."""
+    known = registered_scenarios()
+    if name not in known:
+        raise InputError(f"unknown scenario; scenarios: {', '.join(known)}",
+                         parameter=f"scenario {name}")
+    return known[name]
 
 
 def _plain(value):
@@ -251,7 +252,7 @@ def check_plan(plan):
     """Refuse, before any trial runs, a sweep whose options, specs or drawn values the
     scenario or the FMUs would refuse (:class:`InputError` naming the option or spec)."""
     try:
-        RUNS[plan.scenario](_DryMaster(plan.system), **plan.options)
+        scenario_named(plan.scenario).run(_DryMaster(plan.system), **plan.options)
     except _OptionsChecked:
         pass
     variables = fmu_variables(plan.system, plan.fmu_paths)
@@ -326,9 +327,7 @@ def make_plan(scenario, vary=(), trials=None, seed=0, from_model=None, axis=None
     from .fmu_cache import fmu_paths
     from .system import axis_from_options
 
-    if scenario not in RUNS:
-        raise InputError(f"unknown scenario; scenarios: {', '.join(RUNS)}",
-                         parameter=f"scenario {scenario}")
+    scenario_named(scenario)
     if from_model and model:
         raise InputError("give the model to draw from (--from-model) or a fixed one (--model),"
                          " not both", parameter="--model")
@@ -380,9 +379,10 @@ def sweep(scenario, vary=(), trials=None, seed=0, out=None, *, from_model=None, 
 
     Parameters
     ----------
-    scenario : {"iso230", "thermal", "tracking"}
-        The scenario (:data:`feedaxis.cosim.scenarios.RUNS`); ``options`` are its keyword
-        arguments (``targets_mm=...``, ``frequency_hz=...``; see ``run_<scenario>``).
+    scenario : str
+        The name of a kind's scenario (:func:`feedaxis.kinds.scenarios`: ``iso230``,
+        ``thermal``, ``tracking``); ``options`` are its run's keyword arguments
+        (``targets_mm=...``, ``frequency_hz=...``; see ``run_<scenario>``).
     vary : sequence of str
         ``Component.parameter=SPEC`` items (:mod:`feedaxis.cosim.sweep_specs`).
     trials : int, optional

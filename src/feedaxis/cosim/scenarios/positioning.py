@@ -1,12 +1,12 @@
-"""Scenarios on the co-simulated axis that write measurement cases (data-format.md).
+"""The positioning kind's simulated tests: ``feedaxis simulate iso230`` and ``thermal``.
 
-- :func:`simulate_iso230`: ISO 230-2 positioning cycle -> ``axis.toml`` + ``positioning.csv``;
-- :func:`simulate_thermal`: a duty cycle with measurement passes -> + ``duty.csv``;
-- :func:`simulate_tracking`: sinusoidal tracking (seed 002) -> ``axis.toml`` + ``tracking.csv``.
+- :func:`simulate_iso230`: ISO 230-2 positioning cycle -> ``axis.toml`` + ``positioning.csv``
+  (+ ``duty.csv``, the motion simulated);
+- :func:`simulate_thermal`: a duty cycle with measurement passes -> + ``duty.csv``.
 
-Each writes what its in-memory twin (:func:`run_iso230`, :func:`run_thermal`,
-:func:`run_tracking`, by name in :data:`RUNS`) returns: a :class:`ScenarioRun` holding the
-case's columns, the scenario's figures and the curve a sweep bands (:mod:`.sweep`).
+Each writes what its in-memory twin (:func:`run_iso230`, :func:`run_thermal`) returns, a
+:class:`~.base.ScenarioRun`; :data:`SCENARIOS` declares both to the positioning kind
+(``Positioning.scenarios``), with their command-line options.
 
 Every motion is a sequence of :class:`~feedaxis.physics.thermal.DutySegment` (travel between
 two points at a feed, or standing still), the same segments duty.csv holds, so what the
@@ -16,86 +16,29 @@ step, so it then follows the motion without the one-step delay of a held sample.
 
 A measured deviation is what a laser interferometer sees: table position - target, with
 the table position = servo position + the three FMUs' errors (``table_position_mm``).
-Ctrl-C stops the run cleanly; the samples computed so far are written as a (shorter) case
-and :class:`ScenarioInterrupted` says where.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..case import PHYSICAL_RANGE, write_case
-from ..kinds import kinds
-from ..measurement.positioning import PositioningSamples
-from ..compensate import thermal_error_um
-from ..errors import ParameterError
-from ..iso230 import iso230_figures, per_target
-from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
-from ..physics.checks import require_positive
-from ..physics.servo import MAX_INTERVAL_STEPS, MAX_LOOP_STEPS, ServoParams
-from ..physics.thermal import DutySegment
-from .master import SimulationInterrupted
-from .physics_check import start_value
+from ...compensate import thermal_error_um
+from ...errors import ParameterError, number_list
+from ...iso230 import iso230_figures, per_target
+from ...measurement.positioning import PositioningSamples
+from ...physics.thermal import DutySegment
+from ..master import SimulationInterrupted
+from .base import (Scenario, ScenarioInterrupted, ScenarioRun, Series,
+                   require_positive_values as _require_positive, stop_time_s, write_run)
 
 ISO_REFERENCE_C = 20.0
-SETTLE_S = 1.0
-MAX_TRAVEL_MM = PHYSICAL_RANGE["reference_mm"][1]  # beyond any physical axis
 MAX_SAMPLES = 100_000  # samples of one simulated test (ISO 230-2: 5 runs x 2 x ~20 targets)
-MAX_MACRO_STEPS = 1e9  # 11.6 days of axis time at 1 ms: days of computing
-TEETH = 2
-# F0 (N) calibrated on one row of seed 002 Table 2 (PID, 0.4 Hz, 10 mm, 1500 rpm: 0.0757 mm)
-# with the assumed force_constant_N_per_V = 100; it then gives 0.2211 mm at 0.7 Hz, 20 mm,
-# 1500 rpm (paper 0.2217), but falls faster with spindle speed than the paper.
-CUTTING_FORCE_N = 1.4
 # Positioning tests (iso230, thermal) run the servo with a type-1 plant (a0 = 0): with seed
 # 002's a0 = 193.3 1/s² and its tiny integral gain the loop keeps a static error of about
 # target/364 (1.4 mm at 500 mm), which no CNC axis shows and which would swamp the errors
 # a positioning test is about. Tracking keeps the published plant; --set overrides both.
 POSITIONING_SERVO = {"NpidServo": {"plant_stiffness_per_s2": 0.0}}
-
-
-TRACKING_SERIES_POINTS = 200  # tracking-error samples a sweep keeps per trial for its bands
-
-
-@dataclass(frozen=True)
-class Series:
-    """The curve of one run that a sweep gives bands of: ``y`` against ``x``, one line per
-    value of ``group`` (approach direction, target, ...)."""
-
-    x_name: str
-    x: np.ndarray
-    y_name: str
-    y: np.ndarray
-    group: tuple
-
-
-@dataclass(frozen=True)
-class ScenarioRun:
-    """One scenario run in memory.
-
-    ``tables`` are the case's columns by file (``positioning``, ``duty``, ``tracking``),
-    ``figures`` the scenario's figures (µm or mm, named with their unit), ``summary`` what
-    ``feedaxis simulate`` reports, ``parameters`` the overrides it ran with; ``completed``
-    is False after Ctrl-C (the tables then hold what was reached).
-    """
-
-    name: str
-    parameters: dict
-    tables: dict
-    figures: dict
-    series: Series
-    summary: dict
-    completed: bool
-
-
-class ScenarioInterrupted(KeyboardInterrupt):
-    """Ctrl-C: the partial result was written; ``message`` says where and how much."""
-
-    def __init__(self, message):
-        super().__init__(message)
-        self.message = message
 
 
 @dataclass(frozen=True)
@@ -261,7 +204,7 @@ def run_motion(master, motion, parameters=None, progress=None):
     The run records at every sample time; on Ctrl-C it returns the samples reached.
     """
     h = master.system.macro_step_s
-    stop_s = _stop_time_s(motion.time_s, h)
+    stop_s = stop_time_s(motion.time_s, h)
     inputs = {"position_ref_mm": lambda t: motion.position_at(t + h),
               "ambient_C": motion.ambient_at}
     times_s = [s.time_s for s in motion.samples]
@@ -321,7 +264,8 @@ def run_iso230(master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5, over
     return ScenarioRun(name, parameters, {"positioning": positioning,
                                           "duty": motion.duty_columns(until_s)}, figures,
                        _mean_deviation_series(target_mm, error_um, direction),
-                       _positioning_summary(positioning, motion.samples), completed)
+                       _positioning_summary(positioning, motion.samples),
+                       _stopped(positioning, motion, completed))
 
 
 def simulate_iso230(out, master, targets_mm, runs=5, feed_mm_min=3000.0, dwell_s=0.5,
@@ -380,7 +324,7 @@ def run_thermal(master, duty, targets_mm, every_s, feed_mm_min=3000.0, dwell_s=0
     return ScenarioRun(name, parameters, {"positioning": positioning,
                                           "duty": motion.duty_columns(until_s)},
                        figures, series, _positioning_summary(positioning, motion.samples),
-                       completed)
+                       _stopped(positioning, motion, completed))
 
 
 def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
@@ -392,216 +336,12 @@ def simulate_thermal(out, master, duty, targets_mm, every_s, feed_mm_min=3000.0,
     return write_run(out, master, run, noise)
 
 
-def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
-    """Milling force at the tooth-passing frequency, an assumption (seed 002 gives none).
-
-    F(t) = F0 · (1500 / n) · (1 + sin(2π z n / 60 · t)) / 2: the mean force falls with
-    spindle speed n as the feed per tooth does (seed 002's explanation of Table 2), z teeth.
-    """
-    _require_positive(spindle_rpm=spindle_rpm)
-    scale = force_N * 1500.0 / spindle_rpm
-    return scale * 0.5 * (1.0 + np.sin(2 * np.pi * teeth * spindle_rpm / 60.0 * time_s))
-
-
-def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid",
-                 spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
-    """Sinusoidal tracking (seed 002) in memory.
-
-    Parameters
-    ----------
-    master : Master
-    frequency_hz, amplitude_mm, duration_s : float
-        Reference A sin(2π f t) (mm) for ``duration_s`` seconds.
-    controller : {"pid", "npid"}
-        PID (seed 002 Eq. 6) or NPID (Eq. 8).
-    spindle_rpm : float, optional
-        Adds the cutting force of :func:`cutting_force_N` (1500/2500/3500 rpm in seed 002).
-    force_N : float
-        Cutting-force amplitude F0 at 1500 rpm (N); see :data:`CUTTING_FORCE_N`.
-
-    Returns
-    -------
-    ScenarioRun
-        Figures: ``max_tracking_error_mm`` and ``rms_tracking_error_mm`` over t > 1 s (after
-        the start-up transient, as the seed 002 Table 1 reproduction); series: the tracking
-        error against time at :data:`TRACKING_SERIES_POINTS` evenly spaced steps.
-    """
-    _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
-                      duration_s=duration_s)
-    h = master.system.macro_step_s
-    if amplitude_mm > MAX_TRAVEL_MM:
-        raise ParameterError(f"must be <= {MAX_TRAVEL_MM:g} mm (beyond any physical axis), "
-                             f"got {amplitude_mm:g}", "amplitude_mm")
-    if frequency_hz >= 0.5 / h:
-        raise ParameterError(f"must be below {0.5 / h:g} Hz, the Nyquist frequency of the "
-                             f"{h:g} s macro step, got {frequency_hz:g}", "frequency_hz")
-    if not duration_s > SETTLE_S:
-        raise ParameterError(f"must exceed {SETTLE_S:g} s: the tracking error is measured "
-                             f"after the first {SETTLE_S:g} s (the start-up transient), got "
-                             f"{duration_s:g}", "duration_s")
-    if controller not in ("pid", "npid"):
-        raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
-    overrides = {**(parameters or {})}
-    overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
-    stop_s = _stop_time_s(duration_s, h)
-    servo = master.system.with_parameters(overrides).component("NpidServo").parameters
-    _check_loop_budget(h, stop_s, servo.get("time_step_s", ServoParams.time_step_s))
-
-    def reference_mm(t):
-        return amplitude_mm * np.sin(2 * np.pi * frequency_hz * t)
-
-    inputs = {"position_ref_mm": lambda t: reference_mm(t + h)}
-    if spindle_rpm is not None:
-        inputs["disturbance_N"] = lambda t: cutting_force_N(t, spindle_rpm, force_N)
-    try:
-        rows, completed = master.run(stop_s, inputs, overrides, progress=progress), True
-    except SimulationInterrupted as stopped:
-        rows, completed = stopped.partial, False
-    rows = rows[1:]
-    if rows.size == 0:
-        raise ScenarioInterrupted("interrupted before the first step; nothing written")
-    tracking = {"time_s": rows["time"], "reference_mm": reference_mm(rows["time"]),
-                "actual_mm": rows["NpidServo.position_mm"]}
-    if spindle_rpm is not None:
-        tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
-    name = "simulated tracking test" + ("" if completed else
-                                        f" (interrupted at t = {rows['time'][-1]:g} s)")
-    settled = rows["time"] > SETTLE_S
-    error_mm = np.abs(rows["NpidServo.tracking_error_mm"][settled])
-    figures = {"max_tracking_error_mm": float(error_mm.max()) if error_mm.size else math.nan,
-               "rms_tracking_error_mm": float(np.sqrt(np.mean(error_mm**2)))
-               if error_mm.size else math.nan}
-    every = max(1, math.ceil(rows.size / TRACKING_SERIES_POINTS))
-    series = Series("time_s", rows["time"][every - 1::every], "tracking_error_mm",
-                    rows["NpidServo.tracking_error_mm"][every - 1::every], ("tracking",))
-    summary = {"controller": controller, "frequency_hz": frequency_hz,
-               "amplitude_mm": amplitude_mm, "spindle_rpm": spindle_rpm,
-               "simulated_s": float(rows["time"][-1]), **figures}
-    return ScenarioRun(name, overrides, {"tracking": tracking}, figures, series, summary,
-                       completed)
-
-
-def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, controller="pid",
-                      spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None,
-                      noise=None):
-    """Sinusoidal tracking (:func:`run_tracking`) written as tracking.csv into the case
-    folder ``out``; return the case folder, the run's settings and its max and RMS
-    tracking error (mm)."""
-    run = run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller,
-                       spindle_rpm, force_N, parameters, progress)
-    return write_run(out, master, run, noise)
-
-
-RUNS = {"iso230": run_iso230, "thermal": run_thermal, "tracking": run_tracking}
-
-
-@dataclass(frozen=True)
-class MeasurementNoise:
-    """White Gaussian noise added to what a case records as measured (the positioning
-    deviation, the tracking ``actual_mm``), standard deviation ``sigma_um``, drawn by
-    ``numpy.random.default_rng(seed)``: the simulated axis measured by an instrument."""
-
-    sigma_um: float
-    seed: int = 0
-
-    def __post_init__(self):
-        if not (math.isfinite(self.sigma_um) and self.sigma_um >= 0):
-            raise ParameterError(f"must be a finite number >= 0 (µm), got {self.sigma_um}",
-                                 parameter="--noise-um")
-
-    def measured(self, tables):
-        """``tables`` with the noise added to their measured column."""
-        rng = np.random.default_rng(self.seed)
-        noisy = dict(tables)
-        for table, kind in kinds().items():
-            column, mm_per_um = kind.measured_column
-            if table in tables:
-                measured = np.asarray(tables[table][column], dtype=float)
-                noisy[table] = {**tables[table], column: measured
-                                + mm_per_um * rng.normal(0.0, self.sigma_um, measured.size)}
-        return noisy
-
-
-def write_run(out, master, run, noise=None):
-    """Write ``run`` as the case folder ``out``, its measured column with ``noise`` (a
-    :class:`MeasurementNoise`) when given; return its summary with the folder. The summary's
-    figures are the simulated axis's, before the noise.
-
-    Raises
-    ------
-    ScenarioInterrupted
-        After writing an interrupted run, saying what it holds.
-    """
-    with_servo = "tracking" in run.tables
-    tables = noise.measured(run.tables) if noise else run.tables
-    write_case(out, axis_values(master, run.parameters, run.name, with_servo=with_servo),
-               **tables)
-    summary = {"case": str(out), **run.summary}
-    if noise:
-        summary["noise"] = {"sigma_um": noise.sigma_um, "seed": noise.seed}
-    if not run.completed:
-        if with_servo:
-            raise ScenarioInterrupted(f"interrupted at t = {summary['simulated_s']:g} s; the "
-                                      f"partial tracking.csv is in {out}")
-        raise ScenarioInterrupted(f"interrupted: {summary['samples']} of "
-                                  f"{summary['planned_samples']} samples written to {out}")
-    return summary
-
-
-def _check_loop_budget(macro_step_s, stop_s, loop_step_s):
-    """Refuse a tracking test whose case no reader would take: samples every macro step too
-    far apart for the control loop, or a record too long for it
-    (:func:`feedaxis.physics.servo.loop_budget_problem`)."""
-    if macro_step_s / loop_step_s > MAX_INTERVAL_STEPS:
-        steps = macro_step_s / loop_step_s
-        raise ParameterError(f"a sample every {macro_step_s:g} s is {steps:.3g} "
-                             f"steps of the {loop_step_s:g} s control loop; a tracking case may "
-                             f"hold at most {MAX_INTERVAL_STEPS:g} between samples", "--step-ms")
-    if stop_s / loop_step_s > MAX_LOOP_STEPS:
-        raise ParameterError(f"{stop_s:g} s is {stop_s / loop_step_s:.3g} steps of the "
-                             f"{loop_step_s:g} s control loop; a tracking case may need at most "
-                             f"{MAX_LOOP_STEPS:g} ({MAX_LOOP_STEPS * loop_step_s:g} s)",
-                             "duration_s")
-
-
 def _positioning_parameters(parameters):
     """:data:`POSITIONING_SERVO` under the caller's values (theirs win)."""
     parameters = dict(parameters or {})
     for component, defaults in POSITIONING_SERVO.items():
         parameters[component] = {**defaults, **parameters.get(component, {})}
     return parameters
-
-
-def axis_values(master, parameters, name, with_servo=False):
-    """axis.toml content from the co-simulated axis's effective parameter values; with
-    ``with_servo`` the ``[servo]`` table too (the controller as set in NpidServo, not its
-    plant or friction: those are what a fit of the tracking case identifies)."""
-    system = master.system.with_parameters(parameters or {})
-
-    def values(component, keys):
-        c = system.component(component)
-        variables = master.loaded[c.fmu].variables
-        return {k: c.parameters[k] if k in c.parameters else start_value(variables[k]) for k in keys}
-
-    axis = {"name": name, **{table: axis_table(table, values) for table in AXIS_KEYS}}
-    if with_servo:
-        axis["servo"] = servo_from_fmu(values("NpidServo", SERVO_KEYS.values()))
-    return axis
-
-
-def axis_table(table, values):
-    """axis.toml ``[table]`` from the FMUs that take its keys (:data:`AXIS_KEYS`); a key
-    several FMUs take must have one value in all of them."""
-    found = {}
-    for fmu, keys in AXIS_KEYS[table].items():
-        for key, value in values(fmu, keys).items():
-            found.setdefault(key, {})[fmu] = value
-    differ = {key: by_fmu for key, by_fmu in found.items() if len(set(by_fmu.values())) > 1}
-    if differ:
-        by_fmu = next(iter(differ.values()))
-        raise ParameterError(f"{' and '.join(by_fmu)} disagree on {', '.join(differ)}: one "
-                             f"axis has one {table}", "--set")
-    return {key: next(iter(by_fmu.values())) for key, by_fmu in found.items()}
 
 
 def _positioning_columns(samples, rows, with_time=False):
@@ -619,6 +359,14 @@ def _positioning_summary(positioning, planned):
     error_um = positioning["error_um"]
     return {"samples": len(positioning["target_mm"]), "planned_samples": len(planned),
             **_deviation_range(error_um)}
+
+
+def _stopped(positioning, motion, completed):
+    """What an interrupted run's case holds (:attr:`ScenarioRun.stopped`); empty if complete."""
+    if completed:
+        return ""
+    return (f"interrupted: {len(positioning['target_mm'])} of {len(motion.samples)} samples "
+            "written to")
 
 
 def _deviation_range(error_um):
@@ -643,18 +391,70 @@ def _mean_deviation_series(target_mm, error_um, direction):
                   tuple(groups))
 
 
-def _stop_time_s(duration_s, macro_step_s):
-    """``duration_s`` rounded up to whole macro steps; refused beyond :data:`MAX_MACRO_STEPS`
-    (a feed near 0 or a step near 0 would otherwise run for ever)."""
-    steps = duration_s / macro_step_s
-    if not steps <= MAX_MACRO_STEPS:
-        raise ParameterError(f"the run would take {duration_s:.4g} s in {steps:.4g} macro steps "
-                             f"of {macro_step_s:g} s, more than the {MAX_MACRO_STEPS:.0e} "
-                             "feedaxis simulates; check the feed, the targets and --step-ms",
-                             "duration")
-    return math.ceil(steps - 1e-9) * macro_step_s
 
 
-def _require_positive(**values):
-    for name, value in values.items():
-        require_positive(name, value)
+def _add_motion_options(parser):
+    parser.add_argument("--feed-mm-min", type=float, default=3000.0,
+                        help="feed of the moves between targets (default 3000 mm/min)")
+    parser.add_argument("--dwell-s", type=float, default=0.5,
+                        help="dwell at each target before the sample (default 0.5 s)")
+
+
+def _iso230_options(parser):
+    parser.add_argument("--targets", type=int, default=11, help="number of targets (default 11)")
+    parser.add_argument("--spacing-mm", type=float, default=50.0,
+                        help="target spacing p (default 50)")
+    parser.add_argument("--first-mm", type=float, default=0.0, help="P_1 before offset (default 0)")
+    parser.add_argument("--runs", type=int, default=5, help="runs each direction (default 5)")
+    parser.add_argument("--overrun-mm", type=float, default=2.0, help="default 2")
+    _add_motion_options(parser)
+
+
+def _iso230_arguments(args):
+    return {"targets_mm": iso230_targets(args.targets, args.spacing_mm, args.first_mm),
+            "runs": args.runs, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s,
+            "overrun_mm": args.overrun_mm}
+
+
+def _iso230_line(args, summary):
+    return (f"{args.out}: {summary['samples']} samples, {args.targets} targets x "
+            f"{args.runs} runs each direction; deviation "
+            f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} µm")
+
+
+def _thermal_options(parser):
+    parser.add_argument("--duty", required=True, metavar="duty.csv", help="the heating duty")
+    parser.add_argument("--targets", required=True, metavar="X1,X2,...",
+                        help="targets of each measurement pass (mm), visited in this order")
+    parser.add_argument("--every-s", type=float, default=600.0,
+                        help="duty time between measurement passes (default 600 s)")
+    _add_motion_options(parser)
+
+
+def _thermal_arguments(args):
+    from ...case import read_duty
+
+    return {"duty": read_duty(args.duty), "targets_mm": number_list(args.targets, "--targets"),
+            "every_s": args.every_s, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s}
+
+
+def _thermal_line(args, summary):
+    return (f"{args.out}: {summary['samples']} samples (duty.csv + positioning.csv); "
+            f"deviation {summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} µm")
+
+
+SCENARIOS = (
+    Scenario("iso230", run_iso230, _iso230_options, _iso230_arguments, _iso230_line,
+             help="ISO 230-2 positioning test -> positioning.csv + duty.csv",
+             description="Targets P_i = (i-1) p + r_i (r_i a different small offset at each), "
+                         "RUNS runs approaching every target in + and in -, overrun beyond the "
+                         "end targets, dwell, then the deviation table position - target; "
+                         "duty.csv holds the motion simulated (it warms the screw), "
+                         "positioning.csv the samples with their time."),
+    Scenario("thermal", run_thermal, _thermal_options, _thermal_arguments, _thermal_line,
+             help="duty cycle with measurement passes -> + duty.csv",
+             description="Drive the axis through DUTY (duty.csv format) with a measurement pass "
+                         "over --targets at t = 0, every --every-s of duty time and at the end; "
+                         "write the motion as duty.csv and the samples (with time_s) as "
+                         "positioning.csv."),
+)
