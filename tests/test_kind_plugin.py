@@ -60,6 +60,38 @@ def test_a_toy_kind_from_one_module_runs_through_the_command_line(toy_case, caps
     assert "toy samples; model: toy_slope" in capsys.readouterr().out
 
 
+@pytest.fixture
+def toy_from_effects_file():
+    """The toy kind as ``--effects TOY`` registers it, taken out of the registry after."""
+    yield
+    kinds.unregister("toy")
+
+
+def test_a_toy_kind_brings_its_scenario_to_simulate_and_sweep(toy_from_effects_file, fmu_paths,
+                                                              capsys, tmp_path):
+    """``--effects TOY`` alone makes ``simulate toy`` and ``sweep toy`` (the kind's declared
+    scenario, a ramp on the co-simulated axis) without any other module knowing it: the case
+    written reads back as toy samples, and the sweep varies an FMU parameter over it."""
+    fmus = str(next(iter(fmu_paths.values())).parent)
+    out = tmp_path / "ramp"
+    code, simulated = run(capsys, "simulate", "toy", str(out), "--length-mm", "20",
+                          "--points", "11", "--fmus", fmus)
+    assert code == 0 and simulated["samples"] == 11
+    samples = read_case(out).samples["toy"]
+    np.testing.assert_allclose(samples.x_mm, np.linspace(0.0, 20.0, 11))
+    assert simulated["rms_deviation_um"] == pytest.approx(
+        np.sqrt(np.mean(samples.deviation_um ** 2)))
+    code, diagnosed = run(capsys, "diagnose", str(out))
+    assert code == 0 and diagnosed["measurement"] == "toy"
+    code, swept = run(capsys, "sweep", "toy", str(tmp_path / "sweep"), "--length-mm", "20",
+                      "--points", "11", "--vary", "GeometricError.backlash_um=grid(0,4,2)",
+                      "--workers", "0", "--fmus", fmus)
+    assert code == 0 and (swept["finished_trials"], swept["failed_trials"]) == (2, 0)
+    kinds.unregister("toy")
+    assert main(["simulate", "toy", str(tmp_path / "again"), "--fmus", fmus]) == 2
+    assert "invalid choice: 'toy'" in capsys.readouterr().err
+
+
 def _kind(**members):
     """A Measurement subclass with the required hooks and ``members``."""
     required = {"kind": "sketch", "file": "sketch.csv", "read": classmethod(lambda *a: None),

@@ -825,6 +825,13 @@ def _add_common_options(parser):
                            help="on an internal error, show the Python traceback")
 
 
+def _effects_files(argv):
+    """The files of every ``--effects`` in ``argv``, loaded before the parser is built: an
+    effects file may register a kind, whose scenarios are subcommands of simulate and sweep."""
+    return ([value for option, value in zip(argv, argv[1:]) if option == "--effects"]
+            + [item.partition("=")[2] for item in argv if item.startswith("--effects=")])
+
+
 def _wants_json(args):
     return getattr(args, "json", False)
 
@@ -853,6 +860,7 @@ def main(argv=None):
     try:
         from threadpoolctl import threadpool_limits
 
+        available_effects(_effects_files(argv))  # a file's kinds bring their scenarios
         args = build_parser(argv[0] if argv else None).parse_args(argv)
         with _one_line_warnings():
             args.handler(args)
