@@ -15,7 +15,7 @@ from scipy import stats
 from feedaxis.cli import main
 from feedaxis.cosim.scenarios import iso230_targets
 from feedaxis.cosim.sweep import SweepInterrupted, parquet_bytes, sweep, sweep_metadata
-from feedaxis.cosim.sweep_specs import design, model_draws, parse_spec
+from feedaxis.cosim.sweep.specs import design, model_draws, parse_spec
 from feedaxis.effects import CATALOG, FitRecord, Model
 from feedaxis.errors import InputError
 from feedaxis.examples import write_seed001_case

@@ -740,7 +740,7 @@ command("sweep", help="many co-simulations of a scenario with varied FMU paramet
 
 def _cmd_sweep(args):
     from .cosim.sweep import sweep
-    from .cosim.sweep_summary import summary_lines
+    from .cosim.sweep.summary import summary_lines
 
     with _counter_progress("sweeping", "trial") as progress:
         sweep(args.scenario, args.vary, args.trials, args.seed, args.out,

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ...errors import InputError
 
 KINDS = {"grid": 3, "uniform": 2, "normal": 2, "truncnormal": 4, "triangular": 3, "mvnormal": 2}
 MAX_REDRAWS = 100  # draws of a fitted model's parameters outside their bounds, per trial
