@@ -14,7 +14,8 @@ from scipy import stats
 
 from feedaxis.cli import main
 from feedaxis.cosim.scenarios import iso230_targets
-from feedaxis.cosim.sweep import SweepInterrupted, parquet_bytes, sweep, sweep_metadata
+from feedaxis.cosim.sweep import (SweepInterrupted, parquet_bytes, read_sweep, sweep,
+                                  sweep_metadata)
 from feedaxis.cosim.sweep.specs import design, model_draws, parse_spec
 from feedaxis.effects import CATALOG, FitRecord, Model
 from feedaxis.errors import InputError
@@ -99,7 +100,10 @@ def test_a_backlash_grid_gives_the_iso_reversal_of_each_trial(tmp_path, fmu_dir,
     assert main(["sweep", "iso230", str(out), "--vary", "GeometricError.backlash_um=grid(0,10,3)",
                  *SHORT_ISO, *QUIET_AXIS, "--workers", "0", "--fmus", fmu_dir, "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
-    table = pq.read_table(out / "trials.parquet")
+    table = read_sweep(out)  # the documented way back (docs/sweep.md)
+    assert table.equals(pq.read_table(out / "trials.parquet"))
+    with pytest.raises(InputError, match="not a sweep folder"):
+        read_sweep(tmp_path)
     swept = table.column("GeometricError.backlash_um").to_numpy()
     np.testing.assert_array_equal(swept, [0.0, 5.0, 10.0])
     np.testing.assert_allclose(table.column("B_um").to_numpy(), swept, atol=0.02)
