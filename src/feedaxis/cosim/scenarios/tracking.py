@@ -63,19 +63,8 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
         the start-up transient, as the seed 002 Table 1 reproduction); series: the tracking
         error against time at :data:`TRACKING_SERIES_POINTS` evenly spaced steps.
     """
-    _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
-                      duration_s=duration_s)
     h = master.system.macro_step_s
-    if amplitude_mm > MAX_TRAVEL_MM:
-        raise ParameterError(f"must be <= {MAX_TRAVEL_MM:g} mm (beyond any physical axis), "
-                             f"got {amplitude_mm:g}", "amplitude_mm")
-    if frequency_hz >= 0.5 / h:
-        raise ParameterError(f"must be below {0.5 / h:g} Hz, the Nyquist frequency of the "
-                             f"{h:g} s macro step, got {frequency_hz:g}", "frequency_hz")
-    if not duration_s > SETTLE_S:
-        raise ParameterError(f"must exceed {SETTLE_S:g} s: the tracking error is measured "
-                             f"after the first {SETTLE_S:g} s (the start-up transient), got "
-                             f"{duration_s:g}", "duration_s")
+    _check_reference(h, frequency_hz, amplitude_mm, duration_s)
     if controller not in ("pid", "npid"):
         raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
     overrides = {**(parameters or {})}
@@ -103,6 +92,37 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
         tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
     name = "simulated tracking test" + ("" if completed else
                                         f" (interrupted at t = {rows['time'][-1]:g} s)")
+    figures, series = _tracking_figures(rows)
+    summary = {"controller": controller, "frequency_hz": frequency_hz,
+               "amplitude_mm": amplitude_mm, "spindle_rpm": spindle_rpm,
+               "simulated_s": float(rows["time"][-1]), **figures}
+    stopped = "" if completed else (f"interrupted at t = {summary['simulated_s']:g} s; the "
+                                    "partial tracking.csv is in")
+    return ScenarioRun(name, overrides, {"tracking": tracking}, figures, series, summary,
+                       stopped, with_servo=True)
+
+
+def _check_reference(macro_step_s, frequency_hz, amplitude_mm, duration_s):
+    """Refuse a reference no axis could follow or no record could show: beyond any travel,
+    at or above the macro step's Nyquist frequency, or over before the start-up transient."""
+    _require_positive(frequency_hz=frequency_hz, amplitude_mm=amplitude_mm,
+                      duration_s=duration_s)
+    if amplitude_mm > MAX_TRAVEL_MM:
+        raise ParameterError(f"must be <= {MAX_TRAVEL_MM:g} mm (beyond any physical axis), "
+                             f"got {amplitude_mm:g}", "amplitude_mm")
+    if frequency_hz >= 0.5 / macro_step_s:
+        raise ParameterError(f"must be below {0.5 / macro_step_s:g} Hz, the Nyquist frequency "
+                             f"of the {macro_step_s:g} s macro step, got {frequency_hz:g}",
+                             "frequency_hz")
+    if not duration_s > SETTLE_S:
+        raise ParameterError(f"must exceed {SETTLE_S:g} s: the tracking error is measured "
+                             f"after the first {SETTLE_S:g} s (the start-up transient), got "
+                             f"{duration_s:g}", "duration_s")
+
+
+def _tracking_figures(rows):
+    """(figures, series) of a run's rows: the largest and RMS tracking error after
+    :data:`SETTLE_S` (mm), and the tracking error at :data:`TRACKING_SERIES_POINTS` steps."""
     settled = rows["time"] > SETTLE_S
     error_mm = np.abs(rows["NpidServo.tracking_error_mm"][settled])
     figures = {"max_tracking_error_mm": float(error_mm.max()) if error_mm.size else math.nan,
@@ -111,13 +131,7 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     every = max(1, math.ceil(rows.size / TRACKING_SERIES_POINTS))
     series = Series("time_s", rows["time"][every - 1::every], "tracking_error_mm",
                     rows["NpidServo.tracking_error_mm"][every - 1::every], ("tracking",))
-    summary = {"controller": controller, "frequency_hz": frequency_hz,
-               "amplitude_mm": amplitude_mm, "spindle_rpm": spindle_rpm,
-               "simulated_s": float(rows["time"][-1]), **figures}
-    stopped = "" if completed else (f"interrupted at t = {summary['simulated_s']:g} s; the "
-                                    "partial tracking.csv is in")
-    return ScenarioRun(name, overrides, {"tracking": tracking}, figures, series, summary,
-                       stopped, with_servo=True)
+    return figures, series
 
 
 def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, controller="pid",
