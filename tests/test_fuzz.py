@@ -17,6 +17,7 @@ import io
 import json
 import os
 import tracemalloc
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -390,3 +391,223 @@ def test_tracking_spans_are_read_within_the_loops_budget_or_refused(tmp_path_fac
         return
     event("accepted")
     assert within_loop_budget(case)
+
+
+# --- issue 36: stop signals, outputs aliasing inputs, links out of a case, damaged files ---
+
+SIGTERM_WRITERS = {  # a writing command on the bundled case -> the files it may write
+    "fit": (["fit", "{case}", "--add", "lead_error", "--out", "{out}/m.toml"], ["m.toml"]),
+    "report": (["report", "{case}", "--out", "{out}/r.html"], ["r.html"]),
+    "comp-table": (["comp-table", "{case}", "--controller", "mach4", "--from-measurement",
+                    "--out", "{out}/t.txt"], ["t.txt"]),
+    "uncertainty": (["uncertainty", "{case}", "--trials", "20000", "--html", "{out}/u.html"],
+                    ["u.html"]),
+    "simulate": (["simulate", "iso230", "{out}/sim", "--targets", "3", "--runs", "2",
+                  "--fmus", "{fmus}"], ["sim"]),
+    "import": (["import", "{laser}/X-axis.rtl", "--axis", "{laser}/axis.toml", "--out",
+                "{out}/imported"], ["imported"]),
+    "export-ssp": (["export-ssp", "{out}/axis.ssp", "--fmus", "{fmus}"], ["axis.ssp"]),
+}
+
+
+def _whole(path):
+    """Raise unless ``path``, written by a command, reads back whole with its reader."""
+    from feedaxis.comptable import mach4
+    from feedaxis.effects import CATALOG, load_model
+
+    if path.suffix == ".toml":
+        load_model(path, CATALOG)
+    elif path.suffix == ".html":
+        assert path.read_text(encoding="utf-8").rstrip().endswith("</html>"), path
+    elif path.suffix == ".txt":
+        mach4.read(path.read_text(encoding="utf-8"), str(path))
+    elif path.suffix == ".ssp":
+        with zipfile.ZipFile(path) as archive:
+            assert archive.testzip() is None and "SystemStructure.ssd" in archive.namelist()
+    else:
+        read_case(path)
+
+
+@pytest.mark.parametrize("command", sorted(SIGTERM_WRITERS))
+def test_sigterm_at_a_random_moment_leaves_whole_outputs_or_none(tmp_path, fmu_paths,
+                                                                  command):
+    """SIGTERM (a scheduler's, ``timeout``'s) at a moment drawn from 0.2 to 5 s into each
+    writing command (demo, build-fmus and sweep: test_reliability_two.py), start-up included: exit 143 with one line (or 0 when it finished first), every
+    output whole or absent, no staging file or folder left. CI draws a fixed moment."""
+    import subprocess
+    import signal
+    import sys
+    import time
+    import zlib
+
+    from feedaxis.examples import LASER_EXAMPLE, write_seed001_case
+
+    case, out = write_seed001_case(tmp_path / "case"), tmp_path / "out"
+    out.mkdir()
+    argv, written = SIGTERM_WRITERS[command]
+    argv = [a.format(case=case, out=out, fmus=next(iter(fmu_paths.values())).parent,
+                     laser=LASER_EXAMPLE) for a in argv]
+    seed = zlib.crc32(command.encode()) if os.environ.get("CI") == "true" else None
+    delay_s = np.random.default_rng(seed).uniform(0.2, 5.0)
+    process = subprocess.Popen([sys.executable, "-m", "feedaxis", *argv], cwd=tmp_path,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(delay_s)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=300)
+    said = [line for line in err.splitlines() if line.startswith("feedaxis:")]
+    assert process.returncode in (0, 143), (delay_s, err)
+    if process.returncode == 143:
+        assert len(said) == 1 and said[0].endswith("(SIGTERM)"), (delay_s, err)
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [], delay_s
+    for name in written:
+        if (out / name).exists():
+            _whole(out / name)
+        else:
+            assert process.returncode == 143, (delay_s, name)
+
+
+ALIASED_COMMANDS = (["fit", "{case}", "--add", "lead_error", "--out", "{alias}"],
+                    ["report", "{case}", "--out", "{alias}"],
+                    ["comp-table", "{case}", "--controller", "mach4", "--from-measurement",
+                     "--out", "{alias}"],
+                    ["uncertainty", "{case}", "--trials", "1000", "--html", "{alias}"],
+                    ["compensate", "{case}", "--model", "{case}/axis.toml", "--out",
+                     "{alias}"])
+
+
+@settings(FUZZ, max_examples=40)
+@given(command=st.sampled_from(ALIASED_COMMANDS),
+       victim=st.sampled_from(["axis.toml", "positioning.csv"]),
+       form=st.sampled_from(["plain", "dotted", "absolute", "symlink", "hard link"]))
+def test_an_out_that_is_an_input_in_any_spelling_is_refused(tmp_path_factory, command,
+                                                            victim, form):
+    """Whatever way the output names an input (relative, through ``..``, absolute, a
+    symbolic or a hard link): exit 2 before any work, every case file as it was."""
+    root = tmp_path_factory.mktemp("alias")
+    folder = root / "c"
+    write_case(folder, {"name": "a", "screw": {"lead_mm": 5.0}},
+               positioning={"target_mm": np.array([0.0, 50.0, 100.0] * 2),
+                            "error_um": np.array([0.1, 0.4, 0.2, 0.2, 0.5, 0.1])})
+    alias = {"plain": folder / victim, "dotted": folder / ".." / "c" / "." / victim,
+             "absolute": (folder / victim).resolve(), "symlink": root / "link",
+             "hard link": root / "hard"}[form]
+    if form == "symlink":
+        alias.symlink_to(folder / victim)
+    elif form == "hard link":
+        os.link(folder / victim, alias)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = main([a.format(case=folder, alias=alias) for a in command])
+    assert code == 2 and "an input of this command" in err.getvalue(), err.getvalue()
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+
+
+@settings(FUZZ, max_examples=60)
+@given(links=st.dictionaries(st.sampled_from(["axis.toml", "positioning.csv"]),
+                             st.sampled_from(["outside", "outside relative", "inside"]),
+                             min_size=1))
+def test_case_files_linking_out_of_the_case_are_refused_without_reading_them(
+        tmp_path_factory, links):
+    """A link leaving the case folder (absolute or ``../``): refused naming the link, the
+    target's content never in the message; a link within the case is read."""
+    from feedaxis.case import FOLLOW_LINKS
+
+    root = tmp_path_factory.mktemp("links")
+    folder, elsewhere = root / "c", root / "elsewhere"
+    folder.mkdir()
+    elsewhere.mkdir()
+    for name in FILES[:2]:
+        content = GOOD[name] + "# SECRET-TOKEN\n"
+        (elsewhere / name).write_text(content)
+        if name not in links:
+            (folder / name).write_text(GOOD[name])
+        elif links[name] == "inside":
+            (folder / f"real-{name}").write_text(GOOD[name])
+            (folder / name).symlink_to(f"real-{name}")
+        else:
+            (folder / name).symlink_to(elsewhere / name if links[name] == "outside"
+                                       else Path("..") / "elsewhere" / name)
+    outside = [name for name, kind in links.items() if kind != "inside"]
+    if outside:
+        with pytest.raises(InputError) as refused:
+            read_case(folder)
+        assert "outside the case folder" in str(refused.value)
+        assert refused.value.path.name in outside and "SECRET" not in str(refused.value)
+        token = FOLLOW_LINKS.set(True)
+        try:
+            read_case(folder)
+        finally:
+            FOLLOW_LINKS.reset(token)
+    else:
+        read_case(folder)
+
+
+DAMAGE = st.tuples(st.sampled_from(["truncate", "flip", "empty", "append"]),
+                   st.floats(0.0, 1.0))
+
+
+def _damaged(data, damage):
+    kind, where = damage
+    at = min(int(where * len(data)), len(data) - 1)
+    if kind == "truncate":
+        return data[:at]
+    if kind == "flip":
+        return data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1:]
+    return b"" if kind == "empty" else data + bytes(range(256)) * 4
+
+
+@settings(FUZZ, max_examples=30)
+@given(name=st.sampled_from(["GeometricError", "StepperError", "NpidServo", "ThermalScrew"]),
+       damage=DAMAGE)
+def test_a_damaged_cache_fmu_is_found_or_still_loads(tmp_path_factory, fmu_paths, name,
+                                                     damage):
+    """A cache entry damaged anywhere is found (and rebuilt: the cache's ``_complete``), or
+    is an FMU that still unpacks and loads whole (bytes appended after the archive)."""
+    from feedaxis.cosim.fmu_interface import intact
+    from feedaxis.cosim.fmu_runner import LoadedFmu
+
+    folder = tmp_path_factory.mktemp("cache")
+    paths = {}
+    for fmu, path in fmu_paths.items():
+        paths[fmu] = folder / path.name
+        data = path.read_bytes()
+        paths[fmu].write_bytes(_damaged(data, damage) if fmu == name else data)
+    if intact(paths):
+        event("still an FMU")
+        loaded = LoadedFmu(paths[name])
+        try:
+            loaded.instantiate("probe").freeInstance()
+        finally:
+            loaded.close()
+    else:
+        event("rebuilt")
+
+
+@settings(FUZZ, max_examples=40)
+@given(damage=DAMAGE, file=st.sampled_from(["part", "plan"]))
+def test_a_damaged_partial_sweep_file_is_refused_naming_it_or_read_whole(tmp_path_factory,
+                                                                          damage, file):
+    """``sweep --resume`` over a damaged ``.partial`` file: the file named (exit 2), or
+    the trials it holds read back as they were saved."""
+    from feedaxis.cosim.sweep.store import Store, TrialResult
+
+    out = tmp_path_factory.mktemp("sweep") / "out"
+    identity = {"scenario": "iso230", "seed": 0}
+    store = Store(out, identity, resume=False)
+    saved = [TrialResult(k, (("E_um", 1.5 * k),), np.arange(3.0) + k, None) for k in range(4)]
+    store.add(saved, {"x": [0, 1, 2]})
+    store.flush()
+    path = (next((out / ".partial").glob("part-*.parquet")) if file == "part"
+            else out / ".partial" / "plan.json")
+    path.write_bytes(_damaged(path.read_bytes(), damage))
+    try:
+        loaded = Store(out, identity, resume=True).load()
+    except InputError as error:
+        event("refused")
+        assert error.path == path or path.name in str(error), str(error)
+        return
+    event("read")
+    assert sorted(loaded.results) == [r.trial for r in saved]
+    for result in saved:
+        assert loaded.results[result.trial].figures == result.figures

@@ -1,5 +1,5 @@
 """The ``feedaxis`` console script and ``python -m feedaxis``: Ctrl-C at any moment exits
-130 with one line.
+130 with one line, SIGTERM 143 and SIGHUP 129 the same way (:mod:`feedaxis.stop`).
 
 It imports next to nothing, so that it is running before the seconds of start-up imports
 (NumPy, SciPy) begin: an interrupt during them, as during a command, says ``interrupted``
@@ -7,23 +7,24 @@ once instead of a traceback. (Before this module runs, Python's own start-up, it
 import of some 0.05 s, reports an interrupt itself.) The command line itself is
 :func:`feedaxis.cli.main`.
 """
-import signal
 import sys
 
-from .console import INTERRUPTED_EXIT, fail
+from . import stop
+from .console import fail
 
 
 def run():
     """Run ``feedaxis`` with ``sys.argv`` and exit with its code."""
+    stop.install()
     try:
         from .cli import main
 
         code = main()
     except KeyboardInterrupt:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C cannot cut the line
-        code = fail("--json" in sys.argv[1:], "interrupted", INTERRUPTED_EXIT)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # nor the exit
-    sys.exit(code)
+        stop.ignore_all()  # a second signal cannot cut the line
+        code = fail("--json" in sys.argv[1:], stop.described("interrupted"), stop.exit_code())
+    stop.ignore_all()  # nor the exit
+    stop.leave(code)
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ import math
 import os
 import shutil
 import tempfile
+from contextvars import ContextVar
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -23,10 +24,12 @@ import tomli_w
 from . import kinds
 from .errors import (InputError, finite_float, finite_value, read_text, read_toml,
                      shown_value, toml_key_line)
-from .output import umask_mode, writing
+from .output import staging_prefix, umask_mode, writing
 from .physics.geometry import SUPPORTS
 from .physics.thermal import DutySegment
 
+# Set by --follow-links: read case files that are links to files outside their folder.
+FOLLOW_LINKS = ContextVar("follow_links", default=False)
 AXIS_FILE, DUTY_FILE = "axis.toml", "duty.csv"
 
 SCREW_KEYS = {
@@ -148,6 +151,7 @@ def read_case(folder):
     folder = Path(folder)
     if not folder.is_dir():
         raise CaseError(folder, "not a case folder (expected a folder holding axis.toml)")
+    _refuse_outside_links(folder)
     axis = read_axis(folder / AXIS_FILE)
     duty = (read_duty(folder / DUTY_FILE, length_mm(axis)) if (folder / DUTY_FILE).exists()
             else None)
@@ -168,6 +172,26 @@ def read_case(folder):
 def length_mm(axis):
     """The screw's length (mm), None when axis.toml does not give it."""
     return axis.screw["length_m"] * 1e3 if "length_m" in axis.screw else None
+
+
+def case_files():
+    """The names of the files a case folder may hold: axis.toml, duty.csv and each
+    registered kind's file (positioning.csv, tracking.csv, ...)."""
+    return (AXIS_FILE, DUTY_FILE, *(cls.file for cls in kinds.kinds().values()))
+
+
+def _refuse_outside_links(folder):
+    """Refuse a case file that resolves outside its case folder (a symbolic link to a file
+    elsewhere), before reading anything of it, unless :data:`FOLLOW_LINKS` is set."""
+    if FOLLOW_LINKS.get():
+        return
+    inside = folder.resolve()
+    for name in case_files():
+        path = folder / name
+        if (path.exists() or path.is_symlink()) and inside not in path.resolve().parents:
+            raise CaseError(path, "is a link to a file outside the case folder: not read (a "
+                                  "case must hold its own files; copy the file in, or give "
+                                  "--follow-links to read it anyway)")
 
 
 def read_axis(path):
@@ -485,7 +509,7 @@ def write_case(folder, axis_values, duty=None, check=None, **samples):
         raise CaseError(folder, "already exists; choose a new case folder")
     with writing(folder):
         folder.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+        staging = Path(tempfile.mkdtemp(prefix=staging_prefix(folder), dir=folder.parent))
         try:
             (staging / AXIS_FILE).write_text(tomli_w.dumps(axis_values), encoding="utf-8")
             for name, columns in {**files, DUTY_FILE: duty}.items():

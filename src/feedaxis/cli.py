@@ -2,8 +2,8 @@
 
 Exit codes: 0 success, 2 bad input (an :class:`~feedaxis.errors.InputError`: one message on
 stderr naming the file, row and column or the option, nothing written), 1 a bug (one line;
-``--debug`` shows the traceback), 130 Ctrl-C. With ``--json`` every result and every error is
-strict JSON on stdout (no NaN or Infinity: a value that is not finite is ``null``).
+``--debug`` shows the traceback), 130 Ctrl-C (143 SIGTERM, 129 SIGHUP). With ``--json`` every
+result and every error is strict JSON on stdout (no NaN or Infinity: a value that is not finite is ``null``).
 The numerical modules (scipy, matplotlib, pythonfmu: seconds to import) are imported by the
 commands that use them, so ``--help`` and ``effects`` answer at once.
 """
@@ -17,12 +17,13 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from . import __version__, text
-from .case import read_case
+from . import stop
+from .case import FOLLOW_LINKS, read_case
 from .comptable import CONTROLLERS
-from .console import INTERRUPTED_EXIT, fail
+from .console import fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
-from .output import write_atomically
+from .output import refuse_overwriting_inputs, write_atomically
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
 from .uncertainty.correction import corrected_case, temperature_option
 
@@ -397,6 +398,7 @@ def _cmd_comp_table(args):
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
                                args.from_measurement, args.axis_id, args.force)
+    refuse_overwriting_inputs({path: "--out" for path in files}, _inputs(args))
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
@@ -549,12 +551,14 @@ def _counter_progress(label, unit, unit_scale=False):
 def _simulate(args, run):
     """Run one scenario into a new case folder; Ctrl-C keeps what was computed."""
     from .cosim.master import Master
+    from .cosim.scenarios.base import check_axis_ranges
 
     if Path(args.out).exists():
         raise InputError("already exists; choose a new case folder", path=args.out)
     check_writable_target(args.out, "folder")
-    system = _axis_system(args)
-    with Master(system, _fmu_paths(args)) as master:
+    system, paths = _checked_axis(args)
+    check_axis_ranges(system)
+    with Master(system, paths) as master:
         with _counter_progress("simulating", "step", True) as progress:
             return run(master, progress)
 
@@ -803,7 +807,7 @@ def build_parser(command=None):
                     "ThermalScrew).",
         epilog="Start with `feedaxis demo`. Exit codes: 0 ok, 2 bad input (the message names "
                "the file, row and column or the option), 1 an internal error (a bug: add "
-               "--debug for the traceback), 130 interrupted.")
+               "--debug for the traceback), 130 interrupted (143 SIGTERM, 129 SIGHUP).")
     parser.add_argument("--version", action="version", version=f"feedaxis {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, parser_kwargs, options, handler in COMMANDS:
@@ -823,6 +827,38 @@ def _add_common_options(parser):
                            help="print strict JSON on stdout (errors too: error, file, row, column)")
     parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                            help="on an internal error, show the Python traceback")
+    parser.add_argument("--follow-links", action="store_true", default=argparse.SUPPRESS,
+                        help="read case files that are links to files outside their case "
+                             "folder (refused by default: a case received must not reach "
+                             "outside itself)")
+
+
+INPUT_OPTIONS = {"case": "CASE", "cases": "CASE", "file": "FILE", "axis": "--axis",
+                 "model": "--model", "effects": "--effects", "budget": "--budget",
+                 "duty": "--duty", "from_model": "--from-model", "fmus": "--fmus"}
+OUTPUT_OPTIONS = {"out": "--out", "html": "--html"}
+
+
+def _inputs(args):
+    """Every path the command reads: the files and folders its options name, and the case
+    files and FMUs inside a folder named."""
+    from .case import case_files
+    from .fmu_build import FMU_NAMES
+
+    inside = (*case_files(), *(f"{name}.fmu" for name in FMU_NAMES))
+    found = []
+    for dest in INPUT_OPTIONS:
+        value = getattr(args, dest, None)
+        for path in map(Path, value if isinstance(value, list) else [value] if value else []):
+            found += [path, *(path / name for name in inside if (path / name).exists())]
+    return found
+
+
+def _outputs(args):
+    """{path: option} of what the command writes (``report`` without ``--out`` writes
+    ``<case>-report.html`` in the working folder, never a case file)."""
+    return {getattr(args, dest): option for dest, option in OUTPUT_OPTIONS.items()
+            if getattr(args, dest, None)}
 
 
 def _effects_files(argv):
@@ -853,7 +889,8 @@ def main(argv=None):
     Bad input (:class:`InputError`, a usage error) exits 2 with one message naming where,
     and so does a disk that is full or read-only (naming the file); anything else is a bug:
     exit 1 with one line (``--debug`` re-raises it for the traceback). With ``--json`` the
-    message is a JSON object on stdout. Ctrl-C exits 130 with one line.
+    message is a JSON object on stdout. Ctrl-C exits 130 with one line (SIGTERM 143,
+    SIGHUP 129: :mod:`feedaxis.stop`).
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     wants_json, debug = "--json" in argv, "--debug" in argv
@@ -862,12 +899,14 @@ def main(argv=None):
 
         available_effects(_effects_files(argv))  # a file's kinds bring their scenarios
         args = build_parser(argv[0] if argv else None).parse_args(argv)
+        refuse_overwriting_inputs(_outputs(args), _inputs(args))
+        FOLLOW_LINKS.set(getattr(args, "follow_links", False))
         with _one_line_warnings():
             args.handler(args)
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
         message = str(stopped)
-        return fail(wants_json, message if message.startswith("interrupted") else
-                    "interrupted", INTERRUPTED_EXIT)
+        return fail(wants_json, stop.described(message if message.startswith("interrupted")
+                                               else "interrupted"), stop.exit_code())
     except BrokenPipeError:
         sys.stderr.close()
         return 0

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import sys
 
-INTERRUPTED_EXIT = 130
-
 
 def fail(wants_json, message, code, payload=None):
     """Report a failure on stderr, and as JSON on stdout with ``--json``; return ``code``."""

@@ -128,6 +128,32 @@ FIGURE_NAMES = {
 }
 
 
+def sampling_notes(target_mm, direction, run=None):
+    """What the figures do with the samples that a reader would not assume: samples that
+    repeat another's target, direction and run (pooled with it, as one more run there),
+    and targets read by fewer runs than others (each figure uses every run; R and A need
+    two at every target). Returns a list of sentences (empty when the test is even)."""
+    _, cluster = target_clusters(target_mm)
+    direction = np.asarray(direction, float)
+    notes = []
+    if run is not None:
+        keys = np.column_stack((cluster, direction, np.asarray(run, float)))
+        repeated = keys.shape[0] - np.unique(keys, axis=0).shape[0]
+        if repeated:
+            notes.append(f"{repeated} sample{'s' if repeated > 1 else ''} repeat the target, "
+                         "direction and run of another: pooled with it as further runs at "
+                         "that target")
+    for sign, label in ((1.0, "+"), (-1.0, "-")):
+        counts = np.bincount(cluster[direction == sign])
+        counts = counts[counts > 0]
+        if counts.size and counts.min() != counts.max():
+            notes.append(f"uneven runs in {label}: {counts.min()} to {counts.max()} per "
+                         "target; each target's mean and s use its own runs"
+                         + ("; R and A need two at every target, so they are not given"
+                            if counts.min() < 2 else ""))
+    return notes
+
+
 def target_groups(positioning, clusters=None):
     """Group index of each sample: one group per (target, approach direction), the targets
     from :func:`target_clusters` (``clusters``, when already computed)."""

@@ -1,13 +1,17 @@
 """Writing results: whole files or nothing, so a failure never leaves a half-written file.
 
 The temporary files and folders staged for that are private (mode 0600/0700); what is
-published gets the mode a plain ``open``/``mkdir`` would give under the user's umask.
+published gets the mode a plain ``open``/``mkdir`` would give under the user's umask. Their
+names, ``.NAME-PID-xxxxxxxx``, carry the process that writes them: one a killed run left
+(SIGKILL, a power cut) is removed by the next run writing NAME once that process is gone.
 """
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -38,7 +42,7 @@ def write_atomically(path, content):
     check_writable_target(path)
     with writing(path):
         path.parent.mkdir(parents=True, exist_ok=True)
-        handle, staging = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
+        handle, staging = tempfile.mkstemp(prefix=staging_prefix(path), dir=path.parent)
         try:
             with os.fdopen(handle, "wb") as stream:
                 stream.write(content.encode("utf-8") if isinstance(content, str) else content)
@@ -60,7 +64,7 @@ def staged_folder(folder):
     check_writable_target(folder, "folder")
     with writing(folder):
         folder.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+        staging = Path(tempfile.mkdtemp(prefix=staging_prefix(folder), dir=folder.parent))
         try:
             try:
                 yield staging
@@ -89,7 +93,7 @@ def built_once(folder, build, complete):
         return folder
     with writing(folder):
         folder.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+        staging = Path(tempfile.mkdtemp(prefix=staging_prefix(folder), dir=folder.parent))
         try:
             build(staging)
             if folder.exists() and not complete(folder):
@@ -102,6 +106,68 @@ def built_once(folder, build, complete):
         finally:
             shutil.rmtree(staging, ignore_errors=True)
     return folder
+
+
+def refuse_overwriting_inputs(outputs, inputs):
+    """Raise :class:`~feedaxis.errors.InputError` when one of ``outputs`` ({path: option})
+    is, after symbolic links (or as a hard link), one of ``inputs`` (paths) or a folder
+    holding one: the command would destroy what it reads."""
+    for output, option in outputs.items():
+        target = Path(output).resolve()
+        for source in inputs:
+            read = Path(source).resolve()
+            if target == read or target in read.parents or _same_file(target, read):
+                raise InputError(f"{option} is {source}, an input of this command (after "
+                                 "links): writing there would destroy it; give another path",
+                                 path=output, parameter=option)
+
+
+def _same_file(first, second):
+    try:
+        return os.path.samefile(first, second)
+    except OSError:
+        return False
+
+
+def staging_prefix(path):
+    """The prefix of the private staging name beside ``path``: ``.NAME-PID-``; stale ones
+    of killed runs beside it are removed first (:func:`remove_stale_staging`)."""
+    remove_stale_staging(Path(path))
+    return f".{Path(path).name}-{os.getpid()}-"
+
+
+def remove_stale_staging(path):
+    """Remove the staging files and folders of ``path`` (``.NAME-PID-xxxxxxxx``) whose
+    process is gone: a run killed by SIGKILL or a power cut; warn, naming them, about
+    older-style ones (``.NAME-xxxxxxxx``, without the process) left by an earlier version."""
+    pattern = re.compile(rf"\.{re.escape(path.name)}-(?:(\d+)-)?[a-z0-9_]{{8}}")
+    try:
+        entries = list(path.parent.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        match = pattern.fullmatch(entry.name)
+        if match is None or (match.group(1) and _running(int(match.group(1)))):
+            continue
+        if match.group(1) is None:
+            warnings.warn(f"{entry}: a staging {'folder' if entry.is_dir() else 'file'} of "
+                          "an earlier run that was killed; remove it if no other run is "
+                          "writing there")
+        elif entry.is_dir():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
+
+
+def _running(pid):
+    """Whether process ``pid`` exists (on this machine)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
 
 
 def _merge(staging, folder):

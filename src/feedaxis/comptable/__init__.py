@@ -8,6 +8,8 @@ notes), registered in :data:`CONTROLLERS`, which the command line and its help r
 """
 from __future__ import annotations
 
+import math
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,8 +19,8 @@ from ..errors import InputError
 from ..iso230 import target_clusters
 from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
 from .base import Controller
-from .table import (NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable, default_spacing_mm,
-                    from_measurement, from_model, grid_mm)
+from .table import (GRID_DECIMALS, NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable,
+                    default_spacing_mm, from_measurement, from_model, grid_mm)
 from .verify import between_targets, verify
 
 # The one registry of controllers (the command line's choices and help read it). The table's
@@ -27,6 +29,7 @@ from .verify import between_targets, verify
 CONTROLLERS = {module.CONTROLLER.name: module.CONTROLLER
                for module in (linuxcnc, siemens, fanuc, heidenhain, beckhoff, mach4)}
 POSITIONING_FILE = "positioning.csv"
+MAX_TABLE_POINTS = 100_000  # of a controller without its own limit: a file of some MB
 
 
 def check_case(case):
@@ -48,6 +51,8 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
     chosen = CONTROLLERS[controller]
     target_mm = case.positioning.target_mm
     first_mm, last_mm = _span_mm(chosen, target_mm)
+    if spacing_mm is not None:
+        check_spacing(chosen, spacing_mm, last_mm - first_mm)
     if from_measured:
         count = target_clusters(target_mm)[0].size
         if count < 2:
@@ -71,6 +76,24 @@ def safe_table(case, model, position_mm):
     unsafe = safety.unsafe_effects(case, model)
     table = from_model(case, safety.usable_model(model, unsafe), position_mm)
     return replace(table, excluded={**safety.reasons_by_effect(unsafe), **table.excluded})
+
+
+def check_spacing(controller, spacing_mm, span_mm):
+    """Refuse a ``--spacing-mm`` that is not finite and > 0, longer than the travel the
+    table covers (its points would lie beyond the stroke), or so short that the table
+    would take more points than the controller (or any file: :data:`MAX_TABLE_POINTS`)."""
+    if not (math.isfinite(spacing_mm) and spacing_mm >= 10.0 ** -GRID_DECIMALS):
+        raise InputError(f"must be a number of at least {10.0 ** -GRID_DECIMALS:g} mm, got "
+                         f"{spacing_mm:g}", parameter="--spacing-mm")
+    if spacing_mm > span_mm:
+        raise InputError(f"{spacing_mm:g} mm is longer than the {span_mm:g} mm the table "
+                         "covers: its last point would lie beyond the measured travel",
+                         parameter="--spacing-mm")
+    limit = controller.max_points or MAX_TABLE_POINTS
+    if span_mm / spacing_mm + 1 > limit:
+        raise InputError(f"{span_mm / spacing_mm + 1:.0f} table points over {span_mm:g} mm; "
+                         f"{controller.name} takes at most {limit}: choose a larger spacing",
+                         parameter="--spacing-mm")
 
 
 def _span_mm(controller, target_mm):
@@ -122,7 +145,7 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     from . import safety
 
     chosen = CONTROLLERS[controller]
-    axis_id = axis_id or chosen.default_axis_id
+    axis_id = checked_axis_id(chosen, axis_id)
     unsafe = safety.unsafe_effects(case, model)
     usable = safety.usable_model(model, unsafe)
     table = build_table(case, usable, controller, spacing_mm, from_measured)
@@ -150,6 +173,19 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     if force:
         report["warnings"] += safety.forced_warnings(report, unsafe)
     return files, report
+
+
+def checked_axis_id(controller, axis_id):
+    """``axis_id`` (default: the controller's), refused unless it is what the controller's
+    file holds there (``controller.axis_id_pattern``): a newline or a word more would write
+    a line of the user's into the controller file."""
+    if axis_id is None:
+        return controller.default_axis_id
+    if not re.fullmatch(controller.axis_id_pattern, axis_id):
+        raise InputError(f"{axis_id!r} is not an axis of a {controller.name} file: expected "
+                         f"{controller.axis_id_pattern} (default "
+                         f"{controller.default_axis_id})", parameter="--axis-id")
+    return axis_id
 
 
 def _notes(case, table, controller, spacing_mm):

@@ -36,7 +36,8 @@ class Controller:
     it), ``notes(table) -> [str]`` (what the controller needs of the machine for this
     table), ``quantum_um`` (the value's resolution, µm; 0 when finer than a nanometre), and
     for the command line's help ``out_note`` (what ``--out`` names) and ``axis_note`` (the
-    default axis name as the manual writes it).
+    default axis name as the manual writes it); ``axis_id_pattern``, the regular expression
+    an ``--axis-id`` must match whole (what the file holds there: no newline, no word more).
     """
 
     name: str
@@ -53,6 +54,7 @@ class Controller:
     quantum_um: float = 0.0
     out_note: str = ""
     axis_note: str = ""
+    axis_id_pattern: str = r"[A-Za-z0-9_]{1,16}"
 
     @property
     def module(self):

@@ -19,6 +19,7 @@ NAME = "beckhoff"
 MAX_POINTS = 1500  # P-COMP-00059 default (kw.ssfk.max_points)
 EQUIDISTANT = True
 DEFAULT_AXIS_ID = "1"
+AXIS_ID = r"[1-9][0-9]{0,2}"  # kopf.log_achs_nr: the logical axis number
 UNIT_UM = 0.1
 SIGN = "value = measured - setpoint, 0.1 µm (manual's worked example)"
 LOAD = ("list file named by achs_kw[i] with achs_kw_log_ax_nr[i] in the start-up "
@@ -70,4 +71,5 @@ def read(text, path="achskw.lis"):
 
 
 CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        axis_id_pattern=AXIS_ID,
                         axis_note=f"logical axis number {DEFAULT_AXIS_ID}")

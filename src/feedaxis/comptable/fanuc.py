@@ -34,6 +34,7 @@ EQUIDISTANT = True
 GRID_THROUGH_ZERO = True  # the reference position (machine zero) is a table point
 REFERENCE_COORDINATE = 1240  # read when present, never written
 DEFAULT_AXIS_ID = "1"
+AXIS_ID = r"[1-9][0-9]?"  # the controlled axis number of A<axis>
 DETECTION_UNIT_UM = 1.0
 MAX_VALUE = 127
 PITCH_DATA = 10000
@@ -151,6 +152,7 @@ def read(text, path="PITCH.TXT"):
 
 
 CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        axis_id_pattern=AXIS_ID,
                         grid_through_zero=GRID_THROUGH_ZERO,
                         notes=lambda table: [reference_note(table)],
                         quantum_um=DETECTION_UNIT_UM, axis_note=f"axis {DEFAULT_AXIS_ID}")

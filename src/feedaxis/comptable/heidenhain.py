@@ -23,6 +23,7 @@ NAME = "heidenhain"
 MAX_POINTS = 256
 EQUIDISTANT = False
 DEFAULT_AXIS_ID = "X"
+AXIS_ID = r"[A-Za-z][0-9]?"  # an axis letter (X, Y, Z, U, A, ...)
 SIGN = "value = measured - target (mm); BACKLASH column: the same in the negative direction"
 LOAD = ("copy <name>.COM and the .CMA (e.g. as config.cma) to PLC:\\COMP, activate the line "
         "with * in ACTIVE (or PLC module 9095); nonlinear compensation on (MP730 on older TNC)")
@@ -79,5 +80,6 @@ def read(text, path="X.COM"):
 
 
 CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        axis_id_pattern=AXIS_ID,
                         companions=companions,
                         out_note="the .COM; its .CMA goes beside it", axis_note=DEFAULT_AXIS_ID)

@@ -17,6 +17,7 @@ NAME = "linuxcnc"
 MAX_POINTS = 256  # EMCMOT_COMP_SIZE
 EQUIDISTANT = False
 DEFAULT_AXIS_ID = "0"
+AXIS_ID = r"[0-9]{1,2}"  # the joint number (not written: the INI names it)
 SIGN = "trim = -(measured - target), mm, added to the commanded position"
 LOAD = ("[JOINT_n] COMP_FILE = <file>, COMP_FILE_TYPE = 1 in the INI; BACKLASH is then "
         "ignored (the reverse column carries it)")
@@ -58,4 +59,5 @@ def read(text, path="COMP_FILE"):
                      "file")
 
 
-CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD)
+CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        axis_id_pattern=AXIS_ID)

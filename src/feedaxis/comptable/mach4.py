@@ -19,6 +19,7 @@ NAME = "mach4"
 MAX_POINTS = None
 EQUIDISTANT = True
 DEFAULT_AXIS_ID = "X"
+AXIS_ID = r"[XYZABCxyzabc]"  # one of Mach4's six coordinated axes
 SIGN = "error = measured - expected (mm), per direction"
 LOAD = ("Configure > Plugins > Machine Calibration > Linear Compensation: select the motor, "
         "Modify Inputs: start point, length, number of points; then the errors per point "
@@ -66,4 +67,5 @@ def read(text, path="screwmap.txt"):
     return CompTable(position_mm, errors[:, 0] * UM_PER_MM, errors[:, 1] * UM_PER_MM, "file")
 
 
-CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD)
+CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        axis_id_pattern=AXIS_ID)

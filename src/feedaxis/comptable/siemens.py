@@ -21,6 +21,7 @@ NAME = "siemens"
 MAX_POINTS = None  # set by MD38000 $MA_MM_ENC_COMP_MAX_POINTS; the output says how many
 EQUIDISTANT = True
 DEFAULT_AXIS_ID = "X1"
+AXIS_ID = r"[A-Za-z_][A-Za-z0-9_]{0,15}"  # a machine axis name (X1, AX1)
 SIGN = ("EEC value = measured - target (mm), 0 at the reference point; CEC (direction part) "
         "value = -(deviation) (mm)")
 LOAD = ("MD38000 $MA_MM_ENC_COMP_MAX_POINTS >= points, MD32700 ENC_COMP_ENABLE[0] = 1 "
@@ -125,4 +126,5 @@ def notes(table):
 
 
 CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
+                        axis_id_pattern=AXIS_ID,
                         notes=notes, axis_note=DEFAULT_AXIS_ID)

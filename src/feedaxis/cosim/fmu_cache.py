@@ -20,7 +20,7 @@ from ..fmu_build import FMU_NAMES, SOURCE_DIR, build_fmus, fmu_sources, host_lay
 from ..kernel_build import kernel_missing
 from ..output import built_once
 from ..toolchain import cache_root
-from .fmu_runner import check_fmu_archive
+from .fmu_interface import check_fmu, intact
 
 
 def source_hash():
@@ -55,12 +55,14 @@ def cached_fmus(root=None, standalone=False):
 
 
 def _complete(folder):
-    return all((folder / f"{name}.fmu").exists() for name in FMU_NAMES)
+    """Whether the cache folder holds the four FMUs, each opening with the interface the
+    axis needs (:func:`.fmu_interface.intact`): a truncated or emptied one is rebuilt."""
+    return intact({name: folder / f"{name}.fmu" for name in FMU_NAMES})
 
 
 def fmu_paths(folder=None, standalone=False):
     """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``: each checked to be a safe
-    FMU archive), else of the cache; ``standalone``: FMUs that carry their Python (those in
+    FMU archive with the interface the axis needs), else of the cache; ``standalone``: FMUs that carry their Python (those in
     ``folder`` must be)."""
     if folder is None:
         return cached_fmus(standalone=standalone)
@@ -68,8 +70,8 @@ def fmu_paths(folder=None, standalone=False):
     missing = [str(p) for p in paths.values() if not p.exists()]
     if missing:
         raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {folder}")
-    for path in paths.values():
-        check_fmu_archive(path)
+    for name, path in paths.items():
+        check_fmu(path, name)
     if standalone:
         from ..fmu_standalone import is_standalone
 

@@ -5,8 +5,11 @@ before step k (held over [t_k, t_k + h)), output value k is read after it, at t_
 """
 from __future__ import annotations
 
+import os
 import shutil
+import tempfile
 import zipfile
+import zlib
 from pathlib import PurePosixPath
 
 import numpy as np
@@ -40,14 +43,31 @@ class LoadedFmu:
     def __init__(self, fmu_path):
         self.path = str(fmu_path)
         self.description = read_model_description(self.path)
-        self.unzip_dir = extract(self.path)
+        self.unzip_dir = tempfile.mkdtemp(prefix="feedaxis_fmu_")
+        try:
+            extract(self.path, self.unzip_dir)
+        except (zipfile.BadZipFile, zlib.error, EOFError) as error:  # a damaged member
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            raise InputError(f"damaged, it does not unpack: {error}", path=fmu_path) from None
+        except BaseException:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+            raise
         self.variables = {v.name: v for v in self.description.modelVariables}
 
     def instantiate(self, instance_name):
-        """Return an instantiated :class:`fmpy.fmi2.FMU2Slave`; its log goes to stdout."""
-        slave = FMU2Slave(guid=self.description.guid, unzipDirectory=self.unzip_dir,
-                          modelIdentifier=self.description.coSimulation.modelIdentifier,
-                          instanceName=instance_name)
+        """Return an instantiated :class:`fmpy.fmi2.FMU2Slave`; its log goes to stdout.
+        A shared library that does not load (damaged, another platform's) is an
+        :class:`InputError` naming the FMU."""
+        working_folder = os.getcwd()
+        try:
+            slave = FMU2Slave(guid=self.description.guid, unzipDirectory=self.unzip_dir,
+                              modelIdentifier=self.description.coSimulation.modelIdentifier,
+                              instanceName=instance_name)
+        except Exception as error:  # fmpy raises a bare Exception for a library not loading
+            raise InputError(f"its shared library does not load: {error}",
+                             path=self.path) from None
+        finally:  # fmpy changes into the library's folder and stays there when it fails
+            os.chdir(working_folder)
         slave.instantiate(loggingOn=True)
         return slave
 

@@ -14,8 +14,6 @@ their status, with no per-step dict lookup or allocation.
 from __future__ import annotations
 
 import ctypes
-import signal
-import threading
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -26,6 +24,7 @@ from numpy.lib import recfunctions
 from fmpy.fmi1 import FMICallException
 
 from ..errors import ParameterError
+from ..stop import deferred
 from .fmu_runner import LoadedFmu
 from .physics_check import check_physics
 from .system import check_parameter_values
@@ -94,9 +93,13 @@ class Master:
     def __init__(self, system, fmu_paths):
         self.system = system
         self.loaded = {}
-        for component in system.components:
-            if component.fmu not in self.loaded:
-                self.loaded[component.fmu] = LoadedFmu(fmu_paths[component.fmu])
+        try:
+            for component in system.components:
+                if component.fmu not in self.loaded:
+                    self.loaded[component.fmu] = LoadedFmu(fmu_paths[component.fmu])
+        except BaseException:  # a damaged FMU or a stop signal: no extracted folder left
+            self.close()
+            raise
         self.outputs = {c.name: [v.name for v in self.loaded[c.fmu].description.modelVariables
                                  if v.causality == "output" and v.type == "Real"]
                         for c in system.components}
@@ -167,23 +170,23 @@ class Master:
         started = time.perf_counter()
         for j, source in input_values:
             signals[j] = float(_values(source, np.zeros(1))[0])
-        try:
-            with _StopFlag() as stop:
+        with _StopFlag() as stop:  # freeing the slaves runs their Python too
+            try:
                 for component in system.ordered_components():
                     plan.append(self._instantiate(system, component, signals, slaves,
                                                   fmu_time if profile else None))
                 fmu_time[0] = 0.0
                 loop_started = time.perf_counter()
-                rows = self._loop(plan, signals, table, input_values, record_steps, n_steps, h,
-                                  progress, stop)
+                rows = self._loop(plan, signals, table, input_values, record_steps, n_steps,
+                                  h, progress, stop)
                 loop_s = time.perf_counter() - loop_started
-        finally:
-            for slave in slaves:
-                slave.freeInstance()
+            finally:
+                for slave in slaves:
+                    slave.freeInstance()
         self.timing = Timing(time.perf_counter() - started, loop_s,
                              fmu_time[0] if profile else None, n_steps)
         result = self._result(table[:rows], record_steps[:rows] * h)
-        if rows < record_steps.size:
+        if rows < record_steps.size or stop.requested:  # a stop while the slaves were freed
             raise SimulationInterrupted(result)
         return result
 
@@ -346,7 +349,8 @@ def _timed(function, total):
 
 
 class _StopFlag:
-    """Within ``with``: Ctrl-C sets ``requested`` instead of raising inside an FMU call.
+    """Within ``with``: a stop signal (Ctrl-C, SIGTERM, SIGHUP: :mod:`feedaxis.stop`) sets
+    ``requested`` instead of raising inside an FMU call.
 
     A KeyboardInterrupt raised in the Python code of a pythonfmu slave would surface as
     fmi2Fatal; the master instead finishes the current chunk and stops cleanly.
@@ -354,16 +358,14 @@ class _StopFlag:
 
     def __init__(self):
         self.requested = False
-        self._previous = None
+        self._deferred = deferred(self._request)
 
     def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._request)
+        self._deferred.__enter__()
         return self
 
     def __exit__(self, *exc):
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+        return self._deferred.__exit__(*exc)
 
-    def _request(self, *_):
+    def _request(self):
         self.requested = True

@@ -24,7 +24,8 @@ from scipy.optimize import minimize_scalar
 
 from .. import kinds
 from ..case import DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, length_mm
-from ..iso230 import FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, target_clusters
+from ..iso230 import (FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, sampling_notes,
+                      target_clusters)
 from ..stats import judge
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
@@ -124,6 +125,7 @@ def iso_comparison_lines(comparison):
                  f"{comparison['rms_residual_um']:10.4g}")
     if not comparison["bidirectional"]:
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
+    lines += [f"note: {note}" for note in comparison.get("sampling", ())]
     return "\n".join(lines)
 
 
@@ -380,6 +382,7 @@ class Positioning(Measurement):
         return {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "targets": measured["targets"],
                 "runs_up": measured.get("runs_up", 0), "runs_down": measured.get("runs_down", 0),
+                "sampling": sampling_notes(samples.target_mm, samples.direction, samples.run),
                 "bidirectional": samples.bidirectional,
                 "rms_measured_um": result.statistics.rms_before_um,
                 "rms_residual_um": result.statistics.rms_um, "figures": figures}

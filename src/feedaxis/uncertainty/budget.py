@@ -35,6 +35,7 @@ class Contribution:
     meaning: str
     default: Distribution
     source: str
+    largest: float
     with_correction_only: bool = False
 
 
@@ -45,14 +46,15 @@ CONTRIBUTIONS = {c.name: c for c in (
         "ε·L at a distance L from the laser's datum",
         Distribution("rectangular", 1.6),
         f"±1.5 ppm velocity-of-light compensation by the air sensor plus ±0.1 ppm of the "
-        f"laser itself ({HP_5528A}); use your laser's calibration certificate"),
+        f"laser itself ({HP_5528A}); use your laser's calibration certificate",
+        largest=1e3),
     Contribution(
         "machine_temperature", "K",
         "error of the machine (material) temperature used to correct to 20 °C: "
         "α·δT·(X - X_ref)",
         Distribution("rectangular", 0.1),
         f"±0.10 °C, the HP 10757 material sensor ({HP_5528A})",
-        with_correction_only=True),
+        largest=100.0, with_correction_only=True),
     Contribution(
         "expansion_coefficient", "per_K",
         "error of the expansion coefficient used to correct to 20 °C: "
@@ -61,14 +63,15 @@ CONTRIBUTIONS = {c.name: c for c in (
         "±1 µm/(m·K) about the 11.7 µm/(m·K) catalogued for steel (HP 5528A manual, seed 003 "
         "Table 1): the spread among carbon and alloy steels (an engineering judgement; use "
         "the machine builder's value)",
-        with_correction_only=True),
+        largest=1e-3, with_correction_only=True),
     Contribution(
         "misalignment", "urad",
         "angle θ between the laser beam and the axis: the laser reads L·cos θ, a cosine "
         "error -L·θ²/2 at a distance L from its datum (always short)",
         Distribution("rectangular", 100.0),
         f"the beam held on the target within ±0.1 mm over 1 m of travel (±100 µrad; an "
-        f"alignment judgement, the cosine error as in {HP_5528A})"),
+        f"alignment judgement, the cosine error as in {HP_5528A})",
+        largest=1e4),
     Contribution(
         "setup", "um",
         "set-up and Abbe offset: the offset between the laser beam and the functional point "
@@ -76,7 +79,8 @@ CONTRIBUTIONS = {c.name: c for c in (
         "size at its end",
         Distribution("rectangular", 0.1),
         "10 mm Abbe offset times 10 µrad of pitch change over the travel (an engineering "
-        "judgement; ISO 230-2:2014 Annex A asks for the set-up's own estimate)"),
+        "judgement; ISO 230-2:2014 Annex A asks for the set-up's own estimate)",
+        largest=1e5),
     Contribution(
         "eve", "um",
         "environmental variation error EVE (ISO 230-2 Annex A): the drift of the laser "
@@ -85,11 +89,13 @@ CONTRIBUTIONS = {c.name: c for c in (
         Distribution("rectangular", 0.2),
         "EVE = 0.2 µm, the laser's air compensation (1 ppm per K, HP 5528A manual p. 6-24) "
         "over a 0.2 m dead-free path in a room drifting 1 K (an engineering judgement; "
-        "measure it with the ISO 230-2 EVE test and give its value)"),
+        "measure it with the ISO 230-2 EVE test and give its value)",
+        largest=1e5),
 )}
 FROM_THE_DATA = {"repeatability": "the repeatability at the targets comes from the case's own "
                                   "runs (the scatter of each target's readings), not the budget"}
 DISTRIBUTION_KEYS = ("distribution", "source")
+COVERAGE_FACTORS = (1.0, 10.0)  # a certificate's k: 1 (68 %) to far beyond 3 (99.7 %)
 
 
 @dataclass(frozen=True)
@@ -161,6 +167,9 @@ def _distribution(path, text, contribution, table):
             raise bad("must be text", key)
         if key in size_keys and not _finite_non_negative(value):
             raise bad(f"must be a finite number >= 0, got {shown_value(value)}", key)
+        if key == "coverage_factor" and not COVERAGE_FACTORS[0] <= value <= COVERAGE_FACTORS[1]:
+            raise bad(f"must be {COVERAGE_FACTORS[0]:g} to {COVERAGE_FACTORS[1]:g} (a "
+                      f"certificate's k, 2 for 95 %), got {shown_value(value)}", key)
     kind = table.get("distribution", contribution.default.kind)
     if kind not in DISTRIBUTIONS:
         raise bad(f"unknown distribution {kind!r}; known: {', '.join(DISTRIBUTIONS)}",
@@ -172,8 +181,19 @@ def _distribution(path, text, contribution, table):
                 raise bad(f"a {kind} distribution takes {key}, not {other}", other)
         if key not in table:
             raise bad(f"a {kind} distribution needs {key}")
-        return Distribution(kind, float(table[key])), table.get("source")
-    return Distribution(kind, _normal_size(table, unit, bad)), table.get("source")
+        return _within(contribution, kind, float(table[key]), bad, key), table.get("source")
+    size, key = _normal_size(table, unit, bad)
+    return _within(contribution, kind, size, bad, key), table.get("source")
+
+
+def _within(contribution, kind, size, bad, key):
+    """The distribution of ``size``, refused beyond what the contribution can physically
+    be (``contribution.largest``: 1e300 ppm would overflow every deviation)."""
+    if not size <= contribution.largest:
+        raise bad(f"gives a {'standard uncertainty' if kind == 'normal' else 'half-width'} "
+                  f"of {size:.3g} {contribution.unit}, beyond the {contribution.largest:g} "
+                  f"{contribution.unit} any {contribution.name} can be", key)
+    return Distribution(kind, size)
 
 
 def _finite_non_negative(value):
@@ -184,8 +204,8 @@ def _finite_non_negative(value):
 
 
 def _normal_size(table, unit, bad):
-    """u of a normal contribution: ``standard_uncertainty_<unit>``, or ``expanded_<unit>``
-    with its ``coverage_factor`` as a certificate states them."""
+    """(u, the key giving it) of a normal contribution: ``standard_uncertainty_<unit>``, or
+    ``expanded_<unit>`` with its ``coverage_factor`` as a certificate states them."""
     standard, expanded = f"standard_uncertainty_{unit}", f"expanded_{unit}"
     if f"half_width_{unit}" in table:
         raise bad(f"a normal distribution takes {standard} or {expanded}, not a half-width",
@@ -193,9 +213,9 @@ def _normal_size(table, unit, bad):
     if standard in table and expanded in table:
         raise bad(f"give {standard} or {expanded}, not both", expanded)
     if standard in table:
-        return float(table[standard])
+        return float(table[standard]), standard
     if expanded not in table:
         raise bad(f"a normal distribution needs {standard} or {expanded} with coverage_factor")
     if not table.get("coverage_factor"):
         raise bad(f"{expanded} needs coverage_factor > 0 (the k of the certificate)", expanded)
-    return float(table[expanded]) / float(table["coverage_factor"])
+    return float(table[expanded]) / float(table["coverage_factor"]), expanded

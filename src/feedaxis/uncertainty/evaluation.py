@@ -4,6 +4,7 @@ parameter and table point, the value, standard uncertainty, 95 % coverage interv
 input's share (:class:`Uncertainty`)."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -25,6 +26,8 @@ HISTOGRAM_VALUES = 20_000
 TABLE_TRIALS = 20_000  # the table's values are summarised over the first trials only
 NUMBER_KEYS = ("value", "mean", "standard_uncertainty", "coverage_interval",
                "shortest_coverage_interval")
+ISO_RUNS = 5  # runs per target and direction of an ISO 230-2 test
+MOMENT_NAMES = {"mean": "mean", "standard_uncertainty": "variance"}
 SPECIAL_BLOCK = 10 ** 6  # a seed stream apart from the trials' for the check and refits
 
 
@@ -47,6 +50,7 @@ class Uncertainty:
     table: dict | None = None
     adaptive: object = None
     notes: list = field(default_factory=list)
+    moments: tuple = engine.MOMENTS  # the moments the outputs have (none without a variance)
     samples: dict = field(default_factory=dict, repr=False)
 
     def to_json(self):
@@ -59,7 +63,8 @@ class Uncertainty:
                 "corrected_to_20C": self.correction.to_json() if self.correction else None,
                 "figures": self.figures, "parameters": self.parameters,
                 "undetermined": self.undetermined, "parameter_method": self.parameter_method,
-                "table": self.table, "notes": self.notes}
+                "table": self.table, "notes": self.notes,
+                "moments": {moment: moment in self.moments for moment in engine.MOMENTS}}
 
 
 def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolerance_um=None,
@@ -108,6 +113,8 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
               else None)
     measurement = PositioningMeasurement(case, budget, correction, fitted)
     inputs = measurement.inputs
+    moments = (measurement.repeatability.moments if REPEATABILITY in inputs
+               else engine.MOMENTS)
     if not inputs:
         raise InputError("nothing to propagate: every budget contribution is 0 and the data "
                          "carry no repeatability (one reading per target, no model)",
@@ -127,20 +134,27 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
         judged = [key for key in FIGURE_NAMES if key in measurement.figures()]
         values, adaptive = engine.run_adaptive(measurement.sample, inputs, tolerance_um,
                                                judged, seed, chunk, progress=progress,
-                                               keep=keep)
+                                               keep=keep, moments=moments,
+                                               min_blocks=engine.MIN_BLOCKS_WITHOUT_VARIANCE
+                                               if len(moments) < 2 else 2)
     done = len(values[next(key for key in values if key in FIGURE_NAMES)])
     alone = engine.contributions(measurement.sample, inputs, seed, chunk,
                                  min(done, engine.CONTRIBUTION_TRIALS), progress)
     result = Uncertainty(str(case.folder), done, seed, inputs, budget, correction,
                          measurement.repeatability.source, {}, adaptive=adaptive,
-                         notes=_notes(measurement, correction))
+                         notes=_notes(measurement, correction), moments=moments)
     shares = engine.shares(alone)
-    result.figures = _figures(measurement.figures(), values, alone, shares)
+    if "standard_uncertainty" not in moments:  # the repeatability's u² is infinite
+        alone[REPEATABILITY] = {key: np.full_like(u, np.nan)
+                                for key, u in alone[REPEATABILITY].items()}
+        shares = {key: {name: np.full_like(u, np.nan) for name, u in by_input.items()}
+                  for key, by_input in shares.items()}
+    result.figures = _figures(measurement.figures(), values, alone, shares, moments)
     result.samples = {key: values[key][:HISTOGRAM_VALUES] for key in result.figures}
     if measurement.parameters:
         _parameters(result, measurement, values, alone, shares, seed, chunk, progress)
     if measurement.table.included:
-        result.table = _table(measurement.table, values["table_um"], alone, shares)
+        result.table = _table(measurement.table, values["table_um"], alone, moments)
     return result
 
 
@@ -148,14 +162,25 @@ def _report_progress(progress, planned, trials):
     progress(trials, planned)
 
 
-def _interval_entry(value, summary, index=()):
-    """The numbers of one output element: value, mean, u and the two intervals."""
-    return {"mean": float(summary.mean[index]),
-            "standard_uncertainty": float(summary.standard_uncertainty[index]),
+def _interval_entry(value, summary, index=(), moments=engine.MOMENTS):
+    """The numbers of one output element: value, mean, u (None where the output has no
+    such moment) and the two intervals."""
+    return {"mean": _moment(summary, "mean", index, moments),
+            "standard_uncertainty": _moment(summary, "standard_uncertainty", index, moments),
             "coverage_interval": [float(v) for v in summary.symmetric[(slice(None),) + index]],
             "shortest_coverage_interval": [float(v)
                                            for v in summary.shortest[(slice(None),) + index]],
             **({} if value is None else {"value": float(value)})}
+
+
+def _moment(summary, name, index, moments):
+    """The ``name`` moment of ``summary`` at ``index``, or None where it does not exist."""
+    return float(getattr(summary, name)[index]) if name in moments else None
+
+
+def _optional(value):
+    """``value`` as a float, None for NaN (a share or u that does not exist)."""
+    return None if np.isnan(value) else float(value)
 
 
 def _with_unit(entry, unit):
@@ -165,17 +190,18 @@ def _with_unit(entry, unit):
 
 
 def _contribution_entries(alone, shares, key, index=()):
-    return {name: {"standard_uncertainty": float(alone[name][key][index]),
-                   "share": float(shares[key][name][index])} for name in alone}
+    return {name: {"standard_uncertainty": _optional(alone[name][key][index]),
+                   "share": _optional(shares[key][name][index])} for name in alone}
 
 
-def _figures(data_figures, values, alone, shares):
+def _figures(data_figures, values, alone, shares, moments):
     """{figure key: entry in µm} in the order of the ISO names, as ``compare`` keys them."""
     figures = {}
     for key, name in FIGURE_NAMES.items():
         if key not in values:
             continue
-        entry = _interval_entry(data_figures[key], engine.summarise(values[key]))
+        entry = _interval_entry(data_figures[key], engine.summarise(values[key]), (),
+                                moments)
         entry["contributions"] = {source: _with_unit(c, "um") for source, c in
                                   _contribution_entries(alone, shares, key).items()}
         figures[key] = {"name": name, **_with_unit(entry, "um")}
@@ -208,29 +234,33 @@ def _parameters(result, measurement, values, alone, shares, seed, chunk, progres
         if not linear.determined[index]:
             result.undetermined[key] = linear.undetermined[key]
             continue
-        entry = _interval_entry(linear.estimate[index], summary, (index,))
+        entry = _interval_entry(linear.estimate[index], summary, (index,), result.moments)
         entry["fit_standard_uncertainty"] = float(linear.gum_u[index])
         entry["contributions"] = _contribution_entries(alone, shares, "parameters", (index,))
         result.parameters[key] = {"unit": units[key], **entry}
 
 
-def _table(table, values_um, alone, shares):
-    """The table's points with their values, standard uncertainties and intervals per
-    direction, and each input's share of the summed variance over the points."""
+def _table(table, values_um, alone, moments):
+    """The table's points with their values, standard uncertainties (None without a
+    variance) and intervals per direction, and each input's share of the summed variance
+    over the points."""
     summary = engine.summarise(values_um)
+    has_u = "standard_uncertainty" in moments
+    u = summary.standard_uncertainty if has_u else np.full_like(summary.mean, np.nan)
     sides = {}
     for column, side in enumerate(("forward", "reverse")):
         sides[side] = {
             "value_um": table.values_um[:, column].tolist(),
-            "standard_uncertainty_um": summary.standard_uncertainty[:, column].tolist(),
+            "standard_uncertainty_um": [_optional(v) for v in u[:, column]],
             "coverage_interval_um": summary.symmetric[:, :, column].T.tolist(),
             "shortest_coverage_interval_um": summary.shortest[:, :, column].T.tolist()}
     total = sum(float(np.sum(np.square(u["table_um"]))) for u in alone.values())
     return {"source": table.source, "included": list(table.included),
             "trials": int(values_um.shape[0]), "position_mm": table.position_mm.tolist(), **sides,
-            "largest_standard_uncertainty_um": float(np.max(summary.standard_uncertainty)),
+            "largest_standard_uncertainty_um": float(np.max(u)) if has_u else None,
             "contributions": {name: {"share": float(np.sum(np.square(u["table_um"]))) / total
-                                     if total else None} for name, u in alone.items()}}
+                                     if total and has_u else None}
+                              for name, u in alone.items()}}
 
 
 def _notes(measurement, correction):
@@ -253,4 +283,29 @@ def _notes(measurement, correction):
                      f"test's own, and from {runs} runs each is itself uncertain by about "
                      f"{100 / np.sqrt(2 * (runs - 1)):.0f} % (1/sqrt(2(n - 1))): the sampling "
                      "of the machine's repeatability, not a measurement uncertainty")
+        few = _few_runs(measurement.repeatability)
+        if few:
+            warnings.warn(few)
+            notes.insert(0, few)
     return notes
+
+
+def _few_runs(repeatability):
+    """The warning of a test with fewer than ISO 230-2's :data:`ISO_RUNS` runs at a target:
+    the number of runs every uncertainty here rests on and, with ν = n - 1 <= 2 degrees of
+    freedom, why no standard uncertainty is given. None for enough runs."""
+    counts = repeatability.counts[repeatability.counts > 1]
+    if counts.min() >= ISO_RUNS:
+        return None
+    runs = (f"{counts.min()}" if counts.min() == counts.max()
+            else f"{counts.min()} to {counts.max()}")
+    text = (f"the uncertainty of every figure rests on {runs} runs per target and direction "
+            f"(ISO 230-2 asks for {ISO_RUNS})")
+    missing = [m for m in engine.MOMENTS if m not in repeatability.moments]
+    if missing:
+        text += (f": the t distribution of ν = {repeatability.dof} degree"
+                 f"{'s' if repeatability.dof > 1 else ''} of freedom (n - 1) that moves a "
+                 f"target's mean has no {' and no '.join(MOMENT_NAMES[m] for m in missing)} "
+                 "(ν <= 2), so no standard uncertainty (nor shares of u²) is given, only the "
+                 "95 % coverage intervals, which exist; at least 4 runs give one")
+    return text

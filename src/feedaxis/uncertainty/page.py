@@ -12,6 +12,7 @@ from ..report import plots
 from ..report.page import STYLE, image, table
 from ..text import micro
 from .budget import CONTRIBUTIONS
+from .text import number
 
 
 def _interval(pair):
@@ -23,8 +24,8 @@ def _share(value):
 
 
 def _figure_rows(result):
-    return [(f["name"], f"{f['value_um']:.4g}", f"{f['mean_um']:.4g}",
-             f"{f['standard_uncertainty_um']:.2g}", _interval(f["coverage_interval_um"]),
+    return [(f["name"], f"{f['value_um']:.4g}", number(f["mean_um"], ".4g"),
+             number(f["standard_uncertainty_um"], ".2g"), _interval(f["coverage_interval_um"]),
              _interval(f["shortest_coverage_interval_um"]))
             for f in result.figures.values()]
 
@@ -42,7 +43,7 @@ def _parameter_parts(result):
     if not result.parameters:
         return []
     method = result.parameter_method
-    rows = [(key, f"{e['value']:.6g}", f"{e['standard_uncertainty']:.2g}",
+    rows = [(key, f"{e['value']:.6g}", number(e["standard_uncertainty"], ".2g"),
              f"{e['fit_standard_uncertainty']:.2g}", _interval(e["coverage_interval"]),
              micro(e["unit"])) for key, e in result.parameters.items()]
     return ["<h2>Fitted parameters</h2>",
@@ -63,7 +64,8 @@ def _table_parts(result):
     return ["<h2>Compensation table</h2>",
             f"<p>From the {entry['source']} ({html.escape(', '.join(entry['included']))}), "
             f"{len(entry['position_mm'])} points, intervals over {entry['trials']} trials; "
-            f"largest standard uncertainty {entry['largest_standard_uncertainty_um']:.2g} µm.</p>",
+            f"largest standard uncertainty "
+            f"{number(entry['largest_standard_uncertainty_um'], '.2g')} µm.</p>",
             image(plots.table_with_uncertainty(entry["position_mm"], sides),
                   "compensation table with its coverage interval")]
 

@@ -82,6 +82,24 @@ class Repeatability:
     def available(self):
         return self.pooled_um is not None
 
+    @property
+    def dof(self):
+        """The fewest degrees of freedom ν of a t distribution the draws use: n - 1 of the
+        smallest repeated group, or the pooled ν for groups read once."""
+        repeated = self.counts > 1
+        dofs = [*(self.counts[repeated] - 1), *([self.pooled_dof] if not repeated.all() else [])]
+        return int(min(dofs))
+
+    @property
+    def moments(self):
+        """Which moments the outputs have (JCGM 101 §6.4.9: a t distribution with ν degrees
+        of freedom has a mean for ν > 1 and a variance for ν > 2): the subset of
+        ("mean", "standard_uncertainty") that exists."""
+        if not self.available:
+            return ("mean", "standard_uncertainty")
+        return tuple(name for name, least in (("mean", 2), ("standard_uncertainty", 3))
+                     if self.dof >= least)
+
     def draw(self, rng, trials):
         """The trials' shifts (trials, samples) of each group's readings: its mean's
         uncertainty, s_g·sqrt((n-1)/χ²(n-1))/sqrt(n)·z (the t-distribution of JCGM 101

@@ -19,6 +19,11 @@ def _share(value):
     return "" if value is None or math.isnan(value) else f"{100 * value:.1f}%"
 
 
+def number(value, spec):
+    """``value`` formatted by ``spec``; a moment that does not exist (None) as ``n/a``."""
+    return "n/a" if value is None else format(value, spec)
+
+
 def uncertainty_lines(result):
     """The whole result as text lines (joined with newlines)."""
     payload = result.to_json()
@@ -38,25 +43,35 @@ def uncertainty_lines(result):
                   f"{'95 % interval':20s} {'shortest 95 %':20s}"]
     for figure in result.figures.values():
         lines.append(f"{figure['name']:28s} {figure['value_um']:8.4g} "
-                     f"{figure['standard_uncertainty_um']:7.2g}  "
+                     f"{number(figure['standard_uncertainty_um'], '7.2g'):>7s}  "
                      f"{_interval(figure['coverage_interval_um']):20s} "
                      f"{_interval(figure['shortest_coverage_interval_um']):20s}")
-    lines += ["", "share of u² per input (JCGM 101 Annex B: each input varied alone)",
-              f"{'':28s} " + " ".join(f"{SHORT_NAMES.get(i, i):>8s}" for i in inputs)]
-    for figure in result.figures.values():
-        lines.append(f"{figure['name']:28s} " + " ".join(
-            f"{_share(figure['contributions'][i]['share']):>8s}" for i in inputs))
+    lines += _share_lines(result, inputs)
     lines += _parameter_lines(result)
     if result.table:
         table = result.table
         lines += ["", f"compensation table ({table['source']}: "
                       f"{', '.join(table['included'])}), {len(table['position_mm'])} points, "
                       f"{table['trials']} trials: largest u "
-                      f"{table['largest_standard_uncertainty_um']:.2g} µm; shares: "
-                      + ", ".join(f"{SHORT_NAMES.get(i, i)} {_share(c['share'])}"
-                                  for i, c in table["contributions"].items())]
+                      + number(table['largest_standard_uncertainty_um'], '.2g') + (
+                          "" if table["largest_standard_uncertainty_um"] is None else " µm")
+                      + ("; shares: " + ", ".join(f"{SHORT_NAMES.get(i, i)} {_share(c['share'])}"
+                                                  for i, c in table["contributions"].items())
+                         if "standard_uncertainty" in result.moments else "")]
     lines += [f"note: {note}" for note in result.notes]
     return "\n".join(lines)
+
+
+def _share_lines(result, inputs):
+    """Each input's share of u² per figure, or why there are none."""
+    if "standard_uncertainty" not in result.moments:
+        return ["", "share of u² per input: none (the outputs have no variance; see the note)"]
+    lines = ["", "share of u² per input (JCGM 101 Annex B: each input varied alone)",
+             f"{'':28s} " + " ".join(f"{SHORT_NAMES.get(i, i):>8s}" for i in inputs)]
+    for figure in result.figures.values():
+        lines.append(f"{figure['name']:28s} " + " ".join(
+            f"{_share(figure['contributions'][i]['share']):>8s}" for i in inputs))
+    return lines
 
 
 def _refit_difference(in_u):
@@ -73,7 +88,8 @@ def _parameter_lines(result):
                  f"{_refit_difference(method['largest_refit_difference_in_u'])} u)",
              f"{'':44s} {'value':>11s} {'u':>9s} {'u fit':>9s}  95 % interval"]
     for key, entry in result.parameters.items():
-        lines.append(f"  {key:42s} {entry['value']:11.5g} {entry['standard_uncertainty']:9.2g} "
+        lines.append(f"  {key:42s} {entry['value']:11.5g} "
+                     f"{number(entry['standard_uncertainty'], '9.2g'):>9s} "
                      f"{entry['fit_standard_uncertainty']:9.2g}  "
                      f"{_interval(entry['coverage_interval'], 5)} {micro(entry['unit'])}")
     lines += [f"  {key:42s} undetermined: {why}" for key, why in result.undetermined.items()]

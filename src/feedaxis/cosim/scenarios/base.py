@@ -19,8 +19,8 @@ from typing import Callable
 
 import numpy as np
 
-from ...case import write_case
-from ...errors import ParameterError
+from ...case import CaseError, range_problem, read_case, write_case
+from ...errors import InputError, ParameterError
 from ...fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ...kinds import kinds
 from ...physics.checks import require_positive
@@ -137,6 +137,35 @@ class MeasurementNoise:
         return noisy
 
 
+def check_axis_ranges(system):
+    """Refuse, before anything is simulated, an FMU parameter the simulated case's axis.toml
+    would hold (:data:`~feedaxis.fmu_map.AXIS_KEYS`) beyond any physical axis: the case
+    format's ranges, naming ``Component.parameter``."""
+    for table in AXIS_KEYS.values():
+        for component in system.components:
+            for key in table.get(component.fmu, ()):
+                value = component.parameters.get(key)
+                if isinstance(value, (int, float)) and not isinstance(value, bool):
+                    problem = range_problem(key, value)
+                    if problem:
+                        raise InputError(f"{value:g} {problem} (axis.toml of the simulated "
+                                         "case)", parameter=f"{component.name}.{key}")
+
+
+def _readable(staged):
+    """Refuse a simulated case the case reader would refuse (parameter values beyond any
+    physical axis, such as --set GeometricError.offset_um=1e300), naming the file, row and
+    column it would break, before it is published."""
+    try:
+        read_case(staged)
+    except CaseError as error:
+        where = ", ".join([error.path.name] + ([f"row {error.row}"] if error.row else [])
+                          + ([f"column '{error.column}'"] if error.column else []))
+        raise InputError(f"the simulated case would not be readable ({where}: "
+                         f"{error.message}): a parameter value (--set, --model) beyond what "
+                         "a case can hold (docs/bad-input.md)", parameter="--set") from None
+
+
 def write_run(out, master, run, noise=None):
     """Write ``run`` as the case folder ``out``, its measured column with ``noise`` (a
     :class:`MeasurementNoise`) when given; return its summary with the folder. The summary's
@@ -149,7 +178,7 @@ def write_run(out, master, run, noise=None):
     """
     tables = noise.measured(run.tables) if noise else run.tables
     write_case(out, axis_values(master, run.parameters, run.name, with_servo=run.with_servo),
-               **tables)
+               **tables, check=_readable)
     summary = {"case": str(out), **run.summary}
     if noise:
         summary["noise"] = {"sigma_um": noise.sigma_um, "seed": noise.seed}

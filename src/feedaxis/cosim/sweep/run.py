@@ -226,17 +226,20 @@ class _dask_client:
 
 @contextmanager
 def _ctrl_c_left_to_this_process():
-    """Within: processes started ignore Ctrl-C (SIGINT ignored is inherited), so a Ctrl-C
-    in the terminal stops this process, which keeps the finished trials and closes the
-    cluster, instead of killing the local workers under it."""
+    """Within: processes started ignore Ctrl-C and SIGHUP (an ignored signal is inherited),
+    so a Ctrl-C in the terminal, or the terminal closing, stops this process, which keeps
+    the finished trials and closes the cluster, instead of killing the local workers under
+    it. SIGTERM stays: the cluster stops its workers with it."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    ignored = [getattr(signal, name) for name in ("SIGINT", "SIGHUP") if hasattr(signal, name)]
+    previous = {signum: signal.signal(signum, signal.SIG_IGN) for signum in ignored}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def cluster_size(trial_s, trials=1_000_000, hours=1.0):

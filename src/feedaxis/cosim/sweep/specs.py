@@ -28,6 +28,11 @@ import numpy as np
 from ...errors import InputError
 
 KINDS = {"grid": 3, "uniform": 2, "normal": 2, "truncnormal": 4, "triangular": 3, "mvnormal": 2}
+# A covariance's checks, in correlation units (C_ij / (σ_i σ_j)): a fit's is symmetric to
+# some 1e-12 there; 1e-6 leaves room for a file written with fewer digits. Its eigenvalues
+# (0 to n for a correlation matrix) may be negative by round-off, 1e-12 for a singular fit.
+SYMMETRY_TOLERANCE = 1e-6
+DEFINITENESS_TOLERANCE = 1e-8
 MAX_REDRAWS = 100  # draws of a fitted model's parameters outside their bounds, per trial
 
 
@@ -173,17 +178,34 @@ def _mvnormal(text, names, values):
 
 def normal_factor(covariance, where):
     """F with F Fᵀ = covariance (symmetric, positive semi-definite), from its eigenvectors
-    and eigenvalues, so it exists for a singular covariance too."""
+    and eigenvalues, so it exists for a singular covariance too.
+
+    Both checks are made on the correlation scale, C_ij / (σ_i σ_j), so parameters of any
+    units are judged alike: a covariance a fit computed is symmetric to round-off
+    (:data:`SYMMETRY_TOLERANCE`; entries zero to round-off, 1e-22, may differ by 1e-5 of
+    themselves) and its eigenvalues negative at most by round-off
+    (:data:`DEFINITENESS_TOLERANCE`); it is used symmetrised.
+    """
     covariance = np.asarray(covariance, dtype=float)
-    if not (np.all(np.isfinite(covariance)) and np.allclose(covariance, covariance.T,
-                                                            rtol=1e-9, atol=0)):
+    if not np.all(np.isfinite(covariance)):
         raise InputError("the covariance must be a symmetric matrix of finite numbers",
                          parameter=where)
-    eigenvalues, eigenvectors = np.linalg.eigh(covariance)
-    scale = max(float(np.max(np.abs(eigenvalues), initial=0.0)), np.finfo(float).tiny)
-    if np.min(eigenvalues, initial=0.0) < -1e-9 * scale:
+    sigma = np.sqrt(np.abs(np.diag(covariance)))
+    scale = np.outer(sigma, sigma)
+    scale[scale == 0.0] = max(float(np.max(np.abs(covariance), initial=0.0)),
+                              np.finfo(float).tiny)  # a parameter held: its row is all 0
+    asymmetry = np.abs(covariance - covariance.T) / scale
+    if np.any(asymmetry > SYMMETRY_TOLERANCE):
+        i, j = np.unravel_index(np.argmax(asymmetry), asymmetry.shape)
+        raise InputError(f"the covariance must be a symmetric matrix: entries ({i + 1}, "
+                         f"{j + 1}) and ({j + 1}, {i + 1}) differ by {asymmetry[i, j]:.3g} "
+                         "of σ_i·σ_j", parameter=where)
+    covariance = (covariance + covariance.T) / 2
+    lowest = np.min(np.linalg.eigvalsh(covariance / scale), initial=0.0)
+    if lowest < -DEFINITENESS_TOLERANCE:
         raise InputError(f"the covariance is not positive semi-definite (eigenvalue "
-                         f"{np.min(eigenvalues):.3g})", parameter=where)
+                         f"{lowest:.3g} of its correlation matrix)", parameter=where)
+    eigenvalues, eigenvectors = np.linalg.eigh(covariance)
     return eigenvectors * np.sqrt(np.clip(eigenvalues, 0.0, None))
 
 

@@ -71,7 +71,15 @@ class Store:
         if not plan_path.exists():
             raise InputError("holds no interrupted sweep to resume (no .partial/plan.json)",
                              path=self.out)
-        saved = json.loads(plan_path.read_text())
+        try:
+            saved = json.loads(plan_path.read_text(encoding="utf-8"))
+        except (ValueError, OSError) as error:
+            raise InputError(f"damaged, the plan of the interrupted sweep cannot be read "
+                             f"({error}): start the sweep again into a new folder",
+                             path=plan_path) from None
+        if not isinstance(saved, dict):
+            raise InputError("damaged: not the plan of a sweep; start the sweep again into a "
+                             "new folder", path=plan_path)
         differ = sorted(k for k in set(saved) | set(self.identity)
                         if saved.get(k) != self.identity.get(k))
         if differ:
@@ -85,12 +93,13 @@ class Store:
 
         collected = Collected()
         for path in sorted(self.partial.glob("part-*.parquet")):
-            table = pq.read_table(path)
-            axis = (table.schema.metadata or {}).get(b"feedaxis.series")
-            collected.add([TrialResult(row["trial"],
-                                       tuple(zip(row["figure_names"], row["figure_values"])),
-                                       np.array(row["series"], dtype=float), row["error"])
-                           for row in table.to_pylist()], axis and json.loads(axis))
+            try:
+                results, axis = _part(pq.read_table(path))
+            except (OSError, ValueError, KeyError, TypeError) as error:  # pyarrow's: OSError
+                raise InputError(f"damaged ({type(error).__name__}: {error}); remove it and "
+                                 "run the same command with --resume again to rerun its "
+                                 "trials", path=path) from None
+            collected.add(results, axis)
         self.series_axis = collected.series_axis
         return collected
 
@@ -127,6 +136,16 @@ class Store:
     def complete(self):
         """Remove the saved parts once the outputs hold every trial."""
         shutil.rmtree(self.partial, ignore_errors=True)
+
+
+def _part(table):
+    """([TrialResult], series axis or None) of a saved part file's table."""
+    axis = (table.schema.metadata or {}).get(b"feedaxis.series")
+    results = [TrialResult(int(row["trial"]), tuple(zip(row["figure_names"],
+                                                        row["figure_values"])),
+                           np.array(row["series"], dtype=float), row["error"])
+               for row in table.to_pylist()]
+    return results, axis and json.loads(axis)
 
 
 def parquet_bytes(table):

@@ -1,0 +1,84 @@
+"""The signals that stop a command: Ctrl-C (SIGINT), SIGTERM (what a job scheduler,
+``timeout`` or a service manager sends) and SIGHUP (the terminal closed) all end a command
+the same way, as a :class:`KeyboardInterrupt` raised where it runs, so every ``finally``
+removes its staging folders and a sweep keeps its finished trials; the exit code is
+128 + the signal's number (130, 143, 129). Standard library only, so the console script
+installs it before the seconds of start-up imports.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from contextlib import contextmanager
+
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP")
+                     if hasattr(signal, name))
+_received = [signal.SIGINT]  # the last stop signal received (Ctrl-C until another came)
+
+
+def _raise_interrupt(signum, _frame):
+    _received[0] = signum
+    raise KeyboardInterrupt
+
+
+def install():
+    """Make every stop signal raise :class:`KeyboardInterrupt` (main thread only)."""
+    if threading.current_thread() is threading.main_thread():
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, _raise_interrupt)
+
+
+def ignore_all():
+    """Ignore every stop signal (while the one-line message and the exit are written)."""
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
+
+
+def exit_code():
+    """128 + the number of the last stop signal received (130 for Ctrl-C)."""
+    return 128 + int(_received[0])
+
+
+def leave(code):
+    """Exit with ``code``: a stop's code without Python's finalisation. The interrupt may
+    have been raised inside code a C extension ran (an import, an FMU's Python), which
+    leaves CPython marked to kill itself with SIGINT at exit (exit 130 or -2, never 143);
+    every ``finally`` has run by now, so only the streams are flushed."""
+    if code in {128 + int(signum) for signum in STOP_SIGNALS}:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    sys.exit(code)
+
+
+def described(message):
+    """``message`` with the signal named when it was not Ctrl-C."""
+    signum = _received[0]
+    return message if signum == signal.SIGINT else \
+        f"{message} ({signal.Signals(signum).name})"
+
+
+@contextmanager
+def deferred(request):
+    """Within: a stop signal calls ``request()`` instead of raising where the code is (an
+    FMU call, Dask's own calls); the signal is recorded for :func:`exit_code`. Outside the
+    main thread nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, _frame):
+        _received[0] = signum
+        request()
+
+    previous = {signum: signal.signal(signum, handler) for signum in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, old in previous.items():
+            signal.signal(signum, old)
