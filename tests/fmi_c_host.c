@@ -10,7 +10,12 @@
  *   step_us <microseconds per step of one instance: set inputs, doStep, get outputs>
  *   output <instance> <vr> <value>          (after the last step, per instance and output)
  *   log <status> <category> <message>       (every message the FMU logs)
- * Exit 0 when every call returned fmi2OK, 1 otherwise (after printing the failing call). */
+ * Exit 0 when every call returned fmi2OK, 1 otherwise (after printing the failing call).
+ *
+ * fmi_c_host instantiate UNPACKED_FMU MODEL_IDENTIFIER NAME GUID RESOURCES
+ *   fmi2Instantiate with exactly these arguments ("<NULL>": a NULL pointer) and, if it gives
+ *   an instance, one step of 10 ms; prints "instance 1" or "instance 0", "stepped 0|1" and
+ *   the log lines; exit 0 (a crash is the only other outcome). */
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <stdarg.h>
@@ -57,6 +62,8 @@ static size_t parse_list(char *text, fmi2ValueReference vrs[], double values[])
     return n;
 }
 
+#define LOAD(name) name##TYPE *name = (name##TYPE *)dlsym(library, #name)
+
 #define CHECK(call)                                                                            \
     do {                                                                                       \
         fmi2Status status_ = (call);                                                           \
@@ -66,8 +73,43 @@ static size_t parse_list(char *text, fmi2ValueReference vrs[], double values[])
         }                                                                                      \
     } while (0)
 
+static const char *argument(const char *text)
+{
+    return strcmp(text, "<NULL>") == 0 ? NULL : text;
+}
+
+/* The "instantiate" mode (see the top). */
+static int instantiate_once(char **argv)
+{
+    char path[4096];
+    snprintf(path, sizeof path, "%s/binaries/linux64/%s.so", argv[2], argv[3]);
+    void *library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (!library) {
+        printf("failed dlopen: %s\n", dlerror());
+        return 1;
+    }
+    LOAD(fmi2Instantiate);
+    LOAD(fmi2SetupExperiment);
+    LOAD(fmi2EnterInitializationMode);
+    LOAD(fmi2ExitInitializationMode);
+    LOAD(fmi2DoStep);
+    LOAD(fmi2FreeInstance);
+    fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
+    fmi2Component c = fmi2Instantiate(argument(argv[4]), fmi2CoSimulation, argument(argv[5]),
+                                      argument(argv[6]), &callbacks, fmi2False, fmi2False);
+    printf("instance %d\n", c != NULL);
+    int stepped = c && fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0) == fmi2OK
+                  && fmi2EnterInitializationMode(c) == fmi2OK
+                  && fmi2ExitInitializationMode(c) == fmi2OK
+                  && fmi2DoStep(c, 0.0, 0.01, fmi2True) == fmi2OK;
+    printf("stepped %d\n", stepped);
+    if (c) fmi2FreeInstance(c);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
+    if (argc == 7 && strcmp(argv[1], "instantiate") == 0) return instantiate_once(argv);
     if (argc != 9) {
         fprintf(stderr, "usage: %s UNPACKED_FMU MODEL_IDENTIFIER GUID STEP_S N_STEPS "
                         "N_INSTANCES INPUTS OUTPUTS\n", argv[0]);
@@ -90,7 +132,6 @@ int main(int argc, char **argv)
         printf("failed dlopen: %s\n", dlerror());
         return 1;
     }
-#define LOAD(name) name##TYPE *name = (name##TYPE *)dlsym(library, #name)
     LOAD(fmi2Instantiate);
     LOAD(fmi2SetupExperiment);
     LOAD(fmi2EnterInitializationMode);

@@ -137,7 +137,8 @@ def test_the_host_layer_is_checked_against_the_fmi_headers(tmp_path):
     """The official fmi2Functions.h declares every export: a definition that strays from the
     standard's signature does not compile."""
     import sysconfig
-    source = (FMU_SOURCES / "common" / "feedaxis_fmi_host.c").read_text()
+    exports = FMU_SOURCES / "common" / "host" / "exports.c"
+    source = exports.read_text()
     definition = source.index("EXPORT fmi2Status fmi2GetReal(")
     signature_end = source.index("{", definition)
     signature = source[definition:signature_end]
@@ -145,13 +146,15 @@ def test_the_host_layer_is_checked_against_the_fmi_headers(tmp_path):
     (tmp_path / "wrong.c").write_text(source[:definition] + signature.replace(
         "fmi2Real value[]", "float value[]") + source[signature_end:])
     (tmp_path / "feedaxis_fmi_vars.h").write_text(
-        "typedef struct { unsigned vr; char kind; char type; const char *name; } FeedaxisVar;\n"
-        "static const FeedaxisVar FEEDAXIS_VARS[] = {{0, 'u', 'R', \"x\"}};\n"
+        "typedef struct { unsigned vr; char kind; char type; const char *name; double min, max; }"
+        " FeedaxisVar;\n"
+        "static const FeedaxisVar FEEDAXIS_VARS[] = {{0, 'u', 'R', \"x\", -HUGE_VAL, HUGE_VAL}};\n"
         "#define FEEDAXIS_N_VARS 1\n")
     run = subprocess.run(["cc", "-fsyntax-only", f"-I{sysconfig.get_paths()['include']}",
-                          f"-I{FMU_SOURCES / 'common' / 'fmi2'}", f"-I{tmp_path}",
-                          '-DFEEDAXIS_PYTHON_VERSION="3"', '-DFEEDAXIS_PYTHON="p"',
-                          '-DFEEDAXIS_LIBPYTHON="l"', str(tmp_path / "wrong.c")],
+                          f"-I{FMU_SOURCES / 'common' / 'fmi2'}", f"-I{exports.parent}",
+                          f"-I{tmp_path}", '-DFEEDAXIS_PYTHON_VERSION="3"',
+                          '-DFEEDAXIS_PYTHON="p"', '-DFEEDAXIS_LIBPYTHON="l"',
+                          '-DFEEDAXIS_GUID="g"', str(tmp_path / "wrong.c")],
                          capture_output=True, text=True)
     assert run.returncode != 0
     assert re.search(r"conflicting types for .fmi2GetReal.", run.stderr), run.stderr
@@ -216,10 +219,18 @@ def vr(loaded, name):
 
 
 def test_bad_parameter_is_an_error_with_category_and_the_instance_stays_safe(loaded_fmus):
+    """A parameter below its declared min is refused where it is set; one within it that the
+    physics cannot take, at fmi2ExitInitializationMode; both name it (logStatusError) and
+    leave the instance in the error state, which fmi2DoStep cannot use and fmi2Reset leaves."""
     loaded, messages = loaded_fmus["GeometricError"], Messages()
     slave = fresh(loaded)
     slave.instantiate(callbacks=messages.callbacks())
-    slave.setReal([vr(loaded, "diameter_m")], [-1.0])
+    with pytest.raises(FMICallException) as below:
+        slave.setReal([vr(loaded, "diameter_m")], [-1.0])
+    assert below.value.status == ERROR
+    assert b"parameter diameter_m = -1 is below its min 0" in messages.records[-1][2]
+    slave.reset()
+    slave.setReal([vr(loaded, "diameter_m")], [0.0])
     slave.setupExperiment(startTime=0.0)
     slave.enterInitializationMode()
     with pytest.raises(FMICallException) as failure:
@@ -231,12 +242,15 @@ def test_bad_parameter_is_an_error_with_category_and_the_instance_stays_safe(loa
         slave.doStep(0.0, 0.01)
     assert again.value.status == ERROR
     assert messages.records[-1][1] == b"logStatusError"
-    slave.terminate()
+    assert b"fmi2DoStep is not allowed in the error state" in messages.records[-1][2]
+    slave.reset()
     slave.freeInstance()
     slave.freeLibrary()
 
 
 def test_fixed_parameter_set_after_initialisation_is_refused(loaded_fmus):
+    """Refused by name; the instance is then in the error state, and a state saved before
+    takes it back to where it was."""
     loaded, messages = loaded_fmus["StepperError"], Messages()
     slave = fresh(loaded)
     slave.instantiate(callbacks=messages.callbacks())
@@ -246,10 +260,12 @@ def test_fixed_parameter_set_after_initialisation_is_refused(loaded_fmus):
     slave.setReal([vr(loaded, "position_mm")], [0.37])
     slave.doStep(0.0, 0.01)
     before = slave.getReal([vr(loaded, "error_um")])
+    healthy = slave.getFMUstate()
     with pytest.raises(FMICallException) as failure:
         slave.setReal([vr(loaded, "harmonic1_cos_um")], [0.5])
     assert failure.value.status == ERROR
     assert b"harmonic1_cos_um is a fixed parameter" in messages.records[-1][2]
+    slave.setFMUstate(healthy)
     slave.doStep(0.01, 0.01)
     assert slave.getReal([vr(loaded, "error_um")]) == before
     slave.terminate()
@@ -266,10 +282,11 @@ def run_one_step(loaded, parameters, step_s, messages):
     try:
         slave.exitInitializationMode()
         slave.doStep(0.0, step_s)
-        return slave.getReal([loaded.variables[n].valueReference
-                              for n in loaded.variables if loaded.variables[n].causality == "output"])
-    finally:
+        outputs = slave.getReal([loaded.variables[n].valueReference for n in loaded.variables
+                                 if loaded.variables[n].causality == "output"])
         slave.terminate()
+        return outputs
+    finally:
         slave.freeInstance()
         slave.freeLibrary()
 
@@ -303,7 +320,7 @@ def test_servo_refuses_unbounded_steps_with_a_message(loaded_fmus):
     assert b"internal steps" in messages.records[-1][2]
     with pytest.raises(FMICallException):
         run_one_step(loaded, {"time_step_s": 1e300}, 1e-3, messages)
-    assert b"time_step_s must be <=" in messages.records[-1][2]
+    assert b"time_step_s = 1e+300 is above its max 0.001" in messages.records[-1][2]
 
 
 HOST_SCRIPT = """

@@ -24,6 +24,7 @@ from fmpy.util import read_csv
 from feedaxis.cli import main
 from feedaxis.fmu_build import FMU_NAMES, host_layer_missing
 from feedaxis.fmu_standalone import RUNTIME_ROOT, patchelf_program, standalone_missing
+from test_fmi_contract import c_host_instantiate, check_instantiate_answer, instantiate_cases
 from test_fmi_hosts import (FMU_CHECK, FMU_SOURCES, OMS_DIR, assert_cross_check_passed,
                             cross_check_command, cross_check_options, require_tool)
 
@@ -195,6 +196,21 @@ def test_two_instances_of_a_standalone_fmu_in_a_c_host_without_python(standalone
     by_instance = {i: [v for k, _, v in alone if k == i] for i in ("0", "1")}
     assert by_instance["0"] == by_instance["1"] and float(by_instance["0"][0]) > 0.5
     assert alone == not_alone
+
+
+def test_a_standalone_fmu_answers_every_instantiate_argument_in_a_root_without_python(
+        standalone, bare_root, c_host):
+    """The C host of the tests, in the root without Python, calls fmi2Instantiate of the
+    standalone NpidServo with every resource-URI form, a NULL name, a wrong GUID, a missing
+    folder (one process per case): an instance that steps, or NULL and an error saying why;
+    never a signal (a bad location used to be a segmentation fault)."""
+    inside = Path("/tmp") / "servo dé#"
+    with zipfile.ZipFile(standalone["NpidServo"]) as archive:
+        archive.extractall(bare_root / inside.relative_to("/"))
+    guid = read_model_description(str(standalone["NpidServo"])).guid
+    for case in instantiate_cases(inside, guid):
+        check_instantiate_answer(case, *c_host_instantiate(
+            ["chroot", str(bare_root), "/fmi_c_host"], case, inside, "NpidServo"))
 
 
 def test_a_standalone_fmu_ignores_the_pythons_of_the_machine_it_runs_on(standalone, c_host,

@@ -7,7 +7,7 @@ advances it in :meth:`AxisSlave.step`. Nothing raises into pythonfmu (which woul
 exception into fmi2Fatal and leave its instance holding freed objects): a ValueError (a bad
 parameter, a NaN input, a refused step) is logged with category ``logStatusError`` naming
 the variable, any other exception (a bug) with ``logStatusFatal`` and its traceback; the
-FMU's host layer (fmus/common/feedaxis_fmi_host.c) returns that status for the call.
+FMU's host layer (fmus/common/host/) returns that status for the call.
 
 While stepping, the host layer keeps the Real inputs and outputs itself and makes one call
 per doStep, to the function :func:`claim` returns (:meth:`AxisSlave.exchanger`), instead of
@@ -41,9 +41,9 @@ def exchange(current_time, step_size, {values}):
         except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
             slave._report(f"at t = {{current_time}} s", error)
             return drained(None)
-        if not slave.log_queue:
+        if not slave.log_queue and isfinite({outputs_total}):
             return ({outputs})
-        return drained(({outputs}))
+        return drained(finite(current_time, ({outputs})))
     stepped = advance(current_time, step_size, INPUTS, {values_tuple})
     return drained(({outputs}) if stepped else None)
 """
@@ -96,6 +96,7 @@ class AxisSlave(Fmi2Slave):
         self.limits = {}
         self.model = None
         self._input_names = []
+        self._output_names = []
         _handoff().constructed[threading.get_ident()] = weakref.ref(self)
 
     def _declare(self, name, value, description, unit, limits, **kind):
@@ -118,6 +119,7 @@ class AxisSlave(Fmi2Slave):
 
     def output(self, name, description, unit=None):
         """Declare a Real output, calculated at initialisation from parameters and inputs."""
+        self._output_names.append(name)
         self._declare(name, 0.0, description, unit, None,
                       causality=Fmi2Causality.output, initial=Fmi2Initial.calculated)
 
@@ -139,10 +141,47 @@ class AxisSlave(Fmi2Slave):
 
     def exit_initialization_mode(self):
         try:
+            self._check_parameters()
             self.model = self.build()
             self.step(0.0)
+            self._check_outputs()
         except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
+            self.model = None
             self._report("initialisation", error)
+
+    def _check_parameters(self):
+        """Raise ValueError naming the first number parameter that is not finite or lies
+        outside its declared limits (the host layer refuses these where they are set; a
+        build without it, or a value set before the layer saw it, is caught here)."""
+        for variable in self.vars.values():
+            value = getattr(self, variable.name)
+            if variable.causality != Fmi2Causality.parameter or isinstance(value, (bool, str)):
+                continue
+            if not math.isfinite(value):
+                raise ValueError(f"{variable.name}: must be finite, got {value!r}")
+            lower, upper = self.limits.get(variable.name, (None, None))
+            if (lower is not None and value < lower) or (upper is not None and value > upper):
+                raise ValueError(f"{variable.name} = {value!r} is outside its limits "
+                                 f"[{lower}, {upper}]")
+
+    def _check_outputs(self):
+        """Raise ValueError naming the first output that is not finite: the parameters and
+        inputs, each valid, took the model beyond a float's range (never reported as OK)."""
+        for name in self._output_names:
+            value = getattr(self, name)
+            if not math.isfinite(value):
+                raise ValueError(f"output {name} = {value!r}: the parameters and inputs take "
+                                 "the model beyond a float's range")
+
+    def _finite_outputs(self, current_time, values):
+        """``values`` (the outputs after a step) if all are finite, else None with the error
+        logged (the exchange's check when their sum is not finite)."""
+        try:
+            self._check_outputs()
+        except ValueError as error:
+            self._report(f"at t = {current_time} s", error)
+            return None
+        return values
 
     def do_step(self, current_time, step_size):
         names = self._input_names
@@ -170,13 +209,16 @@ class AxisSlave(Fmi2Slave):
             values=values, values_tuple=f"({values},)" if inputs else "()",
             assignments="".join(f"    slave.{name} = {name}\n" for name in inputs),
             total=" + ".join(inputs) or "0.0",
+            outputs_total=" + ".join(f"slave.{name}" for name in outputs) or "0.0",
             outputs=", ".join(f"slave.{name}" for name in outputs) + ",")
         namespace = {"slave": self, "step": self.step, "advance": self._advance,
-                     "drained": self._drained, "INPUTS": inputs, "inf": math.inf,
+                     "drained": self._drained, "finite": self._finite_outputs,
+                     "INPUTS": inputs, "inf": math.inf,
                      "isfinite": math.isfinite}
         exec(compile(source, f"<{type(self).__name__} exchange>", "exec"), namespace)
         exchange = namespace["exchange"]
         exchange.state_error = self.state_error  # the host layer's check of a state buffer
+        exchange.initialised = self.initialised  # which FMI state a restored state is in
         return exchange
 
     def _drained(self, outputs):
@@ -199,15 +241,24 @@ class AxisSlave(Fmi2Slave):
                     if not math.isfinite(value):
                         raise ValueError(f"input {name} must be finite, got {value!r}")
             self.step(step_size)
+            self._check_outputs()
         except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
             return self._report(f"at t = {current_time} s", error)
         return True
 
     def _report(self, where, error):
         """Log ``error``: a ValueError (bad input) as an error, anything else (a bug) as
-        fatal with its traceback. Returns False (the step failed)."""
+        fatal with its traceback. Returns False (the step failed). A ValueError that is not
+        about one parameter (which the physics names first: ``diameter_m: must be > 0``) nor
+        names an input gets the inputs' values, which brought the model there
+        (``math domain error``, a non-finite output)."""
         if isinstance(error, ValueError):
-            self.log(f"{where}: {error}", Fmi2Status.error, "logStatusError")
+            text = str(error)
+            about_one = any(text.startswith(variable.name) for variable in self.vars.values())
+            if not about_one and not any(name in text for name in self._input_names):
+                values = ", ".join(f"{n} = {getattr(self, n)!r}" for n in self._input_names)
+                text = f"{text} (the inputs: {values})"
+            self.log(f"{where}: {text}", Fmi2Status.error, "logStatusError")
         else:
             self.log(f"{where}: internal error\n{traceback.format_exc()}", Fmi2Status.fatal,
                      "logStatusFatal")
@@ -238,6 +289,11 @@ class AxisSlave(Fmi2Slave):
         super()._set_fmu_state(state)
         if initialised:
             self.restore_model_state(model_state)
+
+    def initialised(self):
+        """Whether the model is built (initialisation succeeded, or a state saved after it
+        was restored)."""
+        return self.model is not None
 
     def state_error(self, data):
         """Why the serialised ``data`` (bytes) is not a state of this FMU, or None."""

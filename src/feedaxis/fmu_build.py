@@ -1,7 +1,7 @@
 """Build the four feedaxis FMUs with pythonfmu and make them loadable by any FMI host.
 
 Sources: ``fmus/<Name>/<Name>.py`` (the slave script), ``fmus/common/feedaxis_slave.py``
-(the shared adapter), ``fmus/common/feedaxis_fmi_host.c`` (the host layer) and
+(the shared adapter), ``fmus/common/host/*.c`` (the host layer) and
 ``feedaxis.physics``. Each FMU carries one package ``feedaxis_fmu_<Name>`` (its slave, the
 adapter and a copy of the physics) so FMUs sharing one Python process never import each
 other's modules, and a generated pythonfmu entry script ``<Name>.py``. It runs without
@@ -155,12 +155,14 @@ def build_fmu(name, out_dir, runtime=None):
             slave = getattr(importlib.import_module(name), name)(instance_name="describe")
         finally:
             _forget_modules(staging, (name, package))
-        variables = _complete_model_description(fmu_path, slave)
+        guid, variables = _complete_model_description(fmu_path, slave)
         missing = host_layer_missing()
         if runtime is not None:
-            _make_standalone(fmu_path, name, sources, variables, staging, runtime, missing)
+            _make_standalone(fmu_path, name, sources, (variables, guid), staging, runtime,
+                             missing)
         elif missing is None:
-            _install_host_layer(fmu_path, name, _compile_host_layer(sources, variables, staging))
+            _install_host_layer(fmu_path, name, _compile_host_layer(sources, variables, guid,
+                                                                           staging))
         elif os.environ.get("CI") == "true":
             raise HostLayerUnavailable(f"{missing}: CI requires the FMUs' C host layer")
         else:
@@ -186,37 +188,52 @@ def _stage_package(sources, name, package_dir):
         (package_dir / source.name).write_text(text, encoding="utf-8")
 
 
-def _make_standalone(fmu_path, name, sources, variables, work_dir, runtime, missing):
+def _make_standalone(fmu_path, name, sources, description, work_dir, runtime, missing):
     """The host layer that starts the FMU's own Python, and that Python's files."""
     from .fmu_standalone import StandaloneUnavailable, trace_fmu, host_layer_defines
 
     if missing is not None:
         raise StandaloneUnavailable(f"{missing}: a standalone FMU needs the C host layer")
     trace = trace_fmu(fmu_path, name, sources / name / f"{name}_in.csv")
-    host_layer = _compile_host_layer(sources, variables, work_dir, host_layer_defines(trace))
+    host_layer = _compile_host_layer(sources, *description, work_dir, host_layer_defines(trace))
     _install_host_layer(fmu_path, name, host_layer)
     runtime.add_runtime(fmu_path, trace)
 
 
-def _compile_host_layer(sources, variables, work_dir, defines=None):
-    """Compile fmus/common/feedaxis_fmi_host.c for this FMU's variables; return the .so.
-    ``defines``: a standalone FMU's constants, else the Python that builds (its paths)."""
-    rows = [f'    {{{vr}, \'{kind}\', \'{type_code}\', "{variable}"}},'
-            for vr, kind, type_code, variable in variables]
+def host_layer_sources(sources):
+    """The C files of the host layer (fmus/common/host/, one job each)."""
+    return sorted((sources / "common" / "host").glob("*.c"))
+
+
+def _c_double(value, infinite_sign):
+    """``value`` as a C expression; None is the infinity of ``infinite_sign``."""
+    if value is None:
+        return "HUGE_VAL" if infinite_sign > 0 else "-HUGE_VAL"
+    return repr(float(value))
+
+
+def _compile_host_layer(sources, variables, guid, work_dir, defines=None):
+    """Compile the host layer (:func:`host_layer_sources`) for this FMU's variables and GUID;
+    return the .so. ``defines``: a standalone FMU's constants, else the Python that builds
+    (its paths)."""
+    rows = [f'    {{{vr}, \'{kind}\', \'{type_code}\', "{variable}", {_c_double(low, -1)}, '
+            f'{_c_double(high, 1)}}},'
+            for vr, kind, type_code, variable, (low, high) in variables]
     (work_dir / "feedaxis_fmi_vars.h").write_text(
-        "typedef struct { unsigned vr; char kind; char type; const char *name; } FeedaxisVar;\n"
+        "typedef struct { unsigned vr; char kind; char type; const char *name; double min, max; }"
+        " FeedaxisVar;\n"
         "static const FeedaxisVar FEEDAXIS_VARS[] = {\n" + "\n".join(rows) + "\n};\n"
         "#define FEEDAXIS_N_VARS (sizeof FEEDAXIS_VARS / sizeof FEEDAXIS_VARS[0])\n",
         encoding="utf-8")
     defines = {**(defines or {"FEEDAXIS_PYTHON": sys.executable,
                               "FEEDAXIS_LIBPYTHON": libpython_path() or ""}),
-               "FEEDAXIS_PYTHON_VERSION": f"{sys.version_info.major}.{sys.version_info.minor}"}
+               "FEEDAXIS_PYTHON_VERSION": f"{sys.version_info.major}.{sys.version_info.minor}",
+               "FEEDAXIS_GUID": guid}
     output = work_dir / "host.so"
     command = [c_compiler(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-Wall",
                f"-I{sysconfig.get_paths()['include']}", f"-I{sources / 'common' / 'fmi2'}",
-               f"-I{work_dir}", *(f'-D{name}="{value}"' for name, value in defines.items()),
-               "-o", str(output), str(sources / "common" / "feedaxis_fmi_host.c"),
-               "-ldl", "-lpthread"]
+               f"-I{sources / 'common' / 'host'}", f"-I{work_dir}", *(f'-D{name}="{value}"' for name, value in defines.items()),
+               "-o", str(output), *map(str, host_layer_sources(sources)), "-ldl", "-lpthread"]
     result = subprocess.run(command, capture_output=True, text=True)
     if result.returncode != 0:
         raise RuntimeError(f"compiling the FMU host layer failed:\n{result.stderr}")
@@ -253,14 +270,17 @@ def _forget_modules(staging, module_names):
 
 
 def _complete_model_description(fmu_path, slave):
-    """Add units, limits, dependencies and InitialUnknowns; return (vr, kind, type, name)
-    rows.
+    """Add units, limits, dependencies and InitialUnknowns, and drop the platforms the FMU does
+    not carry; return the GUID and (vr, kind, type, name, (min, max)) rows.
 
     kind (for the host layer): ``f`` fixed parameter, ``o`` output, ``u`` input, ``i``
-    anything else; type: ``R`` Real, ``I`` Integer, ``B`` Boolean, ``S`` String.
-    Outputs are computed in doStep only (no direct feedthrough: ``dependencies=""``).
+    anything else; type: ``R`` Real, ``I`` Integer, ``B`` Boolean, ``S`` String; min and
+    max None where unbounded. Outputs are computed in doStep only (no direct feedthrough:
+    ``dependencies=""``). pythonfmu packs its stock win64 library too; nothing here builds
+    or tests the FMUs on Windows (docs/fmu-hosts.md), so they declare linux64 only.
     """
-    entries = _read_fmu(fmu_path)
+    entries = {name: data for name, data in _read_fmu(fmu_path).items()
+               if not name.startswith("binaries/") or name.startswith("binaries/linux64/")}
     root = ET.fromstring(entries["modelDescription.xml"])
     _add_unit_definitions(root, sorted(set(slave.units.values())))
     rows, outputs = [], []
@@ -280,7 +300,8 @@ def _complete_model_description(fmu_path, slave):
         if variable.get("causality") == "output":
             kind = "o"
             outputs.append(index)
-        rows.append((int(variable.get("valueReference")), kind, type_element.tag[0], name))
+        rows.append((int(variable.get("valueReference")), kind, type_element.tag[0], name,
+                     (lower, upper)))
     structure = root.find("ModelStructure")
     for unknown in structure.iter("Unknown"):
         unknown.set("dependencies", "")
@@ -290,7 +311,7 @@ def _complete_model_description(fmu_path, slave):
     ET.indent(root)
     entries["modelDescription.xml"] = ET.tostring(root, encoding="utf-8", xml_declaration=True)
     _write_fmu(fmu_path, entries)
-    return rows
+    return root.get("guid"), rows
 
 
 def _add_unit_definitions(root, unit_names):
