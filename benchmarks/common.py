@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import os
 import platform
+import subprocess
 import sys
+import tempfile
+import time
 from datetime import datetime, timezone
+from typing import NamedTuple
 
 
 def arguments(parser, argv, **smoke):
@@ -23,6 +27,33 @@ def arguments(parser, argv, **smoke):
         for name, value in smoke.items():
             setattr(args, name, value)
     return args
+
+
+class Command(NamedTuple):
+    """What one command cost and printed: wall and CPU seconds (its own and its reaped
+    children's, as wait4 gives them), peak resident memory (MB), its output."""
+
+    wall_s: float
+    cpu_s: float
+    peak_mb: float
+    stdout: str
+    stderr: str
+
+
+def run_command(command):
+    """:class:`Command` of ``command`` (a list) run to its end; a failure raises."""
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        start = time.perf_counter()
+        process = subprocess.Popen(command, stdout=out, stderr=err)
+        _, status, usage = os.wait4(process.pid, 0)
+        wall_s = time.perf_counter() - start
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read().decode(), err.read().decode()
+    if os.waitstatus_to_exitcode(status):
+        raise RuntimeError(f"{' '.join(command[2:5])} failed: {stderr.strip().splitlines()[-1:]}")
+    return Command(wall_s, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, stdout,
+                   stderr)
 
 
 def machine():

@@ -13,11 +13,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from feedaxis.case import (PHYSICAL_RANGE, CaseError, _check_header, _read_csv, _read_text,
                            _row_label, range_problem)
+from feedaxis.cli import main
 from feedaxis.measurement.positioning import POSITIONING_COLUMNS
 from feedaxis.measurement.tracking import TRACKING_COLUMNS
 from feedaxis.errors import finite_float, text_lines
@@ -151,3 +153,35 @@ def test_the_reader_benchmark_runs_at_a_tiny_size():
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert "reader / np.loadtxt" in result.stdout
+
+
+def test_a_case_beyond_the_memory_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    """A positioning.csv whose analysis would need more memory than the machine has is
+    refused with its size and the limit (exit 2), and its text is never read."""
+    import feedaxis.case as case_module
+
+    folder = tmp_path / "big"
+    folder.mkdir()
+    (folder / "axis.toml").write_text('name = "big"\n\n[screw]\nlead_mm = 10.0\n')
+    rows = 20_000
+    lines = [f"{0.5 * (i % 1000):.4f},{(i % 7) * 0.1:.4f}" for i in range(rows)]
+    (folder / "positioning.csv").write_text("target_mm,error_um\n" + "\n".join(lines) + "\n")
+    size = (folder / "positioning.csv").stat().st_size
+    needed = case_module.TEXT_COPIES * size + rows * case_module.ANALYSIS_BYTES_PER_ROW
+
+    def never(path):
+        raise AssertionError("the file was read")
+
+    monkeypatch.setattr(case_module, "available_memory_bytes", lambda: 0.9 * needed)
+    monkeypatch.setattr(case_module, "_read_text", never)
+    with pytest.raises(case_module.CaseError) as refused:
+        case_module.read_case(folder)
+    message = str(refused.value)
+    assert "positioning.csv" in message and f"{size / 1e9:.3g} GB" in message
+    assert f"{0.9 * needed / 1e9:.3g} GB available" in message
+    assert f"about {rows:.3g} rows" in message
+    monkeypatch.undo()
+    monkeypatch.setattr(case_module, "available_memory_bytes", lambda: 1.1 * needed)
+    assert case_module.read_case(folder).positioning.size == rows
+    monkeypatch.setattr(case_module, "available_memory_bytes", lambda: 0.9 * needed)
+    assert main(["compare", str(folder), "--json"]) == 2

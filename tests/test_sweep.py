@@ -228,3 +228,47 @@ def test_the_sweep_benchmark_runs_at_a_tiny_size(user_fmu_cache, capsys):
                      printed)
     assert re.search(r"throughput of 2 workers / 1 worker: \d+\.\d\dx", printed)
     assert re.search(r"10\^6 such trials in one hour: \d+ worker cores", printed)
+
+
+def test_a_cluster_pays_only_for_enough_work():
+    """Known answers of the cost model: n trials of t s take n·t here against
+    CLUSTER_START_S + n·t / cores on a local cluster."""
+    from feedaxis.cosim.sweep.run import CLUSTER_START_S, cluster_pays
+
+    assert not cluster_pays(1, 0.2, 2)
+    assert not cluster_pays(1000, 0.2, 1)  # one core: a cluster never gains
+    even = 2 * CLUSTER_START_S  # n·t at which two workers break even
+    assert not cluster_pays(100, 0.999 * even / 100, 2)
+    assert cluster_pays(100, 1.001 * even / 100, 2)
+
+
+def test_small_sweeps_run_here_and_say_so(fmu_dir, monkeypatch):
+    """The default workers: a sweep too small for a cluster runs in this process (nothing
+    reaches Dask), says so, and gives the table of --workers 0; with a free cluster start
+    the trials after the first go to the cluster."""
+    import feedaxis.cosim.sweep.run as sweep_module
+
+    def no_cluster(*args):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(sweep_module.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(sweep_module, "_run_on_dask", no_cluster)
+    here = sweep("tracking", FRICTION, trials=3, seed=5, workers=0, fmus=fmu_dir, **TRACKING)
+    said = []
+    default = sweep("tracking", FRICTION, trials=3, seed=5, fmus=fmu_dir, echo=said.append,
+                    **TRACKING)
+    assert default.equals(here)
+    assert len(said) == 1 and said[0].startswith("ran in this process: 3 trial(s)")
+
+    handed = []
+
+    def cluster_here(plan, job, remaining, finished, *where):
+        handed.extend(remaining)
+        sweep_module._run_here(plan, job, remaining, finished)
+
+    monkeypatch.setattr(sweep_module, "CLUSTER_START_S", 0.0)
+    monkeypatch.setattr(sweep_module, "_run_on_dask", cluster_here)
+    said.clear()
+    switched = sweep("tracking", FRICTION, trials=3, seed=5, fmus=fmu_dir, echo=said.append,
+                     **TRACKING)
+    assert handed == [1, 2] and not said and switched.equals(here)

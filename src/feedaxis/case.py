@@ -9,7 +9,6 @@ the axis, the duty, the CSV reader and writer.
 from __future__ import annotations
 
 import errno
-import io
 import math
 import os
 import shutil
@@ -26,7 +25,7 @@ from .errors import (InputError, finite_float, finite_value, read_text, read_tom
                      shown_value, toml_key_line)
 from .output import staging_prefix, umask_mode, writing
 from .physics.geometry import SUPPORTS
-from .physics.thermal import DutySegment
+from .physics.thermal import Segments
 
 # Set by --follow-links: read case files that are links to files outside their folder.
 FOLLOW_LINKS = ContextVar("follow_links", default=False)
@@ -102,9 +101,10 @@ class Axis:
 
 @dataclass(frozen=True)
 class Duty:
-    """duty.csv: consecutive segments from t = 0, with the optional ambient per segment."""
+    """duty.csv: consecutive segments from t = 0 (:class:`~feedaxis.physics.thermal.Segments`,
+    columns), with the optional ambient per segment."""
 
-    segments: tuple
+    segments: Segments
     ambient_C: np.ndarray | None = None
 
     @property
@@ -297,6 +297,7 @@ def _read_csv(path, spec):
     columns present, the data rows' :class:`RowLabels`).
     """
     path = Path(path)
+    check_fits_in_memory(path)
     text = _read_text(path).replace("\r\n", "\n").replace("\r", "\n")
     header = _first_record(text)
     if header is None:
@@ -317,6 +318,50 @@ def _read_csv(path, spec):
             value = column[bad[0]]
             raise CaseError(path, f"{value:g} {range_problem(name, value)}", rows[bad[0]], name)
     return values, rows
+
+
+# Peak memory of the heaviest command per row of a case file: report on 10^6 positioning
+# rows (1,000 targets x 500 bidirectional runs) peaked at 615 MB resident, 465 bytes a
+# row above the interpreter's own; the text read is held up to three times more (line
+# ends normalised) while it is parsed.
+ANALYSIS_BYTES_PER_ROW = 500
+TEXT_COPIES = 3
+SAMPLE_BYTES = 1 << 16  # the file's start, from which its rows are counted
+
+
+def check_fits_in_memory(path, available_bytes=None):
+    """Refuse (:class:`CaseError`) a CSV whose reading and analysis would not fit in the
+    memory the machine has available, before reading it: its rows estimated from its size
+    and the lines of its first 64 kB, each row costing ``ANALYSIS_BYTES_PER_ROW``."""
+    size = path.stat().st_size if path.is_file() else 0
+    if size <= SAMPLE_BYTES:
+        return
+    with open(path, "rb") as stream:
+        start = stream.read(SAMPLE_BYTES)
+    rows = size * max(start.count(b"\n"), 1) / len(start)
+    needed = TEXT_COPIES * size + rows * ANALYSIS_BYTES_PER_ROW
+    available = available_memory_bytes() if available_bytes is None else available_bytes
+    if available is not None and needed > available:
+        raise CaseError(path, f"{size / 1e9:.3g} GB, about {rows:.3g} rows: reading and "
+                              f"analysing it needs about {needed / 1e9:.3g} GB of memory "
+                              f"and this machine has {available / 1e9:.3g} GB available; "
+                              "split the measurement into several cases or thin it")
+
+
+def available_memory_bytes():
+    """Memory the machine can give this process now (bytes): MemAvailable of
+    /proc/meminfo, else the physical memory; None when neither is known."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as stream:
+            for line in stream:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
 
 
 class RowLabels:
@@ -352,13 +397,16 @@ def _first_record(text):
 def _table(path, body, header_line, names):
     """The data rows below the header as a float table, and their :class:`RowLabels`.
 
-    A body without comments or blank lines goes to NumPy whole; otherwise its data lines
+    A body without comments or blank lines goes to NumPy whole, read from the file below
+    the header (NumPy's reader takes it in chunks: a copy of the text, 4 bytes a character
+    in a StringIO, would double the memory of a large case); otherwise its data lines
     are picked out first. Where NumPy refuses, the first bad cell is named.
     """
     if (body and not body.isspace() and not body.startswith("\n") and "\n\n" not in body
             and "#" not in body):
         try:
-            table = _parse(io.StringIO(body))
+            table = np.loadtxt(path, delimiter=",", comments=None, dtype=float, ndmin=2,
+                               encoding="utf-8", skiprows=header_line)
             return table, RowLabels(np.arange(header_line + 1, header_line + 1 + len(table)))
         except ValueError:
             pass  # whitespace-only lines or a bad cell: the line-by-line pass sorts it out
@@ -462,9 +510,7 @@ def read_duty(path, length_mm=None):
         kind = "overlaps the previous one" if start[i] < expected[i - 1] else "leaves a gap after the previous one"
         raise CaseError(path, f"segment {kind}: starts at {start[i]:g} s, the previous ends at "
                               f"{expected[i - 1]:g} s", rows[i], "start_s")
-    segments = tuple(DutySegment(*row) for row in zip(
-        start, duration, values["feed_mm_min"], values["from_mm"], values["to_mm"]))
-    return Duty(segments, values.get("ambient_C"))
+    return Duty(Segments(start, duration, feed, from_mm, to_mm), values.get("ambient_C"))
 
 
 def _check_travel(path, values, rows, columns, length_mm):

@@ -52,11 +52,15 @@ def command_group(name, options, **parser_kwargs):
 @contextmanager
 def _progress(label, unit):
     """A tqdm counter on stderr that shows itself only when the work takes over a second;
-    the callback takes an optional label of the step under way."""
+    the callback takes an optional label of the step under way, or ``total=N``: N more
+    steps at most (the bar's total grows by N, nothing is counted)."""
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
-        def tick(step=None):
+        def tick(step=None, total=None):
+            if total is not None:
+                bar.total = (bar.total or 0) + total
+                return
             if step:
                 bar.set_postfix_str(str(step), refresh=False)
             bar.update()
@@ -710,8 +714,8 @@ def _add_sweep_options(sub):
                      help="hold the parameters the fit could not determine at their "
                           "fitted values (without it such a model is refused)")
     sub.add_argument("--workers", type=int, metavar="N",
-                     help="local Dask worker processes (default: one per core; 0 runs "
-                          "in this process)")
+                     help="local Dask worker processes (default: in this process while "
+                          "that is sooner, else one per core; 0 runs in this process)")
     sub.add_argument("--scheduler", metavar="ADDRESS",
                      help="run on the Dask cluster of this scheduler (tcp://host:8786) "
                           "instead of a local one")
@@ -753,7 +757,8 @@ def _cmd_sweep(args):
               thermal_step_s=args.thermal_step_s, model=args.model, set_items=args.set or (),
               effects=_effects(args), fmus=args.fmus,
               workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-              progress=progress, **args.run_scenario.arguments(args))
+              progress=progress, echo=lambda line: print(line, file=sys.stderr),
+              **args.run_scenario.arguments(args))
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     _emit(args, summary, summary_lines(summary) + f"\nfiles: {args.out}/trials.parquet, "
                                                   "summary.json, summary.txt, report.html")

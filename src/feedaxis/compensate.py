@@ -13,7 +13,6 @@ import numpy as np
 
 from .effects import Model
 from .errors import InputError
-from .fit import check_available, rms
 from .iso230 import target_groups
 
 THERMAL_EFFECTS = ("thermal_screw", "ambient_expansion")
@@ -21,6 +20,8 @@ THERMAL_EFFECTS = ("thermal_screw", "ambient_expansion")
 
 def _figures(before_um, after_um):
     """Max |·| and RMS of the thermal error before and after compensation (µm)."""
+    from .fit import rms  # feedaxis.fit imports scipy.optimize (a second): only where used
+
     return {"max_before_um": float(np.max(np.abs(before_um))),
             "max_after_um": float(np.max(np.abs(after_um))),
             "rms_before_um": rms(before_um), "rms_after_um": rms(after_um)}
@@ -104,6 +105,8 @@ def compensate(case, model):
                          f"effect ({' or '.join(THERMAL_EFFECTS)}); identify one first: "
                          "feedaxis fit CASE... --add thermal_screw --out M.toml",
                          parameter="--model")
+    from .fit import check_available
+
     check_available(thermal, case)
     positioning = case.positioning
     visit, reference = visits(positioning)

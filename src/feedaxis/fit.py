@@ -30,6 +30,7 @@ SINGULAR_RATIO = 1e-6
 # of freedom), 25 % at nu = 8; with fewer, BIC and the noise-based verdicts mean nothing.
 NOISE_DOF = 8
 FD_STEP = np.sqrt(np.finfo(float).eps)  # relative step of the finite differences
+MAX_NFEV_PER_PARAMETER = 100  # a trust-region pass's evaluations per parameter it moves
 
 
 @dataclass(frozen=True)
@@ -197,7 +198,9 @@ def fit(model, data, progress=None, kind=None):
     data : Case, Measurement or list of them
         Fitted jointly; their residuals are concatenated.
     progress : callable, optional
-        Called once per model evaluation (for a progress bar).
+        Called once per model evaluation (for a progress bar), and first as
+        ``progress(total=N)`` with the most evaluations the fit can make
+        (:func:`evaluation_bound`).
     kind : str, optional
         The kind of measurement, where the model names none and a case holds several.
 
@@ -211,10 +214,13 @@ def fit(model, data, progress=None, kind=None):
     if layout.size == 0:
         return evaluate(model, found)
     problem = Problem(model, found, progress)
+    if progress:
+        progress(total=evaluation_bound(layout))
     start = variable_projection(problem, layout)
     solution = (_linear_solution(problem, layout, start) if layout.nonlinear_index.size == 0
                 else least_squares(problem.residual(layout), start, bounds=layout.bounds(),
-                                   jac=problem.jacobian(layout), x_scale="jac", method="trf"))
+                                   jac=problem.jacobian(layout), x_scale="jac", method="trf",
+                                   max_nfev=MAX_NFEV_PER_PARAMETER * layout.size))
     sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
                                                     solution.active_mask, layout, found)
     fitted = model.with_values(layout.values(solution.x))
@@ -384,12 +390,24 @@ def variable_projection(problem, layout):
     if nonlinear.size:
         solution = least_squares(project, x[nonlinear], bounds=(lower[nonlinear],
                                                                 upper[nonlinear]),
-                                 x_scale="jac", method="trf")
+                                 x_scale="jac", method="trf",
+                                 max_nfev=MAX_NFEV_PER_PARAMETER * nonlinear.size)
         project(solution.x)
     else:
         project(x[nonlinear])
     margin = 1e-9 * (upper - lower)
     return np.clip(x, lower + margin, upper - margin)
+
+
+def evaluation_bound(layout):
+    """The most model evaluations one :func:`fit` over ``layout`` makes: each of its two
+    trust-region passes (the projection's over the nonlinear parameters, the polish over
+    all) stops after ``MAX_NFEV_PER_PARAMETER`` evaluations per parameter it moves (SciPy's
+    default for TRF, passed explicitly), each followed by at most one forward-difference
+    Jacobian of one evaluation per nonlinear parameter; plus the projection's last."""
+    per_step = 1 + layout.nonlinear_index.size
+    moved = layout.nonlinear_index.size + (layout.size if layout.nonlinear_index.size else 0)
+    return MAX_NFEV_PER_PARAMETER * moved * per_step + 2
 
 
 def bounded_linear_solve(columns, target, lower, upper):

@@ -18,6 +18,7 @@ axis coordinate mapped through P_f (Eq. 15-16), plus ambient expansion TE_a (Eq.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from functools import cached_property
 from typing import NamedTuple
@@ -446,12 +447,15 @@ def simulate_duty(params, segments, times_s):
 
 @one_blas_thread
 def duty_unit_fields(params, segments, times_s):
-    """Temperature rise per unit k3 and per unit k4 at ``times_s``, in closed form per segment.
+    """Temperature rise per unit k3 and per unit k4 at ``times_s``, in closed form per run.
 
     Within a segment the nut's heat and shading are averaged over its path
     (:func:`averaged_nut_cells`), which makes the system time-invariant; the explicit
     scheme of Eq. 10 is then evaluated exactly for any number of steps through the
     eigen-decomposition of the symmetric A: θ_k = V (1 + dt·μ)^k Vᵀ (θ_0 - θ*) + θ*.
+    Consecutive segments of one feed and one path share A and θ*, so a run of them is one
+    such step (the steps of its segments added; :class:`Segments`): the cost follows the
+    number of runs, not of segments, and the field is formed at ``times_s`` only.
     Heat enters only through the sources, so the field is k3·Θ_B + k4·Θ_N for any
     k3, k4 (W per mm/min) at fixed k1, k2, λ and P_f.
 
@@ -459,7 +463,7 @@ def duty_unit_fields(params, segments, times_s):
     ----------
     params : ThermalScrewParams
         k3 and k4 are ignored.
-    segments : sequence of DutySegment
+    segments : Segments or sequence of DutySegment
         Consecutive segments starting at t = 0.
     times_s : array_like
         Sample times (s), within the duty span.
@@ -469,52 +473,220 @@ def duty_unit_fields(params, segments, times_s):
     ndarray, shape (2, len(times_s), n_cells)
         Θ_B and Θ_N (K per W/(mm/min)) at each sample time.
     """
+    duty = Segments.of(segments)
     times_s = np.asarray(times_s, dtype=float)
+    modes = [_path_modes(params, *key) for key in duty.keys]
+    alternation = _alternation(duty, modes)
+    samples = duty.locate(times_s)
+    run_start = _run_start_modes(duty, modes, alternation, np.unique(samples.run))
+    sample_key = duty.run_key[samples.run]
+    dt_s = np.array([mode.dt_s for mode in modes])[sample_key]
+    sign = (_range_reduce(np.multiply, alternation, duty.run_first[samples.run], samples.segment)
+            * np.cos(np.pi * samples.elapsed_s / dt_s))
+    steps = (samples.before_s + samples.elapsed_s) / dt_s
     unit_K = np.zeros((2, times_s.size, params.n_cells))
-    state_K = np.zeros((2, params.n_cells))
-    propagators = {}
-    for segment in segments:
-        key = (abs(segment.feed_mm_min), segment.from_mm, segment.to_mm)
-        if key not in propagators:
-            propagators[key] = _segment_propagator(params, segment)
-        propagate = propagators[key]
-        inside = (times_s >= segment.start_s) & (times_s <= segment.end_s)
-        if np.any(inside):
-            unit_K[:, inside] = propagate(state_K, times_s[inside] - segment.start_s)
-        state_K = propagate(state_K, np.array([segment.duration_s]))[:, 0]
+    for key in np.unique(sample_key):
+        mine = np.flatnonzero(sample_key == key)
+        mode = modes[key]
+        start = np.stack([run_start[r] for r in samples.run[mine]], axis=1)
+        unit_K[:, samples.inside[mine]] = (
+            (start * _decay(mode, steps[mine], sign[mine])[None]) @ mode.vectors.T
+            + mode.steady_K[:, None])
     return unit_K
 
 
-def _segment_propagator(params, segment):
-    """θ(elapsed) for a start field, one row per unit source (bearing, nut), Eq. 10 exactly."""
-    feed = segment.feed_mm_min
-    path_m = screw_coordinate_m(np.array([segment.from_mm, segment.to_mm]), params.fixed_end_mm)
+class PathModes(NamedTuple):
+    """Eq. 10 with the nut's heat and shading averaged over one path at one feed, in the
+    eigenbasis of its symmetric A: A = V diag(μ) Vᵀ, one explicit step multiplies mode i
+    by growth_i = 1 + dt·μ_i, and the field tends to θ* (one row per unit source)."""
+
+    vectors: np.ndarray
+    growth: np.ndarray
+    steady_K: np.ndarray
+    dt_s: float
+
+    @property
+    def alternating(self):
+        """Modes whose growth is negative (the fastest, zigzag ones, near the stable limit)."""
+        return self.growth < 0.0
+
+
+def _path_modes(params, feed_mm_min, from_mm, to_mm):
+    """:class:`PathModes` of a nut running between two axis positions at a feed."""
+    path_m = screw_coordinate_m(np.array([from_mm, to_mm]), params.fixed_end_mm)
     nut_fraction = averaged_nut_cells(params, path_m[0], path_m[1])
-    rates, vectors = np.linalg.eigh(rate_matrix(params, feed, nut_fraction))
-    steady_K = -((unit_source_rates(params, feed, nut_fraction) @ vectors) / rates) @ vectors.T
-    dt_s = stable_time_step_s(params, convective_loss_W_K(params, feed, nut_fraction))
-    growth = 1.0 + dt_s * rates
-
-    def propagate(state_K, elapsed_s):
-        modes = (state_K - steady_K) @ vectors
-        decay = _powers(growth, elapsed_s / dt_s)
-        return (decay[None, :, :] * modes[:, None, :]) @ vectors.T + steady_K[:, None, :]
-
-    return propagate
+    rates, vectors = np.linalg.eigh(rate_matrix(params, feed_mm_min, nut_fraction))
+    steady_K = -((unit_source_rates(params, feed_mm_min, nut_fraction) @ vectors) / rates) \
+        @ vectors.T
+    dt_s = stable_time_step_s(params, convective_loss_W_K(params, feed_mm_min, nut_fraction))
+    return PathModes(vectors, 1.0 + dt_s * rates, steady_K, dt_s)
 
 
-def _powers(growth, steps):
-    """growth^steps for every (step count, mode), shape (len(steps), len(growth)).
+def _alternation(duty, modes):
+    """cos(π k) of each segment's k = duration / dt steps, the factor :func:`_decay` gives
+    the alternating modes over it (1 where its path has none)."""
+    cosines = np.ones(len(duty))
+    alternating = np.array([mode.alternating.any() for mode in modes])
+    segment_key = duty.segment_key
+    chosen = np.flatnonzero(alternating[segment_key])
+    if chosen.size:
+        dt_s = np.array([mode.dt_s for mode in modes])[segment_key[chosen]]
+        cosines[chosen] = np.cos(np.pi * duty.duration_s[chosen] / dt_s)
+    return cosines
 
-    The stable scheme keeps growth in [-1, 1]; a negative growth (the fastest, zigzag modes)
-    alternates in sign, (-1)^k = cos(πk) at whole steps, continued smoothly between them so
-    the field stays smooth in the parameters that set dt.
+
+def _run_start_modes(duty, modes, alternation, wanted, block=4096):
+    """{run: modal field at its start, (θ_0 - θ*) V per unit source} for the ``wanted``
+    runs, advancing the field run by run (one decay per run, :func:`_decay`)."""
+    state_K = np.zeros_like(modes[0].steady_K)
+    wanted_set, last = set(wanted.tolist()), int(wanted.max(initial=-1))
+    run_sign = np.multiply.reduceat(alternation, duty.run_first)
+    starts = {}
+    for first in range(0, last + 1, block):
+        runs = np.arange(first, min(first + block, last + 1))
+        decays = _run_decays(duty, modes, run_sign, runs)
+        for run, key, decay in zip(runs.tolist(), duty.run_key[runs].tolist(), decays):
+            mode = modes[key]
+            start = (state_K - mode.steady_K) @ mode.vectors
+            if run in wanted_set:
+                starts[run] = start
+            state_K = (start * decay) @ mode.vectors.T + mode.steady_K
+    return starts
+
+
+def _run_decays(duty, modes, run_sign, runs):
+    """Each run's decay of every mode over its whole length (rows of ``runs``)."""
+    decays = np.empty((runs.size, modes[0].growth.size))
+    keys = duty.run_key[runs]
+    for key in np.unique(keys):
+        mine = keys == key
+        mode = modes[key]
+        decays[mine] = _decay(mode, duty.run_duration_s[runs[mine]] / mode.dt_s,
+                              run_sign[runs[mine]])
+    return decays
+
+
+def _decay(mode, steps, sign):
+    """growth^steps per (span, mode): |growth|^steps, times ``sign`` on the alternating
+    modes.
+
+    The stable scheme keeps growth in [-1, 1]; a negative growth (the fastest, zigzag
+    modes) alternates in sign, (-1)^k = cos(πk) at whole steps, continued smoothly between
+    them so the field stays smooth in the parameters that set dt; over a span of segments
+    ``sign`` is the product of their cos(πk) (:func:`_alternation`).
     """
-    steps = np.asarray(steps, dtype=float)[:, None]
-    powers = np.abs(growth)[None, :] ** steps
-    alternating = growth < 0.0
-    powers[:, alternating] *= np.cos(np.pi * steps)
-    return powers
+    decay = np.abs(mode.growth)[None, :] ** np.asarray(steps, dtype=float)[:, None]
+    decay[:, mode.alternating] *= np.asarray(sign, dtype=float)[:, None]
+    return decay
+
+
+def _range_reduce(ufunc, values, first, stop):
+    """``ufunc`` over ``values[first:stop]`` for each pair, its identity where empty;
+    ``first <= stop < len(values)``."""
+    if first.size == 0:
+        return np.zeros(0)
+    reduced = ufunc.reduceat(values, np.column_stack((first, stop)).ravel())[::2]
+    reduced[first == stop] = ufunc.identity
+    return reduced
+
+
+class SampleSpans(NamedTuple):
+    """Where each sample time falls in a duty: the samples ``inside`` a segment, and for
+    those their segment, its run, the duration of the run's segments before it (s) and the
+    time since the segment's start (s)."""
+
+    inside: np.ndarray
+    segment: np.ndarray
+    run: np.ndarray
+    before_s: np.ndarray
+    elapsed_s: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Segments(Sequence):
+    """duty.csv's segments as columns (no object per row); ``segments[i]`` is a
+    :class:`DutySegment`. Consecutive segments of the same path at the same speed form a
+    run: Eq. 10 advances them as one (:func:`duty_unit_fields`)."""
+
+    start_s: np.ndarray
+    duration_s: np.ndarray
+    feed_mm_min: np.ndarray
+    from_mm: np.ndarray
+    to_mm: np.ndarray
+
+    @classmethod
+    def of(cls, segments):
+        """``segments`` (a sequence of DutySegment) as columns; Segments pass through."""
+        if isinstance(segments, cls):
+            return segments
+        rows = np.array([(s.start_s, s.duration_s, s.feed_mm_min, s.from_mm, s.to_mm)
+                         for s in segments], dtype=float).reshape(-1, 5)
+        return cls(*(np.ascontiguousarray(column) for column in rows.T))
+
+    def __len__(self):
+        return self.start_s.size
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        return DutySegment(float(self.start_s[index]), float(self.duration_s[index]),
+                           float(self.feed_mm_min[index]), float(self.from_mm[index]),
+                           float(self.to_mm[index]))
+
+    @property
+    def end_s(self):
+        """Where each segment ends (s)."""
+        return self.start_s + self.duration_s
+
+    @cached_property
+    def _runs(self):
+        paths = np.column_stack((np.abs(self.feed_mm_min), self.from_mm, self.to_mm))
+        first = np.flatnonzero(np.append(True, (paths[1:] != paths[:-1]).any(axis=1)))
+        keys, run_key = np.unique(paths[first], axis=0, return_inverse=True)
+        return keys, run_key.ravel(), first
+
+    @property
+    def segment_key(self):
+        """Each segment's row of :attr:`keys`."""
+        return self.run_key[self.segment_run]
+
+    @property
+    def keys(self):
+        """The distinct (|feed| mm/min, from mm, to mm) of the duty, one row each."""
+        return self._runs[0]
+
+    @property
+    def run_key(self):
+        """Each run's row of :attr:`keys`."""
+        return self._runs[1]
+
+    @property
+    def run_first(self):
+        """Each run's first segment."""
+        return self._runs[2]
+
+    @cached_property
+    def segment_run(self):
+        """The run of each segment."""
+        return np.repeat(np.arange(self.run_first.size),
+                         np.diff(np.append(self.run_first, len(self))))
+
+    @cached_property
+    def run_duration_s(self):
+        """Each run's length (s): the sum of its segments' durations."""
+        return np.add.reduceat(self.duration_s, self.run_first)
+
+    def locate(self, times_s):
+        """:class:`SampleSpans` of ``times_s``: a time belongs to the last segment that
+        starts at or before it, if it has not ended by then."""
+        segment = np.clip(np.searchsorted(self.start_s, times_s, side="right") - 1, 0, None)
+        inside = np.flatnonzero((times_s >= self.start_s[segment])
+                                & (times_s <= self.end_s[segment]))
+        segment = segment[inside]
+        run = self.segment_run[segment]
+        return SampleSpans(inside, segment, run,
+                           _range_reduce(np.add, self.duration_s, self.run_first[run], segment),
+                           times_s[inside] - self.start_s[segment])
 
 
 @one_blas_thread

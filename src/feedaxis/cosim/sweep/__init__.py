@@ -46,7 +46,7 @@ class SweepInterrupted(KeyboardInterrupt):
 def sweep(scenario, vary=(), trials=None, seed=0, out=None, *, from_model=None, axis=None,
           hold_undetermined=False, step_ms=1.0, thermal_step_s=None, model=None,
           set_items=(), effects=None, fmus=None, workers=None, scheduler=None, client=None,
-          resume=False, progress=None, **options):
+          resume=False, progress=None, echo=None, **options):
     """Run a scenario once per trial with varied FMU parameters; return the trial table.
 
     Parameters
@@ -74,8 +74,10 @@ def sweep(scenario, vary=(), trials=None, seed=0, out=None, *, from_model=None, 
         The axis, as ``feedaxis simulate`` takes it (``--step-ms``, ``--model``, ``--set``
         ...).
     workers : int, optional
-        0: run in this process; N: a local Dask cluster of N processes; None: as many as
-        the machine has cores. Ignored with ``scheduler`` or ``client``.
+        0: run in this process; N: a local Dask cluster of N processes; None: in this
+        process while the trials left would not finish sooner on a local cluster of as
+        many processes as the machine has cores (its start included, judged from the
+        trials' mean time), then on that cluster. Ignored with ``scheduler`` or ``client``.
     scheduler : str, optional
         Address of a running Dask scheduler (``tcp://host:8786``).
     client : distributed.Client, optional
@@ -84,6 +86,8 @@ def sweep(scenario, vary=(), trials=None, seed=0, out=None, *, from_model=None, 
         Run only the trials an interrupted sweep into ``out`` has not finished.
     progress : callable, optional
         ``progress(finished, total)`` after every finished trial.
+    echo : callable, optional
+        Given a line of text when the default ``workers`` ran every trial in this process.
 
     Returns
     -------
@@ -106,7 +110,8 @@ def sweep(scenario, vary=(), trials=None, seed=0, out=None, *, from_model=None, 
     remaining = [k for k in range(plan.trials) if k not in collected.results]
     job = Job(plan.scenario, plan.options, plan.system, files, digest)
     try:
-        execute(plan, job, remaining, collected, store, workers, scheduler, client, progress)
+        execute(plan, job, remaining, collected, store, workers, scheduler, client, progress,
+                echo)
     except KeyboardInterrupt:
         table = finish(plan, identity, collected, store)
         where = f" in {out}; run the same command with --resume for the rest" if store else ""

@@ -25,6 +25,11 @@ from .store import TrialResult
 TASK_S = 2.0          # a Dask task's target duration (s): batches grow to it
 MAX_BATCH = 256
 POLL_S = 0.02         # how often the client looks for finished Dask tasks (s)
+# What a local cluster costs before its first trial and after its last (importing Dask,
+# starting the scheduler and the worker processes, each loading the FMUs, closing them):
+# a 1-trial sweep took 3.5 s on a local cluster of 2 against about 1 s in process on an
+# idle 2-core machine; 6.5 s measured for the cluster alone under a load of 13.
+CLUSTER_START_S = 3.0
 # The local cluster's HTTP server on a free port: its default, 8787, is taken by any other
 # cluster running (a second sweep), and Dask then warns on the user's terminal.
 SCHEDULER_HTTP_PORT = ":0"
@@ -116,8 +121,11 @@ def run_batch(job, batch):
     return runner.series_axis, results, time.perf_counter() - started
 
 
-def execute(plan, job, remaining, collected, store, workers, scheduler, client, progress):
-    """Run the ``remaining`` trials into ``collected`` (and ``store``) where asked."""
+def execute(plan, job, remaining, collected, store, workers, scheduler, client, progress,
+            echo=None):
+    """Run the ``remaining`` trials into ``collected`` (and ``store``) where asked: with
+    ``workers`` None, in this process for as long as a local cluster would not finish
+    sooner (``echo`` says so when it never would)."""
     def finished(batch_results, series_axis):
         collected.add(batch_results, series_axis)
         if store:
@@ -128,23 +136,44 @@ def execute(plan, job, remaining, collected, store, workers, scheduler, client, 
     if not remaining:
         return
     try:
-        if client is None and scheduler is None and workers == 0:
-            _run_here(plan, job, remaining, finished)
-        else:
+        if client is not None or scheduler is not None or workers:
             _run_on_dask(plan, job, remaining, finished, workers, scheduler, client)
+            return
+        cores = 1 if workers == 0 else (os.cpu_count() or 1)
+        left = _run_here(plan, job, remaining, finished, cores)
+        if left:
+            _run_on_dask(plan, job, left, finished, workers, scheduler, client)
+        elif cores > 1 and echo:
+            echo(f"ran in this process: {len(remaining)} trial(s) finish here before a local "
+                 f"cluster of {cores} workers would pay for its start (about "
+                 f"{CLUSTER_START_S:g} s); --workers N runs on one anyway")
     finally:
         if store:
             store.flush()
 
 
-def _run_here(plan, job, remaining, finished):
+def _run_here(plan, job, remaining, finished, cores=1):
+    """Run trials in this process while that finishes sooner than a local cluster of
+    ``cores`` workers would (:func:`cluster_pays`, judged after every trial from their
+    mean time); return the trials left for the cluster."""
     runner = TrialRunner(job, plan.fmu_paths)
+    started = time.perf_counter()
     try:
-        for trial in remaining:
+        for done, trial in enumerate(remaining):
+            trial_s = (time.perf_counter() - started) / max(done, 1)
+            if done and cluster_pays(len(remaining) - done, trial_s, cores):
+                return remaining[done:]
             result = runner.run(trial, plan.inputs(trial)[1])
             finished([result], runner.series_axis)
     finally:
         runner.close()
+    return []
+
+
+def cluster_pays(trials, trial_s, cores):
+    """True when ``trials`` of ``trial_s`` each finish sooner on a local cluster of
+    ``cores`` workers, its start (:data:`CLUSTER_START_S`) included, than here."""
+    return cores > 1 and CLUSTER_START_S + trials * trial_s / cores < trials * trial_s
 
 
 def _run_on_dask(plan, job, remaining, finished, workers, scheduler, client):

@@ -62,13 +62,13 @@ def _distribution(values):
 def sensitivities(inputs, figure):
     """{"r2": R², "inputs": {name: {"src", "spearman", "p_value"}}} of ``figure`` on the
     ``inputs`` ({name: values}) that vary; empty when too few trials."""
-    from scipy.stats import spearmanr
-
     finite = np.isfinite(figure)
     varying = {n: v[finite] for n, v in inputs.items() if v[finite].size and np.ptp(v[finite]) > 0}
     y = figure[finite]
     if not varying or y.size < len(varying) + 2 or np.ptp(y) == 0:
         return {}
+    from scipy.stats import spearmanr  # a second's import, only where it is used
+
     x = np.column_stack(list(varying.values()))
     design = np.column_stack([np.ones(y.size), x])
     coefficients, *_ = np.linalg.lstsq(design, y, rcond=None)

@@ -1,0 +1,79 @@
+"""Fast paths give the numbers of the straightforward ones (seeded cases, 1e-12 relative)."""
+import numpy as np
+import pytest
+
+from feedaxis.stats.coloured import Autoregression
+from feedaxis.stats.noise import PureError, Serial, spectral_gram
+
+
+def plain_gram(jacobian, spectrum):
+    """J'ΣJ through the FFT of every column at once (the formula, unrearranged)."""
+    n_fft = 1 << int(np.ceil(np.log2(2 * jacobian.shape[0])))
+    transform = np.fft.rfft(jacobian, n_fft, axis=0)
+    weights = spectrum(n_fft) / n_fft
+    weights[1:-1] *= 2.0
+    return np.real((transform.conj() * weights[:, None]).T @ transform)
+
+
+def circulant_gram(jacobian, spectrum):
+    """J'ΣJ with Σ formed: the circulant autocovariance of the spectrum, lags |i - j|."""
+    n = jacobian.shape[0]
+    n_fft = 1 << int(np.ceil(np.log2(2 * n)))
+    autocovariance = np.fft.irfft(spectrum(n_fft), n_fft)
+    lags = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    return jacobian.T @ autocovariance[lags] @ jacobian
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_spectral_gram_is_the_plain_formula(seed):
+    rng = np.random.default_rng(seed)
+    jacobian = rng.normal(size=(1500 + 37 * seed, 4))
+    noise = Autoregression(np.array([0.6, -0.2, 0.1])[:seed], 0.3, 0.5)
+    fast = spectral_gram(jacobian.T, noise.spectrum)
+    np.testing.assert_allclose(fast, plain_gram(jacobian, noise.spectrum), rtol=1e-12,
+                               atol=1e-12 * np.abs(fast).max())
+    np.testing.assert_allclose(fast, circulant_gram(jacobian, noise.spectrum), rtol=1e-10,
+                               atol=1e-10 * np.abs(fast).max())
+
+
+def test_serial_gram_in_and_out_of_order():
+    """The gram in the order taken: a permuted order reorders the rows, the identity not."""
+    rng = np.random.default_rng(4)
+    n = 600
+    groups = np.repeat(np.arange(n // 3), 3)
+    jacobian = rng.normal(size=(n, 3))
+    correlated = np.zeros(n)
+    for i, innovation in enumerate(rng.normal(size=n)):
+        correlated[i] = 0.8 * correlated[i - 1] + innovation
+    order = rng.permutation(n)
+    residual = np.empty(n)
+    residual[order] = correlated  # AR(1) in the order taken
+    serial, in_order = Serial(order, PureError(groups)), Serial(np.arange(n), PureError(groups))
+    assert serial.reordered and not in_order.reordered
+    noise = serial.autoregression(residual)
+    assert noise.order > 0
+    np.testing.assert_allclose(serial.gram(jacobian, residual, 1.0),
+                               plain_gram(jacobian[order], noise.spectrum), rtol=1e-12)
+    noise = in_order.autoregression(correlated)
+    assert noise.order > 0
+    np.testing.assert_allclose(in_order.gram(jacobian, correlated, 1.0),
+                               plain_gram(jacobian, noise.spectrum), rtol=1e-12)
+
+
+def test_autoregression_kept_by_content():
+    """A residual seen again (equal content, another array) gets the model fitted to it;
+    another residual its own."""
+    rng = np.random.default_rng(5)
+    n = 900
+    correlated = np.zeros(n)
+    for i, innovation in enumerate(rng.normal(size=n)):
+        correlated[i] = 0.7 * correlated[i - 1] + innovation
+    serial = Serial(np.arange(n), PureError(np.repeat(np.arange(n // 3), 3)))
+    first = serial.autoregression(correlated)
+    assert serial.autoregression(correlated.copy()) is first
+    fresh = serial._autoregression(correlated)
+    np.testing.assert_array_equal(first.coefficients, fresh.coefficients)
+    other = correlated[::-1].copy()
+    assert serial.autoregression(other) is not first
+    np.testing.assert_array_equal(serial.autoregression(other).coefficients,
+                                  serial._autoregression(other).coefficients)
