@@ -129,7 +129,7 @@ OWNERS = {
                     "effects/catalog.py", "positioning_details.py", "report/positioning.py",
                     "report/compensation_table.py", "comptable/", "compensate.py",
                     "uncertainty/", "importers/", "examples.py", "demo.py",
-                    "cosim/scenarios/positioning.py", "cosim/replay.py"),
+                    "cosim/scenarios/positioning.py", "cosim/replay.py", "standards/"),
     "tracking": ("measurement/tracking.py", "effects/tracking.py", "tracking_details.py",
                  "report/tracking.py", "cosim/scenarios/tracking.py"),
 }

@@ -18,6 +18,7 @@ from .fit import FitResult, evaluate, fit
 from .kinds import part
 from .measurement import kinds_for, measurement_of
 from .physics.threads import one_blas_thread
+from .standards import DEFAULT
 
 
 @dataclass
@@ -51,11 +52,21 @@ def measurement_for(case, model, kind=None):
     return measurement_of(case, kind or kinds_for([case], model)[0])
 
 
-def compare(case, model, kind=None):
+def compare(case, model, kind=None, standard=DEFAULT):
     """The figures of ``model`` (as it stands) on the ``kind`` samples of ``case`` (the
-    kind's own: ISO 230-2, seed 002's tracking error; a dict for ``--json``)."""
+    kind's own: for positioning those of ``standard``, :mod:`feedaxis.standards`; seed
+    002's tracking error; a dict for ``--json``)."""
     measurement = measurement_for(case, model, kind)
-    return measurement.figures(evaluate(model, measurement))
+    return _figures(measurement, evaluate(model, measurement), standard)
+
+
+def _figures(measurement, result, standard):
+    """The measurement's figures; those of ``standard`` through the kind's ``standards``
+    part (positioning: :mod:`feedaxis.standards`) when it has one."""
+    of_standard = part(type(measurement), "standards")
+    if standard == DEFAULT or of_standard is None:
+        return measurement.figures(result)
+    return of_standard(measurement, result, standard)
 
 
 def error_ladder(case, model, kind=None):
@@ -74,7 +85,8 @@ def ladder_of(measurement, model):
 
 
 @one_blas_thread
-def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, progress=None):
+def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, progress=None,
+            standard=DEFAULT):
     """Analyse ``model`` (as fitted) on the ``kind`` samples of ``case``.
 
     Parameters
@@ -90,6 +102,8 @@ def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, p
         The kind of measurement (default: the model's, else the first the case holds).
     progress : callable, optional
         Called with a label before each step and each fit.
+    standard : str
+        The standard of the positioning figures (:data:`feedaxis.standards.NAMES`).
 
     Returns
     -------
@@ -109,4 +123,5 @@ def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, p
     details_of = part(type(measurement), "details")
     details = details_of(measurement, model, effects, result) if details_of else None
     return Analysis(case, model, effects, measurement, result, diagnosis, ladder,
-                    measurement.figures(result), measurement.components(model), details)
+                    _figures(measurement, result, standard), measurement.components(model),
+                    details)

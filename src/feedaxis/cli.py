@@ -228,16 +228,28 @@ def _cmd_diagnose(args):
     _emit_each(args, outputs)
 
 
+def _add_standard_option(parser):
+    from .standards import DEFAULT, NAMES, parse
+
+    parser.add_argument("--standard", type=parse, default=DEFAULT, metavar="NAME",
+                        help=f"the standard and edition of the positioning figures (default "
+                             f"{DEFAULT}; 'all': side by side): {', '.join(NAMES)}. See "
+                             "docs/standards.md")
+
+
 def _compare_options(parser):
     parser.add_argument("case", metavar="CASE", help=CASE_HELP)
     _add_model_options(parser, "model (TOML) as fitted; without it the model is empty")
     _add_correction_option(parser)
+    _add_standard_option(parser)
 
 
 @command("compare", help="the measurement's figures: measured against the model",
          description="Positioning: ISO 230-2 accuracy, repeatability, reversal and systematic "
                      "deviation of the measured runs and of what is left after the model, "
-                     "side by side. Tracking: seed 002's maximum and RMS tracking error "
+                     "side by side (--standard: another standard's, or all; a thermal case's "
+                     "ISO 230-3 figures, measured, predicted and compensated). Tracking: "
+                     "seed 002's maximum and RMS tracking error "
                      "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):
@@ -246,7 +258,7 @@ def _cmd_compare(args):
     _, case, model, kinds = _case_and_model(args)
     outputs = []
     for kind in kinds:
-        comparison = compare(case, model, kind)
+        comparison = compare(case, model, kind, args.standard)
         outputs.append((kind, comparison, text.comparison_lines(comparison)))
     _emit_each(args, outputs)
 
@@ -256,6 +268,7 @@ def _report_options(parser):
     _add_model_options(parser, "fitted model (TOML); without it the model is empty")
     parser.add_argument("--out", metavar="REPORT.html", help="default: <case>-report.html")
     _add_correction_option(parser)
+    _add_standard_option(parser)
 
 
 @command("report", help="self-contained HTML page with the plots",
@@ -275,7 +288,8 @@ def _cmd_report(args):
     analyses = []
     for kind in kinds:
         with _progress(f"analysing {kind}", " steps") as tick:
-            analyses.append(analyse(case, model, effects, kind=kind, progress=tick))
+            analyses.append(analyse(case, model, effects, kind=kind, progress=tick,
+                                    standard=args.standard))
     write_report(analyses, out)
     _emit(args, {"report": str(out)}, f"report: {out}")
 
@@ -430,6 +444,7 @@ def _uncertainty_options(parser):
     _add_correction_option(parser)
     parser.add_argument("--html", metavar="PAGE.html",
                         help="also write the results as a page with histograms")
+    _add_standard_option(parser)
 
 
 @command("uncertainty", help="Monte Carlo uncertainty of the ISO 230-2 figures (JCGM 101)",
@@ -462,7 +477,7 @@ def _cmd_uncertainty(args):
             bar.update(trials)
 
         result = evaluate(case, model, budget, args.trials, args.tolerance_um, args.seed,
-                          args.correct_to_20C, progress=tick)
+                          args.correct_to_20C, progress=tick, standard=args.standard)
     payload = result.to_json()
     if args.html:
         from .uncertainty.page import write_page

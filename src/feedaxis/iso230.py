@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 SAME_TARGET_MM = 1e-4  # targets closer than 0.1 µm are one target (recorded jitter)
+COVERAGE = 2  # standard deviations either side of a mean: ±2s (1997, 2006, 2014 editions)
 
 
 def target_clusters(target_mm, tolerance_mm=SAME_TARGET_MM):
@@ -65,41 +66,55 @@ def _figure(value):
     return float(value) if np.ndim(value) == 0 else value
 
 
-def _unidirectional(mean, std, counts):
+def _unidirectional(mean, std, counts, coverage=COVERAGE):
     figures = {"E": _figure(np.ptp(mean, axis=-1))}
     if np.all(counts > 1):
-        figures["R"] = _figure(np.max(4 * std, axis=-1))
-        figures["A"] = _figure(np.max(mean + 2 * std, axis=-1)
-                               - np.min(mean - 2 * std, axis=-1))
+        figures["R"] = _figure(np.max(2 * coverage * std, axis=-1))
+        figures["A"] = _figure(np.max(mean + coverage * std, axis=-1)
+                               - np.min(mean - coverage * std, axis=-1))
     return figures
 
 
-def iso230_figures(target_mm, error_um, direction):
+def direction_sides(target_mm, error_um, direction):
+    """The per-target statistics every standard's figures start from: the
+    :func:`target_clusters` of all samples and, per approach direction present (``"up"``,
+    ``"down"``), its targets, means, standard deviations and run counts
+    (:func:`per_target`; ``error_um`` may carry leading trial axes)."""
+    target_mm, error_um = np.asarray(target_mm, float), np.asarray(error_um, float)
+    direction = np.asarray(direction, float)
+    clusters = target_clusters(target_mm)
+    return clusters, {label: _per_cluster(clusters, error_um, direction, sign)
+                      for label, sign in (("up", 1.0), ("down", -1.0))
+                      if np.any(direction == sign)}
+
+
+def iso230_figures(target_mm, error_um, direction, coverage=COVERAGE):
     """ISO 230-2 figures (µm) keyed ``E_up_um``, ``B_um``, ``A_um``, ...; absent when the
     data cannot give them (one direction only, or one run per target).
 
     ``error_um`` is one set of deviations (``(samples,)``: each figure a float) or many
     trials' (``(trials, samples)``: each figure an array over the trials), computed by the
-    same formulas.
+    same formulas. ``coverage`` is the number of standard deviations either side of a mean
+    (2 since the 1997 edition; 3 in the 1988 edition's ±3s convention).
     """
-    target_mm, error_um = np.asarray(target_mm, float), np.asarray(error_um, float)
-    direction = np.asarray(direction, float)
-    clusters = target_clusters(target_mm)
+    clusters, sides = direction_sides(target_mm, error_um, direction)
+    return figures_of_sides(clusters[0].size, sides, coverage)
+
+
+def figures_of_sides(targets, sides, coverage=COVERAGE):
+    """:func:`iso230_figures` from :func:`direction_sides`' per-direction statistics."""
     figures = {}
-    sides = {}
-    for label, sign in (("up", 1.0), ("down", -1.0)):
-        if np.any(direction == sign):
-            sides[label] = _per_cluster(clusters, error_um, direction, sign)
-            for name, value in _unidirectional(*sides[label][1:]).items():
-                figures[f"{name}_{label}_um"] = value
-            figures[f"runs_{label}"] = int(np.min(sides[label][3]))
+    for label, side in sides.items():
+        for name, value in _unidirectional(*side[1:], coverage).items():
+            figures[f"{name}_{label}_um"] = value
+        figures[f"runs_{label}"] = int(np.min(side[3]))
     if len(sides) == 2 and np.array_equal(sides["up"][0], sides["down"][0]):
-        figures.update(_bidirectional(sides["up"][1:], sides["down"][1:]))
-    figures["targets"] = int(clusters[0].size)
+        figures.update(_bidirectional(sides["up"][1:], sides["down"][1:], coverage))
+    figures["targets"] = int(targets)
     return figures
 
 
-def _bidirectional(up, down):
+def _bidirectional(up, down, coverage=COVERAGE):
     (mean_up, std_up, counts_up), (mean_down, std_down, counts_down) = up, down
     reversal = mean_up - mean_down
     both = np.concatenate((mean_up, mean_down), axis=-1)
@@ -108,13 +123,14 @@ def _bidirectional(up, down):
                "E_um": _figure(np.ptp(both, axis=-1)),
                "M_um": _figure(np.ptp((mean_up + mean_down) / 2, axis=-1))}
     if np.all(counts_up > 1) and np.all(counts_down > 1):
-        r_i = np.maximum.reduce([2 * std_up + 2 * std_down + np.abs(reversal),
-                                 4 * std_up, 4 * std_down])
+        k = coverage
+        r_i = np.maximum.reduce([k * std_up + k * std_down + np.abs(reversal),
+                                 2 * k * std_up, 2 * k * std_down])
         figures["R_um"] = _figure(np.max(r_i, axis=-1))
-        highest = np.maximum(np.max(mean_up + 2 * std_up, axis=-1),
-                             np.max(mean_down + 2 * std_down, axis=-1))
-        lowest = np.minimum(np.min(mean_up - 2 * std_up, axis=-1),
-                            np.min(mean_down - 2 * std_down, axis=-1))
+        highest = np.maximum(np.max(mean_up + k * std_up, axis=-1),
+                             np.max(mean_down + k * std_down, axis=-1))
+        lowest = np.minimum(np.min(mean_up - k * std_up, axis=-1),
+                            np.min(mean_down - k * std_down, axis=-1))
         figures["A_um"] = _figure(highest - lowest)
     return figures
 

@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .. import kinds
+from .. import kinds, standards
 from ..case import DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, length_mm
-from ..iso230 import (FIGURE_NAMES, SAME_TARGET_MM, iso230_figures, sampling_notes,
-                      target_clusters)
+from ..iso230 import SAME_TARGET_MM, iso230_figures, sampling_notes, target_clusters
+from ..standards import DEFAULT
 from ..stats import judge
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
@@ -112,18 +112,17 @@ def _check_within_duty(path, time_s, rows, duty_end_s):
 
 
 def iso_comparison_lines(comparison):
-    """ISO 230-2 figures, measured against the residual after the model."""
+    """The figures of the comparison's standard (ISO 230-2:2014 unless ``--standard`` chose
+    another, or all), measured against the residual after the model."""
+    from ..standards.text import all_lines, standard_lines
+
     lines = [f"{comparison['targets']} targets, runs + {comparison['runs_up']} / "
-             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}",
-             f"{'ISO 230-2 figure (µm)':32s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
-    for figure in comparison["figures"].values():
-        explained = figure["explained"]
-        lines.append(f"{figure['name']:32s} {figure['measured_um']:10.4g} "
-                     f"{figure['residual_um']:10.4g} "
-                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
-    lines.append(f"{'RMS':32s} {comparison['rms_measured_um']:10.4g} "
-                 f"{comparison['rms_residual_um']:10.4g}")
-    if not comparison["bidirectional"]:
+             f"- {comparison['runs_down']}; model: {', '.join(comparison['effects']) or '(none)'}"]
+    if comparison["standard"] == standards.ALL:
+        return "\n".join(lines + all_lines(comparison["standards"]))
+    lines += standard_lines(comparison, (comparison["rms_measured_um"],
+                                         comparison["rms_residual_um"]))
+    if not comparison["bidirectional"] and comparison["standard"] == "ISO 230-2:2014":
         lines.append("(one approach direction: reversal B, E, M and bidirectional R, A need both)")
     lines += [f"note: {note}" for note in comparison.get("sampling", ())]
     return "\n".join(lines)
@@ -141,6 +140,7 @@ class Positioning(Measurement):
     views = "feedaxis.report.positioning:VIEWS"
     scenarios = "feedaxis.cosim.scenarios.positioning:SCENARIOS"
     text = staticmethod(iso_comparison_lines)
+    standards = "feedaxis.standards.compare:standard_figures"
 
     @classmethod
     def read(cls, folder, axis, duty):
@@ -367,25 +367,27 @@ class Positioning(Measurement):
                 return {"R_um": r_um, "E_um": e_um, "repeatable": bool(r_um <= e_um)}
         return None
 
-    def figures(self, result):
-        """ISO 230-2 figures of the measurement and of the residual after the model, side
-        by side; ``explained`` = 1 - residual / measured, the share the model explains."""
+    def head(self, result):
+        """What ``compare`` says of the test and the fit before any standard's figures."""
         samples = self.samples
         measured = iso230_figures(samples.target_mm, result.measured_um, samples.direction)
-        residual = iso230_figures(samples.target_mm, result.residual_um, samples.direction)
-        figures = {}
-        for key, name in FIGURE_NAMES.items():
-            if key in measured:
-                explained = 1 - residual[key] / measured[key] if measured[key] else None
-                figures[key] = {"name": name, "measured_um": measured[key],
-                                "residual_um": residual[key], "explained": explained}
         return {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "targets": measured["targets"],
                 "runs_up": measured.get("runs_up", 0), "runs_down": measured.get("runs_down", 0),
                 "sampling": sampling_notes(samples.target_mm, samples.direction, samples.run),
                 "bidirectional": samples.bidirectional,
                 "rms_measured_um": result.statistics.rms_before_um,
-                "rms_residual_um": result.statistics.rms_um, "figures": figures}
+                "rms_residual_um": result.statistics.rms_um}
+
+    def figures(self, result, standard=DEFAULT):
+        """The figures of the positioning standard ``standard`` (default ISO 230-2:2014;
+        ``all``: every one side by side) of the measurement and of the residual after the
+        model; ``explained`` = 1 - residual / measured, the share the model explains
+        (:mod:`feedaxis.standards`)."""
+        samples = self.samples
+        return {**self.head(result), **standards.figures_payload(
+            standard, samples.target_mm, result.measured_um, result.residual_um,
+            samples.direction)}
 
 
 def marked_wavelengths(axis, effects):

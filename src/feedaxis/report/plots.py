@@ -300,6 +300,29 @@ def thermal_compensation(target_mm, visit, time_s, thermal_error_um, left_um):
                    "Largest error of each run")
 
 
+def thermal_drift(time_s, target_mm, drift_um, segments):
+    """ISO 230-3: each target's drift (deviation less its first reading) against time, one
+    line per target coloured by position, over the duty's feed (shaded, right axis)."""
+    figure, axes = plt.subplots(figsize=(9, 3.8))
+    duty = axes.twinx()
+    for segment in segments:
+        duty.fill_between([segment.start_s / 60.0, segment.end_s / 60.0], 0.0,
+                          segment.feed_mm_min / 1000.0, color="0.85", step="pre", lw=0)
+    duty.set_ylabel("duty feed (m/min)", color="0.45")
+    axes.set_zorder(duty.get_zorder() + 1)
+    axes.patch.set_visible(False)
+    colours = plt.get_cmap("viridis")
+    targets = np.unique(target_mm)
+    for index, target in enumerate(targets):
+        chosen = np.flatnonzero(target_mm == target)
+        order = chosen[np.argsort(time_s[chosen])]
+        axes.plot(time_s[order] / 60.0, drift_um[order], ".-", ms=3, lw=0.9,
+                  color=colours(index / max(targets.size - 1, 1)),
+                  label=f"{target:g} mm" if targets.size <= 12 else None)
+    return _finish(figure, axes, "time (min)", "drift (µm)",
+                   "Deviation over time at each target, with the duty (ISO 230-3)")
+
+
 def compensation_table(target_mm, means_um, table_mm, table_um):
     """Measured mean deviation per target and direction (dots) with the compensation table's
     deviation per direction (lines through its points, as the controller interpolates).

@@ -53,17 +53,56 @@ def _positioning_contributions(analysis):
                                dense.line, dense.direction, dense.windows)
 
 
+COLUMNS = {"measured_um": "measured (µm)", "residual_um": "residual (µm)",
+           "explained": "explained", "predicted_um": "model (µm)",
+           "compensated_um": "compensated (µm)"}
+
+
 def _positioning_figures(analysis):
     comparison, details = analysis.comparison, analysis.details
-    rows = [(f["name"], f"{f['measured_um']:.4g}", f"{f['residual_um']:.4g}",
-             "" if f["explained"] is None else f"{100 * f['explained']:.1f} %")
-            for f in comparison["figures"].values()]
-    rows.append(("RMS", f"{comparison['rms_measured_um']:.4g}",
-                 f"{comparison['rms_residual_um']:.4g}", ""))
-    return ["<h2>ISO 230-2 figures</h2>",
-            image(plots.iso230_deviation(details.iso_deviation, details.iso_line),
-                  "ISO 230-2 deviation"),
-            table(("ISO 230-2 figure", "measured (µm)", "residual (µm)", "explained"), rows)]
+    blocks = (comparison["standards"] if comparison["standard"] == "all"
+              else {comparison["standard"]: comparison})
+    html_parts = ["<h2>ISO 230-2 figures</h2>",
+                  image(plots.iso230_deviation(details.iso_deviation, details.iso_line),
+                        "ISO 230-2 deviation")]
+    for block in blocks.values():
+        html_parts += _standard_html(block, comparison)
+    if any("clause" in block and block["figures"] for block in blocks.values()):
+        html_parts.append(_thermal_plot(analysis.case))
+    return html_parts
+
+
+def _standard_html(block, comparison):
+    """One standard's figures as a table, what the data lack, what is not confirmed."""
+    title = html.escape(block["standard"])
+    if block.get("unavailable"):
+        return [f"<h3>{title}</h3>", f"<p>No figures: {html.escape(block['unavailable'])}</p>"]
+    figures = list(block["figures"].values())
+    columns = [key for key in COLUMNS if figures and key in figures[0]]
+    rows = [(f["name"], *(_number(f[key], key) for key in columns)) for f in figures]
+    if "residual_um" in columns:
+        rows.append(("RMS", f"{comparison['rms_measured_um']:.4g}",
+                     f"{comparison['rms_residual_um']:.4g}", ""))
+    lacking = sorted({item for items in block.get("needs", {}).values() for item in items})
+    return [f"<h3>{title}</h3>",
+            table((f"{block['standard']} figure", *(COLUMNS[key] for key in columns)), rows),
+            *(f"<p>Needs: {html.escape(item)}</p>" for item in lacking),
+            f"<p>Not confirmed publicly: {html.escape(block['not_confirmed_publicly'])}</p>"]
+
+
+def _number(value, key):
+    if key == "explained":
+        return "" if value is None else f"{100 * value:.1f} %"
+    return "" if value is None else f"{value:.4g}"
+
+
+def _thermal_plot(case):
+    from ..compensate import thermal_error_um
+
+    positioning = case.positioning
+    return image(plots.thermal_drift(positioning.time_s, positioning.target_mm,
+                                     thermal_error_um(positioning), case.duty.segments),
+                 "ISO 230-3 deviations over time with the duty")
 
 
 def _residual_panels(positioning, residual_um):

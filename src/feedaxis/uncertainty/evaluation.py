@@ -13,7 +13,7 @@ import numpy as np
 from ..measurement.positioning import POSITIONING_FILE
 from ..errors import InputError
 from ..fit import fit
-from ..iso230 import FIGURE_NAMES
+from ..standards import ALL, DEFAULT, STANDARDS, UNDEFINED, FigureSet
 from . import engine
 from .budget import CONTRIBUTIONS, default_budget
 from .correction import OPTION, corrected_case, correction_for
@@ -44,6 +44,7 @@ class Uncertainty:
     correction: object
     repeatability: str
     figures: dict
+    standard: str = STANDARDS[DEFAULT].title
     parameters: dict = field(default_factory=dict)
     undetermined: dict = field(default_factory=dict)
     parameter_method: dict = field(default_factory=dict)
@@ -59,7 +60,7 @@ class Uncertainty:
                 "trials": self.trials, "seed": self.seed,
                 "adaptive": self.adaptive.to_json() if self.adaptive else None,
                 "inputs": list(self.inputs), "repeatability": self.repeatability,
-                "budget": self.budget.to_json(),
+                "budget": self.budget.to_json(), "standard": self.standard,
                 "corrected_to_20C": self.correction.to_json() if self.correction else None,
                 "figures": self.figures, "parameters": self.parameters,
                 "undetermined": self.undetermined, "parameter_method": self.parameter_method,
@@ -68,7 +69,7 @@ class Uncertainty:
 
 
 def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolerance_um=None,
-             seed=None, temperature=None, progress=None):
+             seed=None, temperature=None, progress=None, standard=DEFAULT):
     """The Monte Carlo uncertainty of a positioning case.
 
     Parameters
@@ -92,6 +93,8 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
     progress : callable, optional
         ``progress(trials, planned)`` after every chunk: the trials it ran and the trials
         planned in all (None for the adaptive procedure, which ends when it stabilises).
+    standard : str
+        The standard whose figures get their uncertainty (``all``: every defined one).
 
     Returns
     -------
@@ -106,12 +109,13 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
         raise InputError(f"must be at least {engine.MIN_TRIALS} (JCGM 101 §7.2: a 95 % "
                          "interval needs many more than 1/(1 - p) = 20 trials)",
                          parameter="--trials")
+    outputs = _figure_set(standard)
     budget = budget or default_budget()
     correction = correction_for(case, temperature) if temperature is not None else None
     case = corrected_case(case, temperature)
     fitted = (fit(model, case, kind="positioning") if model is not None and model.effects
               else None)
-    measurement = PositioningMeasurement(case, budget, correction, fitted)
+    measurement = PositioningMeasurement(case, budget, correction, fitted, outputs)
     inputs = measurement.inputs
     moments = (measurement.repeatability.moments if REPEATABILITY in inputs
                else engine.MOMENTS)
@@ -131,25 +135,27 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
         values = engine.run(measurement.sample, inputs, trials, seed, chunk, progress=progress,
                             keep=keep)
     else:
-        judged = [key for key in FIGURE_NAMES if key in measurement.figures()]
+        judged = list(measurement.figures())
         values, adaptive = engine.run_adaptive(measurement.sample, inputs, tolerance_um,
                                                judged, seed, chunk, progress=progress,
                                                keep=keep, moments=moments,
                                                min_blocks=engine.MIN_BLOCKS_WITHOUT_VARIANCE
                                                if len(moments) < 2 else 2)
-    done = len(values[next(key for key in values if key in FIGURE_NAMES)])
+    done = len(values[next(iter(measurement.figures()))])
     alone = engine.contributions(measurement.sample, inputs, seed, chunk,
                                  min(done, engine.CONTRIBUTION_TRIALS), progress)
     result = Uncertainty(str(case.folder), done, seed, inputs, budget, correction,
-                         measurement.repeatability.source, {}, adaptive=adaptive,
-                         notes=_notes(measurement, correction), moments=moments)
+                         measurement.repeatability.source, {}, outputs.title,
+                         adaptive=adaptive, notes=_notes(measurement, correction),
+                         moments=moments)
     shares = engine.shares(alone)
     if "standard_uncertainty" not in moments:  # the repeatability's u² is infinite
         alone[REPEATABILITY] = {key: np.full_like(u, np.nan)
                                 for key, u in alone[REPEATABILITY].items()}
         shares = {key: {name: np.full_like(u, np.nan) for name, u in by_input.items()}
                   for key, by_input in shares.items()}
-    result.figures = _figures(measurement.figures(), values, alone, shares, moments)
+    result.figures = _figures(outputs.names(), measurement.figures(), values, alone, shares,
+                              moments)
     result.samples = {key: values[key][:HISTOGRAM_VALUES] for key in result.figures}
     if measurement.parameters:
         _parameters(result, measurement, values, alone, shares, seed, chunk, progress)
@@ -194,10 +200,26 @@ def _contribution_entries(alone, shares, key, index=()):
                    "share": _optional(shares[key][name][index])} for name in alone}
 
 
-def _figures(data_figures, values, alone, shares, moments):
-    """{figure key: entry in µm} in the order of the ISO names, as ``compare`` keys them."""
+def _figure_set(standard):
+    """The figures of ``standard`` the Monte Carlo propagates to (refusing the standards
+    it cannot: those without a public definition, and ISO 230-3's thermal figures)."""
+    if standard in UNDEFINED:
+        title, reason = UNDEFINED[standard]
+        raise InputError(f"{title} has no figures in feedaxis: {reason}",
+                         parameter="--standard")
+    if standard != ALL and standard not in STANDARDS:
+        raise InputError(f"the Monte Carlo propagates to the positioning figures; "
+                         f"{standard}'s thermal figures get no uncertainty yet: its "
+                         "repeatability moves a target's readings together, which cancels in "
+                         "a drift, and a per-reading noise model is not built",
+                         parameter="--standard")
+    return FigureSet(standard)
+
+
+def _figures(names, data_figures, values, alone, shares, moments):
+    """{figure key: entry in µm} in the standard's order, as ``compare`` keys them."""
     figures = {}
-    for key, name in FIGURE_NAMES.items():
+    for key, name in names.items():
         if key not in values:
             continue
         entry = _interval_entry(data_figures[key], engine.summarise(values[key]), (),
@@ -279,8 +301,9 @@ def _notes(measurement, correction):
     if REPEATABILITY in measurement.inputs and counts.max() > 1:
         runs = int(np.median(counts))
         notes.append(f"the repeatability moves each target's mean by its type A uncertainty "
-                     f"(JCGM 101 §6.4.9); the standard deviations s_i in R and A are the "
-                     f"test's own, and from {runs} runs each is itself uncertain by about "
+                     f"(JCGM 101 §6.4.9); the standard deviations s_i in R and A (VDI: Ps, "
+                     f"P) are the test's own, and from {runs} runs each is itself uncertain "
+                     f"by about "
                      f"{100 / np.sqrt(2 * (runs - 1)):.0f} % (1/sqrt(2(n - 1))): the sampling "
                      "of the machine's repeatability, not a measurement uncertainty")
         few = _few_runs(measurement.repeatability)

@@ -84,7 +84,8 @@ def write_page(result, out_path):
         f"Carlo method of JCGM 101:2008, {result.trials} trials, seed {result.seed}; budget "
         f"in the structure of ISO 230-2:2014 Annex A; {correction}; repeatability from "
         f"{html.escape(result.repeatability)}.</p>",
-        "<h2>ISO 230-2 figures</h2>",
+        f"<h2>{'Every standard' if result.standard == 'all' else result.standard}'s "
+        "figures</h2>",
         table(("figure", "value (µm)", "Monte Carlo mean (µm)", "u (µm)",
                "95 % interval (µm)", "shortest 95 % (µm)"), _figure_rows(result)),
         image(plots.uncertainty_histograms(panels), "histograms of the figures"),

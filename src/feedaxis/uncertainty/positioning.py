@@ -18,7 +18,7 @@ A trial's deviations (µm, every sample k of group g) are
   over the test's time τ (0 to 1: ``time_s``, else the order of the rows, the order the
   laser recorded them), and the correction's temperature T* and coefficient α*.
 
-Outputs: the ISO 230-2 figures (:func:`feedaxis.iso230.iso230_figures` of the trials),
+Outputs: the figures of a standard (:class:`feedaxis.standards.FigureSet` of the trials),
 the fitted model's parameters and the compensation table's values at its points. The
 parameters are the fit's linearisation θ* = θ̂ + J⁺(x* - x) (J the model's Jacobian, J⁺ its
 least-squares pseudo-inverse): exact for parameters the model is linear in, and checked
@@ -35,7 +35,8 @@ from scipy import sparse
 
 from ..comptable import default_spacing_mm, from_measurement, from_model, grid_mm
 from ..fit import SINGULAR_RATIO, fit
-from ..iso230 import FIGURE_NAMES, iso230_figures, per_target, target_clusters, target_groups
+from ..iso230 import per_target, target_clusters, target_groups
+from ..standards import FigureSet
 from .budget import CONTRIBUTIONS
 
 REPEATABILITY = "repeatability"
@@ -122,9 +123,10 @@ class PositioningMeasurement:
     (:attr:`inputs`) and outputs, with the fitted model (a :class:`~feedaxis.fit.FitResult`
     on the case, optional) and the 20 °C correction (optional)."""
 
-    def __init__(self, case, budget, correction=None, fitted=None):
+    def __init__(self, case, budget, correction=None, fitted=None, outputs=None):
         positioning = case.positioning
         self.case, self.correction, self.fitted = case, correction, fitted
+        self.outputs = outputs or FigureSet()
         self.target_mm, self.direction = positioning.target_mm, positioning.direction
         self.deviation_um = positioning.error_um
         self.expansion_um = correction.expansion_um(self.target_mm) if correction else 0.0
@@ -148,10 +150,10 @@ class PositioningMeasurement:
         return ((REPEATABILITY,) if self.repeatability.available else ()) + tuple(self.errors)
 
     def figures(self, deviation_um=None):
-        """The ISO 230-2 figures (µm) of the case's deviations, or of trials'."""
-        found = iso230_figures(self.target_mm, self.deviation_um if deviation_um is None
+        """The figures (µm) of :attr:`outputs`' standards (default ISO 230-2:2014) of the
+        case's deviations, or of trials'."""
+        return self.outputs.of(self.target_mm, self.deviation_um if deviation_um is None
                                else deviation_um, self.direction)
-        return {key: value for key, value in found.items() if key in FIGURE_NAMES}
 
     def trial_deviations(self, streams, trials, active):
         """The trials' deviations (trials, samples), the ``active`` inputs varying."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from ..standards import DEFAULT, STANDARDS
 from ..text import micro
 
 SHORT_NAMES = {"repeatability": "repeat.", "device_calibration": "device",
@@ -39,14 +40,17 @@ def uncertainty_lines(result):
         lines.append(f"adaptive (JCGM 101 §7.9): {adaptive.blocks} blocks, numerical tolerance "
                      f"{adaptive.reached:.2g} µm of {adaptive.tolerance:g} asked"
                      + ("" if adaptive.stabilised else " -- NOT reached"))
-    lines += ["", f"{'ISO 230-2 figure (µm)':28s} {'value':>8s} {'u':>7s}  "
+    width = max([28] + [len(f["name"]) for f in result.figures.values()])
+    heading = {STANDARDS[DEFAULT].title: "ISO 230-2 ", "all": ""}.get(
+        result.standard, result.standard + " ") + "figure (µm)"
+    lines += ["", f"{heading:{width}s} {'value':>8s} {'u':>7s}  "
                   f"{'95 % interval':20s} {'shortest 95 %':20s}"]
     for figure in result.figures.values():
-        lines.append(f"{figure['name']:28s} {figure['value_um']:8.4g} "
+        lines.append(f"{figure['name']:{width}s} {figure['value_um']:8.4g} "
                      f"{number(figure['standard_uncertainty_um'], '7.2g'):>7s}  "
                      f"{_interval(figure['coverage_interval_um']):20s} "
                      f"{_interval(figure['shortest_coverage_interval_um']):20s}")
-    lines += _share_lines(result, inputs)
+    lines += _share_lines(result, inputs, width)
     lines += _parameter_lines(result)
     if result.table:
         table = result.table
@@ -62,14 +66,14 @@ def uncertainty_lines(result):
     return "\n".join(lines)
 
 
-def _share_lines(result, inputs):
-    """Each input's share of u² per figure, or why there are none."""
+def _share_lines(result, inputs, width=28):
+    """Each input's share of u² per figure (names ``width`` wide), or why there are none."""
     if "standard_uncertainty" not in result.moments:
         return ["", "share of u² per input: none (the outputs have no variance; see the note)"]
     lines = ["", "share of u² per input (JCGM 101 Annex B: each input varied alone)",
-             f"{'':28s} " + " ".join(f"{SHORT_NAMES.get(i, i):>8s}" for i in inputs)]
+             f"{'':{width}s} " + " ".join(f"{SHORT_NAMES.get(i, i):>8s}" for i in inputs)]
     for figure in result.figures.values():
-        lines.append(f"{figure['name']:28s} " + " ".join(
+        lines.append(f"{figure['name']:{width}s} " + " ".join(
             f"{_share(figure['contributions'][i]['share']):>8s}" for i in inputs))
     return lines
 

@@ -1,0 +1,145 @@
+"""ISO 230-3's figures of a thermal test of a linear axis: the axis cycled under a duty, its
+targets read again and again; each reading's thermal drift is its deviation minus that of
+the target's first, cold reading (:func:`feedaxis.compensate.thermal_error_um`).
+
+Per approach direction (µm, with the time of each extreme and, when recorded, the air
+temperature's change since the start):
+
+- drift at each target: the drift of largest magnitude over the test;
+- expansion between the outermost targets: the largest change of their distance, the far
+  target's drift less the near one's at the same reading, and the same per metre of their
+  distance (µm/m);
+- change of the linear positioning error: the largest range of the drifts over the
+  targets at one reading.
+
+The same figures of the drift a fitted thermal model predicts (thermal_screw,
+ambient_expansion) and of what its compensation leaves (:func:`feedaxis.compensate`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..compensate import THERMAL_EFFECTS, compensate, thermal_error_um, visits
+from ..errors import InputError
+from ..iso230 import target_clusters
+
+THERMAL_TITLE = "ISO 230-3:2020"
+CLAUSE = (f"{THERMAL_TITLE}, clause 7, thermal distortion caused by moving linear axes "
+          "(the clause of the 2007 edition)")
+PROVENANCE = {
+    "coverage_factor": None, "adopts": None,
+    "confirmed_publicly": "that ISO 230-3 tests the thermal distortion caused by moving "
+                          "linear axes by reading target positions repeatedly while the "
+                          "axis runs a duty (the standard's public scope)",
+    "not_confirmed_publicly": "the clause text (sold by ISO): the evaluated quantities "
+                              "(drift per target, expansion between the targets, change of "
+                              "the linear positioning error) follow the standard's "
+                              "description as reproduced in the literature"}
+
+
+def thermal_figures(positioning, drift_um):
+    """{key: (name, value µm or µm/m, time_s, sample index)} of the drifts ``drift_um``
+    (one per sample of ``positioning``)."""
+    visit = visits(positioning)[0]
+    centres_mm, cluster = target_clusters(positioning.target_mm)
+    signs = [s for s in (1.0, -1.0) if np.any(positioning.direction == s)]
+    figures = {}
+    for sign in signs:
+        chosen = np.flatnonzero(positioning.direction == sign)
+        label = "" if len(signs) == 1 else ("_up" if sign > 0 else "_down")
+        named = "" if len(signs) == 1 else (" (+)" if sign > 0 else " (-)")
+        index = np.full((centres_mm.size, visit.max() + 1), -1)
+        index[cluster[chosen], visit[chosen]] = chosen
+        figures.update(_side_figures(index, centres_mm, drift_um, positioning.time_s,
+                                     label, named))
+    return figures
+
+
+def _side_figures(index, centres_mm, drift_um, time_s, label, named):
+    """The figures of one direction from ``index`` (target, visit) -> sample (-1: none)."""
+    table = np.where(index >= 0, drift_um[index], np.nan)
+    rows = np.flatnonzero(np.any(index >= 0, axis=1))
+    figures = {}
+    for row in rows:
+        column = int(np.nanargmax(np.abs(table[row])))
+        figures[f"drift_{centres_mm[row]:g}mm{label}_um"] = _entry(
+            f"drift at {centres_mm[row]:g} mm{named}", table[row, column], index[row, column],
+            time_s)
+    if rows.size < 2:
+        return figures
+    near, far = rows[0], rows[-1]
+    expansion = table[far] - table[near]
+    if np.any(np.isfinite(expansion)):
+        column = int(np.nanargmax(np.abs(expansion)))
+        span_m = (centres_mm[far] - centres_mm[near]) / 1000
+        where = f"{centres_mm[near]:g} to {centres_mm[far]:g} mm{named}"
+        figures[f"expansion{label}_um"] = _entry(f"expansion {where}", expansion[column],
+                                                 index[far, column], time_s)
+        figures[f"expansion{label}_um_per_m"] = _entry(
+            f"expansion per metre {where} (µm/m)", expansion[column] / span_m,
+            index[far, column], time_s)
+    spread = np.nanmax(table[rows], axis=0) - np.nanmin(table[rows], axis=0)
+    column = int(np.nanargmax(spread))
+    last = index[rows[np.argmax(index[rows, column])], column]
+    figures[f"linear_error_change{label}_um"] = _entry(
+        f"change of the linear positioning error{named}", spread[column], last, time_s)
+    return figures
+
+
+def _entry(name, value, sample, time_s):
+    return name, float(value), float(time_s[sample]), int(sample)
+
+
+def thermal_comparison(case, model):
+    """``compare``'s ISO 230-3 block of a thermal case: each figure measured, predicted by
+    the model's thermal effects and left after their compensation (None without them)."""
+    if not case.is_thermal:
+        raise InputError(f"{THERMAL_TITLE}'s figures need a thermal case (duty.csv and "
+                         "time_s in positioning.csv)", path=case.folder)
+    positioning = case.positioning
+    if visits(positioning)[0].max() == 0:
+        raise InputError(f"{THERMAL_TITLE}'s figures need targets read again and again; "
+                         "no target is read twice", path=case.folder)
+    drift_um = thermal_error_um(positioning)
+    measured = thermal_figures(positioning, drift_um)
+    predicted = compensated = {}
+    notes = []
+    if any(effect.name in THERMAL_EFFECTS for effect in model.effects):
+        left_um = compensate(case, model).left_um
+        predicted = thermal_figures(positioning, drift_um - left_um)
+        compensated = thermal_figures(positioning, left_um)
+    else:
+        notes.append("no thermal effect in the model: give --model with thermal_screw "
+                     "(feedaxis fit CASE --add thermal_screw) for the predicted and "
+                     "compensated figures")
+    figures = {}
+    for key, (name, value, time, sample) in measured.items():
+        figures[key] = {"name": name, "unit": "µm/m" if key.endswith("_per_m") else "µm",
+                        "measured_um": value,
+                        "predicted_um": predicted[key][1] if key in predicted else None,
+                        "compensated_um": compensated[key][1] if key in compensated else None,
+                        "time_s": time, **_temperature(positioning, sample)}
+    two = ["two targets at least, near the ends of the travel; the data have one"]
+    lacking = {} if any(key.startswith("expansion") for key in figures) else {
+        "expansion_um": two, "expansion_um_per_m": two, "linear_error_change_um": two}
+    return {"standard": THERMAL_TITLE, "figures": figures, "clause": CLAUSE,
+            "duration_s": float(np.ptp(positioning.time_s)), "needs": lacking, "notes": notes,
+            "clauses": {key: CLAUSE for key in figures}, **PROVENANCE}
+
+
+def thermal_block(case, model):
+    """ISO 230-3's block of ``compare``: :func:`thermal_comparison` of a thermal case, or
+    why there are no figures."""
+    if not case.is_thermal:
+        return {"standard": THERMAL_TITLE, "figures": {},
+                "unavailable": "not a thermal case (duty.csv and time_s in positioning.csv)"}
+    return thermal_comparison(case, model)
+
+
+def _temperature(positioning, sample):
+    """The air temperature's change from the first reading to ``sample`` (K), if recorded."""
+    if positioning.ambient_C is None:
+        return {}
+    first = int(np.argmin(positioning.time_s))
+    return {"ambient_change_K": float(positioning.ambient_C[sample]
+                                      - positioning.ambient_C[first])}
