@@ -3,7 +3,7 @@
 Run: ``python benchmarks/bench_case_reader.py [--rows 1000000] [--repeats 5] [--smoke]``. Writes one
 positioning.csv (target_mm, error_um, direction, run: the ISO 230-2 layout) and times
 ``feedaxis.measurement.positioning.read_positioning`` (decoding, the header, NumPy's parse, every check of
-data-format.md) against a bare ``np.loadtxt`` of the same file, in interleaved repeats;
+docs/case-format.md) against a bare ``np.loadtxt`` of the same file, in interleaved repeats;
 prints the medians (with their range) and the ratio. The target is a ratio <= 1.5.
 """
 import argparse

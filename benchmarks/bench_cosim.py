@@ -39,7 +39,7 @@ OUTPUTS = ("NpidServo.position_mm", "NpidServo.velocity_mm_s", "NpidServo.tracki
 
 
 def reference_mm(n_steps, h):
-    """Seed 002 tracking: 20 mm at 0.7 Hz, one value per macro step."""
+    """Anang et al. 2017 tracking: 20 mm at 0.7 Hz, one value per macro step."""
     return 20.0 * np.sin(2 * np.pi * 0.7 * np.arange(n_steps) * h)
 
 

@@ -6,7 +6,7 @@ Cases (model: lead error, fitted first):
 - the same 10^6 samples as a dense scan: 10^5 targets x 5 bidirectional runs (the shape
   dynamic capture gives; the cost should follow the samples, not the targets);
 - a single pass over 10^5 uneven positions (lead error, 0.3 µm noise): diagnose and report;
-- tracking, 500 s at 1 ms (500,000 samples, 5·10^6 loop steps per simulation) of seed 002's
+- tracking, 500 s at 1 ms (500,000 samples, 5·10^6 loop steps per simulation) of Anang et al. 2017's
   loop on another plant, white + AR(1) noise; model servo_plant at the truth.
 Wall time: median of ``--repeats`` runs; memory: peak of NumPy and Python allocations
 (tracemalloc) during one more run, the case's own arrays excluded.

@@ -13,7 +13,7 @@ All are driven by the same raw fmpy ctypes calls (``fmi2SetReal`` of the inputs,
 ``fmi2DoStep``, ``fmi2GetReal`` of the outputs; preallocated arrays, as
 feedaxis.cosim.master does) on the default axis schedule: servo, motor and geometric error
 every 1 ms macro step, the thermal screw every 0.1 s. The feedaxis set runs in each
-controller mode of the servo (PID; NPID, seed 002 Eq. 8; PID with Coulomb friction). Each
+controller mode of the servo (PID; NPID, Anang et al. 2017 Eq. 8; PID with Coulomb friction). Each
 FMU is driven alone on its schedule and the four together (the axis); the cost is the CPU
 time of this process per macro step (a busy machine delays the process, which wall time
 would count). One repeat runs every set once, in an order rotated from repeat to repeat; a

@@ -93,7 +93,7 @@ def main(argv=None):
                   f"overhead {(f - b) * 1e6:6.1f} us  ratio {f / b:5.2f}")
             fmu.close()
 
-    print("\nThermal, seed 003 Table 2 cycle (168 min), samples every 60 s: closed form vs "
+    print("\nThermal, Rong et al. 2023 Table 2 cycle (168 min), samples every 60 s: closed form vs "
           "straightforward explicit dt = 0.1 s")
     params = thermal.ThermalScrewParams()
     times = np.arange(0.0, args.minutes * 60.0 + 1.0, 60.0)

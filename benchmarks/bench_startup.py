@@ -1,8 +1,8 @@
 """Start-up of the tracking commands (issue 21): how long ``feedaxis fit``, ``compare`` and
 ``diagnose`` on a tracking case take before their work starts.
 
-Each command runs as its own process, as a user runs it, on a 5 s tracking record (seed
-002's plant, PID, tests/tracking_synthetic.py). A wrapper ends the process as soon as the
+Each command runs as its own process, as a user runs it, on a 5 s tracking record (the plant of
+Anang et al. 2017, PID, tests/tracking_synthetic.py). A wrapper ends the process as soon as the
 first servo simulation (``feedaxis.physics.servo.simulate``, the numba-compiled loop)
 returns: the time from spawning the process to then is the start-up (Python, the imports,
 reading the case, numba and its compiled loop). The same wrapper can end the process just

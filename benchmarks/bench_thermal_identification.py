@@ -1,6 +1,6 @@
 """Thermal identification benchmark (issue 5): feedaxis against the straightforward baseline.
 
-Both identify lead_error + thermal_screw (k1..k4, λ, P_f; seed 003 Eq. 20) on the three
+Both identify lead_error + thermal_screw (k1..k4, λ, P_f; Rong et al. 2023 Eq. 20) on the three
 Table 2 conditions jointly, from the same starting point (Table 3 X, P_f as axis.toml
 states it, 30 mm off), minimising the same sum of squares. The data are synthetic: an axis
 with the Table 3 Y coefficients mounted as X (P_f = -141 mm), 1 µm noise, generated with

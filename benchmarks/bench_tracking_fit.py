@@ -2,10 +2,10 @@
 
 Both fit servo_plant + coulomb_friction (plant b, a1, a0, delay and the Coulomb force: 5
 parameters) to one 5 s record sampled at 1 ms with the 0.1 ms loop (5,000 samples, 50,000
-loop steps per simulation), from the same starting point (seed 002's plant, the friction
+loop steps per simulation), from the same starting point (the plant of Anang et al. 2017, the friction
 from feedaxis's linearised first step), minimising the same sum of squares. The record
 comes from the straightforward Runge-Kutta stepping of tests/tracking_synthetic.py (a plant
-unlike seed 002's, 1.5 N of friction, white + AR(1) noise).
+unlike Anang et al. 2017's, 1.5 N of friction, white + AR(1) noise).
 
 - feedaxis: ``feedaxis.fit.fit`` on the tracking measurement: scipy TRF over the exact
   zero-order-hold loop (fractional delay included) compiled by numba.

@@ -7,7 +7,7 @@ the four FMUs, then
   ``fmpy.simulate_fmu`` in one process and exiting, and counts non-zero exit codes (the
   exit-time heap corruption was rc 134, 4 in 40);
 - runs the same number of fmuCheck processes (a C host) on ThermalScrew when
-  ../shared/tools/fmi/fmuCheck.linux64 exists;
+  ``$FEEDAXIS_FMI_TOOLS/fmuCheck.linux64`` exists (docs/fmu-hosts.md);
 - instantiates and frees StepperError ``--cycles`` times in this process and prints the
   resident memory growth (after as many warm-up cycles);
 - loads StepperError from a freshly unpacked folder ``--cycles`` times (unpack, instantiate,
@@ -15,6 +15,7 @@ the four FMUs, then
   prints the resident memory growth (it was 0.35 MB a cycle: both libraries stayed mapped).
 """
 import argparse
+import os
 import subprocess
 import sys
 import tempfile
@@ -26,7 +27,7 @@ from feedaxis.fmu_build import build_fmus
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import arguments  # noqa: E402
 
-FMU_CHECK = Path(__file__).resolve().parents[2] / "shared" / "tools" / "fmi" / "fmuCheck.linux64"
+FMU_CHECK = Path(os.environ.get("FEEDAXIS_FMI_TOOLS", "fmi-tools")) / "fmuCheck.linux64"
 HOST = """
 import sys
 from fmpy import simulate_fmu

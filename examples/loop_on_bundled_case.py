@@ -1,7 +1,7 @@
 """The loop on the bundled case, from Python: diagnose, add the missing effect, refit, repeat.
 
 Run: ``python examples/loop_on_bundled_case.py``. The same loop as ``feedaxis demo``
-(seed 001's micro ball screw, reconstructed), without the report and the FMUs.
+(the micro ball screw of Liu 2023, reconstructed), without the report and the FMUs.
 """
 from feedaxis.case import read_case
 from feedaxis.demo import improve

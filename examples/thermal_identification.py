@@ -1,6 +1,6 @@
 """Thermal identification on two loadings and compensation of a third (docs/thermal.md).
 
-Run: ``python examples/thermal_identification.py``. Seed 003's Table 2 loadings at 3000 and
+Run: ``python examples/thermal_identification.py``. Rong et al. 2023's Table 2 loadings at 3000 and
 6000 mm/min identify k1..k4, λ and P_f (Eq. 17-20) with a lead error; the model then
 compensates the 9000 mm/min loading, which the fit has not seen.
 """

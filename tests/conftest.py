@@ -7,6 +7,7 @@ import importlib.util
 import os
 import shutil
 import signal
+from pathlib import Path
 
 import pytest
 
@@ -18,6 +19,11 @@ from feedaxis.fmu_build import FMU_NAMES, build_fmus
 
 # System libraries tests load, and how to install them (Debian 12, as .ci/run does).
 SYSTEM_LIBRARIES = {"libtbb.so.12": "apt-get install libtbb12 (ecospy's ecos needs it)"}
+# The FMI hosts that are not Python processes (fmuCheck.linux64, omsimulator/): the folder
+# $FEEDAXIS_FMI_TOOLS names, else where the CI machine keeps them, beside the checkout.
+# docs/fmu-hosts.md ("The hosts the tests use") says how to get them.
+FMI_TOOLS = Path(os.environ.get("FEEDAXIS_FMI_TOOLS")
+                 or Path(__file__).resolve().parents[2] / "shared" / "tools" / "fmi")
 
 
 def unavailable(reason):

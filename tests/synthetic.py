@@ -37,7 +37,7 @@ def micro_positions_mm():
 
 
 def micro_error_um(position_mm, effects):
-    """Seed 001-like errors of the named effects (µm)."""
+    """Liu 2023-like errors of the named effects (µm)."""
     error_um = np.zeros_like(position_mm)
     if "lead_error" in effects:
         error_um += geometry.lead_error_um(position_mm, 0.25, -0.51)
@@ -98,8 +98,28 @@ def iso_case(folder, seed, backlash_um=0.0, ambient_rise_K=0.0):
     return write_case(folder, ISO_AXIS, positioning=columns)
 
 
+def staggered_case(folder, seed, eccentricity_um, noise_um, first_mm=0.0):
+    """81 targets 4.9 mm apart from ``first_mm`` (each staggered by up to ±0.5 mm), a 10 mm
+    lead, 3 bidirectional cycles: lead error 2 µm - 0.02 µm/mm, the eccentricity
+    (cos, sin) ``eccentricity_um``, B = 4 µm and Gaussian noise; the case folder."""
+    rng = np.random.default_rng(seed)
+    targets = np.sort(first_mm + 4.9 * np.arange(81) + rng.uniform(-0.5, 0.5, 81))
+    columns = {"target_mm": [], "error_um": [], "direction": [], "run": []}
+    for run in (1, 2, 3):
+        for direction in (1.0, -1.0):
+            error = (geometry.lead_error_um(targets, 2.0, -0.02)
+                     + geometry.eccentricity_error_um(targets, 10.0, *eccentricity_um)
+                     + geometry.backlash_error_um(direction, 4.0)
+                     + rng.normal(0.0, noise_um, targets.size))
+            for name, values in zip(columns, (targets, error, np.full(81, direction),
+                                              np.full(81, run))):
+                columns[name] += list(values)
+    return write_case(folder, {"name": "staggered", "screw": {"lead_mm": 10.0}},
+                      positioning={k: np.array(v) for k, v in columns.items()})
+
+
 def thermal_case(folder, seed, feed_mm_min=6000.0, params=None):
-    """Seed 003 Table 2 test with a lead error, from feedaxis.examples (physics + noise)."""
+    """Rong et al. 2023 Table 2 test with a lead error, from feedaxis.examples (physics + noise)."""
     return write_table2_case(folder, feed_mm_min, params, noise_um=THERMAL_NOISE_UM, seed=seed)
 
 

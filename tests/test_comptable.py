@@ -68,7 +68,7 @@ def left_between_targets(case, applied):
 
 
 def run_comp_table(tmp_path, folder, *options):
-    out = tmp_path / "table.out"
+    out = tmp_path / "table.COM"   # the ending Heidenhain's control needs; the others take any
     code = main(["comp-table", str(folder), "--out", str(out), "--json", *options])
     return code, out
 
@@ -265,7 +265,7 @@ def test_fanuc_tape_never_sets_the_reference_position():
     np.testing.assert_allclose(shifted.position_mm, fanuc.read(text).position_mm - 100.0)
     target_mm = np.arange(5.0, 306.0, 50.0)
     case = syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=0.0 * target_mm)
-    grid = build_table(case, Model((), {}), "fanuc", spacing_mm=50.0).position_mm
+    grid = build_table(case, Model((), {}), "fanuc", spacing_mm=50.0)[0].position_mm
     np.testing.assert_allclose(grid, np.arange(0.0, 351.0, 50.0))
 
 
@@ -367,7 +367,7 @@ def test_heidenhain_writes_the_cma_beside_the_com(tmp_path, fitted, capsys):
                  "heidenhain", "--out", str(out)]) == 0
     cma = (tmp_path / "X.CMA").read_text()
     assert "X.COM" in cma and "*" in cma
-    assert heidenhain.read(out.read_text()).size == 255
+    assert heidenhain.read(out.read_text()).size == heidenhain.MAX_POINTS  # 0.1 µm not reached
 
 
 @pytest.mark.parametrize("module, old, new, line", [
@@ -400,3 +400,13 @@ def test_mach4_map_reads_back_and_refuses_a_short_line():
     np.testing.assert_allclose(back.reverse_um, table.reverse_um)
     with pytest.raises(LineError, match="line 7"):
         mach4.read(text.replace("1 10.000000 0.002000 0.000000", "1 10.000000 0.002000"))
+
+
+def test_a_heidenhain_table_not_named_com_is_written_with_a_warning(tmp_path, fitted, capsys):
+    folder, model = fitted
+    out = tmp_path / "tab.heidenhain"
+    assert main(["comp-table", str(folder), "--model", str(model), "--controller",
+                 "heidenhain", "--out", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert out.exists() and any(".COM ending" in w and "tab.COM" in w
+                                for w in report["warnings"])

@@ -31,6 +31,31 @@ def test_container_fmu_passes_fmpy_validation(container_path):
     assert validate_fmu(str(container_path)) == []
 
 
+def test_container_variables_keep_the_components_units_and_descriptions(container_path,
+                                                                          fmu_paths):
+    """Each mapped variable carries the unit and description of the component variable it
+    maps to; every unit used is defined."""
+    from fmpy import read_model_description
+
+    container = read_model_description(str(container_path))
+    components = {name: {v.name: v for v in read_model_description(str(path)).modelVariables}
+                  for name, path in fmu_paths.items()}
+    defined = {unit.name for unit in container.unitDefinitions}
+    checked = 0
+    for variable in container.modelVariables:
+        component, _, name = variable.name.partition(".")
+        declared = components.get(component, {}).get(name)
+        if declared is None:
+            continue
+        assert (variable.unit, variable.description) == (declared.unit, declared.description)
+        assert variable.unit is None or variable.unit in defined
+        checked += 1
+    assert checked == sum(v.causality in ("parameter", "output")
+                          for v in container.modelVariables) > 10
+    inputs = [v for v in container.modelVariables if v.causality == "input"]
+    assert inputs and all(v.unit and v.description for v in inputs)
+
+
 def test_container_runs_in_fmpy_and_libcosim_like_the_master(container_path, fmu_paths):
     h, n_steps = 1e-3, 600
     inputs = {"position_ref_mm": 40.0 * np.sin(2 * np.pi * 0.5 * np.arange(n_steps) * h),

@@ -99,16 +99,17 @@ def test_beam_interruptions_in_a_dense_scan_are_outliers_not_structure():
 
 
 def test_wavelengths_the_targets_cannot_resolve_are_passed_over():
-    """11 ISO targets 50 mm apart, staggered by 0.09 mm steps: the 0.2 mm motor period is far
-    below the spacing, but the staggered targets sample its phases, so it is tried (and,
-    absent, not named); targets at whole multiples of the 10 mm lead all sit at the same
-    phase of the eccentricity: passed over."""
+    """11 ISO targets 50 mm apart, staggered by 0.09 mm steps: the staggered targets sample
+    the phases of the 0.2 mm motor period, but in a regular progression, so a wavelength in
+    the band they resolve looks the same at the targets (aliasing): passed over; targets at
+    whole multiples of the 10 mm lead all sit at the same phase of the eccentricity: passed
+    over."""
     axis = {**syn.ISO_AXIS, "motor": {"step_angle_deg": 0.72, "error_period_steps": 10}}
     target_mm = np.repeat(np.arange(11) * 50.0 + np.round(np.linspace(0, 0.9, 11), 3), 5)
     error_um = geometry.lead_error_um(target_mm, 1.0, 0.2) + np.random.default_rng(16).normal(
         0, 0.3, target_mm.size)
     result = diagnose(syn.in_memory_case(axis, target_mm=target_mm, error_um=error_um), Model())
-    assert "motor_step_error" not in result.skipped
+    assert "cannot tell its 0.2 mm wavelength from" in result.skipped["motor_step_error"]
     assert [c.effect for c in result.candidates] == ["lead_error"]
     same_phase = np.repeat(np.arange(11) * 50.0, 5)
     result = diagnose(syn.in_memory_case(axis, target_mm=same_phase, error_um=error_um), LEAD)

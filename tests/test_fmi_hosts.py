@@ -3,8 +3,8 @@
 fmuCheck (FMI Compliance Checker, a plain C program) loads each FMU, simulates its
 cross-check input and must match the cross-check reference; a bad parameter, a fixed
 parameter set late, calls after a failure, tiny and huge steps all end in a status and a
-message with a category, never a crash. Tests needing a tool from ../shared/tools/fmi skip
-with the reason outside CI and fail in CI (CI=true).
+message with a category, never a crash. Tests needing a tool of ``FEEDAXIS_FMI_TOOLS``
+(docs/fmu-hosts.md) skip with the reason outside CI and fail in CI (CI=true).
 """
 import os
 import re
@@ -21,13 +21,13 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 from fmpy.util import read_csv
 
-from conftest import require_system_library, unavailable
+from conftest import FMI_TOOLS, require_system_library, unavailable
 from feedaxis.fmu_build import FMU_NAMES
 from feedaxis.physics import thermal
 
 ROOT = Path(__file__).resolve().parents[1]
 FMU_SOURCES = ROOT / "fmus"
-FMU_CHECK = ROOT.parent / "shared" / "tools" / "fmi" / "fmuCheck.linux64"
+FMU_CHECK = FMI_TOOLS / "fmuCheck.linux64"
 ERROR = 3
 ECOS_LIBRARY = "libtbb.so.12"   # ecospy's binaries (ecos, libecosc.so) link it
 
@@ -35,7 +35,8 @@ ECOS_LIBRARY = "libtbb.so.12"   # ecospy's binaries (ecos, libecosc.so) link it
 def require_tool(path):
     """Skip outside CI when ``path`` is missing; fail in CI."""
     if not Path(path).exists():
-        unavailable(f"{path} is missing (the FMI tools of ../shared/tools/fmi)")
+        unavailable(f"{path} is missing: set FEEDAXIS_FMI_TOOLS to the folder of the FMI hosts "
+                    "(docs/fmu-hosts.md, 'The hosts the tests use')")
 
 
 def require_ecospy():
@@ -390,7 +391,7 @@ def test_loading_from_fresh_folders_again_and_again_keeps_nothing(fmu_paths, tmp
     assert grown_kB < 40 * 50, f"{grown_kB / 40:.0f} kB per cycle (was 350)"
 
 
-OMS_DIR = ROOT.parent / "shared" / "tools" / "fmi" / "omsimulator"
+OMS_DIR = FMI_TOOLS / "omsimulator"
 
 
 @pytest.fixture(scope="module")

@@ -83,11 +83,65 @@ def test_rtl_round_trips_a_generated_case_exactly(tmp_path, axis, capsys):
     assert_same_case(out, runs)
     assert read_case(out).name == "VMC-800 axis X"
     report = capsys.readouterr().out
-    assert "USER-TEXT.DATE = 2026-11-02" in report and "Mat temp 1 20.1" in report
+    assert "USER-TEXT.DATE = 2026-11-02" in report and "Mat temp" not in report
     assert "Air temp" not in report and "air temperature as positioning.csv ambient_C, 20.3" \
-        in report
+        in report and "material temperature as positioning.csv material_C, 20.1" in report
     positioning = read_case(out).positioning
     assert positioning.bidirectional and np.all(positioning.ambient_C == 20.3)
+    assert np.all(positioning.material_C == 20.1)
+
+
+def test_rtl_material_temperatures_and_expansion_make_the_20C_correction(tmp_path, axis,
+                                                                         capsys):
+    """Mat temp 1..3 (one per run or one for the test) average into material_C, Exp coeff
+    (ppm/°C) becomes [screw] expansion_per_K; compare --correct-to-20C then asks for
+    nothing the file held, and corrects by α·(T − 20)·X at each sample."""
+    runs = generated_runs()
+    per_run = " ".join(f"{20.5 + 0.1 * k:g}" for k in range(len(runs)))
+    text = rtl_text(TARGETS_MM, runs, {"Axis": "X"},
+                    {"Mat temp 1": per_run, "Mat temp 2": "20.7", "Exp coeff": "11.5"})
+    code, out = run_import(tmp_path, axis, "x.rtl", text)
+    assert code == 0
+    case = read_case(out)
+    assert case.axis.screw["expansion_per_K"] == 11.5e-6
+    expected_C = (np.array([20.5 + 0.1 * k for k in range(len(runs))]) + 20.7) / 2
+    rtl_run = 2 * (case.positioning.run - 1) + (case.positioning.direction < 0) + 1
+    np.testing.assert_allclose(case.positioning.material_C, expected_C[rtl_run - 1])
+    capsys.readouterr()
+    assert main(["compare", str(out), "--correct-to-20C", "--json"]) == 0
+    corrected = json.loads(capsys.readouterr().out)
+    assert main(["compare", str(out), "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert corrected["figures"] != plain["figures"]
+
+
+def test_the_bundled_rtl_then_correct_to_20C_runs(tmp_path, capsys):
+    from feedaxis.examples import LASER_EXAMPLE
+
+    out = tmp_path / "x-case"
+    assert main(["import", str(LASER_EXAMPLE / "X-axis.rtl"), "--axis",
+                 str(LASER_EXAMPLE / "axis.toml"), "--out", str(out)]) == 0
+    assert "expansion_per_K = 1.17e-05" in capsys.readouterr().out
+    assert main(["compare", str(out), "--correct-to-20C"]) == 0
+    assert "expansion_per_K" not in capsys.readouterr().err
+
+
+def test_vendor_csv_headers_with_units_and_a_column_map(tmp_path, axis, capsys):
+    vendor = tmp_path / "vendor.csv"
+    vendor.write_text("Target (m),Run 1 Fwd (mm),Run 1 Rev (um)\n0,0.0012,3.4\n0.05,0.0008,2.9\n")
+    code, out = run_import(tmp_path, axis, "v.csv", vendor.read_text())
+    assert code == 0
+    samples = read_case(out).positioning
+    np.testing.assert_allclose(samples.target_mm, [0, 0, 50, 50])
+    np.testing.assert_allclose(samples.error_um, [1.2, 3.4, 0.8, 2.9])
+    odd = tmp_path / "odd.csv"
+    odd.write_text("Pos,A,B\n0,1.2,3.4\n50,0.8,2.9\n")
+    assert main(["import", str(odd), "--axis", str(axis), "--out", str(tmp_path / "o1")]) == 2
+    assert "Run <N> Fwd (um)" in capsys.readouterr().err
+    assert main(["import", str(odd), "--axis", str(axis), "--out", str(tmp_path / "o2"),
+                 "--columns", "Pos=target:mm,A=run1+,B=run1-:um"]) == 0
+    np.testing.assert_allclose(read_case(tmp_path / "o2").positioning.error_um,
+                               [1.2, 3.4, 0.8, 2.9])
 
 
 def test_rtl_air_temperature_per_run_becomes_ambient_c(tmp_path, axis, capsys):

@@ -13,5 +13,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_pyproject_lists_every_package():
     setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
-    assert sorted(setuptools["packages"]) == sorted(find_packages(ROOT / "src") + ["feedaxis.fmus"])
+    data = [f"feedaxis.data.{folder.name}" for folder in (ROOT / "src/feedaxis/data").iterdir()
+            if folder.is_dir() and folder.name != "__pycache__"]
+    fmus = [f"feedaxis.fmus.{'.'.join(folder.relative_to(ROOT / 'fmus').parts)}"
+            for folder in (ROOT / "fmus").rglob("*")
+            if folder.is_dir() and "__pycache__" not in folder.parts]
+    assert sorted(setuptools["packages"]) == sorted(
+        find_packages(ROOT / "src") + ["feedaxis.fmus"] + data + fmus)
     assert setuptools["package-dir"]["feedaxis.fmus"] == "fmus"

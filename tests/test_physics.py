@@ -10,7 +10,7 @@ from feedaxis.physics import geometry, motor, mounting, scalar, servo, thermal
 
 
 def literal_eq10_step(T, Ta, p, v, nut_center_m, dt):
-    """Seed 003 Eq. 10 exactly as printed: whole cells, case by case (1-based n)."""
+    """Rong et al. 2023 Eq. 10 exactly as printed: whole cells, case by case (1-based n)."""
     N = p.n_cells
     r = p.conductivity_W_mK * dt / (p.density_kg_m3 * p.specific_heat_J_kgK * p.cell_length_m**2)
     src = 4 * dt / (np.pi * p.diameter_m**2 * p.density_kg_m3 * p.specific_heat_J_kgK)
@@ -136,7 +136,7 @@ def test_averaged_nut_heat_is_the_exact_path_mean():
 def test_servo_discretisation_equals_scipy_expm(plant, duration_s):
     """The zero-order hold (Φ, Γ) without scipy.linalg (servo.expm, Taylor with scaling and
     squaring) equals scipy.linalg.expm of the augmented matrix with the plant's own input
-    column: seed 002's plant, a double integrator, critical damping (a1² = 4 a0), stiff."""
+    column: the plant of Anang et al. 2017, a double integrator, critical damping (a1² = 4 a0), stiff."""
     from scipy.linalg import expm
     stiffness, damping, gain = plant
     reference = expm(np.array([[0.0, 1.0, 0.0], [-stiffness, -damping, gain], [0.0, 0.0, 0.0]])

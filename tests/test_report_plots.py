@@ -222,3 +222,64 @@ def test_numbers_are_right_aligned_and_text_is_not(eccentric):
     assert right and all(re.fullmatch(r"[-+]?[\d.]+(e[-+]?\d+)?( %)?", t) for t in right)
     assert any(len(t) > 30 for t in left)
     assert not any(re.fullmatch(r"[-+]?[\d.]+(e[-+]?\d+)?", t) for t in left)
+
+
+def line_colour(line):
+    from matplotlib.colors import to_hex
+    return to_hex(line.get_color())
+
+
+def test_every_panel_has_a_title_and_measured_dots_are_coloured_by_direction(eccentric):
+    """Dots of each approach direction in that direction's colour, the model drawn over
+    them; every panel of every figure titled."""
+    from matplotlib.colors import to_hex
+
+    _, _, drawn = eccentric
+    axes = titled(drawn, "Measurement against model")
+    dots = [line for line in axes.get_lines() if line.get_marker() == "."]
+    model_lines = [line for line in axes.get_lines() if line.get_linestyle() == "-"]
+    assert {line_colour(line) for line in dots} == {
+        to_hex(plots.DIRECTION_COLOURS[1.0]), to_hex(plots.DIRECTION_COLOURS[-1.0])}
+    assert min(line.get_zorder() for line in model_lines) > max(d.get_zorder() for d in dots)
+    for figure in drawn:
+        for panel in plot_axes(figure):
+            assert panel.get_title() or figure.get_suptitle(), figure
+
+
+def test_residual_against_direction_is_two_categories(eccentric):
+    from matplotlib.colors import to_hex
+
+    _, _, drawn = eccentric
+    axes = titled(drawn, "Residual against approach direction")
+    assert [tick.get_text() for tick in axes.get_xticklabels()] == ["− approach", "+ approach"]
+    colours = {line_colour(line): set(line.get_xdata()) for line in axes.get_lines()}
+    assert colours == {to_hex(plots.DIRECTION_COLOURS[1.0]): {1.0},
+                       to_hex(plots.DIRECTION_COLOURS[-1.0]): {-1.0}}
+
+
+def test_a_constant_ambient_draws_no_panel(tmp_path):
+    from feedaxis.report.positioning import _residual_panels
+
+    case = fifty_case(tmp_path / "case")
+    still = case.positioning.__class__(**{**case.positioning.__dict__,
+                                          "ambient_C": np.full(case.positioning.size, 20.4)})
+    assert [label for label, _, _ in _residual_panels(still, still.error_um)] == [
+        "approach direction"]
+    moving = case.positioning.__class__(**{**case.positioning.__dict__, "ambient_C":
+                                           np.linspace(20.0, 21.0, case.positioning.size)})
+    assert "ambient (°C)" in [label for label, _, _ in _residual_panels(moving, moving.error_um)]
+
+
+def test_the_spectrum_shows_both_lines_and_its_independent_wavelengths(eccentric):
+    """The detrended measurement dashed over the residual; 11 targets: dots at span / k."""
+    _, _, drawn = eccentric
+    axes = titled(drawn, "Spatial spectrum")
+    residual = next(line for line in axes.get_lines() if line.get_label() == "residual")
+    measured = next(line for line in axes.get_lines()
+                    if line.get_label() == "measured, trend removed")
+    assert measured.get_zorder() > residual.get_zorder() and measured.get_linestyle() == "--"
+    dots = [line for line in axes.get_lines() if line.get_marker() == "o"]
+    low, high = axes.get_xlim()
+    expected = [w for w in 500.0 / np.arange(1, 6) if low <= w <= high]
+    assert dots and all(sorted(d.get_xdata()) == pytest.approx(sorted(expected)) for d in dots)
+    assert "11 targets" in axes.get_title()

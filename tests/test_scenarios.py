@@ -1,4 +1,4 @@
-"""Scenarios on the co-simulated axis: cases that load back, seed 002 Table 1, Ctrl-C, CLI."""
+"""Scenarios on the co-simulated axis: cases that load back, Anang et al. 2017 Table 1, Ctrl-C, CLI."""
 import signal
 
 import numpy as np

@@ -6,7 +6,7 @@ from feedaxis.cosim.fmu_runner import run_fmu
 from feedaxis.physics import thermal
 from feedaxis.physics.servo import Servo, ServoParams
 
-# Seed 002 Table 1, PID column, read with the two middle rows swapped (0.4 Hz/20 mm and
+# Anang et al. 2017 Table 1, PID column, read with the two middle rows swapped (0.4 Hz/20 mm and
 # 0.7 Hz/10 mm exchanged): the error of a linear loop is proportional to the amplitude, and
 # only this reading keeps 20 mm rows at twice the 10 mm rows (0.0639 x 2 = 0.1278).
 TABLE1_PID_MM = {(0.4, 10.0): 0.0639, (0.4, 20.0): 0.1273, (0.7, 10.0): 0.1048, (0.7, 20.0): 0.2086}

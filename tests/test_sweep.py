@@ -117,7 +117,7 @@ def test_a_backlash_grid_gives_the_iso_reversal_of_each_trial(tmp_path, fmu_dir,
 @pytest.fixture(scope="module")
 def lead_model(tmp_path_factory):
     """lead_error fitted (say) to 0.25 µm + -0.5 µm/mm with a correlated covariance, saved
-    with its [fit] table; the axis of the bundled seed 001 case."""
+    with its [fit] table; the axis of the bundled Liu 2023 case."""
     folder = tmp_path_factory.mktemp("lead")
     write_seed001_case(folder / "case")
     covariance = np.array([[0.04, -0.006], [-0.006, 0.0025]])

@@ -1,4 +1,4 @@
-"""Thermal identification and compensation, seed 003 §4-5, on synthetic Table 2 tests.
+"""Thermal identification and compensation, Rong et al. 2023 §4-5, on synthetic Table 2 tests.
 
 The cases are generated with Eq. 10 stepped explicitly at dt = 0.1 s with the nut moving
 (``thermal.explicit_duty``), from Table 1 + Table 3; the fit uses the closed form with the

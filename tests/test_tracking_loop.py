@@ -74,7 +74,7 @@ def test_bad_servo_table_names_file_row_column_and_exits_2(tmp_path, capsys, old
 
 
 def test_table1_pid_figures_through_the_fits_simulation():
-    """Seed 002 Table 1 PID column through the tracking measurement's prediction (the fit's
+    """Anang et al. 2017 Table 1 PID column through the tracking measurement's prediction (the fit's
     path)."""
     for (frequency_hz, amplitude_mm), expected_mm in TABLE1_PID_MM.items():
         t = np.arange(int((1.0 + 2.0 / frequency_hz) / 1e-3)) * 1e-3
@@ -101,7 +101,7 @@ def test_generator_and_fast_loop_agree(friction_run):
 
 
 def test_npid_case_runs_the_nonlinear_loop(tmp_path):
-    """An NPID [servo] table: the fit's loop against the generator's NPID (seed 002 Eq. 8)."""
+    """An NPID [servo] table: the fit's loop against the generator's NPID (Anang et al. 2017 Eq. 8)."""
     npid = {"controller": "npid", "ko_per_mm": 6.0, "e_max_mm": 0.3}
     run = step_loop(sine(10.0, 0.7), 2.0, plant=PLANT, servo=npid, damping_N_s_per_mm=0.02)
     case = read_case(write_tracking_case(tmp_path / "c", run, 6,
@@ -194,7 +194,7 @@ def test_cli_loop_on_a_tracking_case(tmp_path, capsys, friction_run):
     model = tmp_path / "m.toml"
     assert main(["diagnose", folder, "--json"]) == 0
     named = [c["effect"] for c in json.loads(capsys.readouterr().out)["candidates"]]
-    assert named == ["servo_plant", "coulomb_friction"]  # the plant differs from seed 002's
+    assert named == ["servo_plant", "coulomb_friction"]  # the plant differs from Anang et al. 2017's
     assert main(["fit", folder, "--add", "servo_plant", "--add", "coulomb_friction",
                  "--out", str(model), "--json"]) == 0
     fitted = json.loads(capsys.readouterr().out)

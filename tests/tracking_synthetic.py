@@ -1,7 +1,7 @@
 """Tracking cases generated from known parameters by a straightforward stepping of the loop.
 
 Independent of ``feedaxis.physics.servo``: the plant ẋ = [[0, 1], [-a0, -a1]] x + [0, b] u
-(seed 002 Eq. 1) is integrated by classical Runge-Kutta over each 0.1 ms loop step with
+(Anang et al. 2017 Eq. 1) is integrated by classical Runge-Kutta over each 0.1 ms loop step with
 the command held, the delayed command switching inside the step where the delay is not a
 whole number of steps; the PID (Eq. 6) or NPID (Eq. 8) acts on the reference sampled at
 the start of each step; friction and the force from the velocity at the step's start.

@@ -1,6 +1,6 @@
-"""GeometricError FMU: transmission error of the screw-nut pair (seed 000/001 Eq. 1-5, 10).
+"""GeometricError FMU: transmission error of the screw-nut pair (Liu 2022/2023 Eq. 1-5, 10).
 
-Thin adapter over feedaxis.physics.geometry; defaults are the seed 001 case-study fit.
+Thin adapter over feedaxis.physics.geometry; defaults are the Liu 2023 case-study fit.
 """
 from pythonfmu import DefaultExperiment
 
@@ -22,18 +22,18 @@ class GeometricError(AxisSlave):
         self.input("velocity_mm_s", 0.0, "Axis velocity; velocity x step moves the nut through its backlash play", "mm/s")
         self.output("error_um", "Positioning deviation, actual - nominal (ISO 230-2 sign)", "um")
         self.parameter("lead_mm", 1.0, "Screw lead, axial travel per revolution", "mm", (0, None))
-        self.parameter("offset_um", 0.2515, "Lead error b1 at position 0 (seed 001)", "um")
-        self.parameter("slope_um_per_mm", -0.5084, "Cumulative lead error a1 (seed 001)", "um/mm")
-        self.parameter("eccentricity_cos_um", 0.2005, "Eccentricity a2, cosine term (seed 001)", "um")
-        self.parameter("eccentricity_sin_um", 0.1504, "Eccentricity b2, sine term (seed 001)", "um")
+        self.parameter("offset_um", 0.2515, "Lead error b1 at position 0 (Liu 2023)", "um")
+        self.parameter("slope_um_per_mm", -0.5084, "Cumulative lead error a1 (Liu 2023)", "um/mm")
+        self.parameter("eccentricity_cos_um", 0.2005, "Eccentricity a2, cosine term (Liu 2023)", "um")
+        self.parameter("eccentricity_sin_um", 0.1504, "Eccentricity b2, sine term (Liu 2023)", "um")
         self.parameter("backlash_um", 0.0, "Reversal value B = mean(+) - mean(-)", "um")
         self.parameter("sag_enabled", True, "Add the gravity sag computed from the screw (Eq. 3-5)")
         self.parameter("length_m", 0.8, "Screw length between supports", "m", (0, None))
         self.parameter("diameter_m", 0.034, "Screw root diameter", "m", (0, None))
         self.parameter("density_kg_m3", 7800.0, "Screw material density", "kg/m3", (0, None))
         self.parameter("youngs_modulus_Pa", 2.1e11, "Screw Young's modulus", "Pa", (0, None))
-        self.parameter("support", "fixed-free", "fixed-free | fixed-fixed | supported-supported")
-        self.parameter("fixed_end_mm", -141.0, "Axis coordinate P_f of the fixed end (seed 003 Eq. 15-16)", "mm")
+        self.parameter("support", "fixed-free", "How the screw is held: fixed-free, fixed-fixed or supported-supported")
+        self.parameter("fixed_end_mm", -141.0, "Axis coordinate P_f of the fixed end (Rong et al. 2023 Eq. 15-16)", "mm")
         self.engagement = 1.0  # in the backlash play: -1 to +1 (geometry.play_engagement)
 
     def build(self):

@@ -1,4 +1,4 @@
-"""NpidServo FMU: ball-screw position loop with PID or NPID control (seed 002 Eq. 1-8).
+"""NpidServo FMU: ball-screw position loop with PID or NPID control (Anang et al. 2017 Eq. 1-8).
 
 Thin adapter over feedaxis.physics.servo; defaults are the Googol XY table x axis.
 """
@@ -14,7 +14,7 @@ from feedaxis_slave import AxisSlave
 # 2 µs each in Python, 20 ns compiled): a step needing more is refused, so one call stays
 # under a second.
 MAX_INTERNAL_STEPS = 200_000
-# Largest internal step: 1 ms, ten times seed 002's 0.1 ms and under its 1.2 ms delay, which
+# Largest internal step: 1 ms, ten times Anang et al. 2017's 0.1 ms and under its 1.2 ms delay, which
 # the loop represents in whole internal steps.
 MAX_TIME_STEP_S = 1e-3
 
@@ -26,12 +26,12 @@ UNITS = {"plant_gain_mm_per_Vs2": "mm/(V.s2)", "plant_damping_per_s": "1/s",
 DESCRIPTIONS = {
     "plant_gain_mm_per_Vs2": "Plant numerator b of G(s) = b / (s2 + a1 s + a0) (Eq. 1)",
     "plant_damping_per_s": "Plant a1 (Eq. 1)", "plant_stiffness_per_s2": "Plant a0 (Eq. 1)",
-    "delay_s": "Transport delay of the command (seed 002: 1.2 ms)",
+    "delay_s": "Transport delay of the command (Anang et al. 2017: 1.2 ms)",
     "kp_V_per_mm": "PID proportional gain (Eq. 6)", "ki_V_per_mm_s": "PID integral gain (Eq. 6)",
     "kd_V_s_per_mm": "PID derivative gain (Eq. 6)", "ko_per_mm": "NPID rate KO (Eq. 8)",
     "e_max_mm": "NPID error beyond which K(e) is held (Eq. 8)",
     "nonlinear": "true: NPID (nonlinear gain in front of the PID), false: PID",
-    "force_constant_N_per_V": "Axial force per volt of command (assumed; not in seed 002)",
+    "force_constant_N_per_V": "Axial force per volt of command (assumed; not in Anang et al. 2017)",
     "time_step_s": "Internal loop step",
     "friction_N": "Coulomb friction opposing the velocity (smoothed over |v| < 0.1 mm/s)",
     "damping_N_s_per_mm": "Viscous friction force per unit velocity"}

@@ -1,6 +1,6 @@
-"""StepperError FMU: stepper-motor angular error as axial displacement (seed 000 Eq. 6, 9, 10).
+"""StepperError FMU: stepper-motor angular error as axial displacement (Liu 2022 Eq. 6, 9, 10).
 
-Thin adapter over feedaxis.physics.motor. Seed 001 does not publish its motor coefficients;
+Thin adapter over feedaxis.physics.motor. Liu 2023 does not publish its motor coefficients;
 the default first harmonic (0.1 µm amplitude) is illustrative.
 """
 from pythonfmu import DefaultExperiment

@@ -1,4 +1,4 @@
-"""ThermalScrew FMU: finite-difference screw heating and its positioning error (seed 003).
+"""ThermalScrew FMU: finite-difference screw heating and its positioning error (Rong et al. 2023).
 
 Thin adapter over feedaxis.physics.thermal (Eq. 1-19); defaults: Table 1 and the X axis
 of Table 3. The temperature field is advanced in stable sub-steps of at most

@@ -54,8 +54,8 @@ def measurement_for(case, model, kind=None):
 
 def compare(case, model, kind=None, standard=DEFAULT):
     """The figures of ``model`` (as it stands) on the ``kind`` samples of ``case`` (the
-    kind's own: for positioning those of ``standard``, :mod:`feedaxis.standards`; seed
-    002's tracking error; a dict for ``--json``)."""
+    kind's own: for positioning those of ``standard``, :mod:`feedaxis.standards`; the tracking
+    error of Anang et al. 2017; a dict for ``--json``)."""
     measurement = measurement_for(case, model, kind)
     return _figures(measurement, evaluate(model, measurement), standard)
 

@@ -1,4 +1,4 @@
-"""Reading, checking and writing a measurement case, format version 1.1 (docs/case-format.md).
+"""Reading, checking and writing a measurement case, format version 1.2 (docs/case-format.md).
 
 A case is one folder: ``axis.toml`` (required), the file of each kind of measurement it
 holds (each kind reads its own: :mod:`feedaxis.kinds`), optionally ``duty.csv``. Every rule
@@ -60,7 +60,7 @@ PHYSICAL_RANGE = {
     "fixed_end_mm": (-1e5, 1e5), "step_angle_deg": (1e-3, 360.0),
     "error_period_steps": (1, 1e6),
     "target_mm": (-1e5, 1e5), "error_um": (-1e5, 1e5), "time_s": (0.0, 1e9),
-    "ambient_C": (-100.0, 200.0), "start_s": (0.0, 1e9), "duration_s": (0.0, 1e9),
+    "ambient_C": (-100.0, 200.0), "material_C": (-100.0, 200.0), "start_s": (0.0, 1e9), "duration_s": (0.0, 1e9),
     "feed_mm_min": (0.0, 1e6), "from_mm": (-1e5, 1e5), "to_mm": (-1e5, 1e5),
     "reference_mm": (-1e5, 1e5), "actual_mm": (-1e5, 1e5), "disturbance_N": (-1e7, 1e7),
     "kp_V_per_mm": (1e-9, 1e6), "ki_V_per_mm_s": (0.0, 1e6), "kd_V_s_per_mm": (0.0, 1e6),
@@ -68,6 +68,8 @@ PHYSICAL_RANGE = {
     "loop_step_s": (1e-7, 0.01),
 }
 
+# What a column accepts, said when a cell of it is not a number at all
+ACCEPTED = {"direction": "+1 or -1", "run": "a whole number >= 1"}
 DUTY_COLUMNS = {"start_s": True, "duration_s": True, "feed_mm_min": True, "from_mm": True,
                 "to_mm": True, "ambient_C": False}
 
@@ -472,7 +474,8 @@ def _number(path, cell, row, column):
     try:
         return finite_float(cell)
     except ValueError as problem:
-        raise CaseError(path, str(problem), row, column) from None
+        accepted = f"; {column} must be {ACCEPTED[column]}" if column in ACCEPTED else ""
+        raise CaseError(path, f"{problem}{accepted}", row, column) from None
 
 
 def _first_bad(path, mask, rows, column, message):

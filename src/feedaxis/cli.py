@@ -24,11 +24,13 @@ from .console import fail
 from .errors import DISK_STATE_ERRORS, InputError, check_writable_target, json_safe, write_error
 from .effects import Model, available_effects, load_model
 from .output import refuse_overwriting_inputs, write_atomically
+from .comptable.table import TABLE_TOLERANCE_UM
+from .importers.wide_csv import column_map
 from .uncertainty.correction import OPTION as CORRECTION_OPTION, OPTION_HELP as CORRECTION_HELP
-from .uncertainty.correction import corrected_case, temperature_option
+from .uncertainty.correction import MATERIAL, corrected_case, temperature_option
 
 CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.toml with [servo] "
-             "+ tracking.csv; see data-format.md")
+             "+ tracking.csv; see docs/case-format.md")
 
 # Each command is registered beside its handler: @command(NAME, add_parser arguments,
 # options=FUNCTION adding its arguments); build_parser adds them in this file's order.
@@ -56,7 +58,8 @@ def _progress(label, unit):
     steps at most (the bar's total grows by N, nothing is counted)."""
     from tqdm import tqdm
 
-    with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr) as bar:
+    with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr,
+              disable=None) as bar:  # None: off when stderr is no terminal (a log file)
         def tick(step=None, total=None):
             if total is not None:
                 bar.total = (bar.total or 0) + total
@@ -101,9 +104,9 @@ def _demo_options(parser):
     parser.add_argument("--out", default="feedaxis-demo", help="output folder (default: feedaxis-demo)")
 
 
-@command("demo", help="the whole loop on the bundled seed 001 case, then the FMUs",
+@command("demo", help="the whole loop on the bundled Liu 2023 case, then the FMUs",
          description="Diagnose, add the missing effect, refit, until the verdict is adequate, "
-                     "on the bundled seed 001 micro ball screw; write the model, the report "
+                     "on the bundled Liu 2023 micro ball screw; write the model, the report "
                      "and the FMUs into --out and check the FMUs reproduce the fitted model.",
          options=_demo_options)
 def _cmd_demo(args):
@@ -135,6 +138,7 @@ def _fit_options(parser):
 def _cmd_fit(args):
     from .fit import check_available, evaluate, fit_with_artefacts
     from .measurement import kinds_for
+    from .plausibility import warn_implausible_fit
 
     if args.out:
         check_writable_target(args.out)
@@ -147,19 +151,25 @@ def _cmd_fit(args):
         check_available(model, cases, kind)
         before = evaluate(starting, cases, kind)
         with _progress("fitting", " evaluations") as tick:
-            results.append((before, fit_with_artefacts(model, cases, progress=tick, kind=kind)))
+            result = fit_with_artefacts(model, cases, progress=tick, kind=kind)
+        alone = evaluate(result.fitted_model(), cases, kind)
+        warn_implausible_fit(result.fitted_model())
+        results.append((before, result, alone.rms_um))
     if args.out:
         write_atomically(args.out, results[0][1].fitted_model().to_toml())
-    _emit_each(args, [(result.kind, _fit_payload(before, result),
-                       text.fit_lines(result, before.rms_um, args.out))
-                      for before, result in results])
+    _emit_each(args, [(result.kind, _fit_payload(before, result, alone_um),
+                       text.fit_lines(result, before.rms_um, args.out, alone_um))
+                      for before, result, alone_um in results])
 
 
-def _fit_payload(before, result):
-    """The --json of a fit: the model's parameters, and the measurement's artefacts apart."""
+def _fit_payload(before, result, alone_um):
+    """The --json of a fit: the model's parameters, and the measurement's artefacts apart;
+    ``rms_after_um`` with the artefacts fitted beside the model, ``rms_model_alone_um`` the
+    saved model on every sample (what compare gives)."""
     fitted = result.fitted_model()
     keys = set(fitted.parameter_keys)
     return {"rms_before_um": before.rms_um, "rms_after_um": result.rms_um,
+            "rms_model_alone_um": alone_um,
             "effects": list(fitted.names), "params": fitted.values,
             "uncertainties": {name: result.uncertainties[name] for name in fitted.names},
             "undetermined": {k: v for k, v in result.undetermined.items() if k in keys},
@@ -249,7 +259,7 @@ def _compare_options(parser):
                      "deviation of the measured runs and of what is left after the model, "
                      "side by side (--standard: another standard's, or all; a thermal case's "
                      "ISO 230-3 figures, measured, predicted and compensated). Tracking: "
-                     "seed 002's maximum and RMS tracking error "
+                     "the maximum and RMS tracking error of Anang et al. 2017 "
                      "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):
@@ -304,7 +314,7 @@ def _compensate_options(parser):
 
 @command("compensate", help="thermal correction at each sample and the error it leaves",
          description="Apply the model's thermal effects (thermal_screw, ambient_expansion) as "
-                     "a compensation to a thermal case, as seed 003 §5.2: the thermal error is "
+                     "a compensation to a thermal case, as Rong et al. 2023 §5.2: the thermal error is "
                      "each target's drift from its first visit; print its max and RMS before "
                      "and after, per target and over time.",
          options=_compensate_options)
@@ -326,13 +336,17 @@ def _import_options(parser):
     parser.add_argument("--axis", required=True, metavar="AXIS.toml",
                         help="axis.toml (or a case folder holding one) describing the axis")
     parser.add_argument("--out", required=True, metavar="CASE", help="case folder to create")
+    parser.add_argument("--columns", metavar="MAP", type=column_map,
+                        help="a .csv whose headers are not recognised: "
+                             "'HEADER=target:UNIT,HEADER=run1+:UNIT,HEADER=run1-:UNIT,...' "
+                             "(units mm, m, µm, nm, in; a deviation defaults to µm)")
 
 
 @command("import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
          formatter_class=argparse.RawDescriptionHelpFormatter,
-         description="Read a laser-interferometer export and write a case folder (data-format "
-                     "1.1: AXIS.toml + positioning.csv), all files or none. Says which metadata "
-                     "the case format cannot hold.",
+         description="Read a laser-interferometer export and write a case folder (case format "
+                     "1.2, docs/case-format.md: AXIS.toml + positioning.csv), all files or none. "
+                     "Says which metadata the case format cannot hold.",
          epilog="Formats, by extension:\n"
                 "  .rtl  Renishaw linear data file (sections HEADER::, TARGET DATA::, RUNS::,\n"
                 "        DEVIATIONS::, ...): odd runs approach in +, even runs in -.\n"
@@ -343,27 +357,50 @@ def _import_options(parser):
                 "        target_mm first (mm); then one column per run and direction,\n"
                 "        run<N>+ / run<N>- (or run<N>_up / run<N>_down), the deviation\n"
                 "        measured - target in µm; an empty cell = not measured; '#' comment\n"
-                "        lines; ';'- or tab-separated files may use a decimal comma.",
+                "        lines; ';'- or tab-separated files may use a decimal comma.\n"
+                "        Vendor headers with units are recognised: 'Target (mm)',\n"
+                "        'Run 1 Fwd (µm)', 'Run 1 Rev (µm)' (fwd/forward/up, rev/reverse/\n"
+                "        bwd/backward/down; units mm, m, µm, nm, in); any other layout\n"
+                "        is mapped with --columns.\n"
+                "See docs/compensation-tables.md and docs/case-format.md.",
          options=_import_options)
 def _cmd_import(args):
     from .importers import import_case
 
-    folder, measurement, dropped = import_case(args.file, args.axis, args.out)
+    folder, measurement, dropped = import_case(args.file, args.axis, args.out, args.columns)
     directions = sorted({int(d) for d in measurement.direction}, reverse=True)
     payload = {"case": str(folder), "samples": int(measurement.error_um.size),
                "targets": int(len(set(measurement.target_mm))),
                "runs": int(measurement.run.max()), "directions": directions,
                "name": read_case(folder).name, "dropped": dropped,
-               "ambient_C": None if measurement.ambient_C is None else
-               [float(measurement.ambient_C.min()), float(measurement.ambient_C.max())]}
+               **{column: None if values is None else [float(values.min()), float(values.max())]
+                  for column, values in (("ambient_C", measurement.ambient_C),
+                                         ("material_C", measurement.material_C))},
+               "expansion_per_K": measurement.expansion_per_K}
     lines = [f"{folder}: {payload['samples']} samples, {payload['targets']} targets, "
              f"{payload['runs']} runs, directions {', '.join(f'{d:+d}' for d in directions)}"]
-    if payload["ambient_C"]:
-        lines.append("  kept: the air temperature as positioning.csv ambient_C, "
-                     + " to ".join(f"{t:g}" for t in sorted(set(payload["ambient_C"]))) + " °C")
+    for column, what in (("ambient_C", "air"), ("material_C", "material")):
+        if payload[column]:
+            lines.append(f"  kept: the {what} temperature as positioning.csv {column}, "
+                         + " to ".join(f"{t:g}" for t in sorted(set(payload[column]))) + " °C")
+    if payload["expansion_per_K"] is not None and "ENVIRONMENT.EXP COEFF" not in dropped:
+        lines.append(f"  kept: the expansion coefficient as [screw] expansion_per_K = "
+                     f"{payload['expansion_per_K']:g} /K")
     lines += [f"  dropped (the case format has no place for it): {key} = {value}"
               for key, value in dropped.items()]
     _emit(args, payload, "\n".join(lines))
+
+
+def _positive_tolerance(text):
+    """``--tolerance-um``: a number > 0 (µm)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < float("inf"):
+        raise InputError(f"expected a tolerance in µm > 0, got {text!r}",
+                         parameter="--tolerance-um")
+    return value
 
 
 def _comp_table_options(parser):
@@ -376,8 +413,13 @@ def _comp_table_options(parser):
                             f" ({c.name}: {c.out_note})" for c in CONTROLLERS.values()
                             if c.out_note))
     parser.add_argument("--spacing-mm", type=float, metavar="S",
-                        help="distance between table points (default: lead / 8, widened to the "
-                             "controller's point limit; with --from-measurement the targets)")
+                        help="distance between table points (default from the model: the "
+                             "fewest points that reproduce it within --tolerance-um under the "
+                             "controller's grid rules; with --from-measurement the targets)")
+    parser.add_argument("--tolerance-um", type=_positive_tolerance, metavar="T",
+                        default=TABLE_TOLERANCE_UM,
+                        help=f"how closely the model's table must follow the model between "
+                             f"its points (default {TABLE_TOLERANCE_UM:g} µm)")
     parser.add_argument("--from-measurement", action="store_true",
                         help="the table from the measured means at the targets, not the model")
     parser.add_argument("--axis-id", metavar="ID",
@@ -415,7 +457,8 @@ def _cmd_comp_table(args):
                          parameter="--model")
     model = load_model(args.model, _effects(args)) if args.model else Model()
     files, report = comp_table(case, model, args.controller, args.out, args.spacing_mm,
-                               args.from_measurement, args.axis_id, args.force)
+                               args.from_measurement, args.axis_id, args.force,
+                               args.tolerance_um)
     refuse_overwriting_inputs({path: "--out" for path in files}, _inputs(args))
     for path, content in files.items():
         write_atomically(path, content)
@@ -470,8 +513,8 @@ def _cmd_uncertainty(args):
     case = read_case(args.case)
     model = load_model(args.model, _effects(args)) if args.model else None
     budget = read_budget(args.budget) if args.budget else default_budget()
-    with tqdm(desc="Monte Carlo", unit="trial", unit_scale=True, delay=1.0, leave=False,
-              file=sys.stderr) as bar:
+    with tqdm(desc="Monte Carlo (the trials, then each input's share)", unit="run",
+              unit_scale=True, delay=1.0, leave=False, file=sys.stderr, disable=None) as bar:
         def tick(trials, planned):
             bar.total = planned
             bar.update(trials)
@@ -503,7 +546,7 @@ def _cmd_effects(args):
     _emit(args, payload, text.effect_lines(effects))
 
 
-STANDALONE_HELP = ("each FMU carries the Python its physics needs (21-37 MB each), for FMI "
+STANDALONE_HELP = ("each FMU carries the Python its physics needs (about 21 MB each), for FMI "
                    "hosts on machines without Python (docs/fmu-hosts.md); without it the FMUs "
                    "are small and need this machine's Python")
 
@@ -559,7 +602,7 @@ def _counter_progress(label, unit, unit_scale=False):
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, unit_scale=unit_scale, delay=1.0, leave=False,
-              file=sys.stderr) as bar:
+              file=sys.stderr, disable=None) as bar:
         def update(done, total):
             bar.total = total
             bar.update(done - bar.n)
@@ -629,9 +672,9 @@ def _cmd_simulate(args):
 # the scenarios of the kinds carry the handlers
 command_group("simulate", help="run a scenario on the co-simulated axis, write a case folder",
               description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
-                          "scenario and write the result as a measurement case (data-format.md), "
+                          "scenario and write the result as a measurement case (docs/case-format.md), "
                           "ready for fit, diagnose and compare. iso230 and thermal run the servo "
-                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: seed 002's "
+                          "with a type-1 plant (NpidServo.plant_stiffness_per_s2 = 0: Anang et al. 2017's "
                           "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
                           "stops and keeps what was computed.",
               options=_simulate_options)
@@ -783,12 +826,12 @@ def _add_model_options(sub, model_help="starting model (TOML); without it the mo
                        required=False):
     sub.add_argument("--model", metavar="M.toml", help=model_help, required=required)
     sub.add_argument("--effects", metavar="F.py", action="append",
-                     help="Python file with your own effects (repeatable); see the README")
+                     help="Python file with your own effects (repeatable); see docs/own-effect.md")
 
 
 def _add_correction_option(sub):
-    sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T",
-                     type=temperature_option, help=CORRECTION_HELP)
+    sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T", nargs="?",
+                     const=MATERIAL, type=temperature_option, help=CORRECTION_HELP)
 
 
 def _add_axis_options(sub, thermal_step=True):

@@ -1,4 +1,4 @@
-"""Thermal compensation checked on a thermal case, as seed 003 §4.3 and §5.2 (Fig. 13).
+"""Thermal compensation checked on a thermal case, as Rong et al. 2023 §4.3 and §5.2 (Fig. 13).
 
 The model's thermal effects (thermal_screw, ambient_expansion) predict the thermal error at
 every sample; the controller adds the opposite as its correction. A thermal test measures
@@ -122,7 +122,7 @@ def compensate(case, model):
 
 def thermal_error_um(positioning):
     """The thermal error a thermal test measures: each sample's deviation minus that of the
-    first visit of its target and direction (µm; seed 003 Fig. 9-13)."""
+    first visit of its target and direction (µm; Rong et al. 2023 Fig. 9-13)."""
     _, reference = visits(positioning)
     return positioning.error_um - positioning.error_um[reference]
 

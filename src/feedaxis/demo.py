@@ -1,4 +1,4 @@
-"""`feedaxis demo`: the whole loop on the bundled seed 001 case, then the FMUs.
+"""`feedaxis demo`: the whole loop on the bundled Liu 2023 case, then the FMUs.
 
 Each round diagnoses the model, adds the best missing effect and refits, until the verdict
 is no longer ``missing_effect``. The case (copied first, to try the loop by hand on), the

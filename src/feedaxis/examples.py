@@ -1,14 +1,14 @@
 """Example cases generated from published numbers with the project's physics.
 
-The seed 001 micro ball screw (the demo case):
+The Liu 2023 micro ball screw (the demo case):
 
-Seed 001 publishes the fitted lead error f1 and eccentricity f2 of a C3 micro ball screw
+Liu 2023 publishes the fitted lead error f1 and eccentricity f2 of a C3 micro ball screw
 (lead 1 mm, stroke 5 mm, 5-phase stepper with 0.72° steps) and a validation run of 2,501
 laser points every 0.002 mm. The motor coefficients are not published: the reconstruction
 adds a motor ripple of 0.3 µm peak to valley (0.12 / 0.09 µm, so that with the noise the
 short-wave ripple is about the paper's 0.5 µm) and 0.05 µm Gaussian measurement noise.
 
-Seed 003 thermal tests: the X axis of Table 1 + Table 3 under a Table 2 loading (stroke
+Rong et al. 2023 thermal tests: the X axis of Table 1 + Table 3 under a Table 2 loading (stroke
 0-500 mm assumed), with a lead error and 1 µm noise, sampled by + runs over 11 targets.
 
 The laser example (``data/laser_example``, shipped for ``feedaxis import``): a Renishaw
@@ -25,7 +25,7 @@ from .case import write_case
 from .physics import geometry, motor, thermal
 
 SEED001_AXIS = {
-    "name": "micro ball screw of seed 001 (reconstructed: published f1, f2 + motor ripple + noise)",
+    "name": "micro ball screw of Liu 2023 (reconstructed: published f1, f2 + motor ripple + noise)",
     "screw": {"lead_mm": 1.0},
     "motor": {"step_angle_deg": 0.72, "error_period_steps": 10},
 }
@@ -44,7 +44,7 @@ LASER_SEED = 230
 
 
 def seed001_error_um(position_mm):
-    """Noise-free error of the reconstructed axis: f1 + f2 (seed 001) + motor ripple (µm)."""
+    """Noise-free error of the reconstructed axis: f1 + f2 (Liu 2023) + motor ripple (µm)."""
     lead_mm = SEED001_AXIS["screw"]["lead_mm"]
     return (geometry.lead_error_um(position_mm, **SEED001_LEAD)
             + geometry.eccentricity_error_um(position_mm, lead_mm, **SEED001_ECCENTRICITY)
@@ -69,7 +69,7 @@ def write_seed001_case(folder, noise_um=SEED001_NOISE_UM, seed=SEED001_SEED, rip
         "direction": np.ones_like(position_mm), "run": np.ones_like(position_mm)})
 
 
-TABLE2_AXIS = {"name": "seed 003 X axis, Table 2 loading (synthetic)", "screw": {
+TABLE2_AXIS = {"name": "Rong et al. 2023 X axis, Table 2 loading (synthetic)", "screw": {
     "lead_mm": 10.0, "length_m": 0.8, "diameter_m": 0.034, "density_kg_m3": 7800.0,
     "specific_heat_J_kgK": 448.0, "expansion_per_K": 11.7e-6, "nut_length_m": 0.212,
     "bearing_length_m": 0.03, "fixed_end_mm": -141.0}}
@@ -81,7 +81,7 @@ def write_table2_case(folder, feed_mm_min, params=None, noise_um=1.0, seed=0, ru
                       simulate=thermal.simulate_duty):
     """A thermal case: Table 2 duty at ``feed_mm_min`` over ``stroke_mm``; every
     ``run_every_s`` a + run over the stroke every 50 mm, 3 s per target;
-    error = TE (seed 003 Eq. 1-19) + lead error + noise.
+    error = TE (Rong et al. 2023 Eq. 1-19) + lead error + noise.
 
     ``params`` (ThermalScrewParams, default Table 1 + Table 3 X) must match TABLE2_AXIS's
     geometry; axis.toml states ``axis_fixed_end_mm`` (default: the true P_f) as the user's

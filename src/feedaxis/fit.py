@@ -227,14 +227,24 @@ def fit(model, data, progress=None, kind=None):
     if found[0].loose_share is not None:
         flag_loose(fitted, sigma, undetermined, found[0].loose_share)
     if len(found) == 1:
-        for key, reason in found[0].confounded(fitted, layout.slots, solution.jac, solution.fun,
-                                               sigma).items():
+        for key, reason in {**unresolved_terms(fitted, found[0]), **found[0].confounded(
+                fitted, layout.slots, solution.jac, solution.fun, sigma)}.items():
             undetermined.setdefault(key, reason)
     result = FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
                        problem.measured_um, solution.fun, sigma, undetermined, covariance, found,
                        jacobian=solution.jac if layout.nonlinear_index.size else None)
     _check_finite(result, found)
     return result
+
+
+def unresolved_terms(model, measurement):
+    """{"effect.parameter": why} of the model's effects whose wavelength the samples cannot
+    resolve (``measurement.unresolvable``, the rule by which diagnose passes them over and
+    comp-table leaves them out): fitted when asked for, but undetermined."""
+    return {f"{effect.name}.{parameter.name}": f"the targets cannot resolve it: {reason}"
+            for effect in model.effects
+            if (reason := measurement.unresolvable(effect))
+            for parameter in effect.parameters}
 
 
 def fit_with_artefacts(model, data, progress=None, kind=None):

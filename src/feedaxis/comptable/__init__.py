@@ -19,8 +19,8 @@ from ..errors import InputError
 from ..iso230 import target_clusters
 from . import beckhoff, fanuc, heidenhain, linuxcnc, mach4, siemens
 from .base import Controller
-from .table import (GRID_DECIMALS, NEVER_IN_TABLE, POINTS_PER_WAVELENGTH, CompTable,
-                    default_spacing_mm, from_measurement, from_model, grid_mm)
+from .table import (GRID_DECIMALS, NEVER_IN_TABLE, TABLE_TOLERANCE_UM, CompTable,
+                    default_spacing_mm, from_measurement, from_model, grid_mm, lean_table)
 from .verify import between_targets, verify
 
 # The one registry of controllers (the command line's choices and help read it). The table's
@@ -38,15 +38,22 @@ def check_case(case):
     if case.positioning is None:
         raise InputError(f"a compensation table needs {POSITIONING_FILE}", path=case.folder)
     return case
+# A controller without a point limit gets at most a point every lead / 16 from the model:
+# a once-per-revolution error followed within 2 % of its amplitude (1 − cos(π/16))
+LEAN_POINTS_PER_LEAD = 16
 
 
-def build_table(case, model, controller, spacing_mm=None, from_measured=False):
-    """The table for ``controller`` on ``case``: from ``model`` (default) or the measured means.
+def build_table(case, model, controller, spacing_mm=None, from_measured=False,
+                tolerance_um=TABLE_TOLERANCE_UM):
+    """The table for ``controller`` on ``case``: from ``model`` (default) or the measured
+    means; with the :class:`~.table.LeanTable` record of a model's table chosen lean (None
+    otherwise).
 
-    The points are equidistant every ``spacing_mm`` (default lead / 8, widened to the
-    controller's point limit) over the measured targets; a table from the measurement on a
-    controller that takes free positions uses the targets themselves unless ``spacing_mm``
-    is given.
+    The points are equidistant over the measured targets, every ``spacing_mm`` when it is
+    given; from the model, by default the fewest that reproduce it within ``tolerance_um``
+    under the controller's grid rules (:func:`.table.lean_table`; at most the count at lead
+    / 8, within the controller's point limit). A table from the measurement on a controller
+    that takes free positions uses the targets themselves unless ``spacing_mm`` is given.
     """
     chosen = CONTROLLERS[controller]
     target_mm = case.positioning.target_mm
@@ -60,11 +67,27 @@ def build_table(case, model, controller, spacing_mm=None, from_measured=False):
                              f"sample is at {target_mm[0]:g} mm", column="target_mm",
                              path=case.folder / POSITIONING_FILE)
         if spacing_mm is None and not chosen.equidistant:
-            return from_measurement(case)
+            return from_measurement(case), None
         spacing_mm = spacing_mm or (target_mm.max() - target_mm.min()) / max(count - 1, 1)
-        return from_measurement(case, _grid(chosen, first_mm, last_mm, spacing_mm))
-    spacing_mm = spacing_mm or default_spacing_mm(case, chosen.max_points, last_mm - first_mm)
-    return from_model(case, model, _grid(chosen, first_mm, last_mm, spacing_mm))
+        return from_measurement(case, _grid(chosen, first_mm, last_mm, spacing_mm)), None
+    if spacing_mm:
+        return from_model(case, model, _grid(chosen, first_mm, last_mm, spacing_mm)), None
+    most = chosen.max_points or _count_grid(chosen, first_mm, last_mm, int(np.ceil(
+        (last_mm - first_mm) / case.axis.lead_mm * LEAN_POINTS_PER_LEAD)) + 1).size
+    lean = lean_table(case, model, lambda count: _count_grid(chosen, first_mm, last_mm, count),
+                      most, (first_mm, last_mm), tolerance_um)
+    return lean.table, lean
+
+
+def _count_grid(controller, first_mm, last_mm, count):
+    """At most ``count`` equidistant points over the span under the controller's grid rules
+    (a grid through 0 mm may need one interval more), spaced by whole micrometres."""
+    for intervals in (count - 1, count - 2):
+        spacing_mm = np.ceil((last_mm - first_mm) / max(intervals, 1) * 1e3) / 1e3
+        points = _grid(controller, first_mm, last_mm, spacing_mm)
+        if points.size <= count or intervals <= 1:
+            return points
+    return points
 
 
 def safe_table(case, model, position_mm):
@@ -131,7 +154,7 @@ class RefusedTable(InputError):
 
 
 def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured=False,
-               axis_id=None, force=False):
+               axis_id=None, force=False, tolerance_um=TABLE_TOLERANCE_UM):
     """The ``controller`` file for ``out_path``, read back as the controller does and verified.
 
     Effects a table must not use (:func:`.safety.unsafe_effects`) are left out. The table is
@@ -148,7 +171,7 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
     axis_id = checked_axis_id(chosen, axis_id)
     unsafe = safety.unsafe_effects(case, model)
     usable = safety.usable_model(model, unsafe)
-    table = build_table(case, usable, controller, spacing_mm, from_measured)
+    table, lean = build_table(case, usable, controller, spacing_mm, from_measured, tolerance_um)
     text = chosen.write(table, axis_id)
     applied = chosen.read(text)
     out_path = Path(out_path)
@@ -162,7 +185,13 @@ def comp_table(case, model, controller, out_path, spacing_mm=None, from_measured
               "sign": chosen.sign, "load": chosen.load, **verify(case, applied),
               "between_targets": between_targets(case, usable, applied),
               "files": [str(path) for path in files]}
-    report["notes"] = _notes(case, table, chosen, spacing_mm)
+    if chosen.suffix and out_path.suffix.upper() != chosen.suffix:
+        report["warnings"].append(
+            f"{chosen.name} finds a compensation table by its {chosen.suffix} ending: "
+            f"{out_path.name} will not be loaded; name it {out_path.stem}{chosen.suffix}")
+    report["tolerance_um"] = None if lean is None else lean.tolerance_um
+    report["deviation_um"] = None if lean is None else lean.deviation_um
+    report["notes"] = _lean_notes(lean, chosen) + _notes(table, chosen)
     if from_measured and unsafe:
         report["notes"].append(f"the model's view between the targets leaves out "
                                f"{', '.join(unsafe)}: the data cannot determine them")
@@ -188,18 +217,27 @@ def checked_axis_id(controller, axis_id):
     return axis_id
 
 
-def _notes(case, table, controller, spacing_mm):
-    """What limits this table: the point limit forcing a spacing over lead / 8, figures
-    in-sample for measured means, the controller's reference and machine data."""
+def _lean_notes(lean, controller):
+    """How the model's table was sized: the tolerance and what it reached."""
+    if lean is None:
+        return []
+    held = ", ".join(lean.table.included) or "nothing"
+    if lean.reached:
+        return [f"{lean.table.size} points: the fewest that reproduce the model ({held}) "
+                f"within {lean.tolerance_um:g} µm between them (largest deviation "
+                f"{lean.deviation_um:.3g} µm, before the controller's rounding); --spacing-mm "
+                "sets the spacing, --tolerance-um the tolerance"]
+    limit = (f"{controller.name} takes at most {controller.max_points}" if controller.max_points
+             else f"a point every lead / {LEAN_POINTS_PER_LEAD} at most")
+    return [f"{lean.table.size} points, the most allowed here ({limit}), leave up to "
+            f"{lean.deviation_um:.3g} µm of the model ({held}) between them, over the "
+            f"{lean.tolerance_um:g} µm tolerance"]
+
+
+def _notes(table, controller):
+    """What limits this table: figures in-sample for measured means, the controller's
+    reference and machine data (the point limit is said by :func:`_lean_notes`)."""
     notes = []
-    lead_mm = case.axis.lead_mm
-    if (table.source == "model" and spacing_mm is None
-            and "assembly_eccentricity" in table.included
-            and table.spacing_mm > lead_mm / POINTS_PER_WAVELENGTH + 1e-9):
-        notes.append(f"{controller.name} takes at most {controller.max_points} points: "
-                     f"{table.spacing_mm:.4g} mm between points (over lead / "
-                     f"{POINTS_PER_WAVELENGTH} = {lead_mm / POINTS_PER_WAVELENGTH:.4g} mm) "
-                     "follows the once-per-revolution error only roughly")
     if table.source == "measurement":
         notes.append("the table is the measured means at the targets: the figures after are "
                      "in-sample there (optimistic); between the targets it is blind")

@@ -37,7 +37,8 @@ class Controller:
     table), ``quantum_um`` (the value's resolution, µm; 0 when finer than a nanometre), and
     for the command line's help ``out_note`` (what ``--out`` names) and ``axis_note`` (the
     default axis name as the manual writes it); ``axis_id_pattern``, the regular expression
-    an ``--axis-id`` must match whole (what the file holds there: no newline, no word more).
+    an ``--axis-id`` must match whole (what the file holds there: no newline, no word more); ``suffix``
+    the file ending the control finds its table by ("" when any name serves).
     """
 
     name: str
@@ -54,6 +55,7 @@ class Controller:
     quantum_um: float = 0.0
     out_note: str = ""
     axis_note: str = ""
+    suffix: str = ""
     axis_id_pattern: str = r"[A-Za-z0-9_]{1,16}"
 
     @property

@@ -82,4 +82,5 @@ def read(text, path="X.COM"):
 CONTROLLER = Controller(NAME, write, read, MAX_POINTS, EQUIDISTANT, DEFAULT_AXIS_ID, SIGN, LOAD,
                         axis_id_pattern=AXIS_ID,
                         companions=companions,
-                        out_note="the .COM; its .CMA goes beside it", axis_note=DEFAULT_AXIS_ID)
+                        out_note="the .COM; its .CMA goes beside it", axis_note=DEFAULT_AXIS_ID,
+                        suffix=".COM")

@@ -28,6 +28,12 @@ NEVER_IN_TABLE = {
 POINTS_PER_WAVELENGTH = 8
 GRID_DECIMALS = 3
 DENSE_PER_SPACING = 16
+# A model's table has the fewest points whose linear interpolation stays within this of the
+# model between them (both directions; before the controller rounds to its unit): a tenth
+# of a micrometre, under what laser calibrations resolve (0.4 µm repeatability on the
+# shipped example) and a tenth of the finest controller unit of 1 µm
+TABLE_TOLERANCE_UM = 0.1
+DENSE_CHECK_POINTS = 4001  # positions the lean table is checked at, over its span
 
 
 @dataclass(frozen=True)
@@ -86,6 +92,59 @@ def default_spacing_mm(case, max_points, span_mm=None):
     if max_points:
         spacing_mm = max(spacing_mm, span_mm / (max_points - 2))
     return float(np.ceil(spacing_mm * 10**GRID_DECIMALS) / 10**GRID_DECIMALS)
+
+
+@dataclass(frozen=True)
+class LeanTable:
+    """The fewest-point table of a model within a tolerance (:func:`lean_table`)."""
+
+    table: CompTable
+    tolerance_um: float
+    deviation_um: float  # the largest |model − table| between the points, both directions
+    reached: bool  # False: the point limit stopped the search above the tolerance
+
+
+def interpolation_deviation_um(case, model, table, dense_mm):
+    """The largest |model − table| (µm) at ``dense_mm``, both directions, over the
+    position effects of ``model`` (what the table is meant to reproduce)."""
+    return max(float(np.max(np.abs(position_error_um(case, model, dense_mm, direction)
+                                   - table.error_um(dense_mm, direction))))
+               for direction in (1.0, -1.0))
+
+
+def lean_table(case, model, grid, max_count, span_mm, tolerance_um=TABLE_TOLERANCE_UM):
+    """The table of ``model`` with the fewest points (``grid(count)`` gives the points for a
+    count, under the controller's grid rules) whose linear interpolation reproduces it within
+    ``tolerance_um`` over ``span_mm`` (first, last), over the effects the densest table
+    allowed (``max_count`` points) holds.
+
+    The count is found by doubling from 2, then halving the interval; a linear model needs
+    the controller's minimum. When even ``max_count`` points leave more, that table is
+    returned with ``reached`` False.
+    """
+    densest = from_model(case, model, grid(max_count))
+    wanted = Model([e for e in model.effects if e.name in densest.included], model.values)
+    dense_mm = np.linspace(*span_mm, DENSE_CHECK_POINTS)
+    tried = {}
+
+    def within(count):
+        table = from_model(case, wanted, grid(count))
+        tried[count] = (table, interpolation_deviation_um(case, wanted, table, dense_mm))
+        return tried[count][1] <= tolerance_um
+
+    low, high = 1, 2
+    while high < max_count and not within(high):
+        low, high = high, min(2 * high, max_count)
+    if high == max_count and not within(max_count):
+        table, deviation = tried[max_count]
+        return LeanTable(replace(table, excluded={**densest.excluded, **table.excluded}),
+                         tolerance_um, deviation, False)
+    while high - low > 1:
+        middle = (low + high) // 2
+        low, high = (low, middle) if within(middle) else (middle, high)
+    table, deviation = tried[high]
+    return LeanTable(replace(table, excluded={**densest.excluded, **table.excluded}),
+                     tolerance_um, deviation, True)
 
 
 def _grid_case(case, position_mm, direction):

@@ -5,7 +5,9 @@ container inputs, every component output a container output (``NpidServo.positio
 a container cannot sum, so ``positioning_error_um`` is the sum of the three ``error_um``
 outputs), the system's parameter values become fixed container parameters
 (``NpidServo.nonlinear``, ...) mapped onto the components, and the component-to-component
-connections are the container's connections.
+connections are the container's connections. Each container variable keeps the unit and the
+description of the component variable it maps to (the components' unit definitions are
+carried over).
 
 What the container is, found by running it (fmpy 0.3.32):
 
@@ -55,12 +57,13 @@ def container_configuration(system, fmu_paths):
     from fmpy.model_description import (CoSimulation, DefaultExperiment, ModelDescription,
                                         ModelVariable, Unknown)
 
-    components, variables = {}, {}
+    components, variables, units = {}, {}, {}
     for c in system.components:
         description = read_model_description(str(fmu_paths[c.fmu]))
         components[c.name] = Component(name=c.name, filename=Path(fmu_paths[c.fmu]),
                                        modelDescription=description)
         variables[c.name] = {v.name: v for v in description.modelVariables}
+        units.update({unit.name: unit for unit in description.unitDefinitions})
     mappings = {}
 
     def add(variable, component, name):
@@ -68,21 +71,27 @@ def container_configuration(system, fmu_paths):
 
     for connection in system.connections:
         if connection.source_component is None:
-            start = next(v.start for v in system.inputs if v.name == connection.source)
+            declared = next(v for v in system.inputs if v.name == connection.source)
             component, name = connection.target.split(".", 1)
             add(ModelVariable(type="Real", variability="continuous", causality="input",
-                              name=connection.source, start=repr(float(start))),
+                              name=connection.source, start=repr(float(declared.start)),
+                              description=declared.description,
+                              unit=variables[component][name].unit),
                 component, name)
     for c in system.components:
         check_parameter_values(c, variables[c.name])
         for name, value in c.parameters.items():
-            add(ModelVariable(type=variables[c.name][name].type, variability="fixed",
-                              causality="parameter", initial="exact", name=f"{c.name}.{name}",
-                              start=fmi_text(value)), c.name, name)
+            declared = variables[c.name][name]
+            add(ModelVariable(type=declared.type, variability="fixed", causality="parameter",
+                              initial="exact", name=f"{c.name}.{name}", start=fmi_text(value),
+                              description=declared.description, unit=declared.unit),
+                c.name, name)
         for name, declared in variables[c.name].items():
             if declared.causality == "output":
                 add(ModelVariable(type="Real", variability="continuous", causality="output",
-                                  initial="calculated", name=f"{c.name}.{name}"), c.name, name)
+                                  initial="calculated", name=f"{c.name}.{name}",
+                                  description=declared.description, unit=declared.unit),
+                    c.name, name)
     connections = []
     for connection in system.connections:
         if connection.source_component is not None:
@@ -100,7 +109,8 @@ def container_configuration(system, fmu_paths):
         description="feedaxis: ball-screw feed axis, four FMUs in an fmpy container",
         defaultExperiment=DefaultExperiment(stepSize=repr(system.macro_step_s)),
         coSimulation=CoSimulation(fixedInternalStepSize=system.macro_step_s),
-        modelVariables=model_variables, outputs=outputs, initialUnknowns=list(outputs))
+        modelVariables=model_variables, outputs=outputs, initialUnknowns=list(outputs),
+        unitDefinitions=[units[name] for name in sorted(units)])
     return Configuration(parallelDoStep=False, modelDescription=description,
                          components=list(components.values()), connections=connections,
                          variableMappings=mappings)

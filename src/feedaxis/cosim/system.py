@@ -217,7 +217,7 @@ def fmi_text(value):
 
 
 def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
-    """The four-FMU feed axis with the FMUs' default physics (seeds 000-003).
+    """The four-FMU feed axis with the FMUs' default physics (the four papers).
 
     Parameters
     ----------
@@ -227,7 +227,7 @@ def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
         Communication step of NpidServo, StepperError and GeometricError (s).
     thermal_step_s : float
         Communication step of ThermalScrew (s); its field is advanced in sub-steps of at
-        most its ``time_step_s`` (0.1 s, seed 003).
+        most its ``time_step_s`` (0.1 s, Rong et al. 2023).
     """
     inputs = (
         Variable("position_ref_mm", "mm", "commanded axis position"),
@@ -237,14 +237,14 @@ def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
     components = (
         Component("NpidServo", "NpidServo", servo_step_s,
                   {"nonlinear": False, "time_step_s": 1e-4},
-                  "position loop, PID (seed 002 Eq. 1-8)"),
+                  "position loop, PID (Anang et al. 2017 Eq. 1-8)"),
         Component("StepperError", "StepperError", servo_step_s, {},
-                  "motor step error (seed 000 Eq. 6, 9, 10)"),
+                  "motor step error (Liu 2022 Eq. 6, 9, 10)"),
         Component("GeometricError", "GeometricError", servo_step_s, {"sag_enabled": True},
-                  "lead, eccentricity, backlash, sag (seed 000/001)"),
+                  "lead, eccentricity, backlash, sag (Liu 2022/2023)"),
         Component("ThermalScrew", "ThermalScrew", thermal_step_s,
                   {"reference_ambient_C": 20.0, "time_step_s": 0.1},
-                  "screw heating (seed 003 Eq. 1-19)"),
+                  "screw heating (Rong et al. 2023 Eq. 1-19)"),
     )
     connections = (
         Connection("position_ref_mm", "NpidServo.position_ref_mm"),

@@ -41,7 +41,7 @@ class _PeriodicEffect(PositioningEffect):
 
 
 class LeadError(PositioningEffect):
-    """Cumulative lead deviation f1 = a1·y + b1 (seed 001, low-frequency part)."""
+    """Cumulative lead deviation f1 = a1·y + b1 (Liu 2023, low-frequency part)."""
 
     name = "lead_error"
     meaning = "the screw's lead differs from nominal, so the error grows linearly with travel"
@@ -68,7 +68,7 @@ class LeadError(PositioningEffect):
 
 
 class GravitySag(PositioningEffect):
-    """Axial error of the nut on the screw bent by its own weight (seed 000 Eq. 3-5).
+    """Axial error of the nut on the screw bent by its own weight (Liu 2022 Eq. 3-5).
 
     Computed from the axis geometry and material, nothing fitted.
     """
@@ -98,7 +98,7 @@ class GravitySag(PositioningEffect):
 
 
 class AssemblyEccentricity(_PeriodicEffect):
-    """Sinusoid of wavelength = lead, amplitude δ·tanθ (seed 000 Eq. 1-2)."""
+    """Sinusoid of wavelength = lead, amplitude δ·tanθ (Liu 2022 Eq. 1-2)."""
 
     name = "assembly_eccentricity"
     meaning = ("the bearing contact point sits off the screw axis on a tilted face, so the "
@@ -125,7 +125,7 @@ class AssemblyEccentricity(_PeriodicEffect):
 
 
 class MotorStepError(_PeriodicEffect):
-    """Rotor angle error periodic over ``error_period_steps`` steps (seed 000 Eq. 6, 9-10)."""
+    """Rotor angle error periodic over ``error_period_steps`` steps (Liu 2022 Eq. 6, 9-10)."""
 
     name = "motor_step_error"
     meaning = ("the stepper rotor's angle deviates periodically within its step cycle; "
@@ -185,7 +185,7 @@ class Backlash(PositioningEffect):
 
 
 class ThermalScrew(PositioningEffect):
-    """Feed-driven screw heating TE_m (seed 003 Eq. 3-19) through a duty.csv."""
+    """Feed-driven screw heating TE_m (Rong et al. 2023 Eq. 3-19) through a duty.csv."""
 
     name = "thermal_screw"
     meaning = ("friction in the nut and the fixed-end bearing heats the screw as the axis "
@@ -255,7 +255,7 @@ class ThermalScrew(PositioningEffect):
 
 
 class AmbientExpansion(PositioningEffect):
-    """TE_a = α·(T_a - 20 °C)·(X - X_ref), X_ref = P_f + offset (seed 003 Eq. 1 from the
+    """TE_a = α·(T_a - 20 °C)·(X - X_ref), X_ref = P_f + offset (Rong et al. 2023 Eq. 1 from the
     fixed end, :func:`~feedaxis.physics.thermal.ambient_error_um`); α and P_f from
     axis.toml, the offset fitted (linear, starting at 0: the screw grows from its fixed end).
     """

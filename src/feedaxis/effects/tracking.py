@@ -1,4 +1,4 @@
-"""Tracking effects: each sets parameters of the closed position loop (seed 002 Eq. 1-8).
+"""Tracking effects: each sets parameters of the closed position loop (Anang et al. 2017 Eq. 1-8).
 
 Names are fixed (other tools use them): servo_plant, coulomb_friction, viscous_friction.
 The parameter names are those of :class:`feedaxis.physics.servo.ServoParams` and of the
@@ -45,10 +45,10 @@ class TrackingEffect(Effect):
 
 
 class ServoPlant(TrackingEffect):
-    """The plant G(s) = b e^{-τs} / (s² + a1 s + a0) of seed 002 Eq. 1, identified."""
+    """The plant G(s) = b e^{-τs} / (s² + a1 s + a0) of Anang et al. 2017 Eq. 1, identified."""
 
     name = "servo_plant"
-    meaning = ("the plant (motor, screw, table) responds differently from seed 002 Eq. 1: "
+    meaning = ("the plant (motor, screw, table) responds differently from Anang et al. 2017 Eq. 1: "
                "gain, damping, stiffness or transport delay")
     parameters = (
         Parameter("plant_gain_mm_per_Vs2", "mm/(V.s2)", 1e2, 1e7, "b of Eq. 1"),

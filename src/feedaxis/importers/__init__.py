@@ -1,4 +1,4 @@
-"""Measurement files of other tools turned into a case folder (data-format 1.1).
+"""Measurement files of other tools turned into a case folder (case format 1.2).
 
 Readers return a :class:`Measurement`; :func:`import_case` writes it with the axis of an
 ``axis.toml`` through :func:`feedaxis.case.write_case` (atomically: the whole folder or
@@ -21,7 +21,9 @@ from ..errors import InputError, check_writable_target
 class Measurement:
     """Deviations (µm) at targets (mm), approach direction ±1 and run (cycle) number;
     ``name`` the axis name the file gives, ``dropped`` what the case format cannot hold,
-    ``ambient_C`` the air temperature at each sample (°C) when the file gives it."""
+    ``ambient_C`` the air and ``material_C`` the machine temperature at each sample (°C),
+    ``expansion_per_K`` the expansion coefficient the laser software used (1/K), when the
+    file gives them."""
 
     target_mm: np.ndarray
     error_um: np.ndarray
@@ -30,16 +32,20 @@ class Measurement:
     name: str = ""
     dropped: dict = field(default_factory=dict)
     ambient_C: np.ndarray | None = None
+    material_C: np.ndarray | None = None
+    expansion_per_K: float | None = None
 
     def columns(self):
         """positioning.csv columns."""
         columns = {"target_mm": self.target_mm, "error_um": self.error_um,
                    "direction": self.direction, "run": self.run}
-        return columns if self.ambient_C is None else {**columns, "ambient_C": self.ambient_C}
+        temperatures = {"ambient_C": self.ambient_C, "material_C": self.material_C}
+        return {**columns, **{k: v for k, v in temperatures.items() if v is not None}}
 
 
-def read_measurement(path):
-    """Read ``path`` by its extension: ``.rtl`` or ``.csv``."""
+def read_measurement(path, columns=None):
+    """Read ``path`` by its extension: ``.rtl`` or ``.csv`` (``columns``: the CSV's column
+    map, :func:`.wide_csv.column_map`)."""
     from . import rtl, wide_csv
 
     path = Path(path)
@@ -50,10 +56,15 @@ def read_measurement(path):
     if reader is None:
         raise InputError(f"unknown format '{path.suffix}'; known: .rtl (Renishaw), .csv "
                          "(wide: target_mm, then one column per run and direction)", path=path)
-    return reader(path)
+    if columns is None:
+        return reader(path)
+    if reader is not wide_csv.read_wide_csv:
+        raise InputError("--columns maps the columns of a .csv export; a .rtl has none",
+                         path=path)
+    return reader(path, columns)
 
 
-def import_case(path, axis_path, out):
+def import_case(path, axis_path, out, columns=None):
     """Read ``path``, write case folder ``out`` with the axis of ``axis_path``.
 
     The case's name is axis.toml's, else the file's. The case is read back as every command
@@ -66,10 +77,11 @@ def import_case(path, axis_path, out):
     if Path(out).exists():
         raise InputError("already exists; choose a new case folder", path=out)
     check_writable_target(out, "folder")
-    measurement = read_measurement(path)
+    measurement = read_measurement(path, columns)
     _check_travel(path, measurement, axis)
     _, axis_values = read_axis_values(axis_file)
     dropped = dict(measurement.dropped)
+    _take_expansion(measurement, axis_values, dropped)
     if measurement.name:
         if axis_values.get("name"):
             dropped["axis name"] = f"{measurement.name} (axis.toml names the case)"
@@ -78,6 +90,20 @@ def import_case(path, axis_path, out):
     folder = write_case(out, axis_values, positioning=measurement.columns(),
                         check=lambda staged: _check_case(path, staged))
     return folder, measurement, dropped
+
+
+def _take_expansion(measurement, axis_values, dropped):
+    """Put the file's expansion coefficient into ``[screw] expansion_per_K`` unless axis.toml
+    sets it (then the file's value is listed as dropped when it differs)."""
+    if measurement.expansion_per_K is None:
+        return
+    screw = axis_values.setdefault("screw", {})
+    given = screw.get("expansion_per_K")
+    if given is None:
+        screw["expansion_per_K"] = measurement.expansion_per_K
+    elif not np.isclose(given, measurement.expansion_per_K, rtol=1e-6):
+        dropped["ENVIRONMENT.EXP COEFF"] = (f"{measurement.expansion_per_K:g} /K (axis.toml "
+                                            f"sets expansion_per_K = {given:g})")
 
 
 def _check_travel(path, measurement, axis):

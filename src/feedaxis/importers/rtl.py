@@ -1,4 +1,4 @@
-"""Renishaw laser-system linear data file (``.rtl``), as ../shared/formats/renishaw-rtl.md.
+"""Renishaw laser-system linear data file (``.rtl``), as docs/formats/renishaw-rtl.md.
 
 Sections are lines ending in ``::``; keys and section names match without regard to
 surrounding spaces or case. Targets (mm) may wrap over several lines; DEVIATIONS lists
@@ -6,7 +6,9 @@ surrounding spaces or case. Targets (mm) may wrap over several lines; DEVIATIONS
 (last to first). The approach direction follows from that order: a run listing its targets
 ascending moved in +, descending in −; in a bidirectional file odd runs must be + and even
 runs −. Cycle (ISO run) j is rtl runs 2j − 1 and 2j. CRLF, exponents and a local code page
-(cp1252) are read. :func:`rtl_text` writes the same structure, for tests and examples.
+(cp1252) are read. ENVIRONMENT's air and material temperatures become ``ambient_C`` and
+``material_C`` of each sample, its expansion coefficient (ppm/°C) ``[screw] expansion_per_K``.
+:func:`rtl_text` writes the same structure, for tests and examples.
 """
 from __future__ import annotations
 
@@ -24,6 +26,10 @@ REQUIRED = ("TARGET DATA", "RUNS", "DEVIATIONS")
 MAX_COUNT_DIGITS = 9  # a count of targets or runs beyond 10^9 is no laser test
 KEPT = {"AXIS", "MACHINE"}
 AIR_TEMPERATURE = re.compile(r"air\s*temp\w*\s*:?\s*(.*)", re.I)
+MATERIAL_TEMPERATURE = re.compile(r"mat\w*\s*temp\w*\s*(\d)?\s*:?\s*(.*)", re.I)
+EXPANSION = re.compile(r"exp\w*\s*coef\w*\s*:?\s*(.*)", re.I)
+PPM = 1e-6  # the file's expansion coefficient is in ppm/°C (µm/(m·K))
+KEPT_ENVIRONMENT = (AIR_TEMPERATURE, MATERIAL_TEMPERATURE, EXPANSION)
 
 
 def _key(text):
@@ -44,6 +50,9 @@ def _sections(path, lines):
             sections[current].append((row, stripped))
         elif stripped:
             raise LineError(path, "text before the first section", row)
+    if not sections:
+        raise LineError(path, "no sections: the file is empty or not a .rtl export (one holds "
+                              + ", ".join(f"{name}::" for name in REQUIRED) + ")")
     for name in REQUIRED:
         if name not in sections:
             raise LineError(path, "missing section", field=f"{name}::")
@@ -160,10 +169,15 @@ def read_rtl(path):
             columns["run"].append((run + 1) // 2 if bidirectional else run)
             columns["rtl_run"].append(run)
     rtl_run = np.array(columns.pop("rtl_run"))
-    air_C = _air_temperature(path, sections.get("ENVIRONMENT", []), n_runs)
-    ambient_C = None if air_C is None else air_C[rtl_run - 1]
+    environment = sections.get("ENVIRONMENT", [])
+    air_C = _temperatures(path, environment, n_runs, AIR_TEMPERATURE, "Air temp", "air")
+    material_C = _temperatures(path, environment, n_runs, MATERIAL_TEMPERATURE, "Mat temp",
+                               "material")
     return Measurement(*(np.array(columns[k], dtype=float) for k in columns),
-                       name=_name(sections), dropped=_dropped(sections), ambient_C=ambient_C)
+                       name=_name(sections), dropped=_dropped(sections),
+                       ambient_C=None if air_C is None else air_C[rtl_run - 1],
+                       material_C=None if material_C is None else material_C[rtl_run - 1],
+                       expansion_per_K=_expansion_per_K(path, environment))
 
 
 def _name(sections):
@@ -172,33 +186,48 @@ def _name(sections):
     return " axis ".join(parts)
 
 
-def _air_temperature(path, section, n_runs):
-    """The air temperature (°C) of each rtl run from the ENVIRONMENT line ``Air temp``: one
-    value for the whole test or one per run; None when the file gives none."""
+def _temperatures(path, section, n_runs, pattern, field, what):
+    """The temperature (°C) of each rtl run from the ENVIRONMENT lines ``pattern`` matches
+    (``Air temp``; ``Mat temp 1`` to ``3``, averaged over the sensors given): each one value
+    for the whole test or one per run; None when the file gives none."""
+    sensors = []
     for row, text in section:
-        match = AIR_TEMPERATURE.fullmatch(text)
+        match = pattern.fullmatch(text)
         if match:
-            values = np.array([number(word, path, row, "Air temp")
-                               for word in match.group(1).replace(",", " ").split()])
+            values = np.array([number(word, path, row, field)
+                               for word in match.groups()[-1].replace(",", " ").split()])
             if values.size not in (1, n_runs):
-                raise LineError(path, f"{values.size} air temperatures: expected one for the "
-                                      f"test or one per run (Run-count {n_runs})", row,
-                                "Air temp")
+                raise LineError(path, f"{values.size} {what} temperatures: expected one for "
+                                      f"the test or one per run (Run-count {n_runs})", row,
+                                field)
             low, high = PHYSICAL_RANGE["ambient_C"]
             for value in values[(values < low) | (values > high)]:
-                raise LineError(path, f"air temperature {value:g} °C is beyond {low:g} to "
-                                      f"{high:g} °C", row, "Air temp")
-            return np.broadcast_to(values, (n_runs,)).astype(float)
+                raise LineError(path, f"{what} temperature {value:g} °C is beyond {low:g} to "
+                                      f"{high:g} °C", row, field)
+            sensors.append(np.broadcast_to(values, (n_runs,)).astype(float))
+    return np.mean(sensors, axis=0) if sensors else None
+
+
+def _expansion_per_K(path, section):
+    """The expansion coefficient (1/K) of the ENVIRONMENT line ``Exp coeff`` (ppm/°C);
+    None when the file gives none."""
+    for row, text in section:
+        match = EXPANSION.fullmatch(text)
+        if match:
+            low, high = PHYSICAL_RANGE["expansion_per_K"]
+            ppm = number(match.group(1).strip(), path, row, "Exp coeff", (low / PPM, high / PPM))
+            return float(f"{ppm!r}e-6")  # exactly the decimal the file wrote, times 10^-6
     return None
 
 
 def _dropped(sections):
-    """{section.key: value} of the metadata the case format cannot hold (the air
-    temperature it holds as ``ambient_C``)."""
+    """{section.key: value} of the metadata the case format cannot hold (the air and
+    material temperatures and the expansion coefficient it holds)."""
     dropped = {}
     for section in ("HEADER", "USER-TEXT", "ENVIRONMENT"):
         lines = [(row, text) for row, text in sections.get(section, [])
-                 if not (section == "ENVIRONMENT" and AIR_TEMPERATURE.fullmatch(text))]
+                 if not (section == "ENVIRONMENT"
+                         and any(p.fullmatch(text) for p in KEPT_ENVIRONMENT))]
         for key, (value, _) in _fields(lines).items():
             if not (section == "USER-TEXT" and key in KEPT) and value:
                 dropped[f"{section}.{key}"] = value

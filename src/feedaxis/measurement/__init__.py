@@ -3,7 +3,7 @@ measurement, registered in :mod:`feedaxis.kinds`, chosen here, in one place, fro
 and the model.
 
 - :mod:`.positioning`: deviations at targets (positioning.csv), ISO 230-2;
-- :mod:`.tracking`: deviations over time (tracking.csv), seed 002's closed loop.
+- :mod:`.tracking`: deviations over time (tracking.csv), Anang et al. 2017's closed loop.
 
 A model acts on one kind (its effects name it, ``Effect.measurement``); a model with no
 effect of any kind (the empty model) is compared with each kind the case holds. A new kind

@@ -26,7 +26,9 @@ from .. import kinds, standards
 from ..case import DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, length_mm
 from ..iso230 import SAME_TARGET_MM, iso230_figures, sampling_notes, target_clusters
 from ..standards import DEFAULT
+from ..plausibility import positioning_problems, warn_implausible
 from ..stats import judge
+from ..stats.aliasing import aliased
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
 from ..stats.noise import PureError, ResidualMeanSquare, Serial
@@ -45,15 +47,17 @@ SERIAL_MIN_SAMPLES = 30  # an autoregressive noise model needs this many samples
 # least this share of its size apart from an offset and a slope (its amplitude's standard
 # error is then at most 1/0.3 = 3.3 times that of evenly spread phases).
 RESOLVABLE_SHARE = 0.3
-SAMPLE_COLUMNS = ("target_mm", "error_um", "direction", "run", "time_s", "ambient_C")
+SAMPLE_COLUMNS = ("target_mm", "error_um", "direction", "run", "time_s", "ambient_C",
+                  "material_C")
 POSITIONING_FILE = "positioning.csv"
 POSITIONING_COLUMNS = {"target_mm": True, "error_um": True, "direction": False, "run": False,
-                       "time_s": False, "ambient_C": False}
+                       "time_s": False, "ambient_C": False, "material_C": False}
 
 
 @dataclass(frozen=True)
 class PositioningSamples:
-    """positioning.csv as arrays; ``direction`` is ±1 (+1 when the column is absent)."""
+    """positioning.csv as arrays; ``direction`` is ±1 (+1 when the column is absent);
+    ``ambient_C`` the air and ``material_C`` the machine temperature (°C) when given."""
 
     target_mm: np.ndarray
     error_um: np.ndarray
@@ -62,6 +66,7 @@ class PositioningSamples:
     time_s: np.ndarray | None = None
     ambient_C: np.ndarray | None = None
     has_direction: bool = False
+    material_C: np.ndarray | None = None
 
     @property
     def size(self):
@@ -99,7 +104,8 @@ def read_positioning(path, duty_end_s=None, length_mm=None):
     return PositioningSamples(values["target_mm"], values["error_um"],
                               direction if direction is not None else np.ones_like(values["target_mm"]),
                               run.astype(int) if run is not None else None, time_s,
-                              values.get("ambient_C"), has_direction=direction is not None)
+                              values.get("ambient_C"), has_direction=direction is not None,
+                              material_C=values.get("material_C"))
 
 
 def _check_within_duty(path, time_s, rows, duty_end_s):
@@ -150,8 +156,12 @@ class Positioning(Measurement):
                 raise CaseError(Path(folder) / DUTY_FILE, f"a thermal test needs {cls.file} "
                                                           "with time_s beside duty.csv")
             return None
-        return read_positioning(path, duty.end_s if duty is not None else None,
-                                length_mm(axis))
+        samples = read_positioning(path, duty.end_s if duty is not None else None,
+                                   length_mm(axis))
+        warn_implausible(positioning_problems(samples.target_mm, samples.direction,
+                                              samples.error_um, axis.lead_mm))
+        return samples
+
     location_key = "wavelength_mm"
     location_unit = "mm"
     coordinate_label = "target position (mm)"
@@ -191,10 +201,14 @@ class Positioning(Measurement):
 
     def unresolvable(self, effect):
         """Why the targets cannot resolve a periodic effect's wavelength (None when they
-        can): its cosine and sine at the targets, taken apart from an offset and a slope
-        (the lead error every positioning model carries), keep less than
-        ``RESOLVABLE_SHARE`` of their size. Irregular targets resolve wavelengths far below
-        their spacing (ISO 230-2 staggers them for this); targets at whole multiples of the
+        can), the one rule every command applies (diagnose passes the effect over, fit
+        calls its terms undetermined, comp-table leaves it out, the report does not mark it):
+        its cosine and sine at the targets, taken apart from an offset and a slope (the lead
+        error every positioning model carries), keep less than ``RESOLVABLE_SHARE`` of their
+        size, or the targets cannot tell its wavelength from another in the band they
+        resolve (:func:`feedaxis.stats.aliasing.aliased`). Irregular targets resolve
+        wavelengths below their spacing only when they are many (ISO 230-2 staggers them so
+        that a periodic error does not sit at one phase); targets at whole multiples of the
         wavelength resolve nothing."""
         wavelength_mm = self.wavelength_mm(effect)
         if not wavelength_mm:
@@ -208,7 +222,7 @@ class Positioning(Measurement):
                     f"cosine and sine at the {centres_mm.size} targets keep {share:.2f} of "
                     f"their size apart from an offset and a slope (at least "
                     f"{RESOLVABLE_SHARE} needed)")
-        return None
+        return aliased(centres_mm, wavelength_mm)
 
     def degenerate(self):
         if np.ptp(self.position_mm) < SAME_TARGET_MM and self.samples.time_s is None:

@@ -2,14 +2,14 @@
 
 The tracking effects (:mod:`feedaxis.effects.tracking`) act inside the closed loop: they set
 the parameters of one simulation (:func:`feedaxis.physics.servo.simulate`, the NpidServo
-FMU's physics) with the controller of ``[servo]``, the plant of seed 002 Eq. 1 where the
+FMU's physics) with the controller of ``[servo]``, the plant of Anang et al. 2017 Eq. 1 where the
 model has no ``servo_plant``. The model predicts ``actual_mm`` from ``reference_mm`` (and
 ``disturbance_N``); the deviation is actual - reference in µm. The residual is serially
 correlated, so the tests use the effective sample count n/τ and the uncertainties are
 widened by τ. Structure is searched in time: a periodic force over the record or part of
 it, a steady force, error locked to the velocity reversals; a slow drift is a nuisance of
-every diagnosis, single-sample spikes are left out as outliers. ``compare`` gives seed
-002's maximum and RMS tracking error after the first second.
+every diagnosis, single-sample spikes are left out as outliers. ``compare`` gives the maximum and
+RMS tracking error after the first second, as Anang et al. 2017 report them.
 
 A record need not start at rest: the loop is simulated from rest on the first reference
 sample over the whole record, but its samples in the first ``START_WINDOW_S`` (the start-up)
@@ -27,6 +27,7 @@ import scipy
 from .. import kinds
 from ..case import (AXIS_FILE, DEFAULT_LOOP_STEP_S, CaseError, _first_bad, _read_csv)
 from ..fmu_map import servo_to_fmu
+from ..plausibility import tracking_problems, warn_implausible
 from ..physics.servo import ServoParams, check_runs, loop_budget_problem, simulate, step_counts
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
                               peak_p_value, short_time_peak, spikes)
@@ -34,10 +35,10 @@ from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
 from ..stats.noise import Coloured
 from .base import Measurement, Shape, Trial
 
-SETTLING_S = 1.0  # seed 002 measures the tracking error after the first second
+SETTLING_S = 1.0  # Anang et al. 2017 measures the tracking error after the first second
 # The start-up left out of every comparison. A record that starts mid-motion differs from the
 # loop simulated from rest by the free response of the loop's state at the first sample; for
-# the loops of seed 002 and the tests (closed-loop poles near 250 rad/s) it falls within
+# the loops of Anang et al. 2017 and the tests (closed-loop poles near 250 rad/s) it falls within
 # 0.1 s to 5e-6 of its peak (what is left is the integrator's slow mode), so a 100 µm
 # start-up error leaves under 1 nm after 0.2 s. Profiling the state instead (fitting it as
 # nuisance parameters) was tried: on a single-sine reference the fit then moved the plant to
@@ -95,11 +96,11 @@ def servo_params(axis, model, values=None):
 
 
 def tracking_comparison_lines(comparison):
-    """Seed 002's figures after the first second: measured, predicted; then the residual."""
+    """Anang et al.'s (2017) figures after the first second: measured, predicted; then the residual."""
     maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
     return "\n".join([
         f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
-        f"{', '.join(comparison['effects']) or '(seed 002 plant)'}",
+        f"{', '.join(comparison['effects']) or '(Anang et al. 2017 plant)'}",
         f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
         f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
         f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
@@ -126,7 +127,7 @@ class Tracking(Measurement):
     location_key = "frequency_hz"
     location_unit = "Hz"
     coordinate_label = "time (s)"
-    reference_label = "seed 002 plant"
+    reference_label = "the plant of Anang et al. 2017"
     stages = ("drift", "effects", "structures")
     loose_share = 0.5
 
@@ -150,7 +151,9 @@ class Tracking(Measurement):
         path = Path(folder) / cls.file
         if not path.exists():
             return None
-        return read_tracking(path, axis.servo.get("loop_step_s", DEFAULT_LOOP_STEP_S))
+        samples = read_tracking(path, axis.servo.get("loop_step_s", DEFAULT_LOOP_STEP_S))
+        warn_implausible(tracking_problems(samples.reference_mm))
+        return samples
 
     @property
     def noise(self):
@@ -392,7 +395,7 @@ def _max_abs(fitted_um):
 class PeriodicForce(Shape):
     """The strongest sinusoid in the residual, over the whole record or during part of it:
     the loop's response to a periodic force at that frequency (e.g. a cutting force at the
-    tooth-passing frequency, seed 002 Table 2), switched on and off where the residual shows
+    tooth-passing frequency, Anang et al. 2017 Table 2), switched on and off where the residual shows
     it (a cut that lasts part of the record).
 
     Two searches of the whitened residual (:mod:`feedaxis.stats.coloured`): the record's

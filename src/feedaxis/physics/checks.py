@@ -21,6 +21,11 @@ except ImportError:  # inside an FMU on a host without feedaxis
             self.parameter = parameter
 
 
+def shown(value):
+    """``value`` as a message shows it: a NumPy scalar as the plain number it holds."""
+    return repr(value.item() if isinstance(value, np.generic) else value)
+
+
 def require_finite(name, value):
     """Raise :class:`ParameterError` naming ``name`` unless ``value`` is all finite numbers."""
     if type(value) is float and math.isfinite(value):  # the common case, without NumPy
@@ -28,9 +33,9 @@ def require_finite(name, value):
     try:
         numbers = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ParameterError(f"must be a number, got {value!r}", name) from None
+        raise ParameterError(f"must be a number, got {shown(value)}", name) from None
     if not np.all(np.isfinite(numbers)):
-        raise ParameterError(f"must be finite, got {value!r}", name)
+        raise ParameterError(f"must be finite, got {shown(value)}", name)
 
 
 def require_positive(name, value):
@@ -39,7 +44,7 @@ def require_positive(name, value):
         return
     require_finite(name, value)
     if not np.all(np.asarray(value, dtype=float) > 0):
-        raise ParameterError(f"must be > 0, got {value!r}", name)
+        raise ParameterError(f"must be > 0, got {shown(value)}", name)
 
 
 def require_non_negative(name, value):
@@ -48,7 +53,7 @@ def require_non_negative(name, value):
         return
     require_finite(name, value)
     if not np.all(np.asarray(value, dtype=float) >= 0):
-        raise ParameterError(f"must be >= 0, got {value!r}", name)
+        raise ParameterError(f"must be >= 0, got {shown(value)}", name)
 
 
 def require_representable(what, value, positive=True, **parameters):
@@ -61,6 +66,6 @@ def require_representable(what, value, positive=True, **parameters):
     value = float(value)
     if (0.0 < value if positive else -math.inf < value) and value < math.inf:
         return
-    given = ", ".join(f"{name} = {number!r}" for name, number in parameters.items())
+    given = ", ".join(f"{name} = {shown(number)}" for name, number in parameters.items())
     kind = "a positive finite number" if positive else "a finite number"
-    raise ParameterError(f"{given} give {what} = {value!r}, not {kind}", next(iter(parameters)))
+    raise ParameterError(f"{given} give {what} = {shown(value)}, not {kind}", next(iter(parameters)))

@@ -1,6 +1,6 @@
 """Geometric transmission error of the screw-nut pair.
 
-Sources: seed 000 (Liu Minghua 2022) Eq. 1-5 and seed 001 (the same study, 2023) for the
+Sources: Liu 2022 Eq. 1-5 and Liu 2023 (the same study) for the
 fitted case-study coefficients. All positions are axis coordinates in mm, all errors in µm
 (deviation = actual - nominal, ISO 230-2 sign).
 """
@@ -16,7 +16,7 @@ SUPPORTS = ("fixed-free", "fixed-fixed", "supported-supported")
 
 
 def lead_error_um(position_mm, offset_um, slope_um_per_mm):
-    """Cumulative lead deviation f1(y) = a1*y + b1 (seed 001, fitted low-frequency part).
+    """Cumulative lead deviation f1(y) = a1*y + b1 (Liu 2023, fitted low-frequency part).
 
     Parameters
     ----------
@@ -31,7 +31,7 @@ def lead_error_um(position_mm, offset_um, slope_um_per_mm):
 
 
 def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
-    """Assembly eccentricity f2(y) = a2·cos(ωy) + b2·sin(ωy), ω = 2π/lead (seed 000 Eq. 1-2).
+    """Assembly eccentricity f2(y) = a2·cos(ωy) + b2·sin(ωy), ω = 2π/lead (Liu 2022 Eq. 1-2).
 
     The contact point runs on an ellipse once per screw revolution, so the axial error is a
     sinusoid whose wavelength is the lead and whose amplitude hypot(a2, b2) = δ·tanθ.
@@ -52,7 +52,7 @@ def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
 
 
 def screw_line_load_N_per_m(diameter_m, density_kg_m3):
-    """Weight per unit length q = ρ·g·πD²/4 of a solid screw (seed 000 Eq. 3)."""
+    """Weight per unit length q = ρ·g·πD²/4 of a solid screw (Liu 2022 Eq. 3)."""
     require_positive("diameter_m", diameter_m)
     require_positive("density_kg_m3", density_kg_m3)
     return density_kg_m3 * GRAVITY_M_S2 * np.pi * diameter_m**2 / 4.0
@@ -65,7 +65,7 @@ def second_moment_m4(diameter_m):
 
 
 def sag_slope(screw_coord_m, length_m, line_load_N_per_m, flexural_rigidity_Nm2, support):
-    """Slope w'(y) of the screw bent by its own weight (Euler-Bernoulli beam, seed 000 Eq. 3-4).
+    """Slope w'(y) of the screw bent by its own weight (Euler-Bernoulli beam, Liu 2022 Eq. 3-4).
 
     Parameters
     ----------
@@ -95,7 +95,7 @@ def sag_slope(screw_coord_m, length_m, line_load_N_per_m, flexural_rigidity_Nm2,
 
 def gravity_sag_table(length_m, diameter_m, density_kg_m3, youngs_modulus_Pa, support,
                       n_grid=2001):
-    """Axial error y_a - y_i of the nut on the sagging screw, tabulated (seed 000 Eq. 3-5).
+    """Axial error y_a - y_i of the nut on the sagging screw, tabulated (Liu 2022 Eq. 3-5).
 
     The nominal travel is the arc length y_i = ∫₀^{y_a} √(1 + w'(y)²) dy of the bent screw,
     so the error y_a - y_i ≤ 0 grows along the screw. Computed from geometry and material
@@ -177,7 +177,7 @@ def play_engagement(engagement, travel_mm, backlash_um):
 
 def transmission_error_um(position_mm, direction, lead_mm, offset_um, slope_um_per_mm,
                           cos_um, sin_um, backlash_um, sag_um=0.0):
-    """Superposed transmission error f_T = f1 + f2 + backlash + sag (seed 000 Eq. 10).
+    """Superposed transmission error f_T = f1 + f2 + backlash + sag (Liu 2022 Eq. 10).
 
     Parameters
     ----------

@@ -1,8 +1,8 @@
-"""Stepper-motor angular error mapped to axial displacement, seed 000 Eq. 6, 9, 10.
+"""Stepper-motor angular error mapped to axial displacement, Liu 2022 Eq. 6, 9, 10.
 
 The rotor's angular deviation Δφ is periodic over ``error_period_steps`` full steps
 (a 5-phase hybrid motor: 10 steps, a 2-phase one: 4). Through the screw it becomes the
-axial displacement error Δφ/2π × lead (Eq. 9-10); seed 001 fits it with one Fourier term
+axial displacement error Δφ/2π × lead (Eq. 9-10); Liu 2023 fits it with one Fourier term
 f3 = a3·cos(ωy) + b3·sin(ωy) + c3, ω = 2π / period.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ from .scalar import values, values_and_module
 def motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps):
     """Axial wavelength of the motor error: steps × step angle / 360° × lead (mm).
 
-    Seed 001 case: 10 × 0.72° / 360° × 1 mm = 0.02 mm.
+    Liu 2023 case: 10 × 0.72° / 360° × 1 mm = 0.02 mm.
     """
     require_positive("lead_mm", lead_mm)
     require_positive("step_angle_deg", step_angle_deg)
@@ -28,13 +28,13 @@ def motor_error_period_mm(lead_mm, step_angle_deg, error_period_steps):
 
 
 def angular_to_axial_um(angle_deg, lead_mm):
-    """Axial displacement Δφ/2π × p (seed 000 Eq. 9) of a rotor angle Δφ (deg), in µm."""
+    """Axial displacement Δφ/2π × p (Liu 2022 Eq. 9) of a rotor angle Δφ (deg), in µm."""
     return values(angle_deg) / 360.0 * lead_mm * 1e3
 
 
 def motor_step_error_um(position_mm, lead_mm, step_angle_deg, error_period_steps,
                         cos_um, sin_um):
-    """Axial motor error as a Fourier series over the motor error period (seed 000 Eq. 6, 10).
+    """Axial motor error as a Fourier series over the motor error period (Liu 2022 Eq. 6, 10).
 
     Parameters
     ----------
@@ -52,7 +52,7 @@ def motor_step_error_um(position_mm, lead_mm, step_angle_deg, error_period_steps
 
 def motor_error_um(position_mm, period_mm, cos_um, sin_um):
     """The Fourier series of :func:`motor_step_error_um` over a known period (mm), unchecked:
-    f = Σ_k a_k cos(k ω y) + b_k sin(k ω y), ω = 2π / period (seed 000 Eq. 10)."""
+    f = Σ_k a_k cos(k ω y) + b_k sin(k ω y), ω = 2π / period (Liu 2022 Eq. 10)."""
     position_mm, xp = values_and_module(position_mm)
     phase_rad = 2.0 * math.pi * position_mm / period_mm
     error_um = 0.0 * phase_rad

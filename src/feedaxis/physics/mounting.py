@@ -1,4 +1,4 @@
-"""Mapping between axis coordinates and the screw, seed 003 Eq. 15-16.
+"""Mapping between axis coordinates and the screw, Rong et al. 2023 Eq. 15-16.
 
 P_f (``fixed_end_mm``) is the axis coordinate at which the nut would sit over the fixed end
 of the screw. For P_f < 0 the screw coordinate grows with the axis coordinate (Eq. 16),
@@ -10,7 +10,7 @@ from .scalar import values
 
 
 def axis_sign(fixed_end_mm):
-    """+1 when P_f <= 0 (seed 003 Eq. 16), -1 when P_f > 0 (Eq. 15)."""
+    """+1 when P_f <= 0 (Rong et al. 2023 Eq. 16), -1 when P_f > 0 (Eq. 15)."""
     return -1.0 if fixed_end_mm > 0 else 1.0
 
 

@@ -1,4 +1,4 @@
-"""Position servo of a ball-screw drive with a PID or NPID controller, seed 002 Eq. 1-8.
+"""Position servo of a ball-screw drive with a PID or NPID controller, Anang et al. 2017 Eq. 1-8.
 
 Plant (Eq. 1, Googol XY table, x axis): G(s) = 78020 / (s² + 163 s + 193.3), command in V,
 position in mm, with a 1.2 ms transport delay on the command. Controller (Eq. 2, 6):
@@ -9,7 +9,7 @@ in front of the PID, held at K(e_max) for |e| > e_max.
 The loop runs at a fixed internal step: the plant is discretised exactly for a command held
 over each step (zero-order hold), the integral by the trapezoidal rule and the derivative
 by a backward difference; the delay is a shift by whole steps. An axial force enters at the
-plant input as an equivalent command F / force_constant, as data-format.md 1.1 states (the
+plant input as an equivalent command F / force_constant, as the case format (docs/case-format.md) states (the
 paper gives no force scaling; see :class:`ServoParams`): the known disturbance, and the
 friction of the guideways and the nut, a Coulomb force ``friction_N`` opposing the velocity
 (smoothed linearly over |v| < ``FRICTION_SMOOTHING_MM_S``) plus a viscous force
@@ -43,7 +43,7 @@ STATE_SIZE = 6  # position_mm, velocity_mm_s, integral_V, previous_error_mm, ref
 # two samples (10 s at 0.1 ms) and in all (about 1.5 s of the compiled loop per simulation).
 MAX_INTERVAL_STEPS = 10**5
 MAX_LOOP_STEPS = 10**8
-MAX_POSITION_MM = 1e5  # a simulated position beyond any axis (data-format.md): the loop ran away
+MAX_POSITION_MM = 1e5  # a simulated position beyond any axis (docs/case-format.md): the loop ran away
 # The delay line holds delay_s / time_step_s commands: 10^6 (8 MB) covers the tracking
 # fit's widest case, a 20 ms delay at the shortest loop step a case may have (1e-7 s).
 MAX_DELAY_STEPS = 1_000_000
@@ -54,10 +54,10 @@ MAX_PROPAGATOR_DELAY_STEPS = 64
 
 @dataclass(frozen=True)
 class ServoParams:
-    """Plant, controller and loop timing. Defaults: seed 002 Eq. 1, 6, 8.
+    """Plant, controller and loop timing. Defaults: Anang et al. 2017 Eq. 1, 6, 8.
 
     ``force_constant_N_per_V`` converts the disturbance force to the equivalent plant
-    command; seed 002 does not publish it, the default 100 N/V is an assumption.
+    command; Anang et al. 2017 does not publish it, the default 100 N/V is an assumption.
     """
 
     plant_gain_mm_per_Vs2: float = 78020.0
@@ -102,7 +102,7 @@ class ServoParams:
 
 
 def npid_gain(error_mm, ko_per_mm, e_max_mm):
-    """K(e) = cosh(KO·e), held at K(e_max) beyond ±e_max (seed 002 Eq. 8), for a float e."""
+    """K(e) = cosh(KO·e), held at K(e_max) beyond ±e_max (Anang et al. 2017 Eq. 8), for a float e."""
     return math.cosh(ko_per_mm * min(abs(error_mm), e_max_mm))
 
 

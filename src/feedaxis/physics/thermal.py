@@ -1,4 +1,4 @@
-"""Finite-difference thermal model of a ball screw fixed at one end, seed 003 Eq. 1-19.
+"""Finite-difference thermal model of a ball screw fixed at one end, Rong et al. 2023 Eq. 1-19.
 
 The screw is a 1-D rod of N = L/dx cells (Eq. 4). Heat enters from the fixed-end bearing
 (Q_B spread over L_B) and from the nut (Q_N spread over L_N, at the nut's position);
@@ -54,7 +54,7 @@ MAX_SUB_STEPS = 1e12
 
 @dataclass(frozen=True)
 class ThermalScrewParams:
-    """Screw data (seed 003 Table 1) and identified coefficients (Table 3, X axis).
+    """Screw data (Rong et al. 2023 Table 1) and identified coefficients (Table 3, X axis).
 
     k1..k4 relate convection and heat flows to the feed speed v in mm/min (Eq. 17-19):
     h = k1·v + k2, Q_B = k3·v, Q_N = k4·v.
@@ -368,7 +368,7 @@ def sample_elongation_um(params, rise_K, screw_coord_m):
 def ambient_error_um(params, position_mm, ambient_delta_K):
     """TE_a = α·ΔT_a·(X - X_ref) in axis coordinates (µm), X_ref = P_f + offset.
 
-    Seed 003 Eq. 1 writes TE_a = α·ΔT_a·X_N with X_N the axis position: a machine whose
+    Rong et al. 2023 Eq. 1 writes TE_a = α·ΔT_a·X_N with X_N the axis position: a machine whose
     zero is the screw's fixed end. A screw held in its fixed bearing grows from there, so
     the nut moves by α·ΔT_a·(X - P_f) on either side of it (P_f of either sign, the same
     s = ±(X - P_f) of Eq. 15-16); ``ambient_reference_offset_mm`` moves the reference
@@ -380,7 +380,7 @@ def ambient_error_um(params, position_mm, ambient_delta_K):
 
 
 def thermal_error_um(params, rise_K, position_mm, ambient_delta_K=0.0):
-    """Positioning thermal error TE(P_x) = ±TE_m + TE_a (seed 003 Eq. 2, 15, 16), in µm;
+    """Positioning thermal error TE(P_x) = ±TE_m + TE_a (Rong et al. 2023 Eq. 2, 15, 16), in µm;
     TE_a (:func:`ambient_error_um`) is already in axis coordinates.
 
     With a 1-D ``rise_K`` (one field) the error at every position; with a 2-D ``rise_K``
@@ -420,7 +420,7 @@ class DutySegment:
 
 
 def table2_cycle(feed_mm_min, from_mm=0.0, to_mm=500.0):
-    """Seed 003 Table 2 loading: warm 84 min, cool 42 min, warm 42 min at one feed speed.
+    """Rong et al. 2023 Table 2 loading: warm 84 min, cool 42 min, warm 42 min at one feed speed.
 
     The stroke is not published; 0 to 500 mm is an assumption.
     """

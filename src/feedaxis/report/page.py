@@ -14,6 +14,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .. import __version__
+from ..effects.base import BasisEffect
 from ..kinds import part
 from ..output import write_atomically
 from ..stats.wording import p_text
@@ -61,12 +62,18 @@ def _parameter_table(model, refit):
     return table(("parameter", "value", "standard uncertainty", "unit", "meaning"), rows)
 
 
+def _beside(diagnosis):
+    """What the diagnosis fitted beside the model (its RMS includes it), as text."""
+    beside = [e.name for e in diagnosis.base.model.effects if isinstance(e, BasisEffect)]
+    return f" ({', '.join(beside)} fitted beside the model)" if beside else ""
+
+
 def _diagnosis_html(analysis):
     diagnosis, measurement = analysis.diagnosis, analysis.measurement
     location = f"{measurement.location_key.rsplit('_', 1)[0]} ({measurement.location_unit})"
     parts = [f'<p class="verdict">verdict: {diagnosis.verdict}</p>',
-             f"<p>residual RMS {diagnosis.rms_um:.4g} µm; noise {diagnosis.noise_um:.3g} µm "
-             f"({html.escape(diagnosis.noise_source)})</p>"]
+             f"<p>residual RMS {diagnosis.rms_um:.4g} µm{_beside(diagnosis)}; noise "
+             f"{diagnosis.noise_um:.3g} µm ({html.escape(diagnosis.noise_source)})</p>"]
     if diagnosis.undetermined_reason:
         parts.append(f"<p>undetermined: {html.escape(diagnosis.undetermined_reason)}</p>")
     if diagnosis.repeatability:
@@ -115,8 +122,8 @@ def _sections(analysis):
         f"<h2>{analysis.kind.capitalize()} ({measurement.file})</h2>",
         f"<p>{html.escape(measurement.describe())}; model: "
         f"{html.escape(' + '.join(model.names) or '(no effect: ' + measurement.reference_label + ')')}"
-        f"; residual RMS {result.rms_um:.4g} µm of {result.statistics.rms_before_um:.4g} µm "
-        f"measured (R² {result.statistics.r2:.4f})</p>",
+        f"; residual RMS of the model alone {result.rms_um:.4g} µm of "
+        f"{result.statistics.rms_before_um:.4g} µm measured (R² {result.statistics.r2:.4f})</p>",
         "<h2>Diagnosis</h2>", _diagnosis_html(analysis),
         *views(analysis),
         "<h2>Each effect's contribution</h2>",
@@ -124,7 +131,8 @@ def _sections(analysis):
         else "<p>(no effect in the model)</p>",
         "<h2>Error ladder</h2>", image(plots.ladder(steps, analysis.diagnosis.noise_um),
                                        "error ladder"),
-        table(("step", "residual RMS (µm)"), [(label, f"{v:.4g}") for label, v in steps]),
+        table(("step", "residual RMS, the model alone (µm)"),
+              [(label, f"{v:.4g}") for label, v in steps]),
         *figures(analysis),
         "<h2>Model parameters</h2>",
         _parameter_table(model, analysis.diagnosis.base),

@@ -18,6 +18,8 @@ from matplotlib.ticker import ScalarFormatter  # noqa: E402
 
 MARK_COLOURS = ("tab:red", "tab:purple", "tab:brown", "tab:olive")
 DIRECTION_COLOURS = {1.0: "tab:blue", -1.0: "tab:orange"}
+MODEL_COLOURS = {1.0: "navy", -1.0: "saddlebrown"}  # a direction's model over its dots
+DIRECTION_TICKS = {-1.0: "− approach", 1.0: "+ approach"}
 MAX_PERIOD_LINES = 60
 MAX_MARKED_TARGETS = 60  # more targets than this are drawn as a line, without markers
 MIN_SPAN_UM = 1e-3  # 1 nm, the diagnosis's resolution: a smaller span is rounding
@@ -89,14 +91,19 @@ def _direction_label(sign):
     return "+" if sign > 0 else "-"
 
 
-def measurement_vs_model(position_mm, measured_um, model_mm, model_um, model_direction,
-                         model_line, per_run=False):
-    """Measured deviations (dots) and the model between the targets (lines): ``model_mm``,
+def measurement_vs_model(position_mm, measured_um, measured_direction, model_mm, model_um,
+                         model_direction, model_line, per_run=False):
+    """Measured deviations (light dots, coloured by approach direction) and the model between
+    the targets (lines on top, in the darker shade of the same direction): ``model_mm``,
     ``model_um`` are points on lines numbered by ``model_line``, one per approach direction
     (and per run when ``per_run``: a time-dependent case, whose runs differ), so no line
     joins points of different runs."""
     figure, axes = plt.subplots(figsize=(9, 3.6))
-    _plot(axes, position_mm, measured_um, ".", ms=2, color="0.55", label="measured", zorder=3)
+    for sign in np.unique(measured_direction):
+        chosen = measured_direction == sign
+        _plot(axes, position_mm[chosen], measured_um[chosen], ".", ms=2, alpha=0.45,
+              color=DIRECTION_COLOURS[float(sign)], zorder=2,
+              label=f"measured, {_direction_label(sign)} approach")
     labelled = set()
     for number in np.unique(model_line):
         chosen = model_line == number
@@ -106,8 +113,8 @@ def measurement_vs_model(position_mm, measured_um, model_mm, model_um, model_dir
             labelled.add(sign)
             label = (f"model ({_direction_label(sign)} approach"
                      f"{', per run' if per_run else ''}), between the targets too")
-        _plot(axes, model_mm[chosen], model_um[chosen], "-", lw=0.8,
-              color=DIRECTION_COLOURS[sign], alpha=0.8, label=label)
+        _plot(axes, model_mm[chosen], model_um[chosen], "-", lw=1.4,
+              color=MODEL_COLOURS[sign], zorder=3, label=label)
     return _finish(figure, axes, "position (mm)", "error (µm)", "Measurement against model")
 
 
@@ -165,23 +172,28 @@ def residual_vs_position(position_mm, residual_um, marks):
                                                   "targets resolve" if marks else ""))
 
 
-def spectrum(residual, measured, marks, structures=()):
+def spectrum(residual, measured, marks, structures=(), target_mm=None):
     """Amplitude spectra (wavelength, amplitude) of the residual and of the detrended
     measurement against wavelength, over the wavelengths the targets resolve only (call it
     with at least one spectrum that is not empty); the catalog wavelengths ``marks`` (those
     the targets resolve) and unexplained peaks within that band marked, marks outside the
-    band named in the title."""
+    band named in the title. The detrended measurement is drawn dashed over the residual, so
+    neither hides the other. With ``target_mm`` (at most ``MAX_MARKED_TARGETS`` targets) the
+    spectra are marked at their independent wavelengths, span / k: between them the curve
+    is an interpolation, not a finer resolution."""
     figure, axes = plt.subplots(figsize=(9, 3.4))
     shown = [w for w, _ in (residual, measured) if w.size]
     low = min(float(w.min()) for w in shown)
     high = max(float(w.max()) for w in shown)
     top = 0.0
-    for (wavelength_mm, amplitude_um), style in ((measured, dict(color="0.6", lw=0.7,
-                                                                  label="measured, trend removed")),
-                                                 (residual, dict(color="tab:blue", lw=0.8,
-                                                                 label="residual"))):
+    independent = _independent_wavelengths(target_mm)
+    for (wavelength_mm, amplitude_um), style in (
+            (residual, dict(color="tab:blue", lw=1.2, zorder=2, label="residual")),
+            (measured, dict(color="0.3", lw=1.0, ls="--", zorder=3,
+                            label="measured, trend removed"))):
         if wavelength_mm.size:
             _plot(axes, wavelength_mm, amplitude_um, **style)
+            _mark_independent(axes, wavelength_mm, amplitude_um, independent, style)
             axes.set_xscale("log")
             top = max(top, float(np.max(amplitude_um)))
     outside = []
@@ -198,9 +210,32 @@ def spectrum(residual, measured, marks, structures=()):
     axes.set_xlim(low, high)
     axes.set_ylim(0.0, 1.1 * top if top > 0 else 1.0)
     title = "Spatial spectrum along the travel, over the wavelengths the targets resolve"
+    if independent is not None:
+        title += f"\n{np.unique(target_mm).size} targets: dots at the independent wavelengths"
     if outside:
         title += "\noutside this band: " + ", ".join(outside)
     return _finish(figure, axes, "wavelength (mm)", "amplitude (µm)", title, grid="both")
+
+
+def _independent_wavelengths(target_mm):
+    """span / k, k = 1 .. targets / 2: the wavelengths a few targets determine apart (None
+    without targets or with more than ``MAX_MARKED_TARGETS``)."""
+    if target_mm is None:
+        return None
+    targets = np.unique(target_mm)
+    if targets.size > MAX_MARKED_TARGETS or targets.size < 2:
+        return None
+    return np.ptp(targets) / np.arange(1, targets.size // 2 + 1)
+
+
+def _mark_independent(axes, wavelength_mm, amplitude_um, independent, style):
+    """Dots on a spectrum at the independent wavelengths within its band."""
+    if independent is None:
+        return
+    order = np.argsort(wavelength_mm)
+    inside = independent[(independent >= wavelength_mm.min()) & (independent <= wavelength_mm.max())]
+    axes.plot(inside, np.interp(inside, wavelength_mm[order], amplitude_um[order]), "o", ms=4,
+              color=style["color"], zorder=style["zorder"])
 
 
 def contributions(coordinate, components, xlabel, line=None, direction=None, windows=None):
@@ -259,18 +294,28 @@ def ladder(steps, noise_um):
 
 
 def residual_against(panels):
-    """Residual against other variables (time, direction, ambient): one panel each."""
+    """Residual against other variables (time, direction, ambient): one titled panel each;
+    the approach direction (values ±1) as two categories, each in its direction's colour."""
     figure, axes_list = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 3),
                                      squeeze=False)
     for axes, (label, values, residual_um) in zip(axes_list[0], panels):
-        _plot(axes, values, residual_um, ".", ms=2)
-        axes.set(xlabel=label, ylabel="residual (µm)")
+        if set(np.unique(values)) <= set(DIRECTION_TICKS):
+            for sign, tick in DIRECTION_TICKS.items():
+                chosen = values == sign
+                _plot(axes, values[chosen], residual_um[chosen], ".", ms=2,
+                      color=DIRECTION_COLOURS[sign], alpha=0.6)
+            axes.set_xticks(list(DIRECTION_TICKS), list(DIRECTION_TICKS.values()))
+            axes.set_xlim(-2.0, 2.0)
+        else:
+            _plot(axes, values, residual_um, ".", ms=2)
+        axes.set(xlabel=label, ylabel="residual (µm)", title=f"Residual against {label}")
+        axes.title.set_fontsize(9)
         axes.grid(alpha=0.3)
     return _png(figure)
 
 
 def thermal_compensation(target_mm, visit, time_s, thermal_error_um, left_um):
-    """Seed 003 Fig. 13: thermal error against position, one line per visit coloured by time,
+    """Rong et al. 2023 Fig. 13: thermal error against position, one line per visit coloured by time,
     without and with compensation on one scale; then the max of each visit against time."""
     figure, axes_list = plt.subplots(1, 3, figsize=(12, 3.6),
                                      gridspec_kw={"width_ratios": (1, 1, 1.1)})

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import html
 
+import numpy as np
+
 from . import plots
 from .compensation_table import compensation_table_html
 from .page import image, sample_contributions, table
@@ -19,6 +21,7 @@ def _positioning_views(analysis):
     parts = [
         "<h2>Measurement against model</h2>",
         image(plots.measurement_vs_model(positioning.target_mm, result.measured_um,
+                                         positioning.direction,
                                          dense.position_mm, dense.predicted_um,
                                          dense.direction, dense.line, dense.per_run),
               "measurement against model"),
@@ -34,7 +37,8 @@ def _positioning_views(analysis):
         parts.append(f"<p>No spatial spectrum: {html.escape(details.spectrum_missing)}.</p>")
     else:
         parts.append(image(plots.spectrum(details.residual_spectrum, details.measured_spectrum,
-                                          details.marks, analysis.diagnosis.unexplained),
+                                          details.marks, analysis.diagnosis.unexplained,
+                                          positioning.target_mm),
                            "spectrum"))
     if panels:
         parts.append(image(plots.residual_against(panels),
@@ -111,18 +115,19 @@ def _residual_panels(positioning, residual_um):
         panels.append(("time (min)", positioning.time_s / 60.0, residual_um))
     if positioning.bidirectional:
         panels.append(("approach direction", positioning.direction, residual_um))
-    if positioning.ambient_C is not None:
+    if positioning.ambient_C is not None and np.ptp(positioning.ambient_C) > 0:
         panels.append(("ambient (°C)", positioning.ambient_C, residual_um))
     return panels
 
 
 def _compensation_html(result):
-    """Seed 003 Fig. 13 and the before/after figures, for a thermal model on a thermal case."""
+    """Fig. 13 of Rong et al. 2023 and the before/after figures, for a thermal model on a
+    thermal case."""
     if result is None:
         return []
     summary = result.summary()
     return [
-        "<h2>Thermal compensation (seed 003 Fig. 13)</h2>",
+        "<h2>Thermal compensation (Rong et al. 2023 Fig. 13)</h2>",
         f"<p>The thermal error is each target's drift from its first visit; the correction is "
         f"the model's thermal prediction. Max {summary['max_before_um']:.3g} µm → "
         f"{summary['max_after_um']:.3g} µm ({100 * summary['reduction']:.1f} % less), RMS "

@@ -60,7 +60,7 @@ CONTRIBUTIONS = {c.name: c for c in (
         "error of the expansion coefficient used to correct to 20 °C: "
         "δα·(T - 20 °C)·(X - X_ref)",
         Distribution("rectangular", 1.0e-6),
-        "±1 µm/(m·K) about the 11.7 µm/(m·K) catalogued for steel (HP 5528A manual, seed 003 "
+        "±1 µm/(m·K) about the 11.7 µm/(m·K) catalogued for steel (HP 5528A manual, Rong et al. 2023 "
         "Table 1): the spread among carbon and alloy steels (an engineering judgement; use "
         "the machine builder's value)",
         largest=1e-3, with_correction_only=True),

@@ -4,11 +4,12 @@ screw, or a scale) at the machine temperature T is taken out,
 
     x_20 = x - α·(T - 20 °C)·(X - X_ref)·10³   (µm, X in mm),
 
-the ambient expansion of seed 003 Eq. 1 (:func:`feedaxis.physics.thermal.ambient_error_um`,
+the ambient expansion of Rong et al. 2023 Eq. 1 (:func:`feedaxis.physics.thermal.ambient_error_um`,
 the function the ``ambient_expansion`` effect and the ThermalScrew FMU use), α the screw's
 ``expansion_per_K`` and X_ref its fixed end (``fixed_end_mm``, where a screw held in its
-fixed bearing grows from; 0 mm without it). T is the ambient temperature of each sample
-(``ambient_C``) or one measured material temperature.
+fixed bearing grows from; 0 mm without it). T is the material temperature of each sample
+(``material_C``, what a laser system's material sensors record), the ambient temperature
+of each sample (``ambient_C``) or one measured material temperature.
 """
 from __future__ import annotations
 
@@ -23,23 +24,27 @@ from ..physics.thermal import ThermalScrewParams, ambient_error_um
 
 OPTION = "--correct-to-20C"
 AMBIENT = "ambient"
+MATERIAL = "material"
+SAMPLE_COLUMN = {MATERIAL: "material_C", AMBIENT: "ambient_C"}
 OPTION_HELP = ("correct the deviations to 20 °C for the thermal expansion of the screw "
-               "(axis.toml expansion_per_K) at T: 'ambient' (each sample's ambient_C) or the "
-               "machine's measured material temperature in °C, e.g. 21.4")
+               "(axis.toml expansion_per_K) at T: 'material' (each sample's material_C; the "
+               "default when the option is given without T), 'ambient' (each sample's "
+               "ambient_C) or the machine's measured material temperature in °C, e.g. 21.4")
 
 
 def temperature_option(text):
-    """The value of ``--correct-to-20C``: ``"ambient"`` or a temperature in °C (argparse
-    ``type``); :class:`InputError` naming the option otherwise."""
-    if text.strip().lower() == AMBIENT:
-        return AMBIENT
+    """The value of ``--correct-to-20C``: ``"material"``, ``"ambient"`` or a temperature in
+    °C (argparse ``type``); :class:`InputError` naming the option otherwise."""
+    if text.strip().lower() in SAMPLE_COLUMN:
+        return text.strip().lower()
     low, high = PHYSICAL_RANGE["ambient_C"]
     try:
         value = float(text)
     except ValueError:
         value = float("nan")
     if not low <= value <= high:
-        raise InputError(f"expected 'ambient' or a temperature in °C from {low:g} to {high:g}",
+        raise InputError(f"expected 'material', 'ambient' or a temperature in °C from {low:g} "
+                         f"to {high:g}",
                          parameter=f"{OPTION} {text}")
     return value
 
@@ -76,26 +81,30 @@ class Correction:
 
 
 def correction_for(case, temperature):
-    """The :class:`Correction` of ``case`` at ``temperature`` (``"ambient"`` or °C).
+    """The :class:`Correction` of ``case`` at ``temperature`` (``"material"``,
+    ``"ambient"`` or °C).
 
     Raises
     ------
     InputError
-        When axis.toml has no ``[screw] expansion_per_K``, or ``"ambient"`` is asked of a
-        case without the ``ambient_C`` column.
+        When axis.toml has no ``[screw] expansion_per_K``, or ``"material"`` or
+        ``"ambient"`` is asked of a case without the ``material_C`` or ``ambient_C`` column.
     """
     screw = case.axis.screw
     if "expansion_per_K" not in screw:
         raise InputError(f"{OPTION} needs the expansion coefficient of the screw: [screw] "
                          "expansion_per_K", path=case.folder / AXIS_FILE,
                          column="screw.expansion_per_K")
-    if temperature == AMBIENT:
-        if case.positioning.ambient_C is None:
+    if temperature in SAMPLE_COLUMN:
+        column = SAMPLE_COLUMN[temperature]
+        temperature_C = getattr(case.positioning, column)
+        if temperature_C is None:
             from ..measurement.positioning import POSITIONING_FILE  # SciPy-heavy: on error
 
-            raise InputError(f"{OPTION} {AMBIENT} needs the ambient_C column",
-                             path=case.folder / POSITIONING_FILE, column="ambient_C")
-        temperature_C, source = case.positioning.ambient_C, "ambient_C of each sample"
+            raise InputError(f"{OPTION} {temperature} needs the {column} column; or give the "
+                             f"material temperature in °C, e.g. {OPTION} 21.4",
+                             path=case.folder / POSITIONING_FILE, column=column)
+        source = f"{column} of each sample"
     else:
         temperature_C, source = float(temperature), f"material temperature {temperature:g} °C"
     params = ThermalScrewParams(expansion_per_K=screw["expansion_per_K"],

@@ -1,4 +1,4 @@
-"""Scenarios on the co-simulated axis that write measurement cases (data-format.md).
+"""Scenarios on the co-simulated axis that write measurement cases (docs/case-format.md).
 
 Each kind of measurement declares its own (its ``scenarios`` part,
 :func:`feedaxis.kinds.scenarios`): :mod:`.positioning` (``iso230``, ``thermal``) and

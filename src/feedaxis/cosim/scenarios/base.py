@@ -4,7 +4,7 @@ declares (its ``scenarios`` part, read through :func:`feedaxis.kinds.scenarios`)
 
 A scenario runs in memory (``run(master, **keywords, parameters=, progress=)`` ->
 :class:`ScenarioRun`: the case's columns by file, the figures, the curve a sweep bands);
-:func:`write_run` writes it as a case folder (data-format.md). ``feedaxis simulate NAME``
+:func:`write_run` writes it as a case folder (docs/case-format.md). ``feedaxis simulate NAME``
 and ``feedaxis sweep NAME`` read the scenario's command-line options and its terminal line
 from the same object, so a scenario is defined once, in its kind's scenario module
 (:mod:`.positioning`, :mod:`.tracking`). Ctrl-C stops a run cleanly; what was computed is

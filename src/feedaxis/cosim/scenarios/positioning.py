@@ -34,8 +34,9 @@ from .base import (Scenario, ScenarioInterrupted, ScenarioRun, Series,
 
 ISO_REFERENCE_C = 20.0
 MAX_SAMPLES = 100_000  # samples of one simulated test (ISO 230-2: 5 runs x 2 x ~20 targets)
-# Positioning tests (iso230, thermal) run the servo with a type-1 plant (a0 = 0): with seed
-# 002's a0 = 193.3 1/s² and its tiny integral gain the loop keeps a static error of about
+# Positioning tests (iso230, thermal) run the servo with a type-1 plant (a0 = 0): with the
+# a0 = 193.3 1/s² of Anang et al. 2017 and its tiny integral gain the loop keeps a static
+# error of about
 # target/364 (1.4 mm at 500 mm), which no CNC axis shows and which would swamp the errors
 # a positioning test is about. Tracking keeps the published plant; --set overrides both.
 POSITIONING_SERVO = {"NpidServo": {"plant_stiffness_per_s2": 0.0}}

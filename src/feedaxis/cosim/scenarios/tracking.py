@@ -22,7 +22,8 @@ from .base import (Scenario, ScenarioInterrupted, ScenarioRun, Series,
 SETTLE_S = 1.0
 MAX_TRAVEL_MM = PHYSICAL_RANGE["reference_mm"][1]  # beyond any physical axis
 TEETH = 2
-# F0 (N) calibrated on one row of seed 002 Table 2 (PID, 0.4 Hz, 10 mm, 1500 rpm: 0.0757 mm)
+# F0 (N) calibrated on one row of Anang et al. 2017 Table 2 (PID, 0.4 Hz, 10 mm, 1500 rpm:
+# 0.0757 mm)
 # with the assumed force_constant_N_per_V = 100; it then gives 0.2211 mm at 0.7 Hz, 20 mm,
 # 1500 rpm (paper 0.2217), but falls faster with spindle speed than the paper.
 CUTTING_FORCE_N = 1.4
@@ -30,10 +31,11 @@ TRACKING_SERIES_POINTS = 200  # tracking-error samples a sweep keeps per trial f
 
 
 def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
-    """Milling force at the tooth-passing frequency, an assumption (seed 002 gives none).
+    """Milling force at the tooth-passing frequency, an assumption (Anang et al.
+    2017 give none).
 
     F(t) = F0 · (1500 / n) · (1 + sin(2π z n / 60 · t)) / 2: the mean force falls with
-    spindle speed n as the feed per tooth does (seed 002's explanation of Table 2), z teeth.
+    spindle speed n as the feed per tooth does (Anang et al. 2017 explain Table 2 so), z teeth.
     """
     _require_positive(spindle_rpm=spindle_rpm)
     scale = force_N * 1500.0 / spindle_rpm
@@ -42,7 +44,7 @@ def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
 
 def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid",
                  spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
-    """Sinusoidal tracking (seed 002) in memory.
+    """Sinusoidal tracking (Anang et al. 2017) in memory.
 
     Parameters
     ----------
@@ -50,9 +52,10 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     frequency_hz, amplitude_mm, duration_s : float
         Reference A sin(2π f t) (mm) for ``duration_s`` seconds.
     controller : {"pid", "npid"}
-        PID (seed 002 Eq. 6) or NPID (Eq. 8).
+        PID (Anang et al. 2017 Eq. 6) or NPID (Eq. 8).
     spindle_rpm : float, optional
-        Adds the cutting force of :func:`cutting_force_N` (1500/2500/3500 rpm in seed 002).
+        Adds the cutting force of :func:`cutting_force_N` (1500/2500/3500 rpm in
+        Anang et al. 2017).
     force_N : float
         Cutting-force amplitude F0 at 1500 rpm (N); see :data:`CUTTING_FORCE_N`.
 
@@ -60,8 +63,8 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     -------
     ScenarioRun
         Figures: ``max_tracking_error_mm`` and ``rms_tracking_error_mm`` over t > 1 s (after
-        the start-up transient, as the seed 002 Table 1 reproduction); series: the tracking
-        error against time at :data:`TRACKING_SERIES_POINTS` evenly spaced steps.
+        the start-up transient, as the Anang et al. 2017 Table 1 reproduction); series: the
+        tracking error against time at :data:`TRACKING_SERIES_POINTS` evenly spaced steps.
     """
     h = master.system.macro_step_s
     _check_reference(h, frequency_hz, amplitude_mm, duration_s)
@@ -169,7 +172,7 @@ def _tracking_options(parser):
     parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
     parser.add_argument("--force-N", type=float,
                         help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
-                             "row of seed 002 Table 2)")
+                             "row of Anang et al. 2017 Table 2)")
 
 
 def _tracking_arguments(args):
@@ -189,11 +192,11 @@ def _tracking_line(args, summary):
 
 SCENARIOS = (
     Scenario("tracking", run_tracking, _tracking_options, _tracking_arguments, _tracking_line,
-             help="sinusoidal tracking, PID or NPID (seed 002) -> tracking.csv",
+             help="sinusoidal tracking, PID or NPID (Anang et al. 2017) -> tracking.csv",
              description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
                          "after the first second. --spindle-rpm adds a milling force at the "
-                         "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, seed "
-                         "002 publishes none). axis.toml gets the [servo] table (the "
+                         "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, Anang "
+                         "et al. 2017 publish none). axis.toml gets the [servo] table (the "
                          "controller), not the plant or friction: --set "
                          "NpidServo.friction_N=1 hides a Coulomb friction for `feedaxis "
                          "diagnose OUT` to find (docs/tracking.md)."),
