@@ -31,7 +31,7 @@ from feedaxis.fmu_build import build_fmus
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from libcosim_driver import simulate_ssp_with_libcosim  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import arguments  # noqa: E402
+from common import arguments, describe  # noqa: E402
 
 OUTPUTS = ("NpidServo.position_mm", "NpidServo.velocity_mm_s", "NpidServo.tracking_error_mm",
            "StepperError.error_um", "GeometricError.error_um", "ThermalScrew.error_um",
@@ -73,11 +73,6 @@ def time_libcosim_engine(ssp_path, stop_s):
     assert execution.simulate_until(round(stop_s * 1e9))
     del execution
     return time.perf_counter() - started
-
-
-def describe(values, unit="s"):
-    return (f"median {statistics.median(values):.3f} {unit} "
-            f"(range {min(values):.3f}-{max(values):.3f}, n = {len(values)})")
 
 
 def main(argv=None):

@@ -34,13 +34,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import synthetic as syn  # noqa: E402
-from common import arguments  # noqa: E402
+from common import arguments, rate  # noqa: E402
 from feedaxis.case import read_case  # noqa: E402
 from feedaxis.diagnose import diagnose  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
@@ -94,19 +93,6 @@ def tracking_alarms(family, trials, seed, folder):
 
 
 TRACKING_FAMILIES = ("encoder (white + AR(1))", *NOISE_FAMILIES)
-
-
-def clopper_pearson(count, trials, level=0.95):
-    """Two-sided interval of a binomial rate."""
-    tail = (1 - level) / 2
-    low = stats.beta.ppf(tail, count, trials - count + 1) if count else 0.0
-    high = stats.beta.ppf(1 - tail, count + 1, trials - count) if count < trials else 1.0
-    return low, high
-
-
-def rate(count, trials):
-    low, high = clopper_pearson(count, trials)
-    return f"{count:3d}/{trials} ({100 * count / trials:5.2f} %, 95 % {100 * low:.2f}-{100 * high:.2f})"
 
 
 def smallest_with_power(grid, power, target=0.95):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import platform
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -29,6 +30,26 @@ def arguments(parser, argv, **smoke):
     return args
 
 
+def describe(values, unit="s"):
+    """Median and range of repeated timings, with their count."""
+    return (f"median {statistics.median(values):.3f} {unit} "
+            f"(range {min(values):.3f}-{max(values):.3f}, n = {len(values)})")
+
+
+def clopper_pearson(count, trials, level=0.95):
+    """Two-sided interval of a binomial rate."""
+    from scipy import stats
+
+    tail = (1 - level) / 2
+    low = stats.beta.ppf(tail, count, trials - count + 1) if count else 0.0
+    high = stats.beta.ppf(1 - tail, count + 1, trials - count) if count < trials else 1.0
+    return low, high
+
+
+def rate(count, trials):
+    """``count`` of ``trials`` as a rate with its 95 % Clopper-Pearson interval."""
+    low, high = clopper_pearson(count, trials)
+    return f"{count:3d}/{trials} ({100 * count / trials:5.2f} %, 95 % {100 * low:.2f}-{100 * high:.2f})"
 class Command(NamedTuple):
     """What one command cost and printed: wall and CPU seconds (its own and its reaped
     children's, as wait4 gives them), peak resident memory (MB), its output."""

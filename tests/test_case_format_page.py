@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from feedaxis import case as case_format
+from feedaxis import circular_case
 from feedaxis.case import read_axis, read_case
 from feedaxis.cli import main
 from feedaxis.effects import CATALOG, Model
@@ -61,7 +62,8 @@ def test_every_axis_key_is_listed_with_the_range_the_reader_enforces():
 @pytest.mark.parametrize("section, spec", [
     ("### positioning.csv", positioning.POSITIONING_COLUMNS),
     ("### duty.csv", case_format.DUTY_COLUMNS),
-    ("### tracking.csv", tracking.TRACKING_COLUMNS)])
+    ("### tracking.csv", tracking.TRACKING_COLUMNS),
+    ("### circular.csv", circular_case.CIRCULAR_COLUMNS)])
 def test_every_csv_column_is_listed_with_its_range(section, spec):
     listed = rows(section)
     assert set(listed) == set(spec)
@@ -72,6 +74,12 @@ def test_every_csv_column_is_listed_with_its_range(section, spec):
             assert range_text(name) in cells[2] or (
                 low == 0 and f"up to {high:g}" in cells[2]), (name, cells[2])
         assert (cells[3] == "yes") == required, name
+
+
+def test_every_circular_key_is_listed():
+    listed = rows("## Circular tests")
+    assert {f"[circular] {key}" for key in circular_case.CIRCULAR_KEYS} <= set(listed)
+    assert listed["[circular] radius_mm"][2].startswith(range_text("radius_mm"))
 
 
 def test_the_shipped_laser_example_is_its_generator_output():

@@ -17,6 +17,7 @@ PROMISES = {
     "thermal_identification.py": r"^9000 mm/min: thermal error max 60\.\d µm -> [3-5]\.\d µm",
     "cosimulation.py": r"^-?\d+\.\d{3} µm at -?\d+\.\d{4} mm$",
     "ssp_in_libcosim.py": r"^\[\d+\.\d+, -?\d+\.\d+(e-\d+)?\]$",
+    "two_axis_circle.py": r"^7540 steps on the measured turn; radial deviation -\d\.\d{3} to \d\.\d{3} µm$",
 }
 
 

@@ -132,6 +132,9 @@ OWNERS = {
                     "cosim/scenarios/positioning.py", "cosim/replay.py", "standards/"),
     "tracking": ("measurement/tracking.py", "effects/tracking.py", "tracking_details.py",
                  "report/tracking.py", "cosim/scenarios/tracking.py"),
+    "circular": ("measurement/circular.py", "circular_case.py", "effects/circular.py",
+                 "report/circular.py", "comptable/circle.py", "cosim/circular.py",
+                 "cosim/machine.py"),
 }
 
 

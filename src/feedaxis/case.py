@@ -1,10 +1,12 @@
 """Reading, checking and writing a measurement case, format version 1.2 (docs/case-format.md).
 
 A case is one folder: ``axis.toml`` (required), the file of each kind of measurement it
-holds (each kind reads its own: :mod:`feedaxis.kinds`), optionally ``duty.csv``. Every rule
-of the format is checked; a broken file raises one :class:`CaseError` naming the file, the
-row (1-based, header = row 1) and the column. This module holds what every file shares:
-the axis, the duty, the CSV reader and writer.
+holds (each kind reads its own: :mod:`feedaxis.kinds`), optionally ``duty.csv``. A kind may
+own the axis.toml too (its ``axis_tables``: the circular test's machine of two axes); its
+case then holds that kind's file alone. Every rule of the format is checked; a broken file
+raises one :class:`CaseError` naming the file, the row (1-based, header = row 1) and the
+column. This module holds what every file shares: the axis, the duty, the CSV reader and
+writer.
 """
 from __future__ import annotations
 
@@ -66,6 +68,8 @@ PHYSICAL_RANGE = {
     "kp_V_per_mm": (1e-9, 1e6), "ki_V_per_mm_s": (0.0, 1e6), "kd_V_s_per_mm": (0.0, 1e6),
     "ko_per_mm": (0.0, 1e3), "e_max_mm": (1e-6, 1e3), "force_constant_N_per_V": (1e-6, 1e7),
     "loop_step_s": (1e-7, 0.01),
+    "radius_mm": (1e-3, 1e5), "center_mm": (-1e5, 1e5), "deviation_um": (-1e5, 1e5),
+    "angle_deg": (0.0, 360.0),
 }
 
 # What a column accepts, said when a cell of it is not a number at all
@@ -154,6 +158,9 @@ def read_case(folder):
     if not folder.is_dir():
         raise CaseError(folder, "not a case folder (expected a folder holding axis.toml)")
     _refuse_outside_links(folder)
+    owner = _axis_owner(folder)
+    if owner is not None:
+        return _read_owned_case(folder, owner)
     axis = read_axis(folder / AXIS_FILE)
     duty = (read_duty(folder / DUTY_FILE, length_mm(axis)) if (folder / DUTY_FILE).exists()
             else None)
@@ -164,11 +171,41 @@ def read_case(folder):
         if read is not None:
             samples[name] = read
     if not samples:
-        files = ", ".join(cls.file for cls in registered.values())
+        one_axis = [cls.file for cls in registered.values()
+                    if not getattr(cls, "axis_tables", ())]
+        files = ", ".join(one_axis)
         raise CaseError(folder, f"a case holds {files} or both; neither was found"
-                        if len(registered) == 2 else
+                        if len(one_axis) == 2 else
                         f"a case holds one or more of {files}; none was found")
     return Case(folder, axis, samples, duty)
+
+
+def _axis_owner(folder):
+    """The kind whose own tables axis.toml holds (its ``axis_tables``), None for an axis."""
+    if not (folder / AXIS_FILE).is_file():
+        return None
+    tables = set(read_axis_values(folder / AXIS_FILE)[1])
+    return next((cls for cls in kinds.kinds().values()
+                 if tables & set(getattr(cls, "axis_tables", ()))), None)
+
+
+def _read_owned_case(folder, owner):
+    """A case whose axis.toml ``owner`` (a kind) reads: its file alone."""
+    axis = owner.read_axis(folder / AXIS_FILE)
+    for cls in kinds.kinds().values():
+        if cls is not owner and (folder / cls.file).exists():
+            raise CaseError(folder / cls.file, f"a case whose axis.toml has "
+                                               f"{', '.join(f'[{t}]' for t in owner.axis_tables)} "
+                                               f"holds {owner.file} alone ({cls.file} belongs "
+                                               "to a one-axis case)")
+    if (folder / DUTY_FILE).exists():
+        raise CaseError(folder / DUTY_FILE, f"a case of {owner.file} has no duty.csv")
+    samples = owner.read(folder, axis, None)
+    if samples is None:
+        raise CaseError(folder / owner.file, f"missing: axis.toml has "
+                                             f"[{owner.axis_tables[0]}], so the case needs "
+                                             f"{owner.file}")
+    return Case(folder, axis, {owner.kind: samples})
 
 
 def length_mm(axis):
@@ -203,10 +240,9 @@ def read_axis(path):
     tables = {}
     for key, value in data.items():
         if key == "name":
-            if not isinstance(value, str):
-                raise CaseError(path, "name must be a string", toml_key_line(text, key), key)
+            check_name(path, text, value)
         elif key in TABLES and isinstance(value, dict):
-            tables[key] = _check_table(path, text, key, value)
+            tables[key] = check_table(path, text, key, value)
         else:
             raise CaseError(path, _unknown_key_message(key, ["name", "[screw]", "[motor]",
                                                              "[servo]"]),
@@ -214,8 +250,20 @@ def read_axis(path):
     if "screw" not in tables or "lead_mm" not in tables["screw"]:
         raise CaseError(path, "[screw] lead_mm is required (axial travel per revolution, > 0)",
                         column="screw.lead_mm")
-    servo = _check_servo(path, text, tables["servo"]) if "servo" in tables else {}
-    return Axis(data.get("name", ""), tables["screw"], tables.get("motor", {}), servo)
+    return axis_of(path, text, data.get("name", ""), tables)
+
+
+def axis_of(path, text, name, tables, prefix=""):
+    """The :class:`Axis` of checked ``tables`` ([screw], [motor], [servo]; ``prefix`` the
+    TOML table they stand under, ``axes.X`` in a machine)."""
+    servo = (_check_servo(path, text, tables["servo"], prefix) if "servo" in tables else {})
+    return Axis(name, tables.get("screw", {}), tables.get("motor", {}), servo)
+
+
+def check_name(path, text, value):
+    """Refuse a ``name`` that is not a string."""
+    if not isinstance(value, str):
+        raise CaseError(path, "name must be a string", toml_key_line(text, "name"), "name")
 
 
 def read_axis_values(path):
@@ -230,13 +278,15 @@ def read_axis_values(path):
         raise CaseError(path, error.message, error.row) from None
 
 
-def _check_servo(path, text, servo):
+def _check_servo(path, text, servo, prefix=""):
     """The keys ``[servo]`` needs for its controller; ``loop_step_s`` defaulted."""
     required = SERVO_REQUIRED + (NPID_REQUIRED if servo.get("controller") == "npid" else ())
+    table = f"{prefix}.servo" if prefix else "servo"
     for key in required:
         if key not in servo:
-            raise CaseError(path, f"[servo] {key} is required for a {servo.get('controller')} "
-                                  "controller", toml_key_line(text, "servo"), f"servo.{key}")
+            raise CaseError(path, f"[{table}] {key} is required for a "
+                                  f"{servo.get('controller')} controller",
+                            toml_key_line(text, table), f"{table}.{key}")
     return {"loop_step_s": DEFAULT_LOOP_STEP_S, **servo}
 
 
@@ -248,10 +298,13 @@ def _read_text(path):
         raise CaseError(path, error.message, error.row) from None
 
 
-def _check_table(path, text, table, values):
+def check_table(path, text, table, values, prefix=""):
+    """``[table]`` (under ``prefix``, ``axes.X`` in a machine) with every key known and
+    every value within its rule and range."""
     known = TABLES[table]
+    where = f"{prefix}.{table}" if prefix else table
     for key, value in values.items():
-        row, column = toml_key_line(text, key, table), f"{table}.{key}"
+        row, column = toml_key_line(text, key, where), f"{where}.{key}"
         if key not in known:
             raise CaseError(path, _unknown_key_message(key, list(known)), row, column)
         problem = _value_problem(known[key], key, value)
@@ -476,6 +529,15 @@ def _number(path, cell, row, column):
     except ValueError as problem:
         accepted = f"; {column} must be {ACCEPTED[column]}" if column in ACCEPTED else ""
         raise CaseError(path, f"{problem}{accepted}", row, column) from None
+
+
+def checked_run(path, values, rows):
+    """The ``run`` column (None when absent), each a whole number >= 1."""
+    run = values.get("run")
+    if run is not None:
+        _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
+                   "run must be a whole number >= 1")
+    return run
 
 
 def _first_bad(path, mask, rows, column, message):

@@ -71,8 +71,19 @@ def _progress(label, unit):
         yield tick
 
 
-def _effects(args):
-    return available_effects(args.effects or ())
+def _effects(args, cases=()):
+    """The effects by name: the catalog, the user's (--effects) and those a case's kind
+    makes for it (a circular test: each axis's and the machine's, ``backlash@X``), without
+    those acting on kinds the case does not hold."""
+    effects = available_effects(args.effects or ())
+    for case in cases:
+        own = _kind_part(case, "case_effects")
+        if own is not None:
+            held = set(case.samples)
+            effects = {**{name: e for name, e in effects.items()
+                          if e.measurement is None or e.measurement in held},
+                       **own(case)}
+    return effects
 
 
 def _starting_model(args, effects):
@@ -142,8 +153,8 @@ def _cmd_fit(args):
 
     if args.out:
         check_writable_target(args.out)
-    effects = _effects(args)
     cases = [corrected_case(read_case(folder), args.correct_to_20C) for folder in args.cases]
+    effects = _effects(args, cases)
     starting = _starting_model(args, effects)
     model = _with_added(starting, args.add, effects)
     results = []
@@ -181,8 +192,8 @@ def _case_and_model(args):
     measurement to compare it with)."""
     from .measurement import kinds_for
 
-    effects = _effects(args)
     case = corrected_case(read_case(args.case), args.correct_to_20C)
+    effects = _effects(args, [case])
     model = _starting_model(args, effects)
     return effects, case, model, kinds_for([case], model)
 
@@ -422,6 +433,9 @@ def _comp_table_options(parser):
                              f"its points (default {TABLE_TOLERANCE_UM:g} µm)")
     parser.add_argument("--from-measurement", action="store_true",
                         help="the table from the measured means at the targets, not the model")
+    parser.add_argument("--circle-axis", metavar="NAME",
+                        help="a circular case: the axis whose table to write (X, Y, ...); the "
+                             "circle expected after it is verified")
     parser.add_argument("--axis-id", metavar="ID",
                         help="axis name in the file (" + ", ".join(
                             f"{c.name} {c.axis_note}" for c in CONTROLLERS.values()
@@ -450,7 +464,11 @@ def _comp_table_options(parser):
 def _cmd_comp_table(args):
     from .comptable import check_case, comp_table, summary_lines
 
-    case = check_case(read_case(args.case))
+    case = read_case(args.case)
+    kind_table = _kind_part(case, "comp_table")
+    if kind_table is not None:
+        return _kind_comp_table(args, case, kind_table)
+    case = check_case(case)
     case = corrected_case(case, args.correct_to_20C)
     if not (args.model or args.from_measurement):
         raise InputError("give the fitted model (--model M.toml) or --from-measurement",
@@ -460,6 +478,31 @@ def _cmd_comp_table(args):
                                args.from_measurement, args.axis_id, args.force,
                                args.tolerance_um)
     refuse_overwriting_inputs({path: "--out" for path in files}, _inputs(args))
+    for path, content in files.items():
+        write_atomically(path, content)
+    _emit(args, report, summary_lines(report))
+
+
+def _kind_part(case, name):
+    """The part ``name`` of the first kind of measurement ``case`` holds that has one."""
+    from .kinds import kind, part
+
+    return next((found for found in (part(kind(held), name) for held in case.samples)
+                 if found), None)
+
+
+def _kind_comp_table(args, case, kind_table):
+    """comp-table on a case whose kind writes its own tables (a circular test: one axis's
+    table from the fitted model, ``--circle-axis``)."""
+    from .comptable import summary_lines
+
+    if not args.model or args.from_measurement:
+        raise InputError("a table from this case comes from the fitted model (--model "
+                         "M.toml); it has no measured means per position",
+                         parameter="--model")
+    model = load_model(args.model, _effects(args, [case]))
+    files, report = kind_table(case, model, args.controller, args.out, args.circle_axis,
+                               args.spacing_mm, args.axis_id, args.force)
     for path, content in files.items():
         write_atomically(path, content)
     _emit(args, report, summary_lines(report))
@@ -610,15 +653,22 @@ def _counter_progress(label, unit, unit_scale=False):
         yield update
 
 
-def _simulate(args, run):
-    """Run one scenario into a new case folder; Ctrl-C keeps what was computed."""
+def _simulate(args, run, system=None):
+    """Run one scenario into a new case folder (on ``system``, default the axis of the
+    axis options); Ctrl-C keeps what was computed."""
     from .cosim.master import Master
     from .cosim.scenarios.base import check_axis_ranges
 
     if Path(args.out).exists():
         raise InputError("already exists; choose a new case folder", path=args.out)
     check_writable_target(args.out, "folder")
-    system, paths = _checked_axis(args)
+    if system is None:
+        system, paths = _checked_axis(args)
+    else:
+        from .cosim.physics_check import check_parameters
+
+        paths = _fmu_paths(args)
+        check_parameters(system, paths)
     check_axis_ranges(system)
     with Master(system, paths) as master:
         with _counter_progress("simulating", "step", True) as progress:
@@ -646,11 +696,13 @@ def _noise(args):
 def _scenario_parsers(parser, out_help, more_options=None, handler=None):
     """One subparser per scenario of the registered kinds (:func:`feedaxis.kinds.scenarios`):
     its options, OUT, ``more_options``, the axis options; run by ``handler`` (default:
-    :func:`_cmd_simulate`)."""
+    :func:`_cmd_simulate`), a sweep's (``handler`` given) only where the scenario sweeps."""
     from .kinds import scenarios as registered_scenarios
 
     scenarios = parser.add_subparsers(dest="scenario", required=True, metavar="SCENARIO")
     for name, scenario in registered_scenarios().items():
+        if handler and not scenario.sweeps:
+            continue
         sub = scenarios.add_parser(name, help=scenario.help, description=scenario.description)
         scenario.options(sub)
         sub.add_argument("out", metavar="OUT", help=out_help)
@@ -664,8 +716,9 @@ def _scenario_parsers(parser, out_help, more_options=None, handler=None):
 def _cmd_simulate(args):
     scenario = args.run_scenario
     keywords = scenario.arguments(args)
+    system = scenario.system(args) if scenario.system else None
     summary = _simulate(args, lambda master, progress: scenario.simulate(
-        args.out, master, progress=progress, noise=_noise(args), **keywords))
+        args.out, master, progress=progress, noise=_noise(args), **keywords), system)
     _emit(args, summary, scenario.line(args, summary))
 
 
@@ -681,16 +734,39 @@ command_group("simulate", help="run a scenario on the co-simulated axis, write a
 
 
 def _checked_axis(args):
-    """The axis system and FMU paths, its parameter values accepted by every FMU."""
+    """The axis system (the machine of two axes with ``--machine``) and FMU paths, its
+    parameter values accepted by every FMU."""
     from .cosim.physics_check import check_parameters
 
-    system, paths = _axis_system(args), _fmu_paths(args)
+    system, paths = _machine_or_axis(args), _fmu_paths(args)
     check_parameters(system, paths)
     return system, paths
 
 
+def _machine_or_axis(args):
+    """The machine of ``--machine`` (two axes, :mod:`feedaxis.cosim.machine`), else the axis."""
+    machine = getattr(args, "machine", None)
+    if machine is None:
+        return _axis_system(args)
+    from .cosim.machine import circular_machine
+
+    if args.model:
+        raise InputError("a fitted circular model is not taken here yet; give its values with "
+                         "--set", parameter="--model")
+    return circular_machine(machine or None, squareness_urad=args.squareness_urad,
+                            step_ms=args.step_ms, thermal_step_s=args.thermal_step_s,
+                            set_items=args.set)[0]
+
+
 def _export_ssp_options(parser):
     parser.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
+    parser.add_argument("--machine", nargs="?", const="", metavar="AXIS",
+                        help="the machine of two axes instead of one axis (components "
+                             "X_NpidServo, ...): alone the default axes X and Y, or those of "
+                             "the axis.toml (or case folder) of a circular case")
+    parser.add_argument("--squareness-urad", type=float, default=0.0,
+                        help="with --machine: the second axis out of square with the first "
+                             "(µrad), a term of the first axis's table position (printed)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
     parser.add_argument("--stop-time", type=float, default=1.0, metavar="S",
                         help="DefaultExperiment stopTime in s (default 1)")
@@ -715,13 +791,19 @@ def _cmd_export_ssp(args):
     unconnected = [{"input": connector, "unit": variable.unit, "start": variable.start,
                     "meaning": variable.description}
                    for connector, variable in open_inputs(system)]
-    _emit(args, {"ssp": str(path), "open_inputs": unconnected},
-          f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
-          f"four {'standalone ' if args.standalone else ''}FMUs\n"
-          "open inputs (unconnected: drive them from the importing tool, else they keep their "
-          "start values; position_ref_mm at 0 is a standing axis):\n"
-          + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
-                      for i in unconnected))
+    payload = {"ssp": str(path), "open_inputs": unconnected}
+    lines = (f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
+             f"four {'standalone ' if args.standalone else ''}FMUs\n"
+             "open inputs (unconnected: drive them from the importing tool, else they keep their "
+             "start values; position_ref_mm at 0 is a standing axis):\n"
+             + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
+                         for i in unconnected))
+    if args.machine is not None:
+        payload["outputs"] = {o.variable.name: o.formula() for o in system.outputs}
+        lines += ("\nthe machine's table positions (mm) from the component outputs:\n"
+                  + "\n".join(f"  {name} = {formula}"
+                              for name, formula in payload["outputs"].items()))
+    _emit(args, payload, lines)
 
 
 

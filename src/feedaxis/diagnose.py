@@ -58,10 +58,15 @@ class Candidate:
     result: FitResult = field(repr=False)
     error_scale: float = 1.0
 
+    @property
+    def named(self):
+        """The named effect (an :class:`~feedaxis.effects.Effect`)."""
+        return self.result.model.effects[self.result.model.names.index(self.effect)]
+
     def sizes(self):
         """{parameter: (value, standard error, unit)} of the named effect; the standard
         errors rest on the noise model's scale (the pure error where there are repeats)."""
-        effect = self.result.model.effects[self.result.model.names.index(self.effect)]
+        effect = self.named
         values = self.result.model.values[self.effect]
         sigma = self.result.uncertainties.get(self.effect, {})
         return {p.name: (values[p.name], self.error_scale * sigma.get(p.name, float("nan")),
@@ -70,7 +75,8 @@ class Candidate:
     def to_json(self):
         sizes = {name: {"value": value, "standard_error": None if np.isnan(error) else error,
                         "unit": unit} for name, (value, error, unit) in self.sizes().items()}
-        return {"effect": self.effect, "rms_after_um": self.rms_after_um,
+        return {"effect": self.named.effect, "axis": self.named.axis, "add": self.effect,
+                "rms_after_um": self.rms_after_um,
                 "delta_bic": self.delta_bic, "evidence": self.evidence, "parameters": sizes,
                 **self.test.to_json()}
 

@@ -275,7 +275,7 @@ def fit_with_artefacts(model, data, progress=None, kind=None):
         plain = result
         result = fit(with_nuisances, measurement, progress)
         result.plain = plain
-    result.artefacts = artefacts
+    result.artefacts = {**artefacts, **measurement.artefacts(result)}
     return result
 
 

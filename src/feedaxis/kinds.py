@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import importlib
 
-BUILT_IN = ("feedaxis.measurement.positioning", "feedaxis.measurement.tracking")
+BUILT_IN = ("feedaxis.measurement.positioning", "feedaxis.measurement.tracking",
+            "feedaxis.measurement.circular")
 
 _KINDS = {}
 _loaded = []

@@ -263,10 +263,12 @@ def summary_lines(report):
 def _figure_lines(report):
     """The ISO 230-2 figures expected before and after the table, and the model's view
     between the targets."""
-    lines = [f"{'ISO 230-2 figure, expected':34s} {'before':>9s} {'after':>9s}  (µm)"]
-    lines += [f"{f['name']:34s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
+    title = f"{report.get('standard', 'ISO 230-2')} figure, expected"
+    width = max(34, *(len(f["name"]) for f in report["figures"].values()))
+    lines = [f"{title:{width}s} {'before':>9s} {'after':>9s}  (µm)"]
+    lines += [f"{f['name']:{width}s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
               for f in report["figures"].values()]
-    between = report["between_targets"]
+    between = report.get("between_targets")
     if between:
         lines.append(f"{'between targets (model), P-V':34s} {between['pv_before_um']:9.3f} "
                      f"{between['pv_after_um']:9.3f}")

@@ -299,9 +299,7 @@ class Master:
     def _result(self, table, time_s):
         """The structured result: recorded signals plus the system outputs."""
         columns = {name: table[:, i] for i, name in enumerate(self.signal_names)}
-        for output in self.system.outputs:
-            columns[output.variable.name] = sum(factor * columns[term]
-                                                for term, factor in output.terms)
+        columns.update(self.system.output_values(columns))
         stacked = np.column_stack([time_s, *columns.values()]) if len(time_s) else \
             np.zeros((0, len(columns) + 1))
         dtype = np.dtype([(name, float) for name in self.names])

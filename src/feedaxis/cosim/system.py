@@ -110,6 +110,12 @@ class AxisSystem:
                                  "or component")
         self.ordered_components()
 
+    def output_values(self, columns):
+        """{system output: values} from ``columns`` ({"Component.variable": values}), each
+        output the linear combination of its terms."""
+        return {output.variable.name: sum(factor * columns[term] for term, factor in output.terms)
+                for output in self.outputs}
+
     def component(self, name):
         """The component called ``name``."""
         for component in self.components:
@@ -290,6 +296,15 @@ def axis_from_options(step_ms, thermal_step_s=None, model_path=None, axis_path=N
     InputError
         Naming the option (``--step-ms``, ``--thermal-step-s``, ``--model``, ``--set ...``).
     """
+    step_s, thermal_step_s = option_steps(step_ms, thermal_step_s)
+    overrides = axis_overrides(model_path, axis_path, set_items, effects)
+    return default_axis(step_s, step_s, thermal_step_s).with_parameters(overrides)
+
+
+def option_steps(step_ms, thermal_step_s=None):
+    """(macro step, ThermalScrew step) in s from ``--step-ms`` and ``--thermal-step-s``
+    (default 0.1 s rounded up to a whole number of macro steps); :class:`InputError`
+    naming the option."""
     for option, value in (("--step-ms", step_ms), ("--thermal-step-s", thermal_step_s)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"must be > 0, got {value:g}", parameter=option)
@@ -299,8 +314,7 @@ def axis_from_options(step_ms, thermal_step_s=None, model_path=None, axis_path=N
     elif whole_ratio(thermal_step_s, step_s) is None:
         raise InputError(f"{thermal_step_s:g} s must be a whole multiple of the macro step "
                          f"--step-ms {step_ms:g}", parameter="--thermal-step-s")
-    overrides = axis_overrides(model_path, axis_path, set_items, effects)
-    return default_axis(step_s, step_s, thermal_step_s).with_parameters(overrides)
+    return step_s, thermal_step_s
 
 
 def axis_overrides(model_path=None, axis_path=None, set_items=(), effects=None):

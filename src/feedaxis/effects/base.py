@@ -69,6 +69,12 @@ class Effect:
     measurement = None
     additive = True
     probe: dict = {}
+    axis = None  # the machine axis the effect acts on (circular tests), None for one axis
+
+    @property
+    def effect(self):
+        """The catalog name (the same on every axis of a machine)."""
+        return self.name
 
     def __add__(self, other):
         return Model((self,)) + other

@@ -33,6 +33,7 @@ CAPABILITIES = {
     "resolution": ("unresolvable",),
     "core": ("core", "check_start"),
     "correlated": ("noise_gram", "confounded"),
+    "setup": ("artefacts",),
 }
 
 
@@ -283,6 +284,11 @@ class Measurement(ABC):
         show (None when it is): it would only stand in for a structure of another shape."""
         return None
 
+    def artefacts(self, result):
+        """What the measurement fitted of its own set-up beside ``result``'s model (a dict
+        for ``artefacts`` of ``fit --json``; none by default)."""
+        return {}
+
     def repeatability(self):
         """Repeatability set against the systematic error (a dict for ``--json``), or None."""
         return None
@@ -301,6 +307,20 @@ class Measurement(ABC):
 def _overrides(cls, name):
     """True when ``cls`` defines ``name`` itself rather than inheriting the base's."""
     return getattr(cls, name) is not getattr(Measurement, name)
+
+
+def figure_table(title, width, comparison):
+    """The figures of ``compare`` measured, residual and explained, then the RMS, the names
+    ``width`` wide (the text of a kind whose figures have that shape)."""
+    lines = [f"{title:{width}s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
+    for figure in comparison["figures"].values():
+        explained = figure["explained"]
+        lines.append(f"{figure['name']:{width}s} {figure['measured_um']:10.4g} "
+                     f"{figure['residual_um']:10.4g} "
+                     f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
+    lines.append(f"{'RMS':{width}s} {comparison['rms_measured_um']:10.4g} "
+                 f"{comparison['rms_residual_um']:10.4g}")
+    return lines
 
 
 class Shape:

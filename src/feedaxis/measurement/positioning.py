@@ -23,7 +23,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .. import kinds, standards
-from ..case import DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, length_mm
+from ..case import (DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, checked_run,
+                    length_mm)
 from ..iso230 import SAME_TARGET_MM, iso230_figures, sampling_notes, target_clusters
 from ..standards import DEFAULT
 from ..plausibility import positioning_problems, warn_implausible
@@ -91,10 +92,7 @@ def read_positioning(path, duty_end_s=None, length_mm=None):
     if direction is not None:
         _first_bad(path, ~np.isin(direction, (-1.0, 1.0)), rows, "direction",
                    "direction must be +1 or -1")
-    run = values.get("run")
-    if run is not None:
-        _first_bad(path, (run < 1) | (run != np.round(run)), rows, "run",
-                   "run must be a whole number >= 1")
+    run = checked_run(path, values, rows)
     time_s = values.get("time_s")
     if time_s is not None:
         _first_bad(path, time_s < 0, rows, "time_s", "time_s must be >= 0 (seconds since the "

@@ -454,3 +454,38 @@ def table_with_uncertainty(position_mm, sides):
                           label=f"{label}: 95 % interval")
     return _finish(figure, axes, "position (mm)", "table value (µm)",
                    "compensation table and its 95 % coverage interval")
+
+
+def polar_traces(angle_deg, direction, traces, figures):
+    """The circle as ballbar users read it: one polar panel per trace ({title: radial
+    deviation µm}: measured, model, residual), counter-clockwise and clockwise in their
+    colours, the deviation drawn about a reference circle (dotted) so inward and outward
+    read at a glance; ``figures`` ({title: text}) under each panel's title."""
+    figure, panels = plt.subplots(1, len(traces), figsize=(4.2 * len(traces), 4.6),
+                                  subplot_kw={"projection": "polar"})
+    panels = np.atleast_1d(panels)
+    span_um = max(max(float(np.ptp(values)) for values in traces.values()), MIN_SPAN_UM)
+    reference_um = 1.5 * span_um
+    theta = np.radians(angle_deg)
+    for axes, (title, values) in zip(panels, traces.items()):
+        centred = values - np.mean(values)
+        for sign, colour in DIRECTION_COLOURS.items():
+            chosen = direction == sign
+            if chosen.any():
+                order = np.argsort(theta[chosen], kind="stable")
+                axes.plot(theta[chosen][order], reference_um + centred[chosen][order], ".",
+                          markersize=1.5, color=colour,
+                          label="counter-clockwise" if sign > 0 else "clockwise")
+        axes.plot(np.linspace(0, 2 * np.pi, 361), np.full(361, reference_um), ":",
+                  color="0.5", linewidth=0.8)
+        axes.set_ylim(0, reference_um + span_um)
+        axes.set_yticklabels([])
+        axes.set_title(f"{title}\n{figures.get(title, '')}", fontsize=9)
+    panels[0].legend(loc="lower left", bbox_to_anchor=(-0.25, -0.2), fontsize=8)
+    figure.suptitle(f"radial deviation about the mean radius; ring = {span_um:.3g} µm "
+                    "from the dotted circle to the rim", fontsize=9)
+    buffer = io.BytesIO()
+    figure.tight_layout()
+    figure.savefig(buffer, format="png", dpi=110)
+    plt.close(figure)
+    return buffer.getvalue()

@@ -37,7 +37,10 @@ class Scenario:
     ``run(master, **keywords, parameters=None, progress=None)`` -> :class:`ScenarioRun`;
     ``options(parser)`` adds its command-line options, ``arguments(args)`` turns them into
     ``run``'s keywords, ``line(args, summary)`` is the terminal's line of ``simulate``;
-    ``help`` and ``description`` are its ``--help``.
+    ``help`` and ``description`` are its ``--help``. A scenario on another system than the
+    one axis of the axis options gives ``system(args)`` (the circular test's machine of two
+    axes), and one whose case describes its axis itself ``write(out, master, run, noise)``
+    (default :func:`write_run`); ``sweeps`` False keeps it out of ``feedaxis sweep``.
     """
 
     name: str
@@ -47,6 +50,9 @@ class Scenario:
     line: Callable
     help: str = ""
     description: str = ""
+    system: Callable | None = None
+    write: Callable | None = None
+    sweeps: bool = True
 
     def with_defaults(self, keywords):
         """``keywords`` of :attr:`run` with its defaults filled in, so keywords given and
@@ -60,7 +66,7 @@ class Scenario:
         """Run the scenario and write it as the case folder ``out`` (:func:`write_run`);
         return its summary."""
         run = self.run(master, **keywords, parameters=parameters, progress=progress)
-        return write_run(out, master, run, noise)
+        return (self.write or write_run)(out, master, run, noise)
 
 
 @dataclass(frozen=True)
@@ -166,9 +172,10 @@ def _readable(staged):
                          "a case can hold (docs/bad-input.md)", parameter="--set") from None
 
 
-def write_run(out, master, run, noise=None):
+def write_run(out, master, run, noise=None, axis=None):
     """Write ``run`` as the case folder ``out``, its measured column with ``noise`` (a
-    :class:`MeasurementNoise`) when given; return its summary with the folder. The summary's
+    :class:`MeasurementNoise`) when given, its axis.toml ``axis`` (default
+    :func:`axis_values` of the run); return its summary with the folder. The summary's
     figures are the simulated axis's, before the noise.
 
     Raises
@@ -177,8 +184,9 @@ def write_run(out, master, run, noise=None):
         After writing an interrupted run, saying what it holds.
     """
     tables = noise.measured(run.tables) if noise else run.tables
-    write_case(out, axis_values(master, run.parameters, run.name, with_servo=run.with_servo),
-               **tables, check=_readable)
+    if axis is None:
+        axis = axis_values(master, run.parameters, run.name, with_servo=run.with_servo)
+    write_case(out, axis, **tables, check=_readable)
     summary = {"case": str(out), **run.summary}
     if noise:
         summary["noise"] = {"sigma_um": noise.sigma_um, "seed": noise.seed}

@@ -1,0 +1,172 @@
+"""Circular tests: the two-axis co-simulation against one axis, and the diagnosis at 2 x 10^4 samples.
+
+Run: ``python benchmarks/bench_circular.py [--repeats 3] [--radius-mm 100] [--samples 20000]``.
+In one run, with repeats interleaved, it times
+
+- the machine (two axes, eight FMUs, feedaxis.cosim.machine) driven round one 360° circle
+  at 1000 mm/min and a 1 ms macro step, from standing through the 45° lead-in and lead-out
+  arcs, end to end (extract, instantiate, every macro step, free);
+- one axis (the four FMUs) for the same number of macro steps, driven by the first axis's
+  reference;
+- ``diagnose`` on a circular case of ``--samples`` samples (half each direction): backlash
+  of Y, squareness, and a set-up (centring offset, radius, drift) with 0.1 µm noise.
+
+It prints medians (and ranges), the machine / one-axis ratio (target <= 2.2) and the
+diagnosis time (target <= 2 s), wall and CPU: the diagnosis runs on one thread, so on a
+shared machine its wall time grows with the load while its CPU time does not.
+
+Then false alarms and power of the diagnosis on circular cases written from the closed
+forms (720 samples per direction, both directions): ``--trials`` nulls of a random set-up
+(centring offset up to 5 µm, radius up to 5 µm, drift up to 0.02 µm/s) with white noise
+(σ 0.1 µm) and with AR(1) noise in the order taken (ρ 0.9, σ 0.1 µm); a false alarm is any
+verdict but ``adequate`` (the family-wise rate is 0.001). Power: the share of trials that
+name ``backlash@Y`` first for a backlash B of Y in white noise. Each rate with its 95 %
+Clopper-Pearson interval.
+"""
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from feedaxis.cosim.circular import run_circular
+from feedaxis.cosim.machine import MACHINE_SERVO, CircleInterpolator, machine_system
+from feedaxis.cosim.master import Master
+from feedaxis.cosim.system import default_axis
+from feedaxis.diagnose import diagnose
+from feedaxis.effects import Model
+from feedaxis.effects.circular import circular_effects
+from feedaxis.fmu_build import build_fmus
+from feedaxis.physics import circle
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from circular_cases import circle_columns, synthetic_case  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import arguments, describe, rate  # noqa: E402
+
+FEED_MM_MIN = 1000.0
+
+
+def time_machine(fmu_paths, radius_mm):
+    """(seconds end to end, macro steps) of one counter-clockwise circle on the machine."""
+    system = machine_system()
+    started = time.perf_counter()
+    with Master(system, fmu_paths) as master:
+        run_circular(master, radius_mm, FEED_MM_MIN, (radius_mm, radius_mm), directions=(1,),
+                     samples_per_turn=360)
+        steps = master.timing.macro_steps
+    return time.perf_counter() - started, steps
+
+
+def time_one_axis(fmu_paths, radius_mm, steps):
+    """Seconds end to end of one axis for ``steps`` macro steps of the circle's X reference."""
+    system = default_axis()
+    path = CircleInterpolator(radius_mm, FEED_MM_MIN, (radius_mm, radius_mm))
+    h = system.macro_step_s
+    started = time.perf_counter()
+    with Master(system, fmu_paths) as master:
+        master.run(steps * h, {"position_ref_mm": lambda t: path.position_mm(t + h, 0)},
+                   {"NpidServo": MACHINE_SERVO})
+    return time.perf_counter() - started
+
+
+def diagnosis_case(folder, samples):
+    columns = circle_columns(samples // 2)
+    angle, direction = columns["angle_deg"], columns["direction"]
+    rng = np.random.default_rng(0)
+    theta = np.radians(angle)
+    deviation = (circle.backlash_um(angle, direction, 1, 3.0, 20.0)
+                 + circle.squareness_um(angle, 20.0, 50.0) + 2.0 + 1.5 * np.cos(theta)
+                 - 0.5 * np.sin(theta) + 0.01 * columns["time_s"]
+                 + rng.normal(0.0, 0.1, angle.size))
+    return synthetic_case(folder, deviation, columns)
+
+
+def time_diagnosis(case):
+    """(wall seconds, CPU seconds of this process, the diagnosis)."""
+    started, cpu = time.perf_counter(), time.process_time()
+    found = diagnose(case, Model(), circular_effects(case.axis), kind="circular")
+    return time.perf_counter() - started, time.process_time() - cpu, found
+
+
+def set_up_um(columns, rng, noise):
+    """A random set-up and noise: ``noise`` "white" or "ar1" (ρ 0.9), σ 0.1 µm."""
+    theta = np.radians(columns["angle_deg"])
+    a, b, r = rng.uniform(-5, 5, 3)
+    drift = rng.uniform(-0.02, 0.02)
+    white = rng.normal(0.0, 0.1, theta.size)
+    if noise == "ar1":
+        rho, correlated = 0.9, np.empty_like(white)
+        correlated[0] = white[0]
+        for i in range(1, white.size):
+            correlated[i] = rho * correlated[i - 1] + np.sqrt(1 - rho ** 2) * white[i]
+        white = correlated
+    return r + a * np.cos(theta) + b * np.sin(theta) + drift * columns["time_s"] + white
+
+
+def rates(folder, trials):
+    """{label: (hits, trials)} of the nulls and the power trials."""
+    columns = circle_columns()
+    angle, direction = columns["angle_deg"], columns["direction"]
+    rng = np.random.default_rng(11)
+    found = {}
+    plans = [("null, white noise", "white", 0.0), ("null, AR(1) 0.9", "ar1", 0.0),
+             ("power, B = 0.03 µm", "white", 0.03), ("power, B = 0.06 µm", "white", 0.06)]
+    for label, noise, backlash in plans:
+        hits = 0
+        for trial in range(trials):
+            deviation = (set_up_um(columns, rng, noise)
+                         + circle.backlash_um(angle, direction, 1, backlash, 20.0))
+            case = synthetic_case(folder / f"{label[:4]}-{noise}-{backlash}-{trial}", deviation,
+                                  columns)
+            _, _, result = time_diagnosis(case)
+            if backlash:
+                hits += bool(result.candidates) and result.candidates[0].effect == "backlash@Y"
+            else:
+                hits += result.verdict != "adequate"
+        found[label] = (hits, trials)
+    return found
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--radius-mm", type=float, default=100.0)
+    parser.add_argument("--samples", type=int, default=20000)
+    parser.add_argument("--trials", type=int, default=100)
+    args = arguments(parser, argv, repeats=1, radius_mm=1.0, samples=400, trials=1)
+    with tempfile.TemporaryDirectory() as folder:
+        fmu_paths = {p.stem: p for p in build_fmus(Path(folder) / "fmus")}
+        case = diagnosis_case(Path(folder) / "case", args.samples)
+        time_machine(fmu_paths, min(args.radius_mm, 5.0))  # warm-up: first imports
+        machine_s, axis_s, diagnose_s, diagnose_cpu_s = [], [], [], []
+        for _ in range(args.repeats):
+            seconds, steps = time_machine(fmu_paths, args.radius_mm)
+            machine_s.append(seconds)
+            axis_s.append(time_one_axis(fmu_paths, args.radius_mm, steps))
+            seconds, cpu_s, named = time_diagnosis(case)
+            diagnose_s.append(seconds)
+            diagnose_cpu_s.append(cpu_s)
+        found = rates(Path(folder), args.trials)
+    ratio = statistics.median(machine_s) / statistics.median(axis_s)
+    print(f"one circle R {args.radius_mm:g} mm at {FEED_MM_MIN:g} mm/min (45° lead-in and "
+          f"lead-out), macro step 1 ms = {steps} macro steps; {args.repeats} interleaved "
+          "repeats")
+    print(f"  machine, two axes (8 FMUs), end to end : {describe(machine_s)}")
+    print(f"  one axis (4 FMUs), same steps          : {describe(axis_s)}")
+    print(f"  machine / one axis: {ratio:.2f} (target <= 2.2)")
+    print(f"diagnose on {case.circular.size} samples (backlash of Y, squareness, set-up, "
+          f"0.1 µm noise): wall {describe(diagnose_s)} (target <= 2 s), CPU "
+          f"{describe(diagnose_cpu_s)} (one thread: the wall time of an idle machine); named: "
+          f"{', '.join(c.effect for c in named.candidates) or 'none'}, verdict {named.verdict}")
+    print("false alarms (any verdict but adequate) and power (backlash@Y named first), "
+          "1440 samples, σ 0.1 µm:")
+    for label, (hits, trials) in found.items():
+        print(f"  {label:22s}: {rate(hits, trials)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,221 @@
+"""Two co-simulated axes in one machine, and the interpolator that drives them on a circle.
+
+:func:`machine_system` builds one :class:`~feedaxis.cosim.system.AxisSystem` (so the fmpy
+master, the SSP export and the system tables work on it unchanged) from two copies of the
+one-axis signal flow, each component named after its axis (``X_NpidServo``,
+``Y_GeometricError``), plus the machine's own geometry: the out-of-squareness α of the
+second axis towards the first, which moves the table α·y along the first axis as the
+second travels y (a term of the first axis's table position)::
+
+    X_position_ref_mm -> X_NpidServo -> X_StepperError, X_GeometricError, X_ThermalScrew
+    Y_position_ref_mm -> Y_NpidServo -> Y_StepperError, Y_GeometricError, Y_ThermalScrew
+    X_table_position_mm = X_NpidServo.position_mm + X errors / 1000 + α · Y_NpidServo.position_mm
+    Y_table_position_mm = Y_NpidServo.position_mm + Y errors / 1000
+
+An axis has StepperError only where its motor is known and ThermalScrew only where the
+screw's thermal keys are (:func:`machine_from_case_axes`); the default machine has both on
+both axes. :class:`CircleInterpolator` commands the circle at the programmed feed, with a
+lead-in arc before the measured turn and a lead-out arc after it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..fmu_map import AXIS_KEYS, neutral_fmu_parameters, servo_to_fmu
+from ..physics.circle import axis_positions_mm
+from ..errors import InputError
+from .system import (DEFAULT_THERMAL_STEP_S, AxisSystem, Component, Connection, Output,
+                     Variable, axis_overrides, default_axis, option_steps)
+
+AXIS_PARTS = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
+ERROR_PARTS = ("StepperError", "GeometricError", "ThermalScrew")
+# Each axis runs its servo with a type-1 plant (a0 = 0), as the positioning tests do: with
+# the a0 of Anang et al. 2017 and its tiny integral gain the loop keeps a static error of position/364.
+MACHINE_SERVO = {"plant_stiffness_per_s2": 0.0}
+
+
+def component_name(axis, part):
+    """The machine's name for one axis's component: ``X_NpidServo``."""
+    return f"{axis}_{part}"
+
+
+def machine_system(axes=("X", "Y"), parts=None, squareness_urad=0.0, macro_step_s=1e-3,
+                   thermal_step_s=DEFAULT_THERMAL_STEP_S):
+    """Two axes and their squareness as one system.
+
+    Parameters
+    ----------
+    axes : (str, str)
+        The axis names, first and second axis of the plane.
+    parts : dict, optional
+        Axis name -> the components it has (NpidServo and GeometricError always; default
+        all four).
+    squareness_urad : float
+        Out-of-squareness α (µrad = µm/m) of the second axis towards the first.
+    macro_step_s, thermal_step_s : float
+        Master clock and ThermalScrew step (s), as :func:`default_axis`.
+    """
+    one = default_axis(macro_step_s, macro_step_s, thermal_step_s)
+    inputs, components, connections, outputs = [], [], [], []
+    for axis in axes:
+        kept = tuple(p for p in AXIS_PARTS if parts is None or p in parts[axis]
+                     or p in ("NpidServo", "GeometricError"))
+        inputs += [Variable(f"{axis}_{v.name}", v.unit, f"axis {axis}: {v.description}",
+                            v.start) for v in one.inputs if v.name != "ambient_C"]
+        components += [Component(component_name(axis, c.name), c.fmu, c.step_s,
+                                 {**c.parameters, **(MACHINE_SERVO if c.name == "NpidServo"
+                                                     else {})}, f"axis {axis}: {c.description}")
+                       for c in one.components if c.name in kept]
+        connections += [Connection(_renamed(c.source, axis), _renamed(c.target, axis))
+                        for c in one.connections if c.target_component in kept]
+        errors = tuple((f"{component_name(axis, p)}.error_um", 1.0) for p in ERROR_PARTS
+                       if p in kept)
+        outputs.append(Output(Variable(f"{axis}_positioning_error_um", "um",
+                                       f"axis {axis}: table - servo position"), errors))
+        table = ((f"{component_name(axis, 'NpidServo')}.position_mm", 1.0),) + tuple(
+            (term, 1e-3) for term, _ in errors)
+        if axis == axes[0] and squareness_urad:
+            table += ((f"{component_name(axes[1], 'NpidServo')}.position_mm",
+                       squareness_urad * 1e-6),)
+        outputs.append(Output(Variable(f"{axis}_table_position_mm", "mm",
+                                       f"axis {axis}: table position"), table))
+    inputs.append(Variable("ambient_C", "degC", "ambient air temperature", 20.0))
+    return AxisSystem("Machine", macro_step_s, tuple(inputs), tuple(components),
+                      tuple(connections), tuple(outputs))
+
+
+def _renamed(end, axis):
+    """A connection end of the one-axis system in the machine (``ambient_C`` is shared)."""
+    if end == "ambient_C":
+        return end
+    component, _, variable = end.partition(".")
+    return f"{component_name(axis, component)}.{variable}" if variable else f"{axis}_{end}"
+
+
+def machine_from_case_axes(machine, squareness_urad=0.0, macro_step_s=1e-3,
+                           thermal_step_s=DEFAULT_THERMAL_STEP_S):
+    """The system of a circular case's machine (:class:`feedaxis.circular_case.Machine`): each axis
+    with StepperError where its ``[motor]`` is given, ThermalScrew where its screw has
+    every thermal key, its ``[servo]`` controller in NpidServo, the axis.toml keys in the
+    FMUs that take them; every catalog effect switched off (its neutral values)."""
+    axes = machine.circular.axes
+    parts = {name: _parts_of(machine.axes[name]) for name in axes}
+    system = machine_system(axes, parts, squareness_urad, macro_step_s, thermal_step_s)
+    return system.with_parameters(machine_parameters(machine, system))
+
+
+def circular_machine(machine_path=None, radius_mm=None, feed_mm_min=None, center_mm=None,
+                     squareness_urad=0.0, step_ms=1.0, thermal_step_s=None, set_items=()):
+    """(system, circle) of ``feedaxis simulate circular``: the machine of a circular case's
+    axis.toml (or case folder) ``machine_path``, else axes X and Y with the FMUs' defaults;
+    the circle's radius, feed and centre (``{"radius_mm", "feed_mm_min", "center_mm"}``)
+    from the options, else that axis.toml's ``[circular]``, else R 100 mm, F 1000 mm/min,
+    centre (R, R). ``--set`` items name the machine's components (``X_NpidServo.kp_V_per_mm``).
+    """
+    step_s, thermal_step_s = option_steps(step_ms, thermal_step_s)
+    circle = {"radius_mm": 100.0, "feed_mm_min": 1000.0, "center_mm": None}
+    if machine_path:
+        from ..circular_case import read_machine
+
+        path = Path(machine_path)
+        machine = read_machine(path / "axis.toml" if path.is_dir() else path)
+        system = machine_from_case_axes(machine, squareness_urad, step_s, thermal_step_s)
+        circle = {"radius_mm": machine.circular.radius_mm,
+                  "feed_mm_min": machine.circular.feed_mm_min,
+                  "center_mm": machine.circular.center_mm}
+    else:
+        system = machine_system(squareness_urad=squareness_urad, macro_step_s=step_s,
+                                thermal_step_s=thermal_step_s)
+    given = {"radius_mm": radius_mm, "feed_mm_min": feed_mm_min, "center_mm": center_mm}
+    for key, value in given.items():
+        if value is not None:
+            circle[key] = value
+    for option, key in (("--radius-mm", "radius_mm"), ("--feed-mm-min", "feed_mm_min")):
+        if not (math.isfinite(circle[key]) and circle[key] > 0):
+            raise InputError(f"must be > 0, got {circle[key]:g}", parameter=option)
+    if circle["center_mm"] is None:
+        circle["center_mm"] = (circle["radius_mm"], circle["radius_mm"])
+    if len(circle["center_mm"]) != 2 or not all(map(math.isfinite, circle["center_mm"])):
+        raise InputError("expected two finite coordinates C1,C2", parameter="--center-mm")
+    circle["center_mm"] = tuple(float(c) for c in circle["center_mm"])
+    return system.with_parameters(axis_overrides(set_items=set_items)), circle
+
+
+def _parts_of(axis):
+    parts = {"NpidServo", "GeometricError"}
+    if set(AXIS_KEYS["motor"]["StepperError"]) <= set(axis.motor):
+        parts.add("StepperError")
+    if set(AXIS_KEYS["screw"]["ThermalScrew"]) <= set(axis.screw):
+        parts.add("ThermalScrew")
+    return parts
+
+
+def machine_parameters(machine, system):
+    """{component: {parameter: value}} of each axis's axis.toml and neutral effects."""
+    names = {c.name for c in system.components}
+    overrides = {}
+    for axis_name, axis in machine.axes.items():
+        for fmu, values in neutral_fmu_parameters(axis).items():
+            if component_name(axis_name, fmu) in names:
+                overrides[component_name(axis_name, fmu)] = values
+        if axis.servo:
+            overrides[component_name(axis_name, "NpidServo")] = servo_to_fmu(axis.servo)
+    return overrides
+
+
+@dataclass(frozen=True)
+class CircleInterpolator:
+    """The commanded path of a circular test in one direction.
+
+    The axes stand at the start of the lead-in arc, ``lead_in_deg`` before ``start_deg``,
+    then travel the circle at the programmed feed through the lead-in arc, one measured
+    turn from ``start_deg`` and the lead-out arc. ``direction`` +1 is counter-clockwise.
+    """
+
+    radius_mm: float
+    feed_mm_min: float
+    center_mm: tuple
+    direction: int = 1
+    start_deg: float = 0.0
+    lead_in_deg: float = 45.0
+    lead_out_deg: float = 45.0
+
+    def __post_init__(self):
+        for name in ("radius_mm", "feed_mm_min"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be > 0, got {value!r}")
+        for name in ("lead_in_deg", "lead_out_deg"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0 <= value <= 360):
+                raise ValueError(f"{name} must be 0 to 360, got {value!r}")
+
+    @property
+    def degrees_per_s(self):
+        """Angular speed (deg/s) at the programmed feed."""
+        return math.degrees(self.feed_mm_min / 60.0 / self.radius_mm)
+
+    @property
+    def measured_s(self):
+        """(start, end) time (s) of the measured turn."""
+        start = self.lead_in_deg / self.degrees_per_s
+        return start, start + 360.0 / self.degrees_per_s
+
+    @property
+    def duration_s(self):
+        return (self.lead_in_deg + 360.0 + self.lead_out_deg) / self.degrees_per_s
+
+    def angle_deg(self, time_s):
+        """Commanded angle (deg, unwrapped) at the times ``time_s``."""
+        travelled = np.clip(np.asarray(time_s, float), 0.0, self.duration_s) * self.degrees_per_s
+        return self.start_deg + self.direction * (travelled - self.lead_in_deg)
+
+    def position_mm(self, time_s, axis_index):
+        """Commanded position (mm) of the first (0) or second (1) axis."""
+        return axis_positions_mm(self.angle_deg(time_s), self.radius_mm, self.center_mm,
+                                 axis_index)
+
