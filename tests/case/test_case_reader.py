@@ -25,7 +25,7 @@ from feedaxis.measurement.tracking import TRACKING_COLUMNS
 from feedaxis.errors import finite_float, text_lines
 from test_fuzz import CONTENT, FUZZ
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def reference_read_csv(path, spec):

@@ -12,7 +12,7 @@ import pytest
 
 from feedaxis.cli import build_parser, main
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")),
          *sorted((ROOT / "fmus").rglob("README.md"))]
 LINK = re.compile(r"\]\(([^)\s]+)\)")

@@ -30,7 +30,7 @@ from feedaxis.output import built_once, write_atomically
 from feedaxis.physics.servo import MAX_INTERVAL_STEPS
 from test_bad_input import AXIS, assert_refused, raw_case, run, small_case, write_effect
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FEEDAXIS = [sys.executable, "-m", "feedaxis"]
 TRACKING_AXIS = ('[screw]\nlead_mm = 1.0\n[servo]\ncontroller = "pid"\nkp_V_per_mm = 0.8998\n'
                  "ki_V_per_mm_s = 0.0006077\nkd_V_s_per_mm = 0.005155\n"

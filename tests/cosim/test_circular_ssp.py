@@ -23,7 +23,7 @@ from feedaxis.cosim.master import Master
 from feedaxis.cosim.ssp import export_ssp
 from libcosim_driver import simulate_ssp_with_libcosim
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 OMS_DIR = ROOT.parent / "shared" / "tools" / "fmi" / "omsimulator"
 H_S = 1e-3
 PATH = CircleInterpolator(2.0, 1000.0, (60.0, 40.0), lead_in_deg=30.0, lead_out_deg=10.0)

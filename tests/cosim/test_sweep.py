@@ -24,7 +24,7 @@ from feedaxis.examples import write_seed001_case
 TRACKING = {"frequency_hz": 1.0, "amplitude_mm": 5.0, "duration_s": 1.2, "step_ms": 2.0}
 FRICTION = ["NpidServo.friction_N=uniform(0,2)", "NpidServo.kp_V_per_mm=normal(0.9,0.05)"]
 SHORT_ISO = ("--targets", "2", "--spacing-mm", "2", "--runs", "1", "--dwell-s", "0.2")
-# a screw that does not heat (tests/test_scenarios.py): the deviation is then the geometry
+# a screw that does not heat (tests/cosim/test_scenarios.py): the deviation is then the geometry
 QUIET_AXIS = ("--set", "ThermalScrew.k3_W_per_mm_min=0", "--set", "ThermalScrew.k4_W_per_mm_min=0")
 
 
@@ -95,7 +95,7 @@ def test_an_interrupted_sweep_resumed_gives_the_uninterrupted_file(tmp_path, fmu
 
 def test_a_backlash_grid_gives_the_iso_reversal_of_each_trial(tmp_path, fmu_dir, capsys):
     """B = max |x̄↑ - x̄↓| (ISO 230-2) equals the swept backlash within 0.02 µm, the
-    noise-free tolerance of the iso230 scenario (tests/test_scenarios.py)."""
+    noise-free tolerance of the iso230 scenario (tests/cosim/test_scenarios.py)."""
     out = tmp_path / "backlash"
     assert main(["sweep", "iso230", str(out), "--vary", "GeometricError.backlash_um=grid(0,10,3)",
                  *SHORT_ISO, *QUIET_AXIS, "--workers", "0", "--fmus", fmu_dir, "--json"]) == 0
@@ -208,7 +208,7 @@ def test_trial_values_depend_on_the_seed_and_the_trial_only():
 
 
 def test_the_docs_api_snippet_runs(user_fmu_cache, capsys):
-    page = (Path(__file__).resolve().parent.parent / "docs" / "sweep.md").read_text()
+    page = (Path(__file__).resolve().parents[2] / "docs" / "sweep.md").read_text()
     snippet = re.search(r"<!-- snippet: sweep-api -->\n```python\n(.*?)```", page, re.S).group(1)
     exec(compile(snippet, "docs/sweep.md snippet", "exec"), {"__name__": "__main__"})
     printed = capsys.readouterr().out
@@ -218,7 +218,7 @@ def test_the_docs_api_snippet_runs(user_fmu_cache, capsys):
 def test_the_sweep_benchmark_runs_at_a_tiny_size(user_fmu_cache, capsys):
     """benchmarks/bench_sweep.py --smoke: every path it times runs and it prints the
     overhead, the speed-up and the cluster size for 10^6 trials."""
-    path = Path(__file__).resolve().parent.parent / "benchmarks" / "bench_sweep.py"
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_sweep.py"
     spec = importlib.util.spec_from_file_location("bench_sweep", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)

@@ -14,7 +14,7 @@ from conftest import unavailable
 from feedaxis.fmu_build import FMU_NAMES
 from feedaxis.toolchain import c_compiler
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BENCHMARKS = sorted(p.name for p in (ROOT / "benchmarks").glob("*.py")
                     if p.name.startswith(("bench_", "stress_")))
 

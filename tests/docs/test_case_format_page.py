@@ -19,7 +19,7 @@ from feedaxis.examples import (LASER_BACKLASH_UM, LASER_EXAMPLE, LASER_LEAD, LAS
                                laser_example_rtl)
 from feedaxis.fit import fit
 
-PAGE = Path(__file__).resolve().parent.parent / "docs" / "case-format.md"
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "case-format.md"
 
 
 def rows(section):

@@ -3,7 +3,7 @@
 Every fenced block in README.md and docs/ carries a marker comment on the line above saying
 how it is kept true (a block without one fails :func:`test_every_code_block_is_kept_true`):
 
-- ``<!-- snippet: NAME -->``: Python run by a test (here, or tests/test_docs_cosim.py);
+- ``<!-- snippet: NAME -->``: Python run by a test (here, or tests/docs/test_docs_cosim.py);
 - ``<!-- example: examples/FILE -->`` (or a file of ``src/feedaxis/data/``, shipped with the
   package): the block is that file, verbatim;
 - ``<!-- transcript -->``: a console session; the ``$`` lines are run in one folder per page
@@ -27,7 +27,7 @@ import pytest
 
 from conftest import unavailable
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 BLOCK = re.compile(r"(?:<!-- ([^\n]*?) -->\n)?```(\w*)\n(.*?)```", re.S)
 SRC = str(ROOT / "src")
@@ -169,7 +169,7 @@ def test_loop_commands_run_on_the_demo_case(tmp_path):
     write_table2_case(tmp_path / "thermal-case", 9000.0)
     run_line("feedaxis fit thermal-case --add lead_error --add thermal_screw --out thermal.toml",
              tmp_path)
-    marker = "commands: tests/test_docs.py::test_loop_commands_run_on_the_demo_case"
+    marker = "commands: tests/docs/test_docs.py::test_loop_commands_run_on_the_demo_case"
     lines = commands("README.md", marker)
     assert lines == commands("docs/loop.md", marker)
     for line in lines:
@@ -181,7 +181,7 @@ def test_comp_table_commands_run_on_an_rtl_export(tmp_path):
     from feedaxis.examples import LASER_EXAMPLE
     for name in ("X-axis.rtl", "axis.toml"):   # the laser example shipped with the package
         shutil.copy2(LASER_EXAMPLE / name, tmp_path / name)
-    marker = "commands: tests/test_docs.py::test_comp_table_commands_run_on_an_rtl_export"
+    marker = "commands: tests/docs/test_docs.py::test_comp_table_commands_run_on_an_rtl_export"
     for line in commands("docs/compensation-tables.md", marker):
         run_line(line, tmp_path)
     assert (tmp_path / "X1_EEC.INI").stat().st_size > 0

@@ -9,7 +9,7 @@ import pytest
 from feedaxis.cli import main
 from feedaxis.cosim.system import default_axis, markdown_tables
 
-DOCS = Path(__file__).resolve().parent.parent / "docs"
+DOCS = Path(__file__).resolve().parents[2] / "docs"
 COSIM = (DOCS / "cosim.md").read_text(encoding="utf-8")
 SNIPPETS = dict(re.findall(r"<!-- snippet: ([\w-]+) -->\n```python\n(.*?)```",
                            COSIM + (DOCS / "fmus.md").read_text(encoding="utf-8"), re.S))

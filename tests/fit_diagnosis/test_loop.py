@@ -110,7 +110,7 @@ def test_null_iso_case_invents_nothing(tmp_path):
         assert result.noise_source == "scatter of repeated samples"
 
 
-USER_EFFECTS = Path(__file__).resolve().parents[1] / "examples" / "coupling_ripple.py"
+USER_EFFECTS = Path(__file__).resolve().parents[2] / "examples" / "coupling_ripple.py"
 
 
 def test_uncatalogued_periodic_error_is_described_then_closed_by_a_user_effect(tmp_path, capsys):

@@ -18,7 +18,7 @@ from feedaxis.cli import main
 from feedaxis.effects import CATALOG, load_model
 from feedaxis.examples import LASER_EXAMPLE
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 THREE = ("--add", "lead_error", "--add", "assembly_eccentricity", "--add", "backlash")
 TERMS = {"assembly_eccentricity.cos_um", "assembly_eccentricity.sin_um"}
 

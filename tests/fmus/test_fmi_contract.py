@@ -23,7 +23,7 @@ from feedaxis.fmu_build import FMU_NAMES
 from scenarios import OUTPUTS, STEP_SIZE_S
 from test_fmus import initialised
 
-TESTS = Path(__file__).resolve().parent
+TESTS = Path(__file__).resolve().parents[1]
 PROBE = TESTS / "fmi2_probe.py"
 FMI2_HEADERS = TESTS.parent / "fmus" / "common" / "fmi2"
 OK, DISCARD, ERROR = 0, 2, 3

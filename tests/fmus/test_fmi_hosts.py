@@ -25,7 +25,7 @@ from conftest import FMI_TOOLS, require_system_library, unavailable
 from feedaxis.fmu_build import FMU_NAMES
 from feedaxis.physics import thermal
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FMU_SOURCES = ROOT / "fmus"
 FMU_CHECK = FMI_TOOLS / "fmuCheck.linux64"
 ERROR = 3

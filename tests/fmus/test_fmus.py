@@ -16,7 +16,7 @@ from feedaxis.cosim.fmu_runner import run_fmu
 from feedaxis.fmu_build import FMU_NAMES
 from scenarios import N_STEPS, OUTPUTS, PARAMETERS, STEP_SIZE_S, direct, scripted_inputs
 
-FMU_SOURCES = Path(__file__).resolve().parents[1] / "fmus"
+FMU_SOURCES = Path(__file__).resolve().parents[2] / "fmus"
 # The host layer returns fmi2Error for any call during which the slave logged an error.
 ERROR = 3
 
@@ -365,7 +365,8 @@ print(json.dumps({name: result[name].tolist() for name in OUTPUTS["NpidServo"]})
 def npid_scenario_in_fresh_process(fmu_path):
     """(outputs by name, what the FMU logged) of the NPID scenario in a new process."""
     run = subprocess.run([sys.executable, "-c", SCENARIO, str(fmu_path),
-                          str(Path(__file__).parent)], capture_output=True, text=True, check=True)
+                          str(Path(__file__).resolve().parents[1])],
+                         capture_output=True, text=True, check=True)
     *log, outputs = run.stdout.strip().splitlines()
     return {name: np.array(values) for name, values in json.loads(outputs).items()}, log
 

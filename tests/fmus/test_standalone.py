@@ -28,7 +28,7 @@ from test_fmi_contract import c_host_instantiate, check_instantiate_answer, inst
 from test_fmi_hosts import (FMU_CHECK, FMU_SOURCES, OMS_DIR, assert_cross_check_passed,
                             cross_check_command, cross_check_options, require_tool)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GLIBC = ("libc.so.6", "libm.so.6", "libdl.so.2", "libpthread.so.0", "librt.so.1",
          "libutil.so.1", "libresolv.so.2", "libanl.so.1", "libmvec.so.1")
 GCC_RUNTIME = ("libgcc_s.so.1", "libstdc++.so.6")

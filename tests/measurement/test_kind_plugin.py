@@ -1,7 +1,7 @@
 """A kind of measurement is one module (issue 30): a toy kind defined and registered in one
-module of this folder (``toy_kind.py``: its file, reader, effect, noise, figures and text)
-runs through ``diagnose``, ``fit --add``, ``compare`` and ``report`` with ``--json`` on the
-command line with no other module touched; the contract refuses a kind that forgets a
+module of the tests folder (``tests/toy_kind.py``: its file, reader, effect, noise, figures,
+text and scenario) runs through ``diagnose``, ``fit --add``, ``compare``, ``report``,
+``simulate`` and ``sweep`` with ``--json`` on the command line with no other module touched; the contract refuses a kind that forgets a
 hook or inherits an optional one undeclared."""
 import ast
 import json
@@ -16,7 +16,7 @@ from feedaxis.case import read_case, write_case
 from feedaxis.cli import main
 from feedaxis.measurement.base import Measurement
 
-TOY = str(Path(__file__).with_name("toy_kind.py"))
+TOY = str(Path(__file__).resolve().parents[1] / "toy_kind.py")
 SLOPE_UM_PER_MM = 0.2
 
 
@@ -121,7 +121,7 @@ def test_a_second_kind_under_a_registered_name_is_refused():
         kinds.register(_kind(kind="tracking", file="other.csv"))
 
 
-SOURCE = Path(__file__).resolve().parents[1] / "src" / "feedaxis"
+SOURCE = Path(__file__).resolve().parents[2] / "src" / "feedaxis"
 # The modules each kind owns: only they may branch on its name, key by it or read its
 # samples as a Case field (``case.positioning``); everything else iterates the registry.
 OWNERS = {

@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SOURCE = ROOT / "src" / "feedaxis"
 TEXT_SUFFIXES = {".py", ".md", ".toml", ".c", ".h", ".yml", ".yaml", ".txt", ".cfg"}
 

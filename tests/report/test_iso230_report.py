@@ -206,7 +206,7 @@ def readme_says_how_far_the_fit_is_from_the_truth(case, model_path):
              ("motor_step_error", "harmonic1_sin_um", SEED001_MOTOR["sin_um"])]
     distances = [f"{abs(result.model.values[e][p] - t) / result.uncertainties[e][p]:.1f}"
                  for e, p, t in truth]
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text(encoding="utf-8")
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
     sentence = re.sub(r"\s+", " ", readme.split("The fitted values come back", 1)[1]
                       .split("The demo leaves", 1)[0])
     quoted = re.findall(r"(\d\.\d)(?= standard uncertainties off| and | off)", sentence)
