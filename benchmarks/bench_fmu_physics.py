@@ -68,7 +68,7 @@ def servo_paths():
     steps = round(STEP_S["NpidServo"] / params.time_step_s)
     state, buffer = [0.0] * servo.STATE_SIZE, [0.0] * params.buffer_size
     arrays = (np.array([steps]), np.array([5.0]), np.array([0.0]), np.zeros(servo.STATE_SIZE),
-              np.zeros(params.buffer_size), np.zeros(1))
+              np.zeros(params.buffer_size), np.zeros(1), np.zeros(1))
     try:
         compiled = servo.compiled_loop()
         compiled(coefficients, *arrays)  # compile (or load from the cache) outside the timing
@@ -76,7 +76,8 @@ def servo_paths():
         compiled = None
     coefficients_list = coefficients.tolist()
     return (lambda: fast.advance(STEP_S["NpidServo"], 5.0, 0.0),
-            lambda: servo.run_loop(coefficients_list, [steps], [5.0], [0.0], state, buffer, [0.0]),
+            lambda: servo.run_loop(coefficients_list, [steps], [5.0], [0.0], state, buffer, [0.0],
+                                   [0.0]),
             None if compiled is None else lambda: compiled(coefficients, *arrays))
 
 

@@ -68,6 +68,11 @@ def step_loop(reference, duration_s, sample_s=1e-3, plant=None, servo=None, fric
     n_samples = int(round(duration_s / sample_s)) + 1 + skipped
     commands = [0.0] * (whole + 2)
     set_points = [reference(i * sample_s) for i in range(n_samples)]
+    # the friction's sign is smoothed over 0.1 mm/s, or over the velocity one loop step of
+    # the friction would change where that is more (within it the explicit friction would
+    # overshoot zero velocity in one step)
+    velocity_per_V = _plant_rk4(0.0, 0.0, 1.0, a0, a1, b, h)[1]
+    band_mm_s = max(0.1, friction_N / servo["force_constant_N_per_V"] * abs(velocity_per_V))
     x1, x2, integral, previous = set_points[0], 0.0, 0.0, 0.0
     history = [x1] * (late + 1)  # the position at the last late + 1 loop steps
     positions = [x1]
@@ -85,7 +90,7 @@ def step_loop(reference, duration_s, sample_s=1e-3, plant=None, servo=None, fric
         commands = commands[1:] + [output]
         force = (force_N(t) if force_N else 0.0) - damping_N_s_per_mm * x2
         if x2 != 0.0:
-            force -= friction_N * max(-1.0, min(1.0, x2 / 0.1))
+            force -= friction_N * max(-1.0, min(1.0, x2 / band_mm_s))
         force_V = force / servo["force_constant_N_per_V"]
         if early_s > 0.0:
             x1, x2 = _plant_rk4(x1, x2, commands[-whole - 2] + force_V, a0, a1, b, early_s)
@@ -109,10 +114,12 @@ def noise_um(size, seed):
 
 
 def _drift_um(rng, size):
-    """Encoder noise plus a slow drift (thermal growth): 0.5-2 µm over the record, bent."""
+    """Encoder noise plus a slow drift (thermal growth): 0.5-2 µm over the record, bent,
+    about a zero mean: a steady offset of the position against the reference is a steady
+    force for the loop (a P loop holds one so), named as ``constant_force``, not a null."""
     phase = np.linspace(-1.0, 1.0, size)
     return (_encoder_um(rng, size) + rng.uniform(0.5, 2.0) * rng.choice((-1, 1)) * phase
-            + rng.uniform(-0.5, 0.5) * phase**2)
+            + rng.uniform(-0.5, 0.5) * (phase**2 - np.mean(phase**2)))
 
 
 def _spikes_um(rng, size):

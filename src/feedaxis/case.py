@@ -45,11 +45,16 @@ SERVO_KEYS = {
     "controller": "controller", "kp_V_per_mm": "positive", "ki_V_per_mm_s": "non_negative",
     "kd_V_s_per_mm": "non_negative", "ko_per_mm": "non_negative", "e_max_mm": "positive",
     "force_constant_N_per_V": "positive", "loop_step_s": "positive",
+    "kp_per_s": "positive", "kv_V_s_per_mm": "positive", "tn_s": "positive",
+    "velocity_feedforward": "non_negative",
 }
-SERVO_REQUIRED = ("controller", "kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm",
-                  "force_constant_N_per_V")
-NPID_REQUIRED = ("ko_per_mm", "e_max_mm")
-CONTROLLERS = ("pid", "npid")
+PID_KEYS = ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm", "e_max_mm")
+CASCADE_KEYS = ("kp_per_s", "kv_V_s_per_mm", "tn_s", "velocity_feedforward")
+SERVO_REQUIRED = {"pid": ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm"),
+                  "npid": ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm",
+                           "e_max_mm"),
+                  "cascade": ("kp_per_s", "kv_V_s_per_mm")}
+CONTROLLERS = tuple(SERVO_REQUIRED)
 DEFAULT_LOOP_STEP_S = 1e-4
 TABLES = {"screw": SCREW_KEYS, "motor": MOTOR_KEYS, "servo": SERVO_KEYS}
 # Beyond these no machine axis goes: a value outside is a typing or unit slip, refused
@@ -67,7 +72,8 @@ PHYSICAL_RANGE = {
     "reference_mm": (-1e5, 1e5), "actual_mm": (-1e5, 1e5), "disturbance_N": (-1e7, 1e7),
     "kp_V_per_mm": (1e-9, 1e6), "ki_V_per_mm_s": (0.0, 1e6), "kd_V_s_per_mm": (0.0, 1e6),
     "ko_per_mm": (0.0, 1e3), "e_max_mm": (1e-6, 1e3), "force_constant_N_per_V": (1e-6, 1e7),
-    "loop_step_s": (1e-7, 0.01),
+    "loop_step_s": (1e-7, 0.01), "kp_per_s": (1e-3, 1e5), "kv_V_s_per_mm": (1e-12, 1e6),
+    "tn_s": (1e-6, 1e3), "velocity_feedforward": (0.0, 1.0), "control_V": (-1e4, 1e4),
     "radius_mm": (1e-3, 1e5), "center_mm": (-1e5, 1e5), "deviation_um": (-1e5, 1e5),
     "angle_deg": (0.0, 360.0),
 }
@@ -279,14 +285,25 @@ def read_axis_values(path):
 
 
 def _check_servo(path, text, servo, prefix=""):
-    """The keys ``[servo]`` needs for its controller; ``loop_step_s`` defaulted."""
-    required = SERVO_REQUIRED + (NPID_REQUIRED if servo.get("controller") == "npid" else ())
+    """The keys ``[servo]`` (``[PREFIX.servo]`` in a machine) needs for its controller, and
+    none of another controller's; ``loop_step_s`` defaulted."""
     table = f"{prefix}.servo" if prefix else "servo"
-    for key in required:
+    if "controller" not in servo:
+        raise CaseError(path, f"[{table}] controller is required ({', '.join(CONTROLLERS)})",
+                        toml_key_line(text, table), f"{table}.controller")
+    controller = servo["controller"]
+    for key in SERVO_REQUIRED[controller] + ("force_constant_N_per_V",):
         if key not in servo:
-            raise CaseError(path, f"[{table}] {key} is required for a "
-                                  f"{servo.get('controller')} controller",
+            raise CaseError(path, f"[{table}] {key} is required for a {controller} controller",
                             toml_key_line(text, table), f"{table}.{key}")
+    foreign = PID_KEYS if controller == "cascade" else CASCADE_KEYS
+    for key in foreign:
+        if key in servo:
+            raise CaseError(path, f"[{table}] {key} does not belong to a {controller} "
+                                  f"controller (its keys: {', '.join(SERVO_REQUIRED[controller])}"
+                                  + (", tn_s, velocity_feedforward" if controller == "cascade"
+                                     else "") + ")",
+                            toml_key_line(text, key, table), f"{table}.{key}")
     return {"loop_step_s": DEFAULT_LOOP_STEP_S, **servo}
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 from contextlib import contextmanager
@@ -270,7 +271,7 @@ def _compare_options(parser):
                      "deviation of the measured runs and of what is left after the model, "
                      "side by side (--standard: another standard's, or all; a thermal case's "
                      "ISO 230-3 figures, measured, predicted and compensated). Tracking: "
-                     "the maximum and RMS tracking error of Anang et al. 2017 "
+                     "the maximum and RMS tracking error (as Anang et al. 2017 report them) "
                      "after the first second, measured and predicted.",
          options=_compare_options)
 def _cmd_compare(args):
@@ -347,13 +348,21 @@ def _import_options(parser):
     parser.add_argument("--axis", required=True, metavar="AXIS.toml",
                         help="axis.toml (or a case folder holding one) describing the axis")
     parser.add_argument("--out", required=True, metavar="CASE", help="case folder to create")
+    parser.add_argument("--map", action="append", metavar="TARGET=SOURCE[*SCALE]",
+                        help="a drive trace (CSV): tracking.csv's column TARGET from the "
+                             "export's column SOURCE times SCALE (repeatable), e.g. "
+                             "actual_mm=Pos_act*0.001; TARGET: time_s or sample, reference_mm, "
+                             "actual_mm, control_V, disturbance_N")
+    parser.add_argument("--sample-time-s", type=float, metavar="S",
+                        help="with --map sample=...: the drive's sampling time (s)")
     parser.add_argument("--columns", metavar="MAP", type=column_map,
                         help="a .csv whose headers are not recognised: "
                              "'HEADER=target:UNIT,HEADER=run1+:UNIT,HEADER=run1-:UNIT,...' "
                              "(units mm, m, µm, nm, in; a deviation defaults to µm)")
 
 
-@command("import", help="laser export (Renishaw .rtl, wide CSV) -> case folder",
+@command("import", help="laser export (Renishaw .rtl, wide CSV) or a drive trace (--map) "
+                        "-> case folder",
          formatter_class=argparse.RawDescriptionHelpFormatter,
          description="Read a laser-interferometer export and write a case folder (case format "
                      "1.2, docs/case-format.md: AXIS.toml + positioning.csv), all files or none. "
@@ -376,6 +385,8 @@ def _import_options(parser):
                 "See docs/compensation-tables.md and docs/case-format.md.",
          options=_import_options)
 def _cmd_import(args):
+    if args.map:
+        return _import_drive_trace(args)
     from .importers import import_case
 
     folder, measurement, dropped = import_case(args.file, args.axis, args.out, args.columns)
@@ -402,6 +413,20 @@ def _cmd_import(args):
     _emit(args, payload, "\n".join(lines))
 
 
+def _import_drive_trace(args):
+    from .importers import import_drive_trace
+    from .importers.drive_trace import parse_map
+
+    if args.sample_time_s is not None and not 0.0 < args.sample_time_s < math.inf:
+        raise InputError("must be a finite time > 0 (s)", parameter="--sample-time-s")
+    folder, columns, dropped = import_drive_trace(args.file, args.axis, args.out,
+                                                  parse_map(args.map), args.sample_time_s)
+    payload = {"case": str(folder), "samples": int(columns["time_s"].size),
+               "columns": list(columns), "dropped": dropped}
+    lines = [f"{folder}: {payload['samples']} samples of a drive trace, tracking.csv columns "
+             f"{', '.join(columns)}"]
+    lines += [f"  dropped: {column}: {why}" for column, why in dropped.items()]
+    _emit(args, payload, "\n".join(lines))
 def _positive_tolerance(text):
     """``--tolerance-um``: a number > 0 (µm)."""
     try:

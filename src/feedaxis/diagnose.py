@@ -35,9 +35,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .effects import CATALOG, BasisEffect, Model
-from .fit import (FD_STEP, FitResult, ParameterLayout, Problem, fit, fit_with_artefacts,
-                  too_few_samples)
+from .fit import (FD_STEP, FitResult, ParameterLayout, Problem, Statistics, fit,
+                  fit_with_artefacts, too_few_samples)
 from .measurement import kinds_for, measurement_of
+from .measurement.base import NoStart
 from .physics.threads import one_blas_thread
 from .stats.judge import FAMILY_ALPHA, Test, accepts
 
@@ -57,6 +58,7 @@ class Candidate:
     meaning: str
     result: FitResult = field(repr=False)
     error_scale: float = 1.0
+    joint: FitResult | None = field(default=None, repr=False)  # sizes from the last fit
 
     @property
     def named(self):
@@ -66,9 +68,10 @@ class Candidate:
     def sizes(self):
         """{parameter: (value, standard error, unit)} of the named effect; the standard
         errors rest on the noise model's scale (the pure error where there are repeats)."""
-        effect = self.named
-        values = self.result.model.values[self.effect]
-        sigma = self.result.uncertainties.get(self.effect, {})
+        sized = self.joint or self.result
+        effect = sized.model.effects[sized.model.names.index(self.effect)]
+        values = sized.model.values[self.effect]
+        sigma = sized.uncertainties.get(self.effect, {})
         return {p.name: (values[p.name], self.error_scale * sigma.get(p.name, float("nan")),
                          p.unit) for p in effect.parameters}
 
@@ -173,11 +176,18 @@ def diagnose(case, model, effects=None, progress=None, kind=None, measurement=No
     notify("model")
     if measurement is None:
         measurement = measurement_of(case, kind or kinds_for([case], model)[0])
-    base = fit_with_artefacts(model, measurement)
+    measurement.refitter = Refitter(measurement, effects)
+    try:
+        base = fit_with_artefacts(model, measurement)
+    except NoStart as missing:
+        return _unstarted(measurement, model, missing.message)
     measurement = base.measurements[0]
     stages = len(measurement.stages)
     pending, skipped = _available(measurement, model, effects)
     candidates, left = _select(measurement, base, pending, skipped, stages, notify)
+    candidates = [_final_sizes(measurement, c, left) for c in candidates]
+    recorded, left = _recorded(measurement, left, pending, stages)
+    candidates += recorded
     unexplained = _nuisance_findings(measurement, left, stages, notify)
     structures, final = find_structures(measurement, left, measurement.shapes(effects), stages,
                                         notify)
@@ -192,6 +202,38 @@ def diagnose(case, model, effects=None, progress=None, kind=None, measurement=No
                      candidates, unexplained, skipped, base.artefacts["outlier_rows"],
                      test_used, final, base.artefacts["transient_rows"], reason,
                      measurement.repeatability())
+
+
+class Refitter:
+    """Refits of a measurement's samples for its hooks (``Measurement.refitter``):
+    ``refitter(model, names)`` fits ``model`` with the catalog effects ``names`` added;
+    ``with_basis(model, basis)`` fits it with fixed columns added and returns (the fit, the
+    columns' part of its prediction)."""
+
+    def __init__(self, measurement, catalog):
+        self.measurement, self.catalog = measurement, catalog
+
+    def __call__(self, model, names=()):
+        for name in names:
+            model = model + self.catalog[name]
+        return fit(model, self.measurement)
+
+    def with_basis(self, model, basis):
+        columns = BasisEffect("columns", basis)
+        result = fit(model + columns, self.measurement)
+        return result, columns.prepare(self.measurement.case)(result.model.values["columns"])
+
+
+def _unstarted(measurement, model, reason):
+    """The ``undetermined`` diagnosis of samples no model could be started on: ``reason``
+    says what is missing; the residual shown is the deviation itself."""
+    measured = np.asarray(measurement.measured_um, dtype=float)
+    base = FitResult(model, Statistics.of(measured, measured, 0), measured, measured,
+                     measurements=[measurement])
+    noise_um, noise_source = measurement.noise.estimate_um(measured)
+    return Diagnosis(measurement.kind, measurement.file, base, noise_um, noise_source,
+                     "undetermined", [], [], {}, [], "none: no model could be started", base,
+                     [], f"no model could be started on the samples: {reason}")
 
 
 def _available(measurement, model, effects):
@@ -225,20 +267,60 @@ def _select(measurement, left, pending, skipped, stages, notify):
                 del pending[effect.name]
                 continue
             notify(effect.name)
-            result = fit(left.model + effect, measurement) if effect.additive else None
+            joined = _joined(left.model, effect, pending)
+            result = (fit(joined, measurement)
+                      if effect.additive or not effect.screened else None)
             after_um = (result.residual_um if result else
                         _screened_residual(measurement, left, effect))
+            extra = sum(len(e.parameters) for e in (joined.effects if result else (effect,))
+                        if e.name not in left.model)
             tested.append((measurement.noise.extra_ss_test(
-                left.residual_um, after_um, len(effect.parameters),
-                left.statistics.n_free + len(effect.parameters)), effect, result))
+                left.residual_um, after_um, extra, left.statistics.n_free + extra), effect,
+                result))
         named = _best_candidate(measurement, left, tested, pending, skipped, stages)
         if named is None:
             break
         test, effect, result = named
-        candidates.append(_candidate(measurement, left, effect, result, test))
-        del pending[effect.name]
+        result, test = _without_idle_companions(measurement, left, effect, result, test,
+                                                stages)
+        for joined in [e for e in result.model.effects if e.name in pending]:
+            candidates.append(_candidate(measurement, left, joined, result, test))
+            del pending[joined.name]
         left = result
     return candidates, left
+
+
+def _without_idle_companions(measurement, left, effect, result, test, stages):
+    """(``result``, ``test``), or without the effects fitted beside ``effect``
+    (``Effect.fitted_with``) when they are not significant on top of ``effect`` alone (the
+    extra-sum-of-squares test at the policy's level; the test is then ``effect``'s alone):
+    they were fitted beside it to let it show, and are named only when the data need them
+    too."""
+    companions = [e for e in result.model.effects
+                  if e.name in effect.fitted_with and e.name not in left.model]
+    if not companions:
+        return result, test
+    alone = fit(left.model + effect, measurement)
+    extra = sum(len(e.parameters) for e in companions)
+    needed = measurement.noise.extra_ss_test(alone.residual_um, result.residual_um, extra,
+                                             result.statistics.n_free)
+    if accepts(needed.p_value, len(companions), stages):
+        return result, test
+    return alone, measurement.noise.extra_ss_test(left.residual_um, alone.residual_um,
+                                                  len(effect.parameters),
+                                                  alone.statistics.n_free)
+
+
+def _joined(model, effect, pending):
+    """``model`` + ``effect``, with the effects it is fitted with (``Effect.fitted_with``)
+    that the model lacks and the selection still tries: an effect that only shows with
+    another refitted beside it (a friction the starting plant absorbed) is tested with it,
+    the extra-sum-of-squares test counting both."""
+    joined = model
+    for name in effect.fitted_with:
+        if name not in model and name in pending:
+            joined = joined + pending[name]
+    return joined + effect
 
 
 def _screened_residual(measurement, left, effect):
@@ -249,7 +331,7 @@ def _screened_residual(measurement, left, effect):
     so, not a fit (on a 500 s trace a fit of the loop took seconds); the effect the
     screening ranks first is then fitted in full and tested again."""
     model = left.model + effect
-    start = {**left.model.values, effect.name: dict(effect.neutral)}
+    start = {**left.model.values, effect.name: measurement.neutral(effect)}
     problem = Problem(model, [measurement])
     base_um = problem.predicted_um(start)
     columns = []
@@ -269,14 +351,23 @@ def _screened_residual(measurement, left, effect):
 def _best_candidate(measurement, left, tested, pending, skipped, stages):
     """The (test, effect, result) with the smallest p-value that passes the policy and is
     what the data show (a rival shape passes it over, with the reason), or None. A
-    screened candidate (no result yet) is fitted in full before it is judged."""
-    for test, effect, result in sorted(tested, key=lambda item: item[0].p_value):
-        if result is None and accepts(test.p_value, len(tested), stages):
+    screened candidate (no result yet) is fitted in full and takes its place again by the
+    full fit's test (a linearised step may promise more than the fit gives)."""
+    tries = len(tested)
+    tested = list(tested)
+    while tested:
+        tested.sort(key=lambda item: item[0].p_value)
+        test, effect, result = tested[0]
+        if result is None:
+            if not accepts(test.p_value, tries, stages):
+                return None
             result = fit(left.model + effect, measurement)
             test = measurement.noise.extra_ss_test(left.residual_um, result.residual_um,
                                                    len(effect.parameters),
                                                    result.statistics.n_free)
-        if not accepts(test.p_value, len(tested), stages) or \
+            tested[0] = (test, effect, result)
+            continue
+        if not accepts(test.p_value, tries, stages) or \
                 _explained_um(left, result) < RESOLUTION_UM:
             return None
         rival = measurement.rival(effect, left, result)
@@ -284,6 +375,7 @@ def _best_candidate(measurement, left, tested, pending, skipped, stages):
             return test, effect, result
         skipped[effect.name] = rival
         del pending[effect.name]
+        tested.pop(0)
     return None
 
 
@@ -299,6 +391,42 @@ def _candidate(measurement, left, effect, result, test):
     return Candidate(effect.name, result.rms_um,
                      float(result.statistics.bic - left.statistics.bic), test,
                      f"{evidence} ({test.describe()})", effect.meaning, result, scale)
+
+
+def _recorded(measurement, left, pending, stages):
+    """(candidates, fit) for the effects a record beside the deviation shows
+    (:meth:`~feedaxis.measurement.Measurement.recorded_findings`): each joins the model
+    at the values that record gives (the deviation does not move them), with their
+    standard uncertainties."""
+    candidates = []
+    for effect, values, sigma, test, evidence in measurement.recorded_findings(left, pending,
+                                                                               stages):
+        model = left.model + effect
+        left = replace(left, model=model.with_values({**model.values, effect.name: values}),
+                       uncertainties={**left.uncertainties, effect.name: sigma})
+        clean = [e for e in left.model.effects if not isinstance(e, BasisEffect)]
+        result = replace(left, model=Model(clean, {e.name: left.model.values[e.name]
+                                                   for e in clean}))
+        candidates.append(Candidate(effect.name, left.rms_um, 0.0, test,
+                                    f"{evidence} ({test.describe()})", effect.meaning, result))
+        del pending[effect.name]
+    return candidates, left
+
+
+def _final_sizes(measurement, candidate, left):
+    """``candidate`` with its sizes and evidence from the last fit of the selection, where
+    every effect named was refitted with those named after it (an effect named early, on a
+    model still missing another, is sized by the joint fit)."""
+    if candidate.effect not in left.model or candidate.result is left:
+        return candidate
+    clean = [e for e in left.model.effects if not isinstance(e, BasisEffect)]
+    values = {e.name: left.model.values[e.name] for e in clean}
+    joint = replace(left, model=Model(clean, values))
+    effect = clean[[e.name for e in clean].index(candidate.effect)]
+    contribution = measurement.components(joint.model)[effect.name]
+    evidence = effect.evidence(measurement.case, values[effect.name], contribution)
+    return replace(candidate, joint=joint, error_scale=measurement.noise.error_scale(left),
+                   evidence=f"{evidence} ({candidate.test.describe()})")
 
 
 def _nuisance_findings(measurement, left, stages, notify):

@@ -216,11 +216,14 @@ def fit(model, data, progress=None, kind=None):
     problem = Problem(model, found, progress)
     if progress:
         progress(total=evaluation_bound(layout))
-    start = variable_projection(problem, layout)
-    solution = (_linear_solution(problem, layout, start) if layout.nonlinear_index.size == 0
-                else least_squares(problem.residual(layout), start, bounds=layout.bounds(),
-                                   jac=problem.jacobian(layout), x_scale="jac", method="trf",
-                                   max_nfev=MAX_NFEV_PER_PARAMETER * layout.size))
+    with np.errstate(over="ignore"):  # a trial step may overflow; the optimiser steps back
+        start = variable_projection(problem, layout)
+        solution = (_linear_solution(problem, layout, start)
+                    if layout.nonlinear_index.size == 0
+                    else least_squares(problem.residual(layout), start, bounds=layout.bounds(),
+                                       jac=problem.jacobian(layout), x_scale="jac",
+                                       method="trf",
+                                       max_nfev=MAX_NFEV_PER_PARAMETER * layout.size))
     sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
                                                     solution.active_mask, layout, found)
     fitted = model.with_values(layout.values(solution.x))

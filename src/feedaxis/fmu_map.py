@@ -24,12 +24,19 @@ AXIS_KEYS = {
     "motor": {"StepperError": ("step_angle_deg", "error_period_steps")},
 }
 
-# axis.toml [servo] key -> NpidServo parameter; "controller" (pid / npid) is the FMU's
-# boolean "nonlinear"
-SERVO_KEYS = {"controller": "nonlinear", "kp_V_per_mm": "kp_V_per_mm",
+# axis.toml [servo] key -> NpidServo parameter; "controller" (pid / npid / cascade) is the
+# FMU's "controller" (its boolean "nonlinear", NPID on a PID, stays false)
+SERVO_KEYS = {"controller": "controller", "kp_V_per_mm": "kp_V_per_mm",
               "ki_V_per_mm_s": "ki_V_per_mm_s", "kd_V_s_per_mm": "kd_V_s_per_mm",
               "ko_per_mm": "ko_per_mm", "e_max_mm": "e_max_mm",
-              "force_constant_N_per_V": "force_constant_N_per_V", "loop_step_s": "time_step_s"}
+              "force_constant_N_per_V": "force_constant_N_per_V", "loop_step_s": "time_step_s",
+              "kp_per_s": "kp_per_s", "kv_V_s_per_mm": "kv_V_s_per_mm", "tn_s": "tn_s",
+              "velocity_feedforward": "velocity_feedforward"}
+# the [servo] keys of each controller (the others keep the FMU's defaults)
+CONTROLLER_KEYS = {"pid": ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm"),
+                   "npid": ("kp_V_per_mm", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm",
+                            "e_max_mm"),
+                   "cascade": ("kp_per_s", "kv_V_s_per_mm", "tn_s", "velocity_feedforward")}
 
 # FMU parameters the positioning effects set, at the values that switch every effect off
 # (error 0 µm); each effect's ``fmu_parameters`` overrides its own
@@ -58,12 +65,19 @@ def neutral_fmu_parameters(axis):
 
 def servo_to_fmu(servo):
     """NpidServo parameters (``ServoParams`` fields) from an axis.toml ``[servo]`` table."""
-    values = {SERVO_KEYS[key]: value for key, value in servo.items()
-              if key in SERVO_KEYS and key != "controller"}
-    return {**values, "nonlinear": servo["controller"] == "npid"}
+    return {SERVO_KEYS[key]: value for key, value in servo.items() if key in SERVO_KEYS}
 
 
 def servo_from_fmu(values):
-    """The axis.toml ``[servo]`` table from NpidServo parameter values."""
-    return {"controller": "npid" if values["nonlinear"] else "pid",
-            **{key: values[name] for key, name in SERVO_KEYS.items() if key != "controller"}}
+    """The axis.toml ``[servo]`` table from NpidServo parameter values: the keys of its
+    controller (``nonlinear`` on a PID is an NPID; a cascade without integral action,
+    ``tn_s`` 0, has no ``tn_s``)."""
+    controller = values.get("controller", "pid")
+    if controller == "pid" and values.get("nonlinear"):
+        controller = "npid"
+    keys = CONTROLLER_KEYS[controller] + ("force_constant_N_per_V", "loop_step_s")
+    table = {"controller": controller,
+             **{key: values[SERVO_KEYS[key]] for key in keys if SERVO_KEYS[key] in values}}
+    if controller == "cascade" and not table.get("tn_s"):
+        table.pop("tn_s", None)
+    return table

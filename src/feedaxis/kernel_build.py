@@ -34,7 +34,7 @@ from .output import built_once
 from .toolchain import compiler_missing
 
 MODULE_NAME = "servo_kernel"
-SIGNATURE = "void(f8[::1], i8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1])"
+SIGNATURE = "void(f8[::1], i8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1])"
 SERVO_SOURCE = Path(__file__).resolve().parent / "physics" / "servo.py"
 COMPILE = f"""
 import sys, warnings

@@ -53,10 +53,11 @@ def test_every_axis_key_is_listed_with_the_range_the_reader_enforces():
                 choices = {"support": case_format.SUPPORTS,
                            "controller": case_format.CONTROLLERS}[rule]
                 assert all(f'`"{choice}"`' in cells[2] for choice in choices), key
-    for key in case_format.SERVO_REQUIRED:
-        assert "required" in listed[f"[servo] {key}"][3], key
-    for key in case_format.NPID_REQUIRED:
-        assert 'required for `"npid"`' in listed[f"[servo] {key}"][3], key
+    for controller, keys in case_format.SERVO_REQUIRED.items():
+        for key in keys:
+            assert f'required for `"{controller}"`' in listed[f"[servo] {key}"][3] \
+                or f'`"{controller}"`' in listed[f"[servo] {key}"][3], (controller, key)
+    assert "required" in listed["[servo] force_constant_N_per_V"][3]
 
 
 @pytest.mark.parametrize("section, spec", [

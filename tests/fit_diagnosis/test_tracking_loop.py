@@ -108,7 +108,7 @@ def test_npid_case_runs_the_nonlinear_loop(tmp_path):
                                          axis={**AXIS, "servo": {**AXIS["servo"], **npid}}))
     model = Model((CATALOG["servo_plant"], CATALOG["viscous_friction"]),
                   {"servo_plant": PLANT, "viscous_friction": {"damping_N_s_per_mm": 0.02}})
-    assert servo_params(case.axis, model).nonlinear
+    assert servo_params(case.axis, model).npid
     tracking = Tracking(case)
     predicted_mm = tracking.reference_mm + tracking.predict_um(model) * 1e-3
     assert np.max(np.abs(predicted_mm - run[2][tracking.index])) < 1e-6

@@ -243,7 +243,7 @@ def default_axis(macro_step_s=1e-3, servo_step_s=1e-3, thermal_step_s=0.1):
     components = (
         Component("NpidServo", "NpidServo", servo_step_s,
                   {"nonlinear": False, "time_step_s": 1e-4},
-                  "position loop, PID (Anang et al. 2017 Eq. 1-8)"),
+                  "position loop, PID or NPID (Anang et al. 2017, Eq. 1-8) or a drive's cascade"),
         Component("StepperError", "StepperError", servo_step_s, {},
                   "motor step error (Liu 2022 Eq. 6, 9, 10)"),
         Component("GeometricError", "GeometricError", servo_step_s, {"sag_enabled": True},

@@ -69,6 +69,12 @@ class Effect:
     measurement = None
     additive = True
     probe: dict = {}
+    # an effect acting inside the system is screened by one linearised step before it is
+    # fitted (diagnose._screened_residual); False: always fitted (a step from far away)
+    screened: bool = True
+    # effects fitted beside it when the model lacks them (diagnose._joined): a friction
+    # inside a loop whose plant was fitted without it shows only with the plant refitted
+    fitted_with: tuple = ()
     axis = None  # the machine axis the effect acts on (circular tests), None for one axis
 
     @property

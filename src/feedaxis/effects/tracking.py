@@ -1,6 +1,8 @@
-"""Tracking effects: each sets parameters of the closed position loop (Anang et al. 2017 Eq. 1-8).
+"""Tracking effects: each sets parameters of the closed position loop (Anang et al. 2017,
+Eq. 1-8, or a drive's cascade).
 
-Names are fixed (other tools use them): servo_plant, coulomb_friction, viscous_friction.
+Names are fixed (other tools use them): servo_plant, coulomb_friction, viscous_friction,
+stribeck_friction, constant_force.
 The parameter names are those of :class:`feedaxis.physics.servo.ServoParams` and of the
 NpidServo FMU, so a fitted model drives the FMU unchanged.
 """
@@ -11,7 +13,8 @@ from dataclasses import fields
 import numpy as np
 
 from .base import Effect, Parameter
-from ..physics.servo import ServoParams
+from .. import kinds
+from ..physics.servo import PLANT_BOUNDS, ServoParams
 
 SEED002_PLANT = {f.name: f.default for f in fields(ServoParams)}
 
@@ -38,7 +41,14 @@ class TrackingEffect(Effect):
         return None
 
     def guess(self, case, residual_um):
-        return dict(self.neutral)
+        """The neutral values, or what the identification from a recorded controller output
+        found for this effect's parameters (:mod:`feedaxis.physics.identify`)."""
+        identified = kinds.kind(self.measurement).start_of(case).identified
+        found = identified.values if identified is not None else {}
+        return {**self.neutral, **{key: value for key, value in found.items()
+                                   if key in self.neutral and key in self.from_identified}}
+
+    from_identified: tuple = ()
 
     def fmu_parameters(self, axis, values):
         return {self.fmu: dict(values)}
@@ -48,17 +58,27 @@ class ServoPlant(TrackingEffect):
     """The plant G(s) = b e^{-τs} / (s² + a1 s + a0) of Anang et al. 2017 Eq. 1, identified."""
 
     name = "servo_plant"
-    meaning = ("the plant (motor, screw, table) responds differently from Anang et al. 2017 Eq. 1: "
-               "gain, damping, stiffness or transport delay")
+    meaning = ("the plant (motor, screw, table) responds differently from the starting "
+               "plant: gain, damping, stiffness or transport delay")
     parameters = (
-        Parameter("plant_gain_mm_per_Vs2", "mm/(V.s2)", 1e2, 1e7, "b of Eq. 1"),
-        Parameter("plant_damping_per_s", "1/s", 0.0, 1e4, "a1 of Eq. 1"),
-        Parameter("plant_stiffness_per_s2", "1/s2", 0.0, 1e5, "a0 of Eq. 1"),
-        Parameter("delay_s", "s", 0.0, 0.02, "transport delay of the command"))
+        Parameter("plant_gain_mm_per_Vs2", "mm/(V.s2)", *PLANT_BOUNDS["plant_gain_mm_per_Vs2"],
+                  "b of Eq. 1"),
+        Parameter("plant_damping_per_s", "1/s", *PLANT_BOUNDS["plant_damping_per_s"],
+                  "a1 of Eq. 1"),
+        Parameter("plant_stiffness_per_s2", "1/s2", *PLANT_BOUNDS["plant_stiffness_per_s2"],
+                  "a0 of Eq. 1"),
+        Parameter("delay_s", "s", *PLANT_BOUNDS["delay_s"], "transport delay of the command"))
     neutral = {p.name: SEED002_PLANT[p.name] for p in parameters}
+    screened = False  # its delay moves the loop far from a linear step: always fitted
+
+    def guess(self, case, residual_um):
+        """The basin of the case's starting plant (the loop's start,
+        :class:`feedaxis.measurement.tracking.Start`: the plant fitted beside a friction)."""
+        return {**self.neutral, **(kinds.kind(self.measurement).start_of(case).basin or {})}
 
     def evidence(self, case, values, contribution_um):
-        changes = ", ".join(f"{name} {SEED002_PLANT[name]:.4g} -> {values[name]:.4g}"
+        start = {**self.neutral, **(kinds.kind(self.measurement).start_of(case).plant or {})}
+        changes = ", ".join(f"{name} {start[name]:.4g} -> {values[name]:.4g}"
                             for name in self.parameter_names)
         return f"the fitted plant moves {changes}; it changes the prediction by " \
                f"{np.sqrt(np.mean(contribution_um ** 2)):.3g} µm RMS"
@@ -81,6 +101,9 @@ class CoulombFriction(TrackingEffect):
                             "Coulomb force, smoothed over |v| < 0.1 mm/s"),)
     neutral = {"friction_N": 0.0}
     probe = {"friction_N": 1.0}
+    from_identified = ("friction_N",)
+    screened = False  # the loop is nonlinear in it: a linear step from 0 understates it
+    fitted_with = ("servo_plant",)  # the starting plant, fitted alone, absorbed part of it
 
     def evidence(self, case, values, contribution_um):
         return f"{values['friction_N']:.3g} N of Coulomb friction: " + _reversals_text(
@@ -106,5 +129,47 @@ class ViscousFriction(TrackingEffect):
                 f"following the velocity, {np.max(np.abs(contribution_um)):.3g} µm at most")
 
 
-TRACKING_EFFECTS = (ServoPlant(), CoulombFriction(), ViscousFriction())
+class StribeckFriction(TrackingEffect):
+    """Friction that rises at rest above its Coulomb level: coulomb + (static − coulomb)·
+    exp(−(v/v_s)²) opposing the velocity (Armstrong-Hélouvry, Dupont & Canudas de Wit,
+    Automatica 30 (1994), Eq. 2 with δ = 2)."""
+
+    name = "stribeck_friction"
+    meaning = ("friction is higher at rest than in motion (Stribeck), so the axis sticks at "
+               "each reversal and the tracking error spikes as it breaks free")
+    parameters = (Parameter("coulomb_N", "N", 0.0, 1e4, "friction in steady motion"),
+                  Parameter("static_N", "N", 0.0, 1e4, "friction at rest"),
+                  Parameter("stribeck_velocity_mm_s", "mm/s", 1e-3, 1e3,
+                            "velocity over which the friction falls from static to Coulomb"))
+    neutral = {"coulomb_N": 0.0, "static_N": 0.0, "stribeck_velocity_mm_s": 1.0}
+    probe = {"coulomb_N": 1.0, "static_N": 1.0}
+    screened = False
+    fitted_with = ("servo_plant",)
+
+    def evidence(self, case, values, contribution_um):
+        return (f"{values['static_N']:.3g} N at rest falling to {values['coulomb_N']:.3g} N "
+                f"over {values['stribeck_velocity_mm_s']:.3g} mm/s: "
+                + _reversals_text(case, contribution_um))
+
+
+class ConstantForce(TrackingEffect):
+    """A constant axial force: the weight on an inclined axis, a counterbalance, a cable
+    chain's pull."""
+
+    name = "constant_force"
+    meaning = ("a constant axial force acts on the axis (weight on an inclined axis, a "
+               "counterbalance, a cable chain), so the loop holds a steady offset or command")
+    parameters = (Parameter("force_N", "N", -1e5, 1e5, "the force along +x"),)
+    neutral = {"force_N": 0.0}
+    probe = {"force_N": 1.0}
+    from_identified = ("force_N",)
+
+    def evidence(self, case, values, contribution_um):
+        return (f"a constant force of {values['force_N']:+.3g} N on the axis: "
+                f"{np.median(contribution_um):+.3g} µm of steady tracking error")
+
+
+TRACKING_EFFECTS = (ServoPlant(), CoulombFriction(), ViscousFriction(), StribeckFriction(),
+                    ConstantForce())
+
 

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from ..case import CaseError, read_axis, read_axis_values, read_case, write_case
-from ..measurement.positioning import POSITIONING_FILE
 from ..errors import InputError, check_writable_target
 
 
@@ -64,6 +63,36 @@ def read_measurement(path, columns=None):
     return reader(path, columns)
 
 
+def import_drive_trace(path, axis_path, out, mapping, sample_time_s=None):
+    """Read a drive's trace export ``path`` through ``mapping`` ({target: (column, factor)},
+    :func:`.drive_trace.parse_map`), write case folder ``out`` (axis.toml of ``axis_path``,
+    which needs its ``[servo]`` table, and tracking.csv). Returns (folder, columns,
+    dropped)."""
+    from ..measurement.tracking import Tracking
+    from .drive_trace import read_drive_trace
+
+    axis_file = _axis_file(axis_path, out)
+    if not read_axis(axis_file).servo:
+        raise InputError("a drive trace needs the [servo] table in axis.toml (the controller "
+                         "as set in the drive)", path=axis_file, column="servo")
+    columns, dropped = read_drive_trace(path, mapping, sample_time_s)
+    _, axis_values = read_axis_values(axis_file)
+    folder = write_case(out, axis_values, check=lambda staged: _check_case(path, staged),
+                        **{Tracking.kind: columns})
+    return folder, columns, dropped
+
+
+def _axis_file(axis_path, out):
+    """axis.toml of ``axis_path`` (a file or a case folder), checked; ``out`` must be new."""
+    axis_path = Path(axis_path)
+    axis_file = axis_path / "axis.toml" if axis_path.is_dir() else axis_path
+    read_axis(axis_file)
+    if Path(out).exists():
+        raise InputError("already exists; choose a new case folder", path=out)
+    check_writable_target(out, "folder")
+    return axis_file
+
+
 def import_case(path, axis_path, out, columns=None):
     """Read ``path``, write case folder ``out`` with the axis of ``axis_path``.
 
@@ -71,12 +100,8 @@ def import_case(path, axis_path, out, columns=None):
     reads it before it is published, so nothing is written that would then be refused.
     Returns (folder, measurement, dropped): {field: value} of what the case does not hold.
     """
-    axis_path = Path(axis_path)
-    axis_file = axis_path / "axis.toml" if axis_path.is_dir() else axis_path
+    axis_file = _axis_file(axis_path, out)
     axis = read_axis(axis_file)
-    if Path(out).exists():
-        raise InputError("already exists; choose a new case folder", path=out)
-    check_writable_target(out, "folder")
     measurement = read_measurement(path, columns)
     _check_travel(path, measurement, axis)
     _, axis_values = read_axis_values(axis_file)
@@ -123,6 +148,6 @@ def _check_case(path, staged):
     try:
         read_case(staged)
     except CaseError as error:
-        where = f"{POSITIONING_FILE} row {error.row}" if error.row else error.path.name
+        where = f"{Path(error.path).name} row {error.row}" if error.row else error.path.name
         raise InputError(f"the case it makes breaks the case format ({where}, column "
                          f"{error.column}): {error.message}", path=path) from None

@@ -37,6 +37,12 @@ CAPABILITIES = {
 }
 
 
+
+class NoStart(InputError):
+    """The samples give no start for a model (a tracking record no plant makes a stable
+    loop for): the message says what is missing. ``diagnose`` reports it as an
+    ``undetermined`` verdict; a fit or comparison refuses it."""
+
 class Measurement(ABC):
     """One case's samples of one kind: the contract every kind of measurement fulfils.
 
@@ -207,6 +213,14 @@ class Measurement(ABC):
         """The deviation (µm) ``model`` predicts at the samples, with its own values."""
         return self.predictor(model)(model.values)
 
+    # set by the diagnosis (feedaxis.diagnose.Refitter): refits of these samples with
+    # catalog effects added, for hooks that judge a rival with the model refitted
+    refitter = None
+
+    def neutral(self, effect):
+        """``effect``'s values that switch it off on these samples (its ``neutral``)."""
+        return dict(effect.neutral)
+
     def components(self, model):
         """{effect: its contribution (µm) to the prediction}: an additive effect's error;
         for an effect acting inside the system, the full prediction less the prediction
@@ -218,7 +232,7 @@ class Measurement(ABC):
             if effect.additive:
                 parts[effect.name] = effect.prepare(self.case)(model.values[effect.name])
             else:
-                neutral = {**model.values, effect.name: dict(effect.neutral)}
+                neutral = {**model.values, effect.name: self.neutral(effect)}
                 parts[effect.name] = full_um - core(neutral)
         return parts
 
@@ -278,6 +292,12 @@ class Measurement(ABC):
         """Why the data cannot tell the noise from structure in the residual of ``current``
         (None when they can): the verdict is then ``undetermined``, not ``adequate``."""
         return None
+
+    def recorded_findings(self, left, pending, stages):
+        """Effects of ``pending`` these samples cannot show in the deviation but a record
+        beside it can (a drive's controller output): [(effect, values, standard
+        uncertainties, test, evidence)] of those it names at the policy's level."""
+        return []
 
     def rival(self, effect, left, result):
         """Why ``effect``, significant on top of ``left`` (``result``), is not what the data

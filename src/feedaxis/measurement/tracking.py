@@ -18,7 +18,8 @@ has died out by then, does not bend the plant.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import weakref
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,13 +28,16 @@ import scipy
 from .. import kinds
 from ..case import (AXIS_FILE, DEFAULT_LOOP_STEP_S, CaseError, _first_bad, _read_csv)
 from ..fmu_map import servo_to_fmu
+from ..physics.identify import identify_plant, loop_start
+from ..physics.servo import (MAX_POSITION_MM, PLANT_BOUNDS, ServoParams, check_runs,
+                             loop_budget_problem, simulate, simulate_record, step_counts)
 from ..plausibility import tracking_problems, warn_implausible
-from ..physics.servo import ServoParams, check_runs, loop_budget_problem, simulate, step_counts
-from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, locate_sinusoid,
-                              peak_p_value, short_time_peak, spikes)
-from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, drift_basis
+from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, autoregression,
+                              locate_sinusoid, noise_floor_um, peak_p_value, short_time_peak,
+                              spikes)
+from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, accepts, drift_basis
 from ..stats.noise import Coloured
-from .base import Measurement, Shape, Trial
+from .base import Measurement, NoStart, Shape, Trial
 
 SETTLING_S = 1.0  # Anang et al. 2017 measures the tracking error after the first second
 # The start-up left out of every comparison. A record that starts mid-motion differs from the
@@ -53,7 +57,7 @@ ROUNDING_UM = 1e-3  # the diagnosis's resolution (diagnose.RESOLUTION_UM): below
 TRACKING_FILE = "tracking.csv"
 
 TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
-                    "disturbance_N": False}
+                    "disturbance_N": False, "control_V": False}
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,7 @@ class TrackingSamples:
     reference_mm: np.ndarray
     actual_mm: np.ndarray
     disturbance_N: np.ndarray | None = None
+    control_V: np.ndarray | None = None
 
 
 def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
@@ -81,18 +86,136 @@ def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
     if problem is not None:
         raise CaseError(path, problem[1], rows[problem[0]], "time_s")
     return TrackingSamples(time_s, values["reference_mm"], values["actual_mm"],
-                           values.get("disturbance_N"))
+                           values.get("disturbance_N"), values.get("control_V"))
 
 
-def servo_params(axis, model, values=None):
-    """The loop's :class:`ServoParams`: the controller of ``[servo]``, then the model's
-    tracking effects with ``values`` (default the model's own)."""
+PLANT_KEYS = ("plant_gain_mm_per_Vs2", "plant_damping_per_s", "plant_stiffness_per_s2",
+              "delay_s")
+
+
+def servo_params(axis, model, values=None, plant=None):
+    """The loop's :class:`ServoParams`: the controller of ``[servo]`` on ``plant`` (default
+    the paper's, Anang et al. 2017 Eq. 1), then the model's tracking effects with ``values``
+    (default the model's own)."""
     values = model.values if values is None else values
-    merged = servo_to_fmu(axis.servo)
+    merged = {**servo_to_fmu(axis.servo), **(plant or {})}
     for effect in model.effects:
         if effect.measurement == "tracking":
             merged.update({**effect.neutral, **values[effect.name]})
     return ServoParams(**merged)
+
+
+class Start:
+    """Where the loop of a tracking case starts: the plant a model without ``servo_plant``
+    runs, and how it was found (``source``), or why none was (``problem``).
+
+    - With ``control_V`` recorded: the inverse-dynamics least squares of the plant on its own
+      input (:func:`feedaxis.physics.identify.identify_plant`), which also estimates the
+      Coulomb friction and a constant force (``identified``: the starts of those effects).
+    - Otherwise the paper's plant (Anang et al. 2017, Eq. 1) where it makes a stable loop
+      with a PID or NPID that follows the record, and for a cascade, or where it does not,
+      the plant a closed-loop search over the gain finds from the record
+      (:func:`feedaxis.physics.identify.loop_start`).
+
+    A start found from the record is then refined by the closed-loop fit of the plant
+    (``servo_plant`` alone), so a model without ``servo_plant`` runs the plant the record
+    shows, and an effect named on top is judged against it.
+    """
+
+    def __init__(self, plant, source, identified=None, problem=None, refine=True):
+        self.plant, self.source, self.identified, self.problem = (plant, source, identified,
+                                                                  problem)
+        self.refine = refine
+        self.basin = plant  # where a fit of servo_plant starts (:func:`_refined`)
+
+
+_STARTS = {}  # id(tracking record) -> (weak reference to it, Start)
+
+
+def loop_start_of(case):
+    """The :class:`Start` of ``case``'s tracking record, found once per record."""
+    trace = case.tracking
+    entry = _STARTS.get(id(trace))
+    if entry is not None and entry[0]() is trace:
+        return entry[1]
+    for key in [key for key, (ref, _) in _STARTS.items() if ref() is None]:
+        del _STARTS[key]
+    start = _find_start(case)
+    _STARTS[id(trace)] = (weakref.ref(trace), start)
+    if start.plant and start.refine:
+        start.basin, start.plant = _refined(case, start.plant)
+    return start
+
+
+def _refined(case, plant):
+    """(basin, plant): ``plant`` after two closed-loop least-squares fits of the plant, the
+    first with a Coulomb friction beside it as a nuisance (friction at the reversals would
+    otherwise draw the search's plant into another optimum: the basin, where a fit of the
+    plant with the effects starts), the second alone from there: the model without
+    effects is the plant alone that fits the record best, so an effect is judged on top
+    of it as on any model (a plant tuned beside a friction makes the plant alone, or that
+    friction, look significant on a null). Bounded least squares on the samples compared
+    (scipy's trust-region reflective, as the fit's)."""
+    measurement = Tracking(case)
+    beside = _fitted_plant(measurement, plant, ("friction_N",))
+    return beside, _fitted_plant(measurement, beside, ())
+
+
+def _fitted_plant(measurement, plant, nuisances):
+    """The plant (``PLANT_KEYS``) that fits ``measurement`` best from ``plant``, the loop
+    parameters ``nuisances`` (from 0, at least 0) fitted beside it and dropped."""
+    from scipy.optimize import least_squares
+
+    keys = (*PLANT_KEYS, *nuisances)
+    lower = np.array([PLANT_BOUNDS[k][0] if k in PLANT_BOUNDS else 0.0 for k in keys])
+    upper = np.array([PLANT_BOUNDS[k][1] if k in PLANT_BOUNDS else np.inf for k in keys])
+    start = np.clip([plant[k] if k in plant else 0.0 for k in keys], lower, upper)
+    base = {**servo_to_fmu(measurement.case.axis.servo)}
+
+    def residual(x):
+        params = ServoParams(**{**base, **dict(zip(keys, x))})
+        return measurement.measured_um - measurement.deviation_um(params)
+
+    with np.errstate(over="ignore", invalid="ignore"):
+        solution = least_squares(residual, start, bounds=(lower, upper), x_scale="jac",
+                                 method="trf")
+    return {k: float(v) for k, v in zip(PLANT_KEYS, solution.x)}
+
+
+def _runs(params, trace, counts):
+    """Whether ``params`` make a loop that stays on any axis over the record."""
+    with np.errstate(all="ignore"):
+        position_mm = simulate(params, trace.time_s, trace.reference_mm, trace.disturbance_N,
+                               counts)
+    return bool(np.all(np.abs(position_mm) <= MAX_POSITION_MM))
+
+
+def _find_start(case):
+    servo = case.axis.servo
+    trace = case.tracking
+    base = ServoParams(**servo_to_fmu(servo))
+    counts = step_counts(trace.time_s, servo["loop_step_s"])
+    if trace.control_V is not None:
+        identified = identify_plant(trace.time_s, trace.actual_mm, trace.control_V,
+                                    servo["force_constant_N_per_V"], trace.disturbance_N)
+        if identified is not None:
+            plant = {key: float(np.clip(identified.values[key], *PLANT_BOUNDS[key]))
+                     for key in PLANT_KEYS}
+            if _runs(replace(base, **plant), trace, counts):
+                return Start(plant, "identified from the recorded controller output "
+                                    "(inverse dynamics)", identified)
+    if base.controller != "cascade" and _runs(base, trace, counts):
+        return Start({}, "the plant of Anang et al. 2017, Eq. 1", refine=False)
+    plant = loop_start(base, trace.time_s, trace.reference_mm, trace.actual_mm,
+                       trace.disturbance_N, START_WINDOW_S)
+    if plant is None:
+        return Start(None, "", problem=(
+            f"no plant gain from {PLANT_BOUNDS['plant_gain_mm_per_Vs2'][0]:g} to "
+            f"{PLANT_BOUNDS['plant_gain_mm_per_Vs2'][1]:g} mm/(V.s2) makes a stable loop with "
+            f"the controller of [servo] ({servo['controller']}): check its gains and units, "
+            "or record the controller output (control_V) so the plant can be identified "
+            "from its own input"))
+    return Start(plant, "found from the record by a closed-loop search over the plant gain")
 
 
 def tracking_comparison_lines(comparison):
@@ -100,7 +223,7 @@ def tracking_comparison_lines(comparison):
     maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
     return "\n".join([
         f"{comparison['samples']} samples after the first {comparison['after_s']:g} s; model: "
-        f"{', '.join(comparison['effects']) or '(Anang et al. 2017 plant)'}",
+        f"{', '.join(comparison['effects']) or '(no effect: the starting plant)'}",
         f"{'tracking error (mm)':24s} {'measured':>10s} {'predicted':>10s}",
         f"{'max':24s} {maximum['measured']:10.5f} {maximum['predicted']:10.5f}",
         f"{'RMS':24s} {rms['measured']:10.5f} {rms['predicted']:10.5f}",
@@ -127,7 +250,7 @@ class Tracking(Measurement):
     location_key = "frequency_hz"
     location_unit = "Hz"
     coordinate_label = "time (s)"
-    reference_label = "the plant of Anang et al. 2017"
+    reference_label = "the starting plant"
     stages = ("drift", "effects", "structures")
     loose_share = 0.5
 
@@ -145,6 +268,15 @@ class Tracking(Measurement):
         self.time_s = self.coordinate = trace.time_s[self.index]
         self.reference_mm = trace.reference_mm[self.index]
         self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
+        self.start = loop_start_of(case)
+
+    start_of = staticmethod(loop_start_of)  # the start the tracking effects guess from
+
+    def neutral(self, effect):
+        """``effect``'s values that switch it off: for ``servo_plant`` the starting plant."""
+        if effect.name == "servo_plant" and self.start.plant:
+            return {**effect.neutral, **self.start.plant}
+        return super().neutral(effect)
 
     @classmethod
     def read(cls, folder, axis, duty):
@@ -181,8 +313,80 @@ class Tracking(Measurement):
     def subset(self, keep):
         return Tracking(self.case, self.index[keep])
 
+    def recorded_findings(self, left, pending, stages):
+        """A constant force the tracking error cannot show (an integral action holds it) but
+        the recorded controller output does: the output the fitted loop predicts is
+        subtracted from ``control_V``, and what is left regressed on the predicted output's
+        change under 1 N (the integral holds −1/K_F); F test with the effective sample count
+        n/τ of what is left, at the policy's level. The force's standard uncertainty is
+        that of the regression widened by √τ."""
+        trace = self.case.tracking
+        effect = pending.get("constant_force")
+        if trace.control_V is None or effect is None:
+            return []
+        params = self.params(left.model)
+        known = trace.disturbance_N
+        ones = np.ones(trace.time_s.size)
+        outputs = [simulate_record(params, trace.time_s, trace.reference_mm, force,
+                                   self.counts)[1][self.index]
+                   for force in (known, ones if known is None else known + ones)]
+        left_V = trace.control_V[self.index] - outputs[0]
+        column = outputs[1] - outputs[0]
+        energy = float(column @ column)
+        if energy <= 0.0:
+            return []
+        force_N = float(column @ left_V) / energy
+        after_V = left_V - force_N * column
+        test = self.noise.extra_ss_test(left_V, after_V, 1, left.statistics.n_free + 1)
+        if not accepts(test.p_value, 1, stages):
+            return []
+        variance = float(after_V @ after_V) / max(after_V.size - 1, 1)
+        sigma_N = float(np.sqrt(autocorrelation_time(after_V) * variance / energy))
+        test = Test(test.statistic, test.dof, test.p_value,
+                    f"{test.name}, on the recorded controller output", test.symbol)
+        evidence = (f"a constant force of {force_N:+.3g} N on the axis, held by the "
+                    f"controller's integral action: the recorded output carries "
+                    f"{-force_N / params.force_constant_N_per_V:+.3g} V for it, the tracking "
+                    "error nothing lasting")
+        return [(effect, {"force_N": force_N}, {"force_N": sigma_N}, test, evidence)]
+
+    def rival(self, effect, left, result):
+        """Why a friction law is not what the data show, each judged with the plant
+        refitted (the start's plant was fitted beside a friction, so a friction tested on
+        top of it alone would look more significant than it is): not significant against
+        the plant alone (F test at the policy's level over the tracking effects), or the
+        other law describes the reversals better (F test on the two parameters of the
+        Stribeck rise): ``stribeck_friction`` when its rise at rest is not significant
+        against Coulomb friction alone, ``coulomb_friction`` when it is. Only one of them
+        is named, the one the data show."""
+        laws = ("coulomb_friction", "stribeck_friction")
+        if (effect.name not in laws or any(name in left.model for name in laws)
+                or self.refitter is None
+                or not all(name in self.refitter.catalog for name in (*laws, "servo_plant"))):
+            return None
+        plant = () if "servo_plant" in left.model else ("servo_plant",)
+        plain = self.refitter(left.model, plant)
+        coulomb, stribeck = (self.refitter(left.model, (*plant, law)) for law in laws)
+        refitted = coulomb if effect.name == laws[0] else stribeck
+        test = self.noise.extra_ss_test(plain.residual_um, refitted.residual_um,
+                                        len(effect.parameters), refitted.statistics.n_free)
+        tried = sum(e.measurement == self.kind for e in self.refitter.catalog.values())
+        if not accepts(test.p_value, tried, len(self.stages)):
+            return ("with the plant refitted beside it, it is not significant "
+                    f"({test.describe()})")
+        test = self.noise.extra_ss_test(coulomb.residual_um, stribeck.residual_um, 2,
+                                        stribeck.statistics.n_free)
+        rises = accepts(test.p_value, 1, len(self.stages))
+        if effect.name == laws[0] and rises:
+            return ("the friction rises at rest above its Coulomb level: Stribeck friction "
+                    f"describes the reversals better ({test.describe()})")
+        if effect.name == laws[1] and not rises:
+            return ("its rise at rest above the Coulomb level is not significant against "
+                    f"Coulomb friction alone ({test.describe()})")
+        return None
+
     def params(self, model, values=None):
-        return servo_params(self.case.axis, model, values)
+        return servo_params(self.case.axis, model, values, self.start.plant)
 
     def deviation_um(self, params, disturbance_N=None):
         """Predicted deviation position - reference (µm) at the samples under ``params``,
@@ -191,12 +395,16 @@ class Tracking(Measurement):
         force = self.disturbance_N if disturbance_N is None else disturbance_N
         position_mm = simulate(params, self.record_time_s, self.record_reference_mm, force,
                                self.counts)
-        return (position_mm - self.record_reference_mm)[self.index] * 1e3
+        with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
+            return (position_mm - self.record_reference_mm)[self.index] * 1e3
 
     def check_start(self, model, values):
         """The closed loop must not run away with ``values``
         (:class:`~feedaxis.physics.servo.LoopRunsAway`); a fit's trial values may, the
-        optimiser steps back from them."""
+        optimiser steps back from them. A model without ``servo_plant`` on a record no
+        plant could be started from raises :class:`~feedaxis.measurement.base.NoStart`."""
+        if self.start.problem and "servo_plant" not in model:
+            raise NoStart(self.start.problem)
         params = self.params(model, values)
         check_runs(params, simulate(params, self.record_time_s, self.record_reference_mm,
                                     self.disturbance_N, self.counts))
@@ -316,7 +524,13 @@ class Tracking(Measurement):
         return [("drift", drift, drift.trial(self, None).basis)]
 
     def shapes(self, effects):
-        return (PeriodicForce(), ConstantForce(), Reversal())
+        return (ForceSteps(), PeriodicForce(), ConstantForce(), Reversal())
+
+    def step_response_um(self, model):
+        """The deviation (µm) over the record after a 1 N force step at the record's second
+        sample, from that sample on: the running sum of :meth:`impulse_response_um` (exact
+        for a linear loop, a linearisation with Coulomb or Stribeck friction)."""
+        return np.cumsum(self.impulse_response_um(model))
 
     def settled(self):
         """Mask of the samples after the record's first second (all when none is)."""
@@ -324,11 +538,12 @@ class Tracking(Measurement):
         return settled if settled.any() else np.ones_like(settled)
 
     def figures(self, result):
-        """Max and RMS tracking error (reference - position, mm) measured and predicted, and
-        the residual (actual - predicted, µm), over the samples after the first second."""
+        """Max and RMS tracking error (actual − reference, mm: the sign of every deviation)
+        measured and predicted, and the residual (actual − predicted, µm), over the samples
+        after the first second."""
         settled = self.settled()
-        measured_mm = -result.measured_um[settled] * 1e-3
-        predicted_mm = -(result.measured_um - result.residual_um)[settled] * 1e-3
+        measured_mm = result.measured_um[settled] * 1e-3
+        predicted_mm = (result.measured_um - result.residual_um)[settled] * 1e-3
         residual_um = result.residual_um[settled]
         return {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "samples": int(settled.sum()),
@@ -390,6 +605,301 @@ def _rss(values):
 
 def _max_abs(fitted_um):
     return float(np.max(np.abs(fitted_um)))
+
+
+MAX_EVENTS = 200
+
+
+class ForceSteps(Shape):
+    """Force steps as events in time: at each, the force on the axis changes by a size and
+    stays (a cut starting or ending, a load put down, a clamp), so the residual takes the
+    loop's step response from there on. A train of them (cuts every second) is found as
+    its events, with their times, sizes and the period when they repeat, not as the
+    harmonics of its period.
+
+    Candidates by a matching pursuit with orthogonal refits (Pati, Rezaiifar &
+    Krishnaprasad, "Orthogonal matching pursuit", 27th Asilomar Conference, 1993): the
+    loop's step response shifted to every sample compared is correlated with the residual
+    (one FFT), the best joins, all are refitted; candidates are taken while one explains
+    more than the high-frequency noise floor could at its most over the samples searched
+    (:func:`feedaxis.stats.coloured.noise_floor_um`). Then backward: each step is tested
+    against the set without it, by the extra-sum-of-squares test under the coloured-noise
+    model (n/τ of the residual left by all of them), Bonferroni over every sample it could
+    sit at, at the family-wise level; the weakest failing step leaves and the rest are
+    refitted, until every step left passes. The structure's test is the steps' joint test,
+    family-wise over the samples searched.
+    """
+
+    kind = "force_steps"
+    extra = 2  # each step's time and size
+
+    def trials(self, measurement):
+        return 1 if measurement.uniform_step_s() and measurement.size >= 20 else 0
+
+    def trial(self, measurement, current):
+        chosen, test = self._search(measurement, current.model, current.residual_um,
+                                    current.jacobian, current.statistics.n_free)
+        model = current.model
+        if chosen and measurement.refitter is not None:  # once more on the model refitted
+            # with the steps: a plant the unmodelled steps bent would leave steps of its own
+            basis = self._basis(measurement, current.model, chosen)
+            refit, steps_um = measurement.refitter.with_basis(current.model, basis)
+            jacobian = None if refit.jacobian is None else refit.jacobian[:, :-len(chosen)]
+            chosen, test = self._search(measurement, model, refit.residual_um + steps_um,
+                                        jacobian, current.statistics.n_free)
+        if not chosen:
+            return None
+        basis = self._basis(measurement, model, chosen)
+        if _rivals(measurement, current, basis):
+            return None
+        times_s = measurement.record_time_s[np.array(chosen)]
+        return Trial(basis, None, test, {"event_times_s": [float(t) for t in times_s]})
+
+    @staticmethod
+    def _basis(measurement, model, chosen):
+        """The loop's response (µm) to a 1 N step at each record sample of ``chosen``, at
+        the samples compared."""
+        response = measurement.step_response_um(model)
+        return np.column_stack([_step_column(response, c, measurement.index)
+                                for c in chosen])
+
+    def _search(self, measurement, model, residual_um, jacobian, n_free):
+        """(sorted record samples of the steps found, their joint test) on ``residual_um``
+        (at the samples compared) of ``model``, its ``jacobian`` the nuisance; ([], None)
+        when none passes. Residual, step response and nuisance are whitened by the
+        autoregressive filter of the residual's noise (robust spectrum, persistence raised
+        by two standard errors: :meth:`feedaxis.stats.coloured.Autoregression.cautious`),
+        so the tests are those of white noise."""
+        from scipy import stats
+
+        first, last = int(measurement.index[0]), int(measurement.index[-1])
+        _, residual = measurement.gridded(residual_um)
+        noise = autoregression(residual, robust=True).cautious()
+        whiten = _ar_filter(noise.coefficients)
+        response = whiten(measurement.step_response_um(model))
+        residual = whiten(residual - np.mean(residual))
+        grid = np.arange(first, last + 1)
+        positions = grid[1:-1]
+        nuisance = (None if jacobian is None or jacobian.shape[1] == 0 else
+                    whiten(np.column_stack([measurement.gridded(c)[1] for c in jacobian.T])))
+        chosen = _pursued_steps(residual, response, first, positions, nuisance)
+        kept, full = _pruned_steps(measurement, residual, response, grid, nuisance, chosen,
+                                   n_free, positions.size, self.extra)
+        if not kept:
+            return [], None
+        extra = self.extra * len(kept)
+        before = _leftover(residual, nuisance, None)
+        dof = max(full.size - n_free - extra, 1)
+        statistic = max(_rss(before) - _rss(full), 0.0) / extra / max(_rss(full) / dof, 1e-300)
+        p_value = float(stats.f.sf(statistic, extra, dof))
+        test = Test(float(statistic), (extra, dof), min(1.0, p_value * positions.size),
+                    f"F test of the steps together on the residual whitened by its noise's "
+                    f"autoregressive filter (order {noise.order}); each step alone "
+                    f"family-wise over the {positions.size} samples it could sit at", "F")
+        return sorted(kept), test
+
+    def amplitude_um(self, measurement, fitted_um, location):
+        return _max_abs(fitted_um)
+
+    def describe(self, measurement, trial, fitted_um):
+        sizes_N = _regress(fitted_um, trial.basis)[0]
+        times_s = np.array(trial.extra["event_times_s"])
+        trial.extra["event_sizes_N"] = [float(size) for size in sizes_N]
+        period = _period_s(times_s)
+        trial.extra["period_s"] = period
+        spikes = _reversal_spikes(measurement, times_s, fitted_um)
+        if spikes is not None:
+            trial.extra.update(spikes)
+            decay = (f"decaying to 1/e within {1e3 * spikes['decay_s']:.3g} ms"
+                     if spikes["decay_s"] is not None else "not decaying within 0.2 s")
+            return (f"a spike at the velocity reversals (a quadrant glitch): "
+                    f"{spikes['height_um']:.3g} µm high (median over the "
+                    f"{spikes['reversals']} reversals), {decay}; the loop's response to "
+                    f"{times_s.size} force steps there: friction that rises at rest above its "
+                    "Coulomb level (stribeck_friction), stick-slip, or backlash")
+        listed = ", ".join(f"{t:.4g} s ({size:+.3g} N)"
+                           for t, size in zip(times_s[:12], sizes_N[:12]))
+        more = f" and {times_s.size - 12} more" if times_s.size > 12 else ""
+        repeat = (f", repeating every {period:.4g} s" if period is not None else "")
+        return (f"{times_s.size} force step{'s' if times_s.size > 1 else ''}{repeat}: the force "
+                f"on the axis changes at {listed}{more} (median size "
+                f"{np.median(np.abs(sizes_N)):.3g} N), the loop's step response after each "
+                "(a cut starting or ending, a load put down)")
+
+
+REVERSAL_SHARE = 0.8  # of the steps in the REVERSAL_WINDOW_S after a reversal: reversal spikes
+
+
+def _reversal_spikes(measurement, times_s, fitted_um):
+    """{reversals, height_um, decay_s} when at least ``REVERSAL_SHARE`` of the steps sit in
+    the ``REVERSAL_WINDOW_S`` after a reversal of the reference (the axis reverses later, by
+    the loop's lag; a spike at the reversals, not steps of a load), else None: the height the median over the reversals of the largest fitted
+    deviation in the ``REVERSAL_WINDOW_S`` after each, the decay the median time from that
+    peak until the deviation falls below 1/e of it (None where it does not)."""
+    reversals = measurement.reversals_s()
+    if reversals.size == 0 or times_s.size == 0:
+        return None
+    since = times_s[:, None] - reversals[None, :]
+    near = np.any((since >= 0.0) & (since <= REVERSAL_WINDOW_S), axis=1)
+    if near.mean() < REVERSAL_SHARE:
+        return None
+    heights, decays = [], []
+    for reversal in reversals:
+        inside = np.flatnonzero((measurement.time_s >= reversal)
+                                & (measurement.time_s < reversal + REVERSAL_WINDOW_S))
+        if inside.size < 2:
+            continue
+        values = np.abs(fitted_um[inside])
+        peak = int(np.argmax(values))
+        heights.append(values[peak])
+        below = np.flatnonzero(values[peak:] < values[peak] / np.e)
+        decays.append(measurement.time_s[inside[peak + below[0]]] - measurement.time_s[
+            inside[peak]] if below.size else np.nan)
+    if not heights:
+        return None
+    decay = float(np.nanmedian(decays)) if np.isfinite(decays).any() else None
+    return {"reversals": int(reversals.size), "height_um": float(np.median(heights)),
+            "decay_s": decay}
+
+
+def _bic(residual_um, basis, parameters):
+    """The Bayesian information criterion of ``basis`` fitted to ``residual_um``."""
+    left = residual_um - _regress(residual_um, basis)[1]
+    n = residual_um.size
+    return n * np.log(max(_rss(left) / n, 1e-300)) + parameters * np.log(n)
+
+
+def _rivals(measurement, current, steps):
+    """Whether another shape describes the residual of ``current`` at least as well as the
+    force ``steps`` by the Bayesian information criterion (each step a time and a size):
+    the strongest sinusoid (:class:`PeriodicForce`: amplitude, phase, frequency and a
+    window's two edges; a burst at 50 Hz is a periodic force, not a hundred steps), or the
+    profile locked to the velocity reversals (:class:`Reversal`: a spike at each reversal
+    is a reversal spike, not steps that happen to sit there)."""
+    residual = current.residual_um
+    steps_bic = _bic(residual, steps, ForceSteps.extra * steps.shape[1])
+    for shape in (PeriodicForce(), Reversal()):
+        if not shape.trials(measurement):
+            continue
+        trial = shape.trial(measurement, current)
+        parameters = (3 + (2 if trial.extra["localised"] else 0)
+                      if isinstance(shape, PeriodicForce) else shape.extra)
+        if _bic(residual, trial.basis, parameters) <= steps_bic:
+            return True
+    return False
+
+
+def _step_column(response, sample, rows):
+    """The loop's response (µm) to a 1 N step at record ``sample``, at record ``rows``."""
+    column = np.zeros(rows.size)
+    after = rows >= sample
+    column[after] = response[np.minimum(rows[after] - sample, response.size - 1)]
+    return column
+
+
+def _leftover(residual, nuisance, columns):
+    """``residual`` less its least-squares fit on ``nuisance`` and ``columns`` (either may
+    be None or empty)."""
+    parts = [part for part in (nuisance, columns) if part is not None and part.shape[1]]
+    if not parts:
+        return residual
+    return residual - _regress(residual, np.column_stack(parts))[1]
+
+
+def _ar_filter(coefficients):
+    """The whitening filter of an autoregression, x_k − Σ φ_j x_{k−j}, along the first axis
+    from rest (a step column, zero before its step, stays one shifted)."""
+    taps = np.concatenate(([1.0], -np.asarray(coefficients, dtype=float)))
+    return lambda values: scipy.signal.lfilter(taps, [1.0], values, axis=0)
+
+
+def _pursued_steps(residual, response, first, positions, nuisance):
+    """Record samples of candidate steps (:class:`ForceSteps`), by orthogonal matching
+    pursuit (each column orthogonalised against the nuisance and the steps before it): the
+    pursuit stops when the best step explains less than the noise floor's largest chance
+    drop over ``positions`` (its variance times the χ²₁ quantile at 1 − FAMILY_ALPHA /
+    positions) or at ``MAX_EVENTS``. The floor is a lower bound under coloured noise, so
+    the pursuit is liberal; :func:`_pruned_steps` tests what it found."""
+    from scipy import stats
+
+    grid = np.arange(first, first + residual.size)
+    basis = (np.zeros((residual.size, 0)) if nuisance is None
+             else np.linalg.qr(nuisance)[0])
+    left = residual - basis @ (basis.T @ residual)
+    threshold = noise_floor_um(left) ** 2 * stats.chi2.isf(
+        FAMILY_ALPHA / positions.size, 1)
+    chosen = []
+    while len(chosen) < MAX_EVENTS:
+        best = _best_step(left, response, first, positions, chosen)
+        if best is None or best[1] <= threshold:
+            break
+        column = _step_column(response, best[0], grid)
+        column = column - basis @ (basis.T @ column)
+        norm = float(np.linalg.norm(column))
+        chosen.append(best[0])
+        if norm <= 1e-12 * max(float(np.linalg.norm(residual)), 1e-300):
+            continue
+        column /= norm
+        basis = np.column_stack((basis, column))
+        left = left - column * (column @ left)
+    return chosen
+
+
+def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_free, searched,
+                  extra):
+    """(steps kept, the residual after them): backward elimination of ``chosen`` by
+    each step's extra-sum-of-squares F test against the set without it (β² over the
+    diagonal of (X'X)⁻¹, one fit per round) on the whitened residual, Bonferroni over the
+    ``searched`` samples, at the family-wise level of a stage; each round drops the
+    weakest half of the steps that fail (at least one)."""
+    from scipy import stats
+
+    alpha = FAMILY_ALPHA / len(measurement.stages)
+    chosen = list(chosen)
+    offset = 0 if nuisance is None else nuisance.shape[1]
+    while chosen:
+        steps = np.column_stack([_step_column(response, c, grid) for c in chosen])
+        design = steps if nuisance is None else np.column_stack((nuisance, steps))
+        coefficients, _, rank, _ = np.linalg.lstsq(design, residual, rcond=None)
+        full = residual - design @ coefficients
+        inverse = np.diag(np.linalg.pinv(design.T @ design))[offset:]
+        drops = coefficients[offset:] ** 2 / np.maximum(inverse, 1e-300)
+        dof = max(full.size - n_free - extra * len(chosen), 1.0)
+        statistic = drops / extra / max(float(full @ full) / dof, 1e-300)
+        p_values = np.minimum(1.0, stats.f.sf(statistic, extra, dof) * searched)
+        failing = np.flatnonzero(p_values >= alpha)
+        if not failing.size:
+            return chosen, full
+        weakest = failing[np.argsort(-p_values[failing])][:max(1, failing.size // 2)]
+        chosen = [c for i, c in enumerate(chosen) if i not in set(weakest.tolist())]
+    return [], residual
+
+
+def _best_step(residual, response, first, positions, chosen):
+    """The record sample among ``positions`` (not in ``chosen``) where the step response
+    correlates best with ``residual`` (on the grid from record sample ``first``), and the
+    drop in the residual sum of squares it alone would give; None when none does."""
+    size = residual.size
+    correlation = scipy.signal.fftconvolve(residual, response[:size][::-1])[size - 1:]
+    # correlation[j] = sum_t residual[t + j] response[t]: a step at grid sample j
+    energy = np.cumsum(response[:size] ** 2)[::-1]  # energy[j]: the response over size - j
+    offsets = positions - first
+    drop = correlation[offsets] ** 2 / np.maximum(energy[offsets], 1e-300)
+    drop[np.isin(positions, chosen)] = 0.0
+    best = int(np.argmax(drop))
+    return (int(positions[best]), float(drop[best])) if drop[best] > 0.0 else None
+
+
+def _period_s(times_s):
+    """The period (s) of event times that repeat (three or more, every interval within 10 %
+    of the median, or of half of it where a train alternates on and off), else None."""
+    if times_s.size < 3:
+        return None
+    intervals = np.diff(times_s)
+    median = float(np.median(intervals))
+    if median > 0 and np.all(np.abs(intervals - median) <= 0.1 * median):
+        return median
+    return None
 
 
 class PeriodicForce(Shape):
@@ -523,9 +1033,23 @@ class Reversal(Shape):
         return _max_abs(fitted_um)
 
     def describe(self, measurement, trial, fitted_um):
-        return (f"the residual takes a repeatable shape over {REVERSAL_WINDOW_S:g} s after "
-                f"each of the {measurement.reversals_s().size} velocity reversals: a friction "
-                "law other than Coulomb plus viscous (Stribeck, stick-slip), or backlash")
+        """The spike at each reversal with its height (the largest bin of the profile) and
+        its decay (the end of the first bin after the peak below 1/e of it), in the JSON as
+        ``height_um`` and ``decay_s``."""
+        profile = _regress(fitted_um, trial.basis)[0]
+        peak = int(np.argmax(np.abs(profile)))
+        width = REVERSAL_WINDOW_S / REVERSAL_BINS
+        below = np.flatnonzero(np.abs(profile[peak:]) < np.abs(profile[peak]) / np.e)
+        decay_s = float((peak + below[0]) * width) if below.size else None
+        trial.extra = {**(trial.extra or {}), "height_um": float(profile[peak]),
+                       "decay_s": decay_s}
+        decay = (f"decaying to 1/e within {1e3 * decay_s:.0f} ms" if decay_s is not None else
+                 f"not decayed to 1/e within {1e3 * REVERSAL_WINDOW_S:.0f} ms")
+        return (f"a spike at each of the {measurement.reversals_s().size} velocity reversals "
+                f"(a quadrant glitch): {abs(profile[peak]):.3g} µm high "
+                f"{1e3 * peak * width:.0f}-{1e3 * (peak + 1) * width:.0f} ms after the "
+                f"reversal, {decay}: a friction law other than Coulomb plus viscous (a rise at "
+                "rest, stick-slip), or backlash")
 
 
 class TimeDrift(Shape):

@@ -1,10 +1,16 @@
-"""Position servo of a ball-screw drive with a PID or NPID controller, Anang et al. 2017 Eq. 1-8.
+"""Position servo of a ball-screw drive: PID or NPID (Anang et al. 2017 Eq. 1-8) or a drive's cascade.
 
 Plant (Eq. 1, Googol XY table, x axis): G(s) = 78020 / (s² + 163 s + 193.3), command in V,
 position in mm, with a 1.2 ms transport delay on the command. Controller (Eq. 2, 6):
 C(s) = K_P + K_I/s + K_D·s acting on the tracking error e = reference - position (mm).
 NPID (Eq. 7-8) puts the nonlinear gain K(e) = (exp(KO·e) + exp(-KO·e)) / 2 = cosh(KO·e)
-in front of the PID, held at K(e_max) for |e| > e_max.
+in front of the PID, held at K(e_max) for |e| > e_max. The cascade of industrial drives
+(case format 1.2): a proportional position loop commanding a velocity, around a velocity
+loop on the measured velocity, with an optional velocity feed-forward and integral action,
+
+    u = kv·(kp·(r − x) + vff·dr/dt − dx/dt) [+ (kv / tn)·∫(the bracket) dt]   (V)
+
+r the reference, x the position (mm), dx/dt the plant's velocity at the step's start.
 
 The loop runs at a fixed internal step: the plant is discretised exactly for a command held
 over each step (zero-order hold), the integral by the trapezoidal rule and the derivative
@@ -12,8 +18,14 @@ by a backward difference; the delay is a shift by whole steps. An axial force en
 plant input as an equivalent command F / force_constant, as the case format (docs/case-format.md) states (the
 paper gives no force scaling; see :class:`ServoParams`): the known disturbance, and the
 friction of the guideways and the nut, a Coulomb force ``friction_N`` opposing the velocity
-(smoothed linearly over |v| < ``FRICTION_SMOOTHING_MM_S``) plus a viscous force
-``damping_N_s_per_mm``·v, both from the velocity at the start of the step.
+(smoothed linearly over |v| < ``FRICTION_SMOOTHING_MM_S``, wider where a loop step could
+not resolve it: :func:`friction_smoothing_mm_s`) plus a viscous force
+``damping_N_s_per_mm``·v, both from the velocity at the start of the step, and a Stribeck
+rise of the friction at rest (``coulomb_N`` + (``static_N`` − ``coulomb_N``)·exp(−(v/v_s)²),
+Armstrong-Hélouvry, Dupont & Canudas de Wit, "A survey of models, analysis tools and
+compensation methods for the control of machines with friction", Automatica 30 (1994),
+Eq. 2 with δ = 2), smoothed as the Coulomb force; a constant axial force ``force_N`` (the
+weight on an inclined axis, a counterbalance) adds to the known disturbance.
 
 One kernel, :func:`run_loop`, advances the loop for the FMU (:class:`Servo`) and for the fit
 (:func:`simulate`, the same function compiled by numba's JIT): they agree to rounding. The
@@ -37,13 +49,19 @@ from .checks import (ParameterError, require_finite, require_non_negative, requi
 from .threads import one_blas_thread
 
 FRICTION_SMOOTHING_MM_S = 0.1
-STATE_SIZE = 6  # position_mm, velocity_mm_s, integral_V, previous_error_mm, reference_mm, head
+STATE_SIZE = 6  # position_mm, velocity_mm_s, integral, previous (controller input),
+# reference_mm, head
+CONTROLLERS = ("pid", "npid", "cascade")
 # The loop steps through every interval of a record, so its cost is the record's span over
 # the loop step, whatever the samples: a record may ask for at most this many steps between
 # two samples (10 s at 0.1 ms) and in all (about 1.5 s of the compiled loop per simulation).
 MAX_INTERVAL_STEPS = 10**5
 MAX_LOOP_STEPS = 10**8
 MAX_POSITION_MM = 1e5  # a simulated position beyond any axis (docs/case-format.md): the loop ran away
+# the plant a fit may identify (servo_plant's bounds): gain mm/(V.s2), damping 1/s,
+# stiffness 1/s2, delay s
+PLANT_BOUNDS = {"plant_gain_mm_per_Vs2": (1e-1, 1e7), "plant_damping_per_s": (0.0, 1e4),
+                "plant_stiffness_per_s2": (0.0, 1e5), "delay_s": (0.0, 0.02)}
 # The delay line holds delay_s / time_step_s commands: 10^6 (8 MB) covers the tracking
 # fit's widest case, a 20 ms delay at the shortest loop step a case may have (1e-7 s).
 MAX_DELAY_STEPS = 1_000_000
@@ -60,6 +78,7 @@ class ServoParams:
     command; Anang et al. 2017 does not publish it, the default 100 N/V is an assumption.
     """
 
+    controller: str = "pid"
     plant_gain_mm_per_Vs2: float = 78020.0
     plant_damping_per_s: float = 163.0
     plant_stiffness_per_s2: float = 193.3
@@ -74,21 +93,46 @@ class ServoParams:
     time_step_s: float = 1e-4
     friction_N: float = 0.0
     damping_N_s_per_mm: float = 0.0
+    kp_per_s: float = 40.0
+    kv_V_s_per_mm: float = 0.005
+    tn_s: float = 0.0
+    velocity_feedforward: float = 0.0
+    force_N: float = 0.0
+    coulomb_N: float = 0.0
+    static_N: float = 0.0
+    stribeck_velocity_mm_s: float = 1.0
 
     def __post_init__(self):
+        if self.controller not in CONTROLLERS:
+            raise ParameterError(f"must be one of {', '.join(CONTROLLERS)}, got "
+                                 f"{self.controller!r}", "controller")
+        if self.controller == "cascade" and self.nonlinear:
+            raise ParameterError("the NPID gain (nonlinear = true) belongs to a PID, not to a "
+                                 "cascade controller", "nonlinear")
         for field in fields(self):
             value = getattr(self, field.name)
             if field.name in ("delay_s", "ki_V_per_mm_s", "kd_V_s_per_mm", "ko_per_mm",
                               "plant_damping_per_s", "plant_stiffness_per_s2", "friction_N",
-                              "damping_N_s_per_mm"):
+                              "damping_N_s_per_mm", "tn_s", "coulomb_N", "static_N",
+                              "velocity_feedforward"):
                 require_non_negative(field.name, value)
-            elif field.name != "nonlinear":
+            elif field.name == "force_N":
+                require_finite(field.name, value)
+            elif field.name not in ("nonlinear", "controller"):
                 require_positive(field.name, value)
+        if not 0.0 <= self.velocity_feedforward <= 1.0:
+            raise ParameterError(f"must be 0 to 1, got {self.velocity_feedforward!r}",
+                                 "velocity_feedforward")
         if not self.delay_s / self.time_step_s <= MAX_DELAY_STEPS:
             raise ParameterError(
                 f"delay_s / time_step_s = {self.delay_s} / {self.time_step_s} s is "
                 f"{self.delay_s / self.time_step_s:.3g} internal steps of delay, at most "
                 f"{MAX_DELAY_STEPS} (raise time_step_s or shorten delay_s)", "time_step_s")
+
+    @property
+    def npid(self):
+        """Whether the NPID gain acts (controller ``npid``, or ``nonlinear`` on a PID)."""
+        return self.controller == "npid" or self.nonlinear
 
     @property
     def delay_steps(self):
@@ -185,18 +229,68 @@ def loop_coefficients(params):
                           force_constant_N_per_V=params.force_constant_N_per_V)
     friction_V = params.friction_N * volts_per_N
     damping_V_s_per_mm = params.damping_N_s_per_mm * volts_per_N
+    coulomb_V, static_V = params.coulomb_N * volts_per_N, params.static_N * volts_per_N
     require_representable("friction forces as commands (V, V·s/mm)",
-                          friction_V + damping_V_s_per_mm, False,
+                          friction_V + damping_V_s_per_mm + coulomb_V + static_V, False,
                           force_constant_N_per_V=params.force_constant_N_per_V,
                           friction_N=params.friction_N,
-                          damping_N_s_per_mm=params.damping_N_s_per_mm)
+                          damping_N_s_per_mm=params.damping_N_s_per_mm,
+                          coulomb_N=params.coulomb_N, static_N=params.static_N)
+    cascade = params.controller == "cascade"
+    integral_gain = (params.kv_V_s_per_mm / params.tn_s if cascade and params.tn_s > 0.0
+                     else 0.0)
+    require_representable("the velocity loop's integral gain kv / tn (V/mm)", integral_gain,
+                          False, kv_V_s_per_mm=params.kv_V_s_per_mm, tn_s=params.tn_s)
+    smoothing_mm_s = friction_smoothing_mm_s(friction_V + max(coulomb_V, static_V),
+                                             late[1] + early[1])
     return np.array([*transition.ravel(), *late, *early, params.kp_V_per_mm,
                      params.ki_V_per_mm_s, params.kd_V_s_per_mm, params.ko_per_mm,
-                     params.e_max_mm, float(params.nonlinear), friction_V,
-                     damping_V_s_per_mm, params.time_step_s, float(params.delay_steps)])
+                     params.e_max_mm, float(params.npid), friction_V,
+                     damping_V_s_per_mm, params.time_step_s, float(params.delay_steps),
+                     float(cascade), params.kp_per_s, params.kv_V_s_per_mm, integral_gain,
+                     params.velocity_feedforward, coulomb_V, static_V,
+                     params.stribeck_velocity_mm_s, smoothing_mm_s])
 
 
-def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, positions_mm):
+def friction_smoothing_mm_s(friction_V, velocity_per_V):
+    """The velocity (mm/s) over which the friction's sign is smoothed linearly:
+    ``FRICTION_SMOOTHING_MM_S``, or wider where one loop step could not resolve it.
+
+    The friction is taken from the velocity at the step's start, so within the smoothing
+    it acts as a damping of friction_V / width, which one step changes the velocity by
+    ``velocity_per_V`` (mm/s per V held over the step) times: beyond 1 the step overshoots
+    zero velocity and the loop chatters there, a numerical oscillation no axis has. The
+    width is kept where that gain is 1 at most (heavy friction at a long loop step).
+    """
+    return max(FRICTION_SMOOTHING_MM_S, friction_V * abs(velocity_per_V))
+
+
+def stribeck_V(velocity_mm_s, coulomb_V, static_V, stribeck_velocity_mm_s):
+    """The Stribeck friction's magnitude (V): coulomb + (static − coulomb)·exp(−(v/v_s)²)
+    (Armstrong-Hélouvry et al. 1994, Eq. 2, δ = 2), for a float v."""
+    ratio = velocity_mm_s / stribeck_velocity_mm_s
+    return coulomb_V + (static_V - coulomb_V) * math.exp(-ratio * ratio)
+
+
+def friction_V(velocity_mm_s, coulomb_V, damping_V_s_per_mm, rise_coulomb_V, static_V,
+               stribeck_velocity_mm_s, smoothing_mm_s):
+    """The friction opposing ``velocity_mm_s`` (V, positive along +v): Coulomb and Stribeck
+    (:func:`stribeck_V`) smoothed linearly over |v| < ``smoothing_mm_s``
+    (:func:`friction_smoothing_mm_s`), plus viscous; for floats (the compiled loop passes
+    no arrays between functions: that would need numba's runtime)."""
+    total = damping_V_s_per_mm * velocity_mm_s
+    if coulomb_V != 0.0 or rise_coulomb_V != 0.0 or static_V != 0.0:  # no division when none
+        sign = min(max(velocity_mm_s / smoothing_mm_s, -1.0), 1.0)
+        magnitude = coulomb_V
+        if rise_coulomb_V != 0.0 or static_V != 0.0:
+            magnitude += stribeck_V(velocity_mm_s, rise_coulomb_V, static_V,
+                                    stribeck_velocity_mm_s)
+        total += magnitude * sign
+    return total
+
+
+def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, positions_mm,
+             controls_V):
     """Advance the closed loop over consecutive samples (the one kernel of FMU and fit).
 
     Parameters
@@ -216,10 +310,19 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
         The delay line, ``ServoParams.buffer_size`` commands, updated in place.
     positions_mm : mutable sequence of float
         Receives the position at each sample's end.
+    controls_V : mutable sequence of float
+        Receives the controller output (V) of each sample's last step (unchanged for a
+        sample without steps).
+
+    The PID and NPID integrate and differentiate the error; the cascade integrates its
+    bracket kp·e + vff·dr/dt − dx/dt (the ramped reference's slope over the interval).
     """
     a11, a12, a21, a22, late1, late2, early1, early2 = coefficients[0:8]
     kp, ki, kd, ko, e_max, nonlinear = coefficients[8:14]
-    friction_V, damping_V_s_per_mm, dt, delay = coefficients[14:18]
+    dt, delay = coefficients[16], coefficients[17]
+    cascade, kp_per_s, kv, kv_tn, feedforward = coefficients[18:23]
+    coulomb_V, damping_V_s_per_mm = coefficients[14], coefficients[15]
+    rise_V, static_V, stribeck_mm_s, smoothing_mm_s = coefficients[23:27]
     x1, x2, integral, previous, start_mm = state[0], state[1], state[2], state[3], state[4]
     head = int(state[5])
     size = len(buffer)
@@ -228,20 +331,28 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
         n_steps = steps[i]
         end_mm = references_mm[i]
         force_V = disturbances_V[i]
+        slope_mm_s = (end_mm - start_mm) / (n_steps * dt) if n_steps > 0 else 0.0
         for k in range(1, n_steps + 1):
             error = start_mm + (end_mm - start_mm) * (k - 1) / n_steps - x1
-            if nonlinear != 0.0:
-                error = error * npid_gain(error, ko, e_max)
-            integral += 0.5 * (error + previous) * dt
-            derivative = (error - previous) / dt
-            previous = error
-            buffer[head] = kp * error + ki * integral + kd * derivative
+            if cascade != 0.0:
+                bracket = kp_per_s * error + feedforward * slope_mm_s - x2
+                integral += 0.5 * (bracket + previous) * dt
+                previous = bracket
+                command = kv * bracket + kv_tn * integral
+            else:
+                if nonlinear != 0.0:
+                    error = error * npid_gain(error, ko, e_max)
+                integral += 0.5 * (error + previous) * dt
+                derivative = (error - previous) / dt
+                previous = error
+                command = kp * error + ki * integral + kd * derivative
+            buffer[head] = command
+            controls_V[i] = command
             command_late = buffer[(head - shift) % size]
             command_early = buffer[(head - shift - 1) % size]
             head = (head + 1) % size
-            coulomb_V = (friction_V * min(max(x2 / FRICTION_SMOOTHING_MM_S, -1.0), 1.0)
-                         if friction_V != 0.0 else 0.0)  # no division on a frictionless path
-            force = force_V - coulomb_V - damping_V_s_per_mm * x2
+            force = force_V - friction_V(x2, coulomb_V, damping_V_s_per_mm, rise_V, static_V,
+                                         stribeck_mm_s, smoothing_mm_s)
             u_late = command_late + force
             u_early = command_early + force
             x1, x2 = (a11 * x1 + a12 * x2 + late1 * u_late + early1 * u_early,
@@ -254,8 +365,10 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
 
 
 def is_linear(coefficients):
-    """Whether :func:`run_loop` is linear in its state and inputs: PID, no Coulomb friction."""
-    return coefficients[13] == 0.0 and coefficients[14] == 0.0
+    """Whether :func:`run_loop` is linear in its state and inputs: PID or cascade, no
+    Coulomb or Stribeck friction."""
+    return (coefficients[13] == 0.0 and coefficients[14] == 0.0 and coefficients[23] == 0.0
+            and coefficients[24] == 0.0)
 
 
 def loop_propagator(coefficients, n_steps, buffer_size):
@@ -271,17 +384,19 @@ def loop_propagator(coefficients, n_steps, buffer_size):
         unit = [0.0] * (size + 2)
         unit[j] = 1.0
         state, buffer = unit[:5] + [0.0], unit[5:size]
-        run_loop(coefficients, [n_steps], [unit[size]], [unit[size + 1]], state, buffer, [0.0])
+        run_loop(coefficients, [n_steps], [unit[size]], [unit[size + 1]], state, buffer, [0.0],
+                 [0.0])
         head = int(state[5])
         columns.append(state[:5] + buffer[head:] + buffer[:head])
     return np.array(columns).T
 
 
 def numba_ready_loop(numba):
-    """:func:`run_loop` with its call of :func:`npid_gain` compiled
+    """:func:`run_loop` with its calls of :func:`npid_gain` and :func:`friction_V` compiled
     (:func:`with_compiled_callees`): what numba's JIT (:func:`compiled_loop`) and its
     ahead-of-time compiler (feedaxis.kernel_build) take."""
-    return with_compiled_callees(numba, run_loop, npid_gain)
+    return with_compiled_callees(numba, run_loop, npid_gain,
+                                 with_compiled_callees(numba, friction_V, stribeck_V))
 
 
 def with_compiled_callees(numba, function, *callees):
@@ -395,23 +510,38 @@ def compiled_carry():
     return cached_njit(numba, with_compiled_callees(numba, carry_steps, whole_steps))
 
 
+def forces_V(params, disturbance_N, size):
+    """The force on the axis over each interval as an equivalent command (V): the known
+    ``disturbance_N`` (None: none) plus the constant force ``force_N``, over the force
+    constant."""
+    force_N = np.full(size, params.force_N) if disturbance_N is None else \
+        np.asarray(disturbance_N, dtype=float) + params.force_N
+    return np.ascontiguousarray(force_N / params.force_constant_N_per_V)
+
+
 @one_blas_thread
-def simulate(params, time_s, reference_mm, disturbance_N=None, counts=None):
-    """Position (mm) at each sample of a tracking record, the loop starting at rest on the
-    first reference; the same loop as :class:`Servo` stepped with the sample intervals.
+def simulate_record(params, time_s, reference_mm, disturbance_N=None, counts=None):
+    """(position_mm, control_V) at each sample of a tracking record, the loop starting at
+    rest on the first reference; the same loop as :class:`Servo` stepped with the sample
+    intervals. ``control_V`` is the controller output of each sample's last loop step (0 at
+    the first sample), what a drive records.
 
     ``counts`` (:func:`step_counts`) may be passed to save recomputing it.
     """
     reference_mm = np.ascontiguousarray(reference_mm, dtype=float)
     counts = step_counts(time_s, params.time_step_s) if counts is None else counts
-    disturbance_V = (np.zeros_like(reference_mm) if disturbance_N is None else
-                     np.asarray(disturbance_N, dtype=float) / params.force_constant_N_per_V)
     state = np.array([reference_mm[0], 0.0, 0.0, 0.0, reference_mm[0], 0.0])
     positions_mm = np.empty_like(reference_mm)
+    controls_V = np.zeros_like(reference_mm)
     compiled_loop()(loop_coefficients(params), counts, reference_mm,
-                    np.ascontiguousarray(disturbance_V), state, np.zeros(params.buffer_size),
-                    positions_mm)
-    return positions_mm
+                    forces_V(params, disturbance_N, reference_mm.size), state,
+                    np.zeros(params.buffer_size), positions_mm, controls_V)
+    return positions_mm, controls_V
+
+
+def simulate(params, time_s, reference_mm, disturbance_N=None, counts=None):
+    """Position (mm) at each sample of a tracking record (:func:`simulate_record`)."""
+    return simulate_record(params, time_s, reference_mm, disturbance_N, counts)[0]
 
 
 class LoopRunsAway(ParameterError):
@@ -424,8 +554,17 @@ class LoopRunsAway(ParameterError):
             f"gain {params.plant_gain_mm_per_Vs2:g} mm/(V.s2), damping "
             f"{params.plant_damping_per_s:g} 1/s, stiffness {params.plant_stiffness_per_s2:g} "
             f"1/s2, delay {params.delay_s:g} s, friction {params.friction_N:g} N + "
-            f"{params.damping_N_s_per_mm:g} N.s/mm under kp {params.kp_V_per_mm:g} V/mm: no "
-            "working axis behaves so", "tracking model")
+            f"{params.damping_N_s_per_mm:g} N.s/mm under {controller_text(params)}: the "
+            "plant and the controller do not make a stable loop", "tracking model")
+
+
+def controller_text(params):
+    """The controller's gains in words, for messages."""
+    if params.controller == "cascade":
+        integral = f", tn {params.tn_s:g} s" if params.tn_s > 0 else ""
+        return (f"a cascade with kp {params.kp_per_s:g} 1/s, kv {params.kv_V_s_per_mm:g} "
+                f"V.s/mm{integral}, feed-forward {params.velocity_feedforward:g}")
+    return f"kp {params.kp_V_per_mm:g} V/mm"
 
 
 def check_runs(params, positions_mm):
@@ -463,6 +602,7 @@ class Servo:
             self._samples = (np.zeros(1, dtype=np.int64), np.zeros(1), np.zeros(1))
             self._inputs = tuple(memoryview(array) for array in self._samples)
             self._positions = np.zeros(1)
+            self._controls = np.zeros(1)
             linear = False
         self._propagators = {} if linear else None
         self._size = 5 + params.buffer_size
@@ -492,13 +632,23 @@ class Servo:
 
     @property
     def tracking_error_mm(self):
-        """Reference minus position at the end of the last step (mm)."""
+        """Position minus reference at the end of the last step (mm): the sign of every
+        deviation in feedaxis (measured − commanded, ISO 230-2), of tracking.csv's
+        actual_mm − reference_mm and of the report."""
         return self.outputs()[2]
 
     def outputs(self):
-        """(position_mm, velocity_mm_s, tracking_error_mm) at the end of the last step."""
+        """(position_mm, velocity_mm_s, tracking_error_mm, control_V) at the end of the last
+        step; control_V is the last command, the newest in the delay line."""
         loop = self._loop
-        return loop[0], loop[1], loop[4] - loop[0]
+        return loop[0], loop[1], loop[0] - loop[4], self.control_V
+
+    @property
+    def control_V(self):
+        """The controller output of the last loop step (V)."""
+        if self._vector is not None:  # the delay line read from its head: newest last
+            return float(self._vector[4 + self.params.buffer_size])
+        return float(self._buffer[(int(self._state[5]) - 1) % len(self._buffer)])
 
     def state(self):
         """All internal state as plain Python values (for FMU get/set state)."""
@@ -536,7 +686,7 @@ class Servo:
         n_steps, self.pending_s = whole_steps(self.pending_s, duration_s, self.params.time_step_s)
         if n_steps == 0:  # run_loop leaves the state as it is
             return self._loop[0]
-        force_V = disturbance_N / self.params.force_constant_N_per_V
+        force_V = (disturbance_N + self.params.force_N) / self.params.force_constant_N_per_V
         if self._compiled is not None:
             steps, references, forces = self._inputs
             steps[0], references[0], forces[0] = n_steps, reference_mm, force_V
@@ -544,7 +694,7 @@ class Servo:
         elif self._propagators is None:
             self._to_loop_form()
             run_loop(self._coefficients, [n_steps], [float(reference_mm)], [force_V],
-                     self._state, self._buffer, [0.0])
+                     self._state, self._buffer, [0.0], [0.0])
         else:
             self._propagate(n_steps, float(reference_mm), force_V)
         return self._loop[0]  # position_mm without the property's call: every FMU step
@@ -558,7 +708,7 @@ class Servo:
             self._state, self._buffer = np.array(state), np.array(buffer)
             self._loop = memoryview(self._state)
             self._kernel_arguments = (self._coefficients, *self._samples, self._state,
-                                      self._buffer, self._positions)
+                                      self._buffer, self._positions, self._controls)
         self._vector = None
 
     def _to_loop_form(self):

@@ -14,7 +14,7 @@ def _tracking_views(analysis):
     maximum, rms = comparison["max_tracking_error_mm"], comparison["rms_tracking_error_mm"]
     frequency_hz, amplitude_um = details.residual_spectrum
     return [
-        "<h2>Tracking error (as Anang et al. 2017 report it)</h2>",
+        "<h2>Tracking error</h2>",
         table(("after the first second", "measured (µm)", "predicted (µm)"),
               [(name, f"{1e3 * figure['measured']:.4g}", f"{1e3 * figure['predicted']:.4g}")
                for name, figure in (("max tracking error", maximum),

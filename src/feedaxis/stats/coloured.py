@@ -488,3 +488,14 @@ def locate_sinusoid(residual, time_s, frequency_hz, bin_hz):
 def _phases(time_s, frequency_hz):
     phase = 2.0 * np.pi * frequency_hz * time_s
     return np.cos(phase), np.sin(phase)
+
+
+def noise_floor_um(residual_um):
+    """The measurement's noise floor (µm): what a model of the motion cannot carry, from the
+    residual's sample-to-sample changes (median absolute successive difference, scaled to a
+    standard deviation for white noise). A slow model error barely moves it, so a residual
+    far above it is structure, not noise; serially correlated noise makes it a lower bound."""
+    steps = np.diff(np.asarray(residual_um, dtype=float))
+    if steps.size == 0:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(steps - np.median(steps))) / np.sqrt(2.0))

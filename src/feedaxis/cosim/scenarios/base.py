@@ -208,7 +208,7 @@ def axis_values(master, parameters, name, with_servo=False):
 
     axis = {"name": name, **{table: axis_table(table, values) for table in AXIS_KEYS}}
     if with_servo:
-        axis["servo"] = servo_from_fmu(values("NpidServo", SERVO_KEYS.values()))
+        axis["servo"] = servo_from_fmu(values("NpidServo", [*SERVO_KEYS.values(), "nonlinear"]))
     return axis
 
 

@@ -43,7 +43,8 @@ def cutting_force_N(time_s, spindle_rpm, force_N, teeth=TEETH):
 
 
 def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid",
-                 spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None):
+                 spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None,
+                 record_control=False):
     """Sinusoidal tracking (Anang et al. 2017) in memory.
 
     Parameters
@@ -51,13 +52,16 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     master : Master
     frequency_hz, amplitude_mm, duration_s : float
         Reference A sin(2π f t) (mm) for ``duration_s`` seconds.
-    controller : {"pid", "npid"}
-        PID (Anang et al. 2017 Eq. 6) or NPID (Eq. 8).
+    controller : {"pid", "npid", "cascade"}
+        PID (Anang et al. 2017 Eq. 6), NPID (Eq. 8) or a drive's cascade (NpidServo's
+        ``kp_per_s``, ``kv_V_s_per_mm``, ``tn_s``, ``velocity_feedforward``).
     spindle_rpm : float, optional
         Adds the cutting force of :func:`cutting_force_N` (1500/2500/3500 rpm in
         Anang et al. 2017).
     force_N : float
         Cutting-force amplitude F0 at 1500 rpm (N); see :data:`CUTTING_FORCE_N`.
+    record_control : bool
+        Write the controller output as tracking.csv's ``control_V``, as a drive records it.
 
     Returns
     -------
@@ -68,10 +72,11 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
     """
     h = master.system.macro_step_s
     _check_reference(h, frequency_hz, amplitude_mm, duration_s)
-    if controller not in ("pid", "npid"):
-        raise ParameterError(f"must be pid or npid, got {controller!r}", "controller")
+    if controller not in ("pid", "npid", "cascade"):
+        raise ParameterError(f"must be pid, npid or cascade, got {controller!r}", "controller")
     overrides = {**(parameters or {})}
-    overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": controller == "npid"}
+    overrides["NpidServo"] = {**overrides.get("NpidServo", {}), "nonlinear": False,
+                              "controller": controller}
     stop_s = stop_time_s(duration_s, h)
     servo = master.system.with_parameters(overrides).component("NpidServo").parameters
     _check_loop_budget(h, stop_s, servo.get("time_step_s", ServoParams.time_step_s))
@@ -93,6 +98,8 @@ def run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller="pid
                 "actual_mm": rows["NpidServo.position_mm"]}
     if spindle_rpm is not None:
         tracking["disturbance_N"] = cutting_force_N(rows["time"] - h, spindle_rpm, force_N)
+    if record_control:
+        tracking["control_V"] = rows["NpidServo.control_V"]
     name = "simulated tracking test" + ("" if completed else
                                         f" (interrupted at t = {rows['time'][-1]:g} s)")
     figures, series = _tracking_figures(rows)
@@ -139,12 +146,12 @@ def _tracking_figures(rows):
 
 def simulate_tracking(out, master, frequency_hz, amplitude_mm, duration_s, controller="pid",
                       spindle_rpm=None, force_N=CUTTING_FORCE_N, parameters=None, progress=None,
-                      noise=None):
+                      noise=None, record_control=False):
     """Sinusoidal tracking (:func:`run_tracking`) written as tracking.csv into the case
     folder ``out``; return the case folder, the run's settings and its max and RMS
     tracking error (mm)."""
     run = run_tracking(master, frequency_hz, amplitude_mm, duration_s, controller,
-                       spindle_rpm, force_N, parameters, progress)
+                       spindle_rpm, force_N, parameters, progress, record_control)
     return write_run(out, master, run, noise)
 
 
@@ -168,18 +175,25 @@ def _tracking_options(parser):
     parser.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
     parser.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
     parser.add_argument("--duration-s", type=float, default=10.0, help="default 10")
-    parser.add_argument("--controller", choices=("pid", "npid"), default="pid")
+    parser.add_argument("--controller", choices=("pid", "npid", "cascade"), default="pid",
+                        help="pid or npid (Anang et al. 2017), or cascade: a drive's P "
+                             "position loop around a velocity loop (its gains: --set "
+                             "NpidServo.kp_per_s=..., kv_V_s_per_mm, tn_s, "
+                             "velocity_feedforward)")
+    parser.add_argument("--record-control", action="store_true",
+                        help="write the controller output as tracking.csv's control_V, as a "
+                             "drive records it")
     parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
     parser.add_argument("--force-N", type=float,
                         help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
-                             "row of Anang et al. 2017 Table 2)")
+                             "row of Table 2 of Anang et al. 2017)")
 
 
 def _tracking_arguments(args):
     force = {} if args.force_N is None else {"force_N": args.force_N}
     return {"frequency_hz": args.frequency_hz, "amplitude_mm": args.amplitude_mm,
             "duration_s": args.duration_s, "controller": args.controller,
-            "spindle_rpm": args.spindle_rpm, **force}
+            "spindle_rpm": args.spindle_rpm, "record_control": args.record_control, **force}
 
 
 def _tracking_line(args, summary):
@@ -192,7 +206,8 @@ def _tracking_line(args, summary):
 
 SCENARIOS = (
     Scenario("tracking", run_tracking, _tracking_options, _tracking_arguments, _tracking_line,
-             help="sinusoidal tracking, PID or NPID (Anang et al. 2017) -> tracking.csv",
+             help="sinusoidal tracking, PID, NPID (Anang et al. 2017) or a cascade drive "
+                  "-> tracking.csv",
              description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
                          "after the first second. --spindle-rpm adds a milling force at the "
                          "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, Anang "

@@ -1,0 +1,269 @@
+"""Servo traces from real drives (issue 31): the cascade loop industrial drives run, a start
+identified from the record, and findings in the shape a servo engineer names them.
+
+Records come from tests/cascade_synthetic.py: the cascade stepped by classical Runge-Kutta
+independently of feedaxis.physics.servo, with seeded encoder noise (white 0.1 µm + AR(1)
+0.3 µm). Sizes are asserted within 3 standard uncertainties of the generating values.
+"""
+import json
+
+import numpy as np
+import pytest
+
+from cascade_synthetic import (CASCADES, FORCE_CONSTANT_N_PER_V, LOOP_STEP_S, PLANT,
+                               cascade_loop, exciting, servo_table, write_cascade_case)
+from feedaxis.case import CaseError, read_case, write_case
+from feedaxis.cli import main
+from feedaxis.diagnose import diagnose
+from feedaxis.effects import CATALOG, Model
+from feedaxis.physics import servo
+from feedaxis.physics.identify import identify_plant
+
+DURATION_S = 3.0
+
+
+def _params(cascade, **extra):
+    table = servo_table(cascade)
+    gains = {key: table[key] for key in CASCADES[cascade]}
+    return servo.ServoParams(controller="cascade", force_constant_N_per_V=FORCE_CONSTANT_N_PER_V,
+                             time_step_s=LOOP_STEP_S, **gains, **PLANT, **extra)
+
+
+def _train(t):
+    """A 1 Hz train of force steps: 2 N during the second half of every second."""
+    return 2.0 if t % 1.0 >= 0.5 else 0.0
+
+
+@pytest.mark.parametrize("cascade", sorted(CASCADES))
+def test_the_cascade_kernel_equals_an_independent_stepping_of_the_loop(cascade):
+    """physics.servo's cascade (the fit's compiled kernel) against the Runge-Kutta generator,
+    with Coulomb and Stribeck friction, a constant force and a force train: position and
+    recorded controller output agree to 1e-9."""
+    friction = {"friction_N": 1.0, "coulomb_N": 3.0, "static_N": 6.0,
+                "stribeck_velocity_mm_s": 2.0}
+    time_s, reference_mm, position_mm, control_V = cascade_loop(
+        exciting, 1.0, cascade, force_N=lambda t: -3.0 + _train(t), **friction)
+    force_N = np.array([-3.0 + _train(t) for t in time_s])
+    simulated_mm, simulated_V = servo.simulate_record(_params(cascade, **friction), time_s,
+                                                      reference_mm, force_N)
+    assert np.max(np.abs(simulated_mm - position_mm)) < 1e-9
+    assert np.max(np.abs(simulated_V - control_V)) < 1e-9
+
+
+def test_the_fmu_loop_steps_the_cascade_as_the_fit_simulates_it():
+    """Servo (the NpidServo FMU's physics, stepped in Python at 1 ms) against simulate, and
+    its control_V output against the recorded one."""
+    params = _params("P-PI ff", friction_N=2.0, force_N=-1.5)
+    time_s = np.arange(0.0, 0.5, 1e-3)
+    reference_mm = np.array([exciting(t) for t in time_s])
+    positions, controls = servo.simulate_record(params, time_s, reference_mm)
+    loop = servo.Servo(params, reference_mm[0], loop=None)
+    for i in range(1, time_s.size):
+        loop.advance(1e-3, reference_mm[i])
+        position, _, error, control = loop.outputs()
+        assert position == pytest.approx(positions[i], abs=1e-12)
+        assert control == pytest.approx(controls[i], abs=1e-12)
+
+
+def test_the_case_reader_takes_a_cascade_and_refuses_mixed_keys(tmp_path):
+    time_s = np.arange(0.0, 1.0, 1e-3)
+    columns = {"time_s": time_s, "reference_mm": np.sin(time_s), "actual_mm": np.sin(time_s),
+               "control_V": np.zeros_like(time_s)}
+    axis = {"name": "drive", "screw": {"lead_mm": 10.0}, "servo": servo_table("P-PI ff")}
+    case = read_case(write_case(tmp_path / "ok", axis, tracking=columns))
+    assert case.axis.servo["controller"] == "cascade" and case.tracking.control_V is not None
+    for name, servo_values, column in (
+            ("pid-key", {**servo_table("P-P"), "kp_V_per_mm": 1.0}, "servo.kp_V_per_mm"),
+            ("feedforward", {**servo_table("P-P"), "velocity_feedforward": 1.5},
+             "servo.velocity_feedforward"),
+            ("no-kv", {k: v for k, v in servo_table("P-P").items() if k != "kv_V_s_per_mm"},
+             "servo.kv_V_s_per_mm")):
+        folder = write_case(tmp_path / name, {**axis, "servo": servo_values}, tracking=columns)
+        with pytest.raises(CaseError) as error:
+            read_case(folder)
+        assert error.value.column == column
+    pid = {"controller": "pid", "kp_V_per_mm": 1.0, "ki_V_per_mm_s": 0.0, "kd_V_s_per_mm": 0.0,
+           "force_constant_N_per_V": 100.0, "kp_per_s": 40.0}
+    with pytest.raises(CaseError) as error:
+        read_case(write_case(tmp_path / "pid", {**axis, "servo": pid}, tracking=columns))
+    assert error.value.column == "servo.kp_per_s"
+    loud = {**columns, "control_V": np.full_like(time_s, 2e4)}
+    with pytest.raises(CaseError) as error:
+        read_case(write_case(tmp_path / "loud", axis, tracking=loud))
+    assert error.value.column == "control_V"
+
+
+def test_inverse_dynamics_on_control_v_gives_friction_and_force_as_a_start():
+    """Coulomb friction and a constant force from the recorded controller output within 2 %
+    and 0.05 N, the plant's gain within a factor 1.5: a start. The output is recorded once
+    per 1 ms sample while the loop steps four times and its velocity loop crosses over near
+    130 Hz, a model error beyond the noise its standard uncertainties describe; the
+    closed-loop fit sizes the plant and the effects (tests below)."""
+    time_s, _, position_mm, control_V = cascade_loop(exciting, 5.0, "P-PI ff", friction_N=5.0,
+                                                    force_N=lambda t: -3.0)
+    noisy_mm = position_mm + np.random.default_rng(1).normal(0.0, 0.03e-3, time_s.size)
+    found = identify_plant(time_s, noisy_mm, control_V, FORCE_CONSTANT_N_PER_V)
+    assert found.values["friction_N"] == pytest.approx(5.0, rel=0.02)
+    assert found.values["force_N"] == pytest.approx(-3.0, abs=0.05)
+    assert 4000.0 / 1.5 < found.values["plant_gain_mm_per_Vs2"] < 4000.0 * 1.5
+
+
+def _diagnosed(tmp_path, cascade, control, seed=3, duration_s=DURATION_S, model=None,
+               **hidden):
+    record = cascade_loop(exciting, duration_s, cascade, **hidden)
+    case = read_case(write_cascade_case(tmp_path / "case", record, cascade, seed, control))
+    return case, diagnose(case, model or Model())
+
+
+def _assert_within(found, effect, truths):
+    values = found.final.model.values[effect]
+    sigma = found.final.uncertainties[effect]
+    for name, truth in truths.items():
+        assert abs(values[name] - truth) < 3 * sigma[name], (effect, name, values[name], truth)
+
+
+@pytest.mark.parametrize("control", (False, True), ids=("no control_V", "control_V"))
+@pytest.mark.parametrize("cascade", sorted(CASCADES))
+def test_a_null_drive_from_the_empty_model_is_adequate(tmp_path, cascade, control):
+    """No hidden effect: from the empty model (the start from the record) `adequate`, and
+    the command-line diagnosis exits 0 (never 2)."""
+    case, found = _diagnosed(tmp_path, cascade, control)
+    assert found.verdict == "adequate", (found.candidates, found.unexplained)
+    assert main(["diagnose", str(case.folder), "--json"]) == 0
+
+
+@pytest.mark.parametrize("cascade", sorted(CASCADES))
+def test_hidden_coulomb_friction_is_named_with_its_size(tmp_path, cascade):
+    _, found = _diagnosed(tmp_path, cascade, False, friction_N=5.0)
+    assert "coulomb_friction" in [c.effect for c in found.candidates]
+    assert "stribeck_friction" not in [c.effect for c in found.candidates]
+    _assert_within(found, "coulomb_friction", {"friction_N": 5.0})
+
+
+@pytest.mark.parametrize("cascade", ("P-P", "P-PI"))
+def test_hidden_stribeck_friction_is_named_with_its_size(tmp_path, cascade):
+    truths = {"coulomb_N": 3.0, "static_N": 6.0, "stribeck_velocity_mm_s": 2.0}
+    _, found = _diagnosed(tmp_path, cascade, True, **truths)
+    named = [c.effect for c in found.candidates]
+    assert "stribeck_friction" in named and "coulomb_friction" not in named
+    _assert_within(found, "stribeck_friction", truths)
+
+
+@pytest.mark.parametrize("cascade, control", (("P-P", False), ("P-P ff", True),
+                                              ("P-PI", True), ("P-PI ff", True)))
+def test_a_hidden_constant_force_is_named_with_its_size(tmp_path, cascade, control):
+    """A P position loop holds a constant force as a steady error; an integral action holds
+    it in the controller output, which the recorded control_V shows."""
+    _, found = _diagnosed(tmp_path, cascade, control, force_N=lambda t: -3.0)
+    assert [c.effect for c in found.candidates][0] == "constant_force"
+    _assert_within(found, "constant_force", {"force_N": -3.0})
+
+
+def test_a_constant_force_under_an_integral_action_without_control_v_is_not_invented(tmp_path):
+    """P-PI without the controller output: the integral holds the force, the tracking error
+    shows nothing lasting, and nothing is named."""
+    _, found = _diagnosed(tmp_path, "P-PI", False, force_N=lambda t: -3.0)
+    assert found.verdict == "adequate"
+
+
+def test_a_1_hz_train_of_force_steps_is_reported_as_events_with_their_times(tmp_path):
+    """2 N on during the second half of every second, 5 s, diagnosed on top of the plant
+    (``fit --add servo_plant`` first, as a commissioning engineer would): the steps found as
+    events at their times (within 3 samples under the coloured encoder noise), every 0.5 s,
+    not as sinusoids at the train's harmonics."""
+    case, found = _diagnosed(tmp_path, "P-PI", False, duration_s=5.0, force_N=_train,
+                             model=Model((CATALOG["servo_plant"],)))
+    steps = [s for s in found.unexplained if s.kind == "force_steps"]
+    assert len(steps) == 1
+    details = steps[0].to_json()
+    expected = np.arange(0.5, 5.0, 0.5)
+    assert np.allclose(details["event_times_s"], expected, atol=3.5e-3)
+    assert details["period_s"] == pytest.approx(0.5, abs=2e-3)
+    sizes = np.array(details["event_sizes_N"])
+    assert np.allclose(np.abs(sizes), 2.0, rtol=0.25) and np.all(sizes[::2] > 0)
+    assert not [s for s in found.unexplained if s.kind == "periodic"]
+    assert main(["diagnose", str(case.folder), "--json"]) == 0
+
+
+def test_the_built_fmu_runs_a_cascade_drive_as_the_fit_simulates_it(fmu_paths):
+    """NpidServo with ``controller = "cascade"`` (its compiled loop) against the physics'
+    loop stepped alike in Python (fmpy sets each step's input at the step's start), with
+    Coulomb friction and a constant force; tracking_error_mm is position − reference."""
+    from fmpy import simulate_fmu
+
+    friction = {"friction_N": 2.0, "force_N": -1.5}
+    params = _params("P-PI ff", **friction)
+    step_s, n = 1e-3, 400
+    time_s = np.arange(n + 1) * step_s
+    reference_mm = np.array([exciting(t) for t in time_s])
+    signal = np.array(list(zip(time_s, reference_mm)),
+                      dtype=[("time", float), ("position_ref_mm", float)])
+    start = {"controller": "cascade", "time_step_s": LOOP_STEP_S,
+             "force_constant_N_per_V": FORCE_CONSTANT_N_PER_V, **PLANT, **friction,
+             **{key: value for key, value in servo_table("P-PI ff").items()
+                if key in ("kp_per_s", "kv_V_s_per_mm", "tn_s", "velocity_feedforward")}}
+    result = simulate_fmu(str(fmu_paths["NpidServo"]), stop_time=n * step_s, step_size=step_s,
+                          output_interval=step_s, input=signal, start_values=start,
+                          output=["position_mm", "tracking_error_mm", "control_V"])
+    loop = servo.Servo(params, reference_mm[0], loop=servo.run_loop)
+    expected = []
+    for i in range(n):
+        loop.advance(step_s, reference_mm[i])
+        expected.append(loop.outputs())
+    position, _, error, control = np.array(expected).T
+    np.testing.assert_allclose(result["position_mm"][1:], position, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result["control_V"][1:], control, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result["tracking_error_mm"][1:], error, rtol=0, atol=1e-9)
+    assert np.allclose(error, position - reference_mm[:n])  # each step's input, its target
+
+
+def test_a_drive_trace_export_is_imported_through_a_column_map(tmp_path, capsys):
+    """A drive's export (semicolon-separated, decimal comma, µm, a sample index): mapped and
+    scaled into tracking.csv with control_V; the unmapped column reported; a column the
+    export lacks and a target the format lacks are refused, named, exit 2, nothing written."""
+    time_s, reference_mm, position_mm, control_V = cascade_loop(exciting, 0.5, "P-PI")
+    lines = ["Sample;Pos_cmd [um];Pos_act [um];I_q [A];n_act [rpm]"]
+    lines += [f"{i};{r * 1e3:.6f};{a * 1e3:.6f};{u:.9f};0".replace(".", ",")
+              for i, (r, a, u) in enumerate(zip(reference_mm, position_mm, control_V))]
+    export = tmp_path / "trace.csv"
+    export.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    axis = tmp_path / "axis.toml"
+    axis.write_text('name = "drive"\n[screw]\nlead_mm = 10.0\n[servo]\ncontroller = "cascade"\n'
+                    'kp_per_s = 40.0\nkv_V_s_per_mm = 0.2\ntn_s = 0.02\n'
+                    'force_constant_N_per_V = 20.0\nloop_step_s = 0.00025\n', encoding="utf-8")
+    mapping = ["--map", "sample=Sample", "--sample-time-s", "0.001",
+               "--map", "reference_mm=Pos_cmd [um]*0.001", "--map", "actual_mm=Pos_act [um]*0.001",
+               "--map", "control_V=I_q [A]"]
+    assert main(["import", str(export), "--axis", str(axis), "--out", str(tmp_path / "case"),
+                 *mapping, "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["dropped"] == {"n_act [rpm]": "not mapped (--map TARGET=SOURCE to keep it)"}
+    trace = read_case(tmp_path / "case").tracking
+    np.testing.assert_allclose(trace.time_s, time_s, atol=1e-12)
+    np.testing.assert_allclose(trace.actual_mm, position_mm, atol=1e-9)
+    np.testing.assert_allclose(trace.control_V, control_V, atol=1e-9)
+    for wrong, named in ((["--map", "reference_mm=Pos_cmd*0.001"], "Pos_cmd"),
+                         (["--map", "velocity_mm_s=n_act [rpm]"], "velocity_mm_s")):
+        assert main(["import", str(export), "--axis", str(axis), "--out",
+                     str(tmp_path / "refused"), *mapping, *wrong]) == 2
+        assert named in capsys.readouterr().err
+        assert not (tmp_path / "refused").exists()
+
+
+def test_a_record_no_plant_starts_is_undetermined_naming_what_is_missing(tmp_path, capsys,
+                                                                         monkeypatch):
+    """Where the closed-loop search finds no plant making a stable loop with the cascade of
+    [servo] (forced here: the search returns none), the empty model's diagnosis is
+    `undetermined`, the reason naming what is missing (the controller's gains, the recorded
+    output), exit 0, never 2."""
+    from feedaxis.measurement import tracking
+
+    monkeypatch.setattr(tracking, "loop_start", lambda *args, **kwargs: None)
+    record = cascade_loop(exciting, 1.0, "P-P")
+    case = read_case(write_cascade_case(tmp_path / "case", record, "P-P", 1))
+    found = diagnose(case, Model())
+    assert found.verdict == "undetermined" and not found.candidates
+    assert "control_V" in found.undetermined_reason and "gains" in found.undetermined_reason
+    assert main(["diagnose", str(case.folder)]) == 0
+    assert "undetermined" in capsys.readouterr().out
+
