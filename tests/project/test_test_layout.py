@@ -27,6 +27,8 @@ NOT_IMPORTED = {
                                "(feedaxis.comptable.CONTROLLERS) in tests/comptable",
     "feedaxis.effects.positioning": "the @effect of a user's file: examples/coupling_ripple.py "
                                     "through --effects in tests/fit_diagnosis/test_loop.py",
+    "feedaxis.importers.drive_trace": "feedaxis import of a drive's trace through a column "
+                                      "map in tests/fit_diagnosis/test_cascade.py",
     "feedaxis.importers.wide_csv": "through feedaxis import of wide CSV files in "
                                    "tests/case/test_import.py",
     "feedaxis.measurement.circular": "a kind loaded by the registry (feedaxis.kinds.BUILT_IN): "
