@@ -170,7 +170,7 @@ def _identified(best, columns, step_s, force_constant_N_per_V):
 
 
 # the plant gains the closed-loop search tries (mm/(V·s²)), a quarter decade apart: from a
-# heavy table on a weak amplifier to seed 002's small one, and beyond
+# heavy table on a weak amplifier to the small one of Anang et al. 2017, and beyond
 SEARCH_GAINS = np.logspace(-1.0, 7.0, 33)
 SEARCH_DAMPINGS = (0.0, 30.0, 300.0)  # 1/s
 SEARCH_SPAN_S = 5.0  # the search runs on the record's first seconds
