@@ -10,7 +10,7 @@ degrees of freedom, Gaussian quantised to 0.1 µm, a drift along the test's cloc
 ±3 µm outliers (σ = 0.3 µm). A false alarm is a catalog effect named or a periodic
 structure described (the issue's definition), counted apart from any other structure named
 (a drift where the null does not drift, a trend, an irregular error): both are printed.
-Tracking: 2 s records at 1 ms of the plant of ``tests/test_tracking_loop.py``, model
+Tracking: 2 s records at 1 ms of the plant of ``tests/fit_diagnosis/test_tracking_loop.py``, model
 servo_plant at the truth, with encoder noise (white 0.1 µm + AR(1) 0.3 µm) and each null
 family of ``tests/tracking_synthetic.NOISE_FAMILIES`` (white; AR(1) with ρ 0.5 and 0.95;
 Student-t with 3 degrees of freedom; quantised to 0.1 µm; a slow drift, the tracking

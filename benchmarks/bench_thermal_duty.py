@@ -34,6 +34,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE.parent / "tests" / "physics"))  # test_thermal_duty
 sys.path.insert(0, str(HERE))
 
 from common import arguments, run_command  # noqa: E402

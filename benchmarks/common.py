@@ -1,7 +1,7 @@
 """What every benchmark shares: the ``--smoke`` run for CI and the machine it ran on.
 
 Every benchmark script has ``main(argv=None)``; ``--smoke`` runs it at its smallest sizes
-(CI runs each so, ``tests/test_benchmarks.py``: it must finish, not meet a time).
+(CI runs each so, ``tests/docs/test_benchmarks.py``: it must finish, not meet a time).
 ``python benchmarks/speed_page.py`` runs them all at full size and writes docs/speed.md from
 their output, with the machine and the date.
 """

@@ -7,6 +7,7 @@ import importlib.util
 import os
 import shutil
 import signal
+import sys
 from pathlib import Path
 
 import pytest
@@ -16,6 +17,13 @@ from feedaxis.cosim.fmu_cache import cache_folder
 from feedaxis.toolchain import cache_root
 from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.fmu_build import FMU_NAMES, build_fmus
+
+# The tests sit in one folder per layer; the helpers (synthetic.py, scenarios.py, toy_kind.py
+# ...) in this one, which pytest puts on sys.path with this file. A few test modules share
+# tables with others (test_seed_reproduction's published figures, test_fuzz's strategies):
+# every layer's folder is importable too, whichever test is collected first.
+sys.path[:0] = [str(folder) for folder in sorted(Path(__file__).resolve().parent.iterdir())
+                if folder.is_dir() and any(folder.glob("test_*.py"))]
 
 # System libraries tests load, and how to install them (Debian 12, as .ci/run does).
 SYSTEM_LIBRARIES = {"libtbb.so.12": "apt-get install libtbb12 (ecospy's ecos needs it)"}

@@ -1,7 +1,7 @@
 """Write the FMI cross-check files <Name>_in.csv, <Name>_ref.csv, <Name>_ref.opt per FMU.
 
 The reference outputs come from feedaxis.physics called directly with the FMUs' default
-parameters, so compliance tools (fmuCheck ``-i <Name>_in.csv``) and tests/test_fmus.py check
+parameters, so compliance tools (fmuCheck ``-i <Name>_in.csv``) and tests/fmus/test_fmus.py check
 each FMU against its physics. The layout follows the FMI Cross-Check rules: every column
 name quoted, ``<Name>_ref.opt`` beside them.
 Run from the repository root: ``python tests/make_fmu_references.py``.

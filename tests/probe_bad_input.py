@@ -28,7 +28,7 @@ import tomli_w
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path[:0] = [str(Path(__file__).parent), str(Path(__file__).parent / "cli")]
 from test_fuzz import (BOUNDS, CONTENT, ENCODINGS, FILES, FUZZ, GOOD, GUESSES,  # noqa: E402
                        IMPORT_TEXTS, IMPORT_TIME, RETURNS, TIME_STEPS, _cli_json,
                        _controller_text, _strict, _write, controller_outcome,

@@ -1,7 +1,9 @@
 """A kind of measurement defined in this one module, as a new engineer would add one: its
 samples file (toy.csv: x_mm, deviation_um), its reader, one effect (a slope), its noise,
-its figures and its terminal text. Registered on import, it is also a valid effects file:
-``--effects tests/toy_kind.py`` registers the kind and brings its effect to the command line.
+its figures, its terminal text and its simulated scenario (``feedaxis simulate toy``: the
+co-simulated axis driven along a slow ramp). Registered on import, it is also a valid
+effects file: ``--effects tests/toy_kind.py`` registers the kind and brings its effect and
+its scenario to the command line.
 """
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,6 +12,8 @@ import numpy as np
 
 from feedaxis import kinds
 from feedaxis.case import _read_csv
+from feedaxis.cosim.master import SimulationInterrupted
+from feedaxis.cosim.scenarios.base import Scenario, ScenarioRun, Series, stop_time_s
 from feedaxis.effects import Effect, Parameter
 from feedaxis.measurement.base import Measurement
 from feedaxis.stats.noise import ResidualMeanSquare
@@ -31,6 +35,45 @@ def toy_lines(comparison):
             f"{comparison['rms_residual_um']:.4g} µm")
 
 
+def run_ramp(master, length_mm=100.0, points=41, feed_mm_min=600.0, parameters=None,
+             progress=None):
+    """The axis driven from 0 to ``length_mm`` at ``feed_mm_min``; the deviation (table
+    position - reference, µm) at ``points`` evenly spaced reference positions."""
+    h = master.system.macro_step_s
+    speed_mm_s = feed_mm_min / 60.0
+    x_mm = np.linspace(0.0, length_mm, points)
+    times_s = np.round((x_mm / speed_mm_s + 1.0) / h) * h   # 1 s standing first
+
+    def reference_mm(t):
+        return np.clip((t - 1.0) * speed_mm_s, 0.0, length_mm)
+
+    try:
+        rows, stopped = master.run(stop_time_s(times_s[-1], h),
+                                   {"position_ref_mm": lambda t: reference_mm(t + h)},
+                                   parameters, record_at_s=times_s, progress=progress), ""
+    except SimulationInterrupted as interrupted:
+        rows, stopped = interrupted.partial, "interrupted: the partial toy.csv is in"
+    rows = rows[1:]
+    x_mm = reference_mm(rows["time"])
+    deviation_um = (rows["table_position_mm"] - x_mm) * 1e3
+    figures = {"rms_deviation_um": float(np.sqrt(np.mean(deviation_um ** 2)))}
+    return ScenarioRun("simulated toy ramp", parameters or {},
+                       {"toy": {"x_mm": x_mm, "deviation_um": deviation_um}}, figures,
+                       Series("x_mm", x_mm, "deviation_um", deviation_um, ("ramp",) * x_mm.size),
+                       {"samples": int(x_mm.size), **figures}, stopped)
+
+
+def _ramp_options(parser):
+    parser.add_argument("--length-mm", type=float, default=100.0, help="default 100")
+    parser.add_argument("--points", type=int, default=41, help="default 41")
+
+
+RAMP = Scenario("toy", run_ramp, _ramp_options,
+                lambda args: {"length_mm": args.length_mm, "points": args.points},
+                lambda args, summary: f"{args.out}: {summary['samples']} toy samples",
+                help="a slow ramp -> toy.csv")
+
+
 @kinds.register
 class Toy(Measurement):
     """Deviations at positions x, compared with a straight line."""
@@ -44,6 +87,7 @@ class Toy(Measurement):
     stages = ("effects",)
     measured_column = ("deviation_um", 1.0)
     text = toy_lines
+    scenarios = (RAMP,)
 
     def __init__(self, case):
         super().__init__(case)

@@ -36,8 +36,6 @@ CASE_HELP = ("case folder: axis.toml + positioning.csv (+ duty.csv), or axis.tom
 # Each command is registered beside its handler: @command(NAME, add_parser arguments,
 # options=FUNCTION adding its arguments); build_parser adds them in this file's order.
 COMMANDS = []
-SCENARIOS = []
-SCENARIO_ARGUMENTS = {}  # scenario name -> args -> its keyword arguments (simulate and sweep)
 
 
 def command(name, options=None, **parser_kwargs):
@@ -50,24 +48,8 @@ def command(name, options=None, **parser_kwargs):
 
 def command_group(name, options, **parser_kwargs):
     """Register ``feedaxis NAME`` whose subcommands (added by ``options``) carry the
-    handlers, as ``simulate`` and its scenarios."""
+    handlers, as ``simulate`` and the scenarios of the kinds of measurement."""
     COMMANDS.append((name, parser_kwargs, options, None))
-
-
-def scenario(name, options=None, **parser_kwargs):
-    """Register the decorated handler as ``feedaxis simulate NAME``."""
-    def register(handler):
-        SCENARIOS.append((name, parser_kwargs, options, handler))
-        return handler
-    return register
-
-
-def scenario_arguments(name):
-    """Register the decorated ``args -> keyword arguments`` of scenario NAME's run."""
-    def register(function):
-        SCENARIO_ARGUMENTS[name] = function
-        return function
-    return register
 
 
 @contextmanager
@@ -700,7 +682,7 @@ def _simulate(args, run, system=None):
     """Run one scenario into a new case folder (on ``system``, default the axis of the
     axis options); Ctrl-C keeps what was computed."""
     from .cosim.master import Master
-    from .cosim.scenarios import check_axis_ranges
+    from .cosim.scenarios.base import check_axis_ranges
 
     if Path(args.out).exists():
         raise InputError("already exists; choose a new case folder", path=args.out)
@@ -719,44 +701,7 @@ def _simulate(args, run, system=None):
 
 
 def _simulate_options(parser):
-    scenarios = _scenario_parsers(parser, "case folder to create (must not exist)",
-                                  _noise_options)
-    sub = scenarios.add_parser(
-        "circular", help="circular test of two axes (ISO 230-4, ballbar) -> circular.csv",
-        description="Two co-simulated axes (each NpidServo, GeometricError, StepperError, "
-                    "ThermalScrew, components named X_NpidServo, ...) and their squareness; "
-                    "an interpolator commands the circle at the feed, from standing through "
-                    "a lead-in arc, one measured turn and a lead-out arc, in each direction; "
-                    "the case records the radial deviation from the nominal centre as a "
-                    "ballbar does (axis.toml with [circular] and [axes.NAME], circular.csv).")
-    _circular_options(sub)
-    sub.add_argument("out", metavar="OUT", help="case folder to create (must not exist)")
-    _noise_options(sub)
-    _add_axis_options(sub)
-    _add_common_options(sub)
-    sub.set_defaults(handler=_cmd_simulate_circular)
-
-
-def _circular_options(sub):
-    sub.add_argument("--machine", metavar="AXIS",
-                     help="axis.toml (or case folder) of a circular case: its axes, circle and "
-                          "each axis's screw, motor and servo (default: axes X and Y with the "
-                          "FMUs' defaults)")
-    sub.add_argument("--radius-mm", type=float, help="nominal radius (default 100, or the "
-                                                     "--machine's)")
-    sub.add_argument("--feed-mm-min", type=float, help="programmed feed (default 1000, or the "
-                                                       "--machine's)")
-    sub.add_argument("--center-mm", metavar="C1,C2", help="centre in machine coordinates "
-                                                          "(default R,R, or the --machine's)")
-    sub.add_argument("--directions", choices=("both", "ccw", "cw"), default="both",
-                     help="counter-clockwise then clockwise (default both)")
-    sub.add_argument("--samples-per-turn", type=int, default=3600,
-                     help="samples over the measured turn of each direction (default 3600)")
-    sub.add_argument("--lead-in-deg", type=float, default=45.0,
-                     help="arc travelled before the measured turn (default 45)")
-    sub.add_argument("--squareness-urad", type=float, default=0.0,
-                     help="out-of-squareness of the second axis towards the first, µrad "
-                          "(default 0)")
+    _scenario_parsers(parser, "case folder to create (must not exist)", _noise_options)
 
 
 def _noise_options(sub):
@@ -774,22 +719,35 @@ def _noise(args):
 
 
 def _scenario_parsers(parser, out_help, more_options=None, handler=None):
-    """One subparser per scenario: its options, OUT, ``more_options``, the axis options;
-    run by ``handler`` (default: the scenario's own)."""
+    """One subparser per scenario of the registered kinds (:func:`feedaxis.kinds.scenarios`):
+    its options, OUT, ``more_options``, the axis options; run by ``handler`` (default:
+    :func:`_cmd_simulate`), a sweep's (``handler`` given) only where the scenario sweeps."""
+    from .kinds import scenarios as registered_scenarios
+
     scenarios = parser.add_subparsers(dest="scenario", required=True, metavar="SCENARIO")
-    for name, parser_kwargs, options, scenario_handler in SCENARIOS:
-        sub = scenarios.add_parser(name, **parser_kwargs)
-        options(sub)
+    for name, scenario in registered_scenarios().items():
+        if handler and not scenario.sweeps:
+            continue
+        sub = scenarios.add_parser(name, help=scenario.help, description=scenario.description)
+        scenario.options(sub)
         sub.add_argument("out", metavar="OUT", help=out_help)
         if more_options:
             more_options(sub)
         _add_axis_options(sub)
         _add_common_options(sub)
-        sub.set_defaults(handler=handler or scenario_handler)
-    return scenarios
+        sub.set_defaults(handler=handler or _cmd_simulate, run_scenario=scenario)
 
 
-# the scenarios below carry the handlers
+def _cmd_simulate(args):
+    scenario = args.run_scenario
+    keywords = scenario.arguments(args)
+    system = scenario.system(args) if scenario.system else None
+    summary = _simulate(args, lambda master, progress: scenario.simulate(
+        args.out, master, progress=progress, noise=_noise(args), **keywords), system)
+    _emit(args, summary, scenario.line(args, summary))
+
+
+# the scenarios of the kinds carry the handlers
 command_group("simulate", help="run a scenario on the co-simulated axis, write a case folder",
               description="Co-simulate the four FMUs as one axis (the fmpy master) through a "
                           "scenario and write the result as a measurement case (docs/case-format.md), "
@@ -798,157 +756,6 @@ command_group("simulate", help="run a scenario on the co-simulated axis, write a
                           "193.3 leaves a static error of target/364); --set overrides it. Ctrl-C "
                           "stops and keeps what was computed.",
               options=_simulate_options)
-
-
-def _simulate_iso230_options(parser):
-    parser.add_argument("--targets", type=int, default=11, help="number of targets (default 11)")
-    parser.add_argument("--spacing-mm", type=float, default=50.0,
-                        help="target spacing p (default 50)")
-    parser.add_argument("--first-mm", type=float, default=0.0, help="P_1 before offset (default 0)")
-    parser.add_argument("--runs", type=int, default=5, help="runs each direction (default 5)")
-    parser.add_argument("--overrun-mm", type=float, default=2.0, help="default 2")
-    _add_motion_options(parser)
-
-
-@scenario("iso230", help="ISO 230-2 positioning test -> positioning.csv + duty.csv",
-          description="Targets P_i = (i-1) p + r_i (r_i a different small offset at each), "
-                      "RUNS runs approaching every target in + and in -, overrun beyond the "
-                      "end targets, dwell, then the deviation table position - target; "
-                      "duty.csv holds the motion simulated (it warms the screw), "
-                      "positioning.csv the samples with their time.",
-          options=_simulate_iso230_options)
-def _cmd_simulate_iso230(args):
-    from .cosim.scenarios import simulate_iso230
-
-    summary = _simulate(args, lambda master, progress: simulate_iso230(
-        args.out, master, **_iso230_arguments(args), progress=progress, noise=_noise(args)))
-    _emit(args, summary, f"{args.out}: {summary['samples']} samples, {args.targets} targets x "
-                         f"{args.runs} runs each direction; deviation "
-                         f"{summary['error_min_um']:.3f} to {summary['error_max_um']:.3f} µm")
-
-
-@scenario_arguments("iso230")
-def _iso230_arguments(args):
-    from .cosim.scenarios import iso230_targets
-
-    return {"targets_mm": iso230_targets(args.targets, args.spacing_mm, args.first_mm),
-            "runs": args.runs, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s,
-            "overrun_mm": args.overrun_mm}
-
-
-def _cmd_simulate_circular(args):
-    from .cosim.circular import DIRECTIONS, simulate_circular
-    from .cosim.machine import circular_machine
-
-    if args.model:
-        raise InputError("a fitted circular model is not taken here yet; give its values with "
-                         "--set", parameter="--model")
-    system, circle = circular_machine(
-        args.machine, args.radius_mm, args.feed_mm_min,
-        _numbers(args.center_mm, "--center-mm") if args.center_mm else None,
-        args.squareness_urad, args.step_ms, args.thermal_step_s, args.set)
-    if args.samples_per_turn < 3:
-        raise InputError(f"must be at least 3, got {args.samples_per_turn}",
-                         parameter="--samples-per-turn")
-    summary = _simulate(args, lambda master, progress: simulate_circular(
-        args.out, master, _noise(args), **circle, directions=DIRECTIONS[args.directions],
-        samples_per_turn=args.samples_per_turn, lead_in_deg=args.lead_in_deg,
-        progress=progress), system)
-    figures = ", ".join(f"{k[:-3]} {v:.3f}" for k, v in summary.items()
-                        if k in ("G_um", "H_um", "F_max_um", "F_min_um"))
-    _emit(args, summary, f"{args.out}: {summary['samples']} samples "
-                         f"({', '.join(summary['directions'])}); ISO 230-4 (µm): {figures}")
-
-
-def _simulate_thermal_options(parser):
-    parser.add_argument("--duty", required=True, metavar="duty.csv", help="the heating duty")
-    parser.add_argument("--targets", required=True, metavar="X1,X2,...",
-                        help="targets of each measurement pass (mm), visited in this order")
-    parser.add_argument("--every-s", type=float, default=600.0,
-                        help="duty time between measurement passes (default 600 s)")
-    _add_motion_options(parser)
-
-
-@scenario("thermal", help="duty cycle with measurement passes -> + duty.csv",
-          description="Drive the axis through DUTY (duty.csv format) with a measurement pass "
-                      "over --targets at t = 0, every --every-s of duty time and at the end; "
-                      "write the motion as duty.csv and the samples (with time_s) as "
-                      "positioning.csv.",
-          options=_simulate_thermal_options)
-def _cmd_simulate_thermal(args):
-    from .cosim.scenarios import simulate_thermal
-
-    summary = _simulate(args, lambda master, progress: simulate_thermal(
-        args.out, master, **_thermal_arguments(args), progress=progress, noise=_noise(args)))
-    _emit(args, summary, f"{args.out}: {summary['samples']} samples (duty.csv + "
-                         f"positioning.csv); deviation {summary['error_min_um']:.3f} to "
-                         f"{summary['error_max_um']:.3f} µm")
-
-
-@scenario_arguments("thermal")
-def _thermal_arguments(args):
-    from .case import read_duty
-
-    return {"duty": read_duty(args.duty), "targets_mm": _numbers(args.targets, "--targets"),
-            "every_s": args.every_s, "feed_mm_min": args.feed_mm_min, "dwell_s": args.dwell_s}
-
-
-def _simulate_tracking_options(parser):
-    parser.add_argument("--frequency-hz", type=float, default=0.4, help="default 0.4")
-    parser.add_argument("--amplitude-mm", type=float, default=10.0, help="default 10")
-    parser.add_argument("--duration-s", type=float, default=10.0, help="default 10")
-    parser.add_argument("--controller", choices=("pid", "npid", "cascade"), default="pid",
-                        help="pid or npid (Anang et al. 2017), or cascade: a drive's P "
-                             "position loop around a velocity loop (its gains: --set "
-                             "NpidServo.kp_per_s=..., kv_V_s_per_mm, tn_s, "
-                             "velocity_feedforward)")
-    parser.add_argument("--record-control", action="store_true",
-                        help="write the controller output as tracking.csv's control_V, as a "
-                             "drive records it")
-    parser.add_argument("--spindle-rpm", type=float, help="e.g. 1500, 2500, 3500")
-    parser.add_argument("--force-N", type=float,
-                        help="cutting force F0 at 1500 rpm (default 1.4 N: fitted to one "
-                             "row of Table 2 of Anang et al. 2017)")
-
-
-@scenario("tracking", help="sinusoidal tracking, PID, NPID (Anang et al. 2017) or a cascade "
-                           "drive -> tracking.csv",
-          description="Reference A sin(2 pi f t); prints the maximum and RMS tracking error "
-                      "after the first second. --spindle-rpm adds a milling force at the "
-                      "tooth-passing frequency (mean force ~ 1500/rpm; an assumption, Anang "
-                      "et al. 2017 publishes none). axis.toml gets the [servo] table (the controller), not "
-                      "the plant or friction: --set NpidServo.friction_N=1 hides a Coulomb "
-                      "friction for `feedaxis diagnose OUT` to find (docs/tracking.md).",
-          options=_simulate_tracking_options)
-def _cmd_simulate_tracking(args):
-    from .cosim.scenarios import simulate_tracking
-
-    summary = _simulate(args, lambda master, progress: simulate_tracking(
-        args.out, master, **_tracking_arguments(args), progress=progress, noise=_noise(args)))
-    _emit(args, summary, f"{args.out}/tracking.csv: {args.controller.upper()}, "
-                         f"{args.frequency_hz:g} Hz, {args.amplitude_mm:g} mm"
-                         + (f", cutting force at {args.spindle_rpm:g} rpm"
-                            if args.spindle_rpm else "")
-                         + f"; after the first second: max tracking error "
-                           f"{summary['max_tracking_error_mm']:.4f} mm, RMS "
-                           f"{summary['rms_tracking_error_mm']:.4f} mm")
-
-
-@scenario_arguments("tracking")
-def _tracking_arguments(args):
-    force = {} if args.force_N is None else {"force_N": args.force_N}
-    return {"frequency_hz": args.frequency_hz, "amplitude_mm": args.amplitude_mm,
-            "duration_s": args.duration_s, "controller": args.controller,
-            "spindle_rpm": args.spindle_rpm, "record_control": args.record_control, **force}
-
-
-def _numbers(text, option):
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise InputError("expected comma-separated numbers, e.g. 10,100,190",
-                         parameter=f"{option} {text}") from None
-    return values
 
 
 def _checked_axis(args):
@@ -1106,7 +913,7 @@ command("sweep", help="many co-simulations of a scenario with varied FMU paramet
 
 def _cmd_sweep(args):
     from .cosim.sweep import sweep
-    from .cosim.sweep_summary import summary_lines
+    from .cosim.sweep.summary import summary_lines
 
     with _counter_progress("sweeping", "trial") as progress:
         sweep(args.scenario, args.vary, args.trials, args.seed, args.out,
@@ -1116,7 +923,7 @@ def _cmd_sweep(args):
               effects=_effects(args), fmus=args.fmus,
               workers=args.workers, scheduler=args.scheduler, resume=args.resume,
               progress=progress, echo=lambda line: print(line, file=sys.stderr),
-              **SCENARIO_ARGUMENTS[args.scenario](args))
+              **args.run_scenario.arguments(args))
     summary = json.loads((Path(args.out) / "summary.json").read_text())
     _emit(args, summary, summary_lines(summary) + f"\nfiles: {args.out}/trials.parquet, "
                                                   "summary.json, summary.txt, report.html")
@@ -1132,13 +939,6 @@ def _add_model_options(sub, model_help="starting model (TOML); without it the mo
 def _add_correction_option(sub):
     sub.add_argument(CORRECTION_OPTION, dest="correct_to_20C", metavar="T", nargs="?",
                      const=MATERIAL, type=temperature_option, help=CORRECTION_HELP)
-
-
-def _add_motion_options(sub):
-    sub.add_argument("--feed-mm-min", type=float, default=3000.0,
-                     help="feed of the moves between targets (default 3000 mm/min)")
-    sub.add_argument("--dwell-s", type=float, default=0.5,
-                     help="dwell at each target before the sample (default 0.5 s)")
 
 
 def _add_axis_options(sub, thermal_step=True):
@@ -1165,8 +965,9 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(f"{message} (see {self.prog} --help)")
 
 
-def build_parser():
-    """The argparse parser with every subcommand."""
+def build_parser(command=None):
+    """The argparse parser with every subcommand; with ``command`` only that one's options
+    are added (``simulate`` and ``sweep`` load the kinds' scenarios for theirs)."""
     parser = _Parser(
         prog="feedaxis",
         description="Digital twin of a ball-screw feed axis. Compare a model with "
@@ -1181,7 +982,7 @@ def build_parser():
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, parser_kwargs, options, handler in COMMANDS:
         sub = commands.add_parser(name, **parser_kwargs)
-        if options:
+        if options and command in (None, name):
             options(sub)
         _add_common_options(sub)
         if handler:
@@ -1230,6 +1031,13 @@ def _outputs(args):
             if getattr(args, dest, None)}
 
 
+def _effects_files(argv):
+    """The files of every ``--effects`` in ``argv``, loaded before the parser is built: an
+    effects file may register a kind, whose scenarios are subcommands of simulate and sweep."""
+    return ([value for option, value in zip(argv, argv[1:]) if option == "--effects"]
+            + [item.partition("=")[2] for item in argv if item.startswith("--effects=")])
+
+
 def _wants_json(args):
     return getattr(args, "json", False)
 
@@ -1259,7 +1067,8 @@ def main(argv=None):
     try:
         from threadpoolctl import threadpool_limits
 
-        args = build_parser().parse_args(argv)
+        available_effects(_effects_files(argv))  # a file's kinds bring their scenarios
+        args = build_parser(argv[0] if argv else None).parse_args(argv)
         refuse_overwriting_inputs(_outputs(args), _inputs(args))
         FOLLOW_LINKS.set(getattr(args, "follow_links", False))
         with _one_line_warnings():

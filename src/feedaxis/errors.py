@@ -277,6 +277,16 @@ def finite_float(text):
     return value
 
 
+def number_list(text, option):
+    """The comma-separated numbers of option ``option`` (``10,100,190``) as floats."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError("expected comma-separated numbers, e.g. 10,100,190",
+                         parameter=f"{option} {text}") from None
+    return values
+
+
 def toml_key_line(text, key, table=None):
     """1-based line of ``key = ...`` (inside ``[table]`` when given), or of ``[key]``."""
     current = None

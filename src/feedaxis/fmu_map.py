@@ -2,10 +2,10 @@
 
 Used in both directions: model -> FMU (:func:`neutral_fmu_parameters`, under which
 ``Model.fmu_parameters`` lays each effect's own values) and FMU -> axis.toml
-(``feedaxis.cosim.scenarios.axis_values``, which writes the axis of a simulated test), and
+(``feedaxis.cosim.scenarios.base.axis_values``, which writes the axis of a simulated test), and
 by the tracking loop for ``[servo]`` (:func:`servo_to_fmu`). It imports nothing from
-feedaxis, so every package can use it. ``tests/test_catalog_contract.py`` checks every name
-here and every name an effect writes against the built FMUs.
+feedaxis, so every package can use it. ``tests/measurement/test_catalog_contract.py``
+checks every name here and every name an effect writes against the built FMUs.
 """
 from __future__ import annotations
 

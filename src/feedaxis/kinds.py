@@ -60,8 +60,22 @@ def kind(name):
     return known[name]
 
 
+def scenarios():
+    """{name: Scenario} of every registered kind's simulated scenarios (its ``scenarios``
+    part, a sequence of :class:`feedaxis.cosim.scenarios.base.Scenario`), in the kinds'
+    order; a kind without one adds none. Two kinds naming one scenario are refused."""
+    found = {}
+    for cls in kinds().values():
+        for scenario in part(cls, "scenarios") or ():
+            if scenario.name in found:
+                raise TypeError(f"scenario {scenario.name!r} of kind {cls.kind!r} is "
+                                "declared by another kind already")
+            found[scenario.name] = scenario
+    return found
+
+
 def part(cls, name):
-    """The part ``name`` of kind ``cls`` (``details``, ``views``, ``text``...): its callable,
+    """The part ``name`` of kind ``cls`` (``details``, ``views``, ``text``, ``scenarios``): its value,
     loaded from ``"module:attribute"`` on first use; None when the kind has none."""
     value = getattr(cls, name, None)
     if isinstance(value, str):

@@ -6,19 +6,21 @@ sample is the distance of the table point (both axes' ``table_position_mm``, squ
 included) from the pivot less the nominal radius, exactly (not linearised), and its angle
 is the commanded angle at that instant, as a ballbar assigns angles from the programmed
 feed. Samples are taken every ``360 / samples_per_turn`` degrees of the measured turn
-(rounded to the macro step).
+(rounded to the macro step). :data:`SCENARIOS` declares the test to the circular kind
+(``Circular.scenarios``): ``feedaxis simulate circular`` with its command-line options.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..case import write_case
+from ..errors import InputError, number_list
 from ..fmu_map import AXIS_KEYS
 from ..iso230_4 import circular_figures
-from .machine import CircleInterpolator, component_name
+from .machine import CircleInterpolator, circular_machine, component_name
 from .master import SimulationInterrupted
 from .physics_check import start_value
-from .scenarios import ScenarioInterrupted, ScenarioRun, Series, axis_table
+from .scenarios.base import (Scenario, ScenarioInterrupted, ScenarioRun, Series, axis_table,
+                             write_run)
 
 DIRECTIONS = {"both": (1, -1), "ccw": (1,), "cw": (-1,)}
 
@@ -76,8 +78,9 @@ def run_circular(master, radius_mm=100.0, feed_mm_min=1000.0, center_mm=(0.0, 0.
                **{k: v for k, v in figures.items() if v is not None}}
     circular = {"axes": axes, "radius_mm": float(radius_mm), "feed_mm_min": float(feed_mm_min),
                 "center_mm": [float(c) for c in center_mm]}
+    stopped = "" if completed else f"interrupted: {summary['samples']} samples written to"
     return ScenarioRun(name, {"parameters": parameters or {}, "circular": circular},
-                       {"circular": columns}, figures, series, summary, completed)
+                       {"circular": columns}, figures, series, summary, stopped)
 
 
 def _stop_s(path, macro_step_s):
@@ -135,15 +138,76 @@ def machine_axis_values(master, run):
     return {"name": run.name, "circular": run.parameters["circular"], "axes": axes}
 
 
+def write_circular(out, master, run, noise=None):
+    """Write the circular test ``run`` as the case folder ``out`` (axis.toml with
+    ``[circular]`` and ``[axes.NAME]``, circular.csv); return its summary."""
+    return write_run(out, master, run, noise, machine_axis_values(master, run))
+
+
 def simulate_circular(out, master, noise=None, **options):
     """Simulate a circular test (:func:`run_circular`, ``options``) and write it as the case
-    folder ``out`` (axis.toml with ``[circular]`` and ``[axes.NAME]``, circular.csv)."""
-    run = run_circular(master, **options)
-    tables = noise.measured(run.tables) if noise else run.tables
-    write_case(out, machine_axis_values(master, run), **tables)
-    summary = {"case": str(out), **run.summary}
-    if noise:
-        summary["noise"] = {"sigma_um": noise.sigma_um, "seed": noise.seed}
-    if not run.completed:
-        raise ScenarioInterrupted(f"interrupted: {summary['samples']} samples written to {out}")
-    return summary
+    folder ``out`` (:func:`write_circular`)."""
+    return write_circular(out, master, run_circular(master, **options), noise)
+
+
+def _options(sub):
+    sub.add_argument("--machine", metavar="AXIS",
+                     help="axis.toml (or case folder) of a circular case: its axes, circle and "
+                          "each axis's screw, motor and servo (default: axes X and Y with the "
+                          "FMUs' defaults)")
+    sub.add_argument("--radius-mm", type=float, help="nominal radius (default 100, or the "
+                                                     "--machine's)")
+    sub.add_argument("--feed-mm-min", type=float, help="programmed feed (default 1000, or the "
+                                                       "--machine's)")
+    sub.add_argument("--center-mm", metavar="C1,C2", help="centre in machine coordinates "
+                                                          "(default R,R, or the --machine's)")
+    sub.add_argument("--directions", choices=("both", "ccw", "cw"), default="both",
+                     help="counter-clockwise then clockwise (default both)")
+    sub.add_argument("--samples-per-turn", type=int, default=3600,
+                     help="samples over the measured turn of each direction (default 3600)")
+    sub.add_argument("--lead-in-deg", type=float, default=45.0,
+                     help="arc travelled before the measured turn (default 45)")
+    sub.add_argument("--squareness-urad", type=float, default=0.0,
+                     help="out-of-squareness of the second axis towards the first, µrad "
+                          "(default 0)")
+
+
+def _machine(args):
+    """(the machine system, the circle's keywords) of the command line's options."""
+    if args.model:
+        raise InputError("a fitted circular model is not taken here yet; give its values with "
+                         "--set", parameter="--model")
+    return circular_machine(
+        args.machine, args.radius_mm, args.feed_mm_min,
+        number_list(args.center_mm, "--center-mm") if args.center_mm else None,
+        args.squareness_urad, args.step_ms, args.thermal_step_s, args.set)
+
+
+def _arguments(args):
+    circle = _machine(args)[1]
+    if args.samples_per_turn < 3:
+        raise InputError(f"must be at least 3, got {args.samples_per_turn}",
+                         parameter="--samples-per-turn")
+    return {**circle, "directions": DIRECTIONS[args.directions],
+            "samples_per_turn": args.samples_per_turn, "lead_in_deg": args.lead_in_deg}
+
+
+def _line(args, summary):
+    figures = ", ".join(f"{k[:-3]} {v:.3f}" for k, v in summary.items()
+                        if k in ("G_um", "H_um", "F_max_um", "F_min_um"))
+    return (f"{args.out}: {summary['samples']} samples ({', '.join(summary['directions'])}); "
+            f"ISO 230-4 (µm): {figures}")
+
+
+SCENARIOS = (
+    Scenario("circular", run_circular, _options, _arguments, _line,
+             help="circular test of two axes (ISO 230-4, ballbar) -> circular.csv",
+             description="Two co-simulated axes (each NpidServo, GeometricError, StepperError, "
+                         "ThermalScrew, components named X_NpidServo, ...) and their "
+                         "squareness; an interpolator commands the circle at the feed, from "
+                         "standing through a lead-in arc, one measured turn and a lead-out "
+                         "arc, in each direction; the case records the radial deviation from "
+                         "the nominal centre as a ballbar does (axis.toml with [circular] and "
+                         "[axes.NAME], circular.csv).",
+             system=lambda args: _machine(args)[0], write=write_circular, sweeps=False),
+)

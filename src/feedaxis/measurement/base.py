@@ -55,9 +55,11 @@ class Measurement(ABC):
     (:data:`CAPABILITIES`): a kind overriding a hook of a capability it does not name, or
     naming one whose hooks it does not define, is refused when registered
     (:func:`feedaxis.kinds.register`), so no kind inherits another's behaviour by accident.
-    Its parts above the fit (``details``, ``views``, ``text``, ``scenario``, ``standards``:
-    the figures of a standard named by ``--standard``) are given as callables or
-    ``"module:name"`` (:func:`feedaxis.kinds.part`).
+    Its parts above the fit (``details``, ``views``, ``text``, ``scenarios``,
+    ``standards``: the figures of a standard named by ``--standard``) are given as
+    callables or values or ``"module:name"`` (:func:`feedaxis.kinds.part`); ``scenarios``
+    is a sequence of :class:`feedaxis.cosim.scenarios.base.Scenario` (``feedaxis simulate``
+    and ``sweep``), none for a kind with no simulated test.
 
     ``kind`` is the name effects give in ``Effect.measurement``; ``location_key`` is the
     JSON key placing a structure (``wavelength_mm``, ``frequency_hz``) and
@@ -81,6 +83,7 @@ class Measurement(ABC):
     details = None
     views = None
     text = None
+    scenarios = None
     standards = None
 
     def __init__(self, case):

@@ -62,6 +62,7 @@ class Circular(Measurement):
     axis_tables = ("circular", "axes")
     text = "feedaxis.measurement.circular:comparison_lines"
     views = "feedaxis.report.circular:VIEWS"
+    scenarios = "feedaxis.cosim.circular:SCENARIOS"
     case_effects = "feedaxis.effects.circular:case_effects"
     comp_table = "feedaxis.comptable.circle:circle_comp_table"
 

@@ -142,6 +142,7 @@ class Positioning(Measurement):
     measured_column = ("error_um", 1.0)
     details = "feedaxis.positioning_details:positioning_details"
     views = "feedaxis.report.positioning:VIEWS"
+    scenarios = "feedaxis.cosim.scenarios.positioning:SCENARIOS"
     text = staticmethod(iso_comparison_lines)
     standards = "feedaxis.standards.compare:standard_figures"
 

@@ -245,6 +245,7 @@ class Tracking(Measurement):
     measured_column = ("actual_mm", 1e-3)
     details = "feedaxis.tracking_details:tracking_details"
     views = "feedaxis.report.tracking:VIEWS"
+    scenarios = "feedaxis.cosim.scenarios.tracking:SCENARIOS"
     text = staticmethod(tracking_comparison_lines)
     location_key = "frequency_hz"
     location_unit = "Hz"

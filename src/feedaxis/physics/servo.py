@@ -158,7 +158,7 @@ def expm(matrix):
     to compute the exponential of a matrix, twenty-five years later", SIAM Review 45 (2003),
     methods 1 and 3). The servo needs one 3x3 exponential per loop discretisation; this
     keeps scipy.linalg (0.2 s to import) off the FMU's initialisation. Agrees with
-    scipy.linalg.expm to rounding (tests/test_physics.py).
+    scipy.linalg.expm to rounding (tests/physics/test_physics.py).
     """
     matrix = np.asarray(matrix, dtype=float)
     norm = np.abs(matrix).sum(axis=0).max()

@@ -91,7 +91,7 @@ def _sensitivity_rows(summary):
 
 
 def write_sweep_report(summary, table, out_path):
-    """Write the page of a sweep (its :func:`~feedaxis.cosim.sweep_summary.summarise` and
+    """Write the page of a sweep (its :func:`~feedaxis.cosim.sweep.summary.summarise` and
     trial table) to ``out_path``; returns the path."""
     error = table.column("error").to_pylist()
     ok = np.array([e is None for e in error], dtype=bool)

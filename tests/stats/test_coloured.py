@@ -1,0 +1,42 @@
+"""stats/coloured.py on series of known structure: the coefficient and innovation variance
+of a seeded AR(1) process, its integrated autocorrelation time (1 + ρ)/(1 - ρ), and the
+Ljung-Box test's false-alarm rate on white noise."""
+import numpy as np
+import pytest
+
+from feedaxis.stats.coloured import (autocorrelation_time, least_squares_autoregression,
+                                     ljung_box_p_value)
+
+
+def ar1(rho, n, seed):
+    """x_k = ρ x_{k-1} + w_k, w ~ N(0, 1), started from its stationary distribution."""
+    w = np.random.default_rng(seed).normal(size=n)
+    x = np.empty(n)
+    x[0] = w[0] / np.sqrt(1.0 - rho ** 2)
+    for k in range(1, n):
+        x[k] = rho * x[k - 1] + w[k]
+    return x
+
+
+@pytest.mark.parametrize("rho", [0.5, 0.9])
+def test_least_squares_recovers_the_ar1_coefficient_and_innovation_variance(rho):
+    x = ar1(rho, 20_000, seed=1)
+    model = least_squares_autoregression(x, max_order=3)
+    standard_error = np.sqrt((1.0 - rho ** 2) / x.size)
+    assert model.coefficients[0] == pytest.approx(rho, abs=4 * standard_error)
+    assert model.innovation_variance == pytest.approx(1.0, rel=0.05)
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.5, 0.8])
+def test_the_autocorrelation_time_of_ar1_is_one_plus_rho_over_one_minus_rho(rho):
+    tau = np.mean([autocorrelation_time(ar1(rho, 20_000, seed)) for seed in range(4)])
+    assert tau == pytest.approx((1.0 + rho) / (1.0 - rho), rel=0.1)
+
+
+def test_ljung_box_on_white_noise_alarms_at_its_level():
+    """400 white series: the share of p < 0.05 lies in the 99.9 % binomial band of 0.05."""
+    rng = np.random.default_rng(7)
+    p_values = np.array([ljung_box_p_value(rng.normal(size=300), lags=10)
+                         for _ in range(400)])
+    band = 3.29 * np.sqrt(0.05 * 0.95 / p_values.size)
+    assert abs(np.mean(p_values < 0.05) - 0.05) <= band
