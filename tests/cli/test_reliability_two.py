@@ -264,7 +264,7 @@ def test_sigterm_and_sighup_stop_a_fit_as_ctrl_c_does(tmp_path, signum):
                             "assembly_eccentricity", "--out", str(tmp_path / "m.toml")],
                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True)
-    time.sleep(1.5)  # within the start-up imports or the fit
+    time.sleep(0.5)  # after the handler (0.05 s), within the imports or the fit (1.3 s idle)
     fit.send_signal(signum)
     _, err = fit.communicate(timeout=300)
     name = signal.Signals(signum).name
