@@ -48,8 +48,12 @@ SETTLING_S = 1.0  # Anang et al. 2017 measures the tracking error after the firs
 # nuisance parameters) was tried: on a single-sine reference the fit then moved the plant to
 # a lightly damped one whose free ringing imitated a persistent 62.5 Hz force.
 START_WINDOW_S = 0.2
-REVERSAL_WINDOW_S = 0.2
-REVERSAL_BINS = 8
+REVERSAL_WINDOW_S = 0.2  # after a reversal or near-stop of the reference: where a spike of
+# friction at rest is looked for (the axis reverses later, by the loop's lag)
+REVERSAL_LEAD_S = 0.05  # and before it: the speed falls into the friction's rise at rest first
+REVERSAL_SHARE = 0.8  # of force steps near the reversals: the spikes there, not steps of a load
+NEAR_STOP_SHARE = 0.02  # of the largest reference speed: a near-stop, where friction at rest
+# acts as at a reversal
 UNIFORM_SAMPLING_TOLERANCE = 0.01
 WHOLE_RECORD_SHARE = 0.75  # of the periodic test's level: the record's periodogram, the rest
 # the short-time periodogram's
@@ -560,6 +564,30 @@ class Tracking(Measurement):
         velocity = np.gradient(self.reference_mm, self.time_s)
         return self.time_s[1:][np.diff(np.sign(velocity)) != 0]
 
+    def stops_s(self):
+        """Times (s) at which the reference velocity changes sign or falls to a near-stop (a
+        local minimum of its magnitude under ``NEAR_STOP_SHARE`` of its largest, more than
+        two samples from a reversal): where friction at rest acts."""
+        velocity = np.abs(np.gradient(self.reference_mm, self.time_s))
+        inner = np.flatnonzero((velocity[1:-1] <= velocity[:-2])
+                               & (velocity[1:-1] < velocity[2:])) + 1
+        slow = self.time_s[inner[velocity[inner] < NEAR_STOP_SHARE * np.max(velocity)]]
+        reversals = self.reversals_s()
+        step_s = float(np.median(np.diff(self.time_s))) if self.time_s.size > 1 else 0.0
+        if reversals.size:
+            gap = np.min(np.abs(slow[:, None] - reversals[None, :]), axis=1)
+            slow = slow[gap > 2.0 * step_s]
+        return np.sort(np.concatenate((reversals, slow)))
+
+    def near_stop(self, time_s):
+        """Mask of the times (s) from ``REVERSAL_LEAD_S`` before to ``REVERSAL_WINDOW_S``
+        after a reversal or near-stop of the reference (:meth:`stops_s`)."""
+        stops = self.stops_s()
+        if not stops.size:
+            return np.zeros(np.shape(time_s), dtype=bool)
+        since = time_s[:, None] - stops[None, :]
+        return np.any((since >= -REVERSAL_LEAD_S) & (since <= REVERSAL_WINDOW_S), axis=1)
+
     def uniform_step_s(self):
         """The sampling step (s) when the record is evenly sampled over the samples compared
         (outliers left out are gaps of it), else None."""
@@ -649,10 +677,13 @@ class ForceSteps(Shape):
                                         jacobian, current.statistics.n_free)
         if not chosen:
             return None
+        times_s = measurement.record_time_s[np.array(chosen)]
+        if (self.kind == "force_steps"
+                and np.mean(measurement.near_stop(times_s)) >= REVERSAL_SHARE):
+            return None  # steps at the reversals: the spikes there (:class:`Reversal`)
         basis = self._basis(measurement, model, chosen)
         if _rivals(measurement, current, basis):
             return None
-        times_s = measurement.record_time_s[np.array(chosen)]
         return Trial(basis, None, test, {"event_times_s": [float(t) for t in times_s]})
 
     @staticmethod
@@ -707,16 +738,6 @@ class ForceSteps(Shape):
         trial.extra["event_sizes_N"] = [float(size) for size in sizes_N]
         period = _period_s(times_s)
         trial.extra["period_s"] = period
-        spikes = _reversal_spikes(measurement, times_s, fitted_um)
-        if spikes is not None:
-            trial.extra.update(spikes)
-            decay = (f"decaying to 1/e within {1e3 * spikes['decay_s']:.3g} ms"
-                     if spikes["decay_s"] is not None else "not decaying within 0.2 s")
-            return (f"a spike at the velocity reversals (a quadrant glitch): "
-                    f"{spikes['height_um']:.3g} µm high (median over the "
-                    f"{spikes['reversals']} reversals), {decay}; the loop's response to "
-                    f"{times_s.size} force steps there: friction that rises at rest above its "
-                    "Coulomb level (stribeck_friction), stick-slip, or backlash")
         listed = ", ".join(f"{t:.4g} s ({size:+.3g} N)"
                            for t, size in zip(times_s[:12], sizes_N[:12]))
         more = f" and {times_s.size - 12} more" if times_s.size > 12 else ""
@@ -725,41 +746,6 @@ class ForceSteps(Shape):
                 f"on the axis changes at {listed}{more} (median size "
                 f"{np.median(np.abs(sizes_N)):.3g} N), the loop's step response after each "
                 "(a cut starting or ending, a load put down)")
-
-
-REVERSAL_SHARE = 0.8  # of the steps in the REVERSAL_WINDOW_S after a reversal: reversal spikes
-
-
-def _reversal_spikes(measurement, times_s, fitted_um):
-    """{reversals, height_um, decay_s} when at least ``REVERSAL_SHARE`` of the steps sit in
-    the ``REVERSAL_WINDOW_S`` after a reversal of the reference (the axis reverses later, by
-    the loop's lag; a spike at the reversals, not steps of a load), else None: the height the median over the reversals of the largest fitted
-    deviation in the ``REVERSAL_WINDOW_S`` after each, the decay the median time from that
-    peak until the deviation falls below 1/e of it (None where it does not)."""
-    reversals = measurement.reversals_s()
-    if reversals.size == 0 or times_s.size == 0:
-        return None
-    since = times_s[:, None] - reversals[None, :]
-    near = np.any((since >= 0.0) & (since <= REVERSAL_WINDOW_S), axis=1)
-    if near.mean() < REVERSAL_SHARE:
-        return None
-    heights, decays = [], []
-    for reversal in reversals:
-        inside = np.flatnonzero((measurement.time_s >= reversal)
-                                & (measurement.time_s < reversal + REVERSAL_WINDOW_S))
-        if inside.size < 2:
-            continue
-        values = np.abs(fitted_um[inside])
-        peak = int(np.argmax(values))
-        heights.append(values[peak])
-        below = np.flatnonzero(values[peak:] < values[peak] / np.e)
-        decays.append(measurement.time_s[inside[peak + below[0]]] - measurement.time_s[
-            inside[peak]] if below.size else np.nan)
-    if not heights:
-        return None
-    decay = float(np.nanmedian(decays)) if np.isfinite(decays).any() else None
-    return {"reversals": int(reversals.size), "height_um": float(np.median(heights)),
-            "decay_s": decay}
 
 
 def _bic(residual_um, basis, parameters):
@@ -773,20 +759,17 @@ def _rivals(measurement, current, steps):
     """Whether another shape describes the residual of ``current`` at least as well as the
     force ``steps`` by the Bayesian information criterion (each step a time and a size):
     the strongest sinusoid (:class:`PeriodicForce`: amplitude, phase, frequency and a
-    window's two edges; a burst at 50 Hz is a periodic force, not a hundred steps), or the
-    profile locked to the velocity reversals (:class:`Reversal`: a spike at each reversal
-    is a reversal spike, not steps that happen to sit there)."""
+    window's two edges; a burst at 50 Hz is a periodic force, not a hundred steps)."""
     residual = current.residual_um
     steps_bic = _bic(residual, steps, ForceSteps.extra * steps.shape[1])
-    for shape in (PeriodicForce(), Reversal()):
-        if not shape.trials(measurement):
-            continue
-        trial = shape.trial(measurement, current)
-        parameters = (3 + (2 if trial.extra["localised"] else 0)
-                      if isinstance(shape, PeriodicForce) else shape.extra)
-        if _bic(residual, trial.basis, parameters) <= steps_bic:
-            return True
-    return False
+    shape = PeriodicForce()
+    if not shape.trials(measurement):
+        return False
+    trial = shape.trial(measurement, current)
+    if trial is None:
+        return False
+    parameters = 3 + (2 if trial.extra["localised"] else 0)
+    return _bic(residual, trial.basis, parameters) <= steps_bic
 
 
 def _step_column(response, sample, rows):
@@ -951,6 +934,8 @@ class PeriodicForce(Shape):
             if test.p_value < FAMILY_ALPHA:  # only a sinusoid that may pass is refined
                 first, last = measurement.fit_window(current.model, current.residual_um,
                                                      frequency_hz, first, last)
+            if np.all(measurement.near_stop(record_s[first:last + 1])):
+                return None  # the ringing of a spike at the reversals: :class:`Reversal`'s
             start_s, end_s = float(record_s[first]), float(record_s[last])
             on = np.zeros(record_s.size)
             on[first:last + 1] = 1.0
@@ -1005,51 +990,90 @@ class ConstantForce(Shape):
 
 
 class Reversal(Shape):
-    """Error locked to the reversals of another shape than the friction effects give: a
-    free profile over ``REVERSAL_WINDOW_S`` after each reversal, in ``REVERSAL_BINS`` bins."""
+    """Spikes at the velocity reversals (quadrant glitches) that the model does not carry: a
+    Stribeck rise where the catalog's law does not match it, friction breaking away over
+    time, stick-slip, backlash. The samples from ``REVERSAL_LEAD_S`` before to
+    ``REVERSAL_WINDOW_S`` after each reversal or near-stop of the reference
+    (:meth:`Tracking.stops_s`) are tested against the rest: the residual whitened by its
+    noise's autoregressive filter (as :class:`ForceSteps`), the ratio of its mean square
+    there to elsewhere an F statistic under white noise. What is described is the residual
+    in those windows itself (a spike's shape after a reversal is the loop's nonlinear
+    response to sticking, which no linear force term fits), and the search ends with it:
+    those windows hold about half of a record that reverses often, and a residual with them
+    taken out is no longer one the spectral tests can judge.
+    """
 
     kind = "reversal"
-    extra = REVERSAL_BINS
+    last = True  # the structure search ends with it
 
     def trials(self, measurement):
-        return 1 if measurement.reversals_s().size else 0
+        return 1 if measurement.uniform_step_s() and measurement.stops_s().size else 0
 
     def trial(self, measurement, current):
-        time_s = measurement.time_s
-        direction = np.sign(np.gradient(measurement.reference_mm, time_s))
-        turns = np.flatnonzero(np.diff(direction) != 0) + 1
-        basis = np.zeros((time_s.size, REVERSAL_BINS))
-        width = REVERSAL_WINDOW_S / REVERSAL_BINS
-        # each window's last sample or one past it: ``since < window`` below decides
-        ends = np.searchsorted(time_s, time_s[turns] + REVERSAL_WINDOW_S, side="right") + 1
-        for turn, end in zip(turns, ends):
-            since = time_s[turn:end] - time_s[turn]
-            inside = since < REVERSAL_WINDOW_S
-            rows = turn + np.flatnonzero(inside)
-            basis[rows, (since[inside] / width).astype(int)] += direction[turn]
-        return Trial(basis)
+        from scipy import stats
+
+        time_s, residual = measurement.gridded(current.residual_um)
+        noise = autoregression(residual, robust=True).cautious()
+        whitened = _ar_filter(noise.coefficients)(residual - np.mean(residual))[noise.order:]
+        near = measurement.near_stop(time_s)
+        inside, outside = near[noise.order:], ~near[noise.order:]
+        if inside.sum() < 2 or outside.sum() < 2:
+            return None
+        statistic = float(np.mean(whitened[inside] ** 2) / max(np.mean(whitened[outside] ** 2),
+                                                               1e-300))
+        dof = (int(inside.sum()), int(outside.sum()))
+        test = Test(statistic, dof, float(stats.f.sf(statistic, *dof)),
+                    "F test of the residual's mean square near the reversals against elsewhere, "
+                    f"whitened by its noise's autoregressive filter (order {noise.order})", "F")
+        near = measurement.near_stop(measurement.time_s)
+        return Trial(np.where(near, current.residual_um, 0.0)[:, None], None, test)
 
     def amplitude_um(self, measurement, fitted_um, location):
         return _max_abs(fitted_um)
 
     def describe(self, measurement, trial, fitted_um):
-        """The spike at each reversal with its height (the largest bin of the profile) and
-        its decay (the end of the first bin after the peak below 1/e of it), in the JSON as
-        ``height_um`` and ``decay_s``."""
-        profile = _regress(fitted_um, trial.basis)[0]
-        peak = int(np.argmax(np.abs(profile)))
-        width = REVERSAL_WINDOW_S / REVERSAL_BINS
-        below = np.flatnonzero(np.abs(profile[peak:]) < np.abs(profile[peak]) / np.e)
-        decay_s = float((peak + below[0]) * width) if below.size else None
-        trial.extra = {**(trial.extra or {}), "height_um": float(profile[peak]),
-                       "decay_s": decay_s}
-        decay = (f"decaying to 1/e within {1e3 * decay_s:.0f} ms" if decay_s is not None else
-                 f"not decayed to 1/e within {1e3 * REVERSAL_WINDOW_S:.0f} ms")
-        return (f"a spike at each of the {measurement.reversals_s().size} velocity reversals "
-                f"(a quadrant glitch): {abs(profile[peak]):.3g} µm high "
-                f"{1e3 * peak * width:.0f}-{1e3 * (peak + 1) * width:.0f} ms after the "
-                f"reversal, {decay}: a friction law other than Coulomb plus viscous (a rise at "
-                "rest, stick-slip), or backlash")
+        """``height_um`` (the largest departure near a reversal), ``median_height_um`` (its
+        median over the reversals), ``decay_s`` (the median time from each peak to 1/e of
+        it) and ``reversal_times_s``."""
+        stops = measurement.stops_s()
+        spike = _spike_size(measurement, stops, fitted_um) or {
+            "height_um": None, "median_height_um": None, "decay_s": None}
+        trial.extra = {"reversal_times_s": [float(t) for t in stops], **spike}
+        height = ("" if spike["height_um"] is None else
+                  f": up to {spike['height_um']:.3g} µm (median {spike['median_height_um']:.3g} "
+                  f"µm over the {stops.size} reversals and near-stops)")
+        decay = ("" if spike["decay_s"] is None else
+                 f", falling to 1/e of its peak within {1e3 * spike['decay_s']:.3g} ms")
+        return (f"a spike in the tracking error at the velocity reversals (a quadrant glitch)"
+                f"{height}{decay}: friction at rest the model does not carry (a Stribeck rise "
+                "of another shape, friction breaking away over time, stick-slip), or backlash")
+
+
+def _spike_size(measurement, stops_s, fitted_um):
+    """{height_um, median_height_um, decay_s} of ``fitted_um`` (at the samples compared)
+    near the reversals or near-stops at ``stops_s``: the largest departure in any window
+    (:meth:`Tracking.near_stop`), the median over the windows of the largest in each, the
+    median over the windows whose peak reaches half the largest of the time from that peak
+    until the departure falls below 1/e of it (None where it never does); None without a
+    window of two samples."""
+    heights, decays = [], []
+    for stop in stops_s:
+        inside = np.flatnonzero((measurement.time_s >= stop - REVERSAL_LEAD_S)
+                                & (measurement.time_s < stop + REVERSAL_WINDOW_S))
+        if inside.size < 2:
+            continue
+        values = np.abs(fitted_um[inside])
+        peak = int(np.argmax(values))
+        heights.append(values[peak])
+        below = np.flatnonzero(values[peak:] < values[peak] / np.e)
+        decays.append(measurement.time_s[inside[peak + below[0]]] - measurement.time_s[
+            inside[peak]] if below.size else np.nan)
+    if not heights:
+        return None
+    decays = np.array(decays)[np.array(heights) >= 0.5 * max(heights)]
+    decay = float(np.nanmedian(decays)) if np.isfinite(decays).any() else None
+    return {"height_um": float(np.max(heights)), "median_height_um": float(np.median(heights)),
+            "decay_s": decay}
 
 
 class TimeDrift(Shape):
