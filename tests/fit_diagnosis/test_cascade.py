@@ -194,11 +194,20 @@ def test_a_hidden_constant_force_is_named_with_its_size(tmp_path, cascade, contr
     _assert_within(found, "constant_force", {"force_N": -3.0})
 
 
-def test_a_constant_force_under_an_integral_action_without_control_v_is_not_invented(tmp_path):
+def test_a_constant_force_under_an_integral_action_without_control_v_is_undetermined(
+        tmp_path, capsys):
     """P-PI without the controller output: the integral holds the force, the tracking error
-    shows nothing lasting, and nothing is named."""
-    _, found = _diagnosed(tmp_path, "P-PI", False, force_N=lambda t: -3.0)
-    assert found.verdict == "adequate"
+    shows nothing lasting; nothing is named, and constant_force is passed over as
+    undetermined with the reason (the integral action, control_V to record), in the text
+    too. A P-P loop holds it as a steady error: not passed over there."""
+    case, found = _diagnosed(tmp_path, "P-PI", False, force_N=lambda t: -3.0)
+    assert found.verdict == "adequate" and not found.candidates
+    reason = found.skipped["constant_force"]
+    assert reason.startswith("undetermined") and "integral" in reason and "control_V" in reason
+    assert main(["diagnose", str(case.folder)]) == 0
+    assert "integral action holds a constant force" in capsys.readouterr().out
+    _, found = _diagnosed(tmp_path / "p", "P-P", False)
+    assert "constant_force" not in found.skipped
 
 
 def test_a_1_hz_train_of_force_steps_is_reported_as_events_with_their_times(tmp_path):

@@ -55,6 +55,7 @@ REVERSAL_SHARE = 0.8  # of force steps near the reversals: the spikes there, not
 NEAR_STOP_SHARE = 0.02  # of the largest reference speed: a near-stop, where friction at rest
 # acts as at a reversal
 UNIFORM_SAMPLING_TOLERANCE = 0.01
+HELD_SHARE = 0.01  # of a force's first response left after the start-up: the loop holds it
 WHOLE_RECORD_SHARE = 0.75  # of the periodic test's level: the record's periodogram, the rest
 # the short-time periodogram's
 ROUNDING_UM = 1e-3  # the diagnosis's resolution (diagnose.RESOLUTION_UM): below it, rounding
@@ -245,7 +246,7 @@ class Tracking(Measurement):
 
     kind = "tracking"
     file = TRACKING_FILE
-    capabilities = ("outliers", "nuisances", "shapes", "core", "correlated")
+    capabilities = ("outliers", "nuisances", "shapes", "core", "correlated", "resolution")
     measured_column = ("actual_mm", 1e-3)
     details = "feedaxis.tracking_details:tracking_details"
     views = "feedaxis.report.tracking:VIEWS"
@@ -316,6 +317,37 @@ class Tracking(Measurement):
 
     def subset(self, keep):
         return Tracking(self.case, self.index[keep])
+
+    def unresolvable(self, effect):
+        """A constant force the controller's integral action holds (``held_force``), where
+        no controller output is recorded: the position trace cannot show it."""
+        if effect.name == "constant_force" and self.case.tracking.control_V is None:
+            return self.held_force()
+        return None
+
+    def held_force(self):
+        """Why a constant force is hidden from the position trace, or None: the starting
+        loop's response to 1 N acting from the first sample, over the samples compared, under
+        ``HELD_SHARE`` of its largest over the whole record (the integral action has taken
+        it over within the start-up), so only the recorded controller output shows it."""
+        if not self.start.plant and self.start.problem:
+            return None
+        params = ServoParams(**{**servo_to_fmu(self.case.axis.servo), **self.start.plant})
+        ones = np.ones(self.record_time_s.size)
+        known = np.zeros_like(ones) if self.disturbance_N is None else self.disturbance_N
+        with np.errstate(all="ignore"):
+            moved_um = (simulate(params, self.record_time_s, self.record_reference_mm,
+                                 known + ones, self.counts)
+                        - simulate(params, self.record_time_s, self.record_reference_mm, known,
+                                   self.counts)) * 1e3
+        largest = float(np.max(np.abs(moved_um)))
+        lasting = float(np.max(np.abs(moved_um[self.index])))
+        if not np.isfinite(largest) or largest == 0.0 or lasting >= HELD_SHARE * largest:
+            return None
+        return (f"undetermined: the controller's integral action holds a constant force, "
+                f"leaving {lasting / largest:.1%} of its first response in the position "
+                f"trace after the first {self.start_s:.3g} s; record the controller output "
+                "(control_V) to see it")
 
     def recorded_findings(self, left, pending, stages):
         """A constant force the tracking error cannot show (an integral action holds it) but
