@@ -987,18 +987,65 @@ class PeriodicForce(Shape):
                                                                  location))[0][:2]))
 
     def describe(self, measurement, trial, fitted_um):
+        """The sinusoid, the force it answers (JSON ``force_N``) and, where the reference
+        runs at a steady speed, what turns at that frequency (:func:`_turning_at`: JSON
+        ``source``, ``rotation_hz``, ``harmonic``)."""
         amplitude_um = self.amplitude_um(measurement, fitted_um, trial.location)
         force_N = np.hypot(*_regress(fitted_um, trial.basis)[0])
+        bin_hz = 1.0 / max(trial.extra["end_s"] - trial.extra["start_s"], 1e-300)
+        named = _turning_at(measurement, trial.location, trial.extra["start_s"],
+                            trial.extra["end_s"], bin_hz)
+        trial.extra.update({**named[1], "force_N": float(force_N)})
         if trial.extra["localised"]:
             return (f"a sinusoid at {trial.location:.4g} Hz from {trial.extra['start_s']:.4g} s "
                     f"to {trial.extra['end_s']:.4g} s, {amplitude_um:.3g} µm in the residual "
                     f"(short-time periodogram {trial.test.statistic:.0f}x the noise level): the "
                     f"loop's response to a force of {force_N:.3g} N at that frequency during "
-                    "that time (e.g. a cutting force while the tool is engaged)")
+                    f"that time ({named[0] or 'e.g. a cutting force while the tool is engaged'})")
         return (f"a sinusoid at {trial.location:.4g} Hz, {amplitude_um:.3g} µm in the residual "
                 f"(whitened periodogram {trial.test.statistic:.0f}x its mean level): the loop's "
-                f"response to a force of {force_N:.3g} N at that frequency (e.g. a cutting "
-                "force at the tooth-passing frequency)")
+                f"response to a force of {force_N:.3g} N at that frequency "
+                f"({named[0] or 'e.g. a cutting force at the tooth-passing frequency'})")
+
+
+STEADY_SPEED_SPREAD = 0.05  # the reference's speed varies less (interquartile range over
+# median) while a sinusoid in time can be a rotation's
+MAX_HARMONIC = 10  # of a rotation, named as such
+
+
+def _turning_at(measurement, frequency_hz, start_s, end_s, bin_hz):
+    """(text, JSON fields) naming what turns at ``frequency_hz`` while the reference runs at
+    a steady speed v between ``start_s`` and ``end_s``: the screw, at v / lead (and its
+    harmonics up to ``MAX_HARMONIC``), or the motor's angular error, whose period is
+    ``error_period_steps`` steps of ``step_angle_deg`` (360 / (step angle × steps) per
+    revolution), where [motor] gives them; a match within ``bin_hz`` plus the speed's
+    spread. ("", {}) when the speed is not steady or nothing matches."""
+    inside = (measurement.time_s >= start_s) & (measurement.time_s <= end_s)
+    screw = measurement.case.axis.screw
+    if inside.sum() < 3 or not screw.get("lead_mm"):
+        return "", {}
+    speed_mm_s = np.abs(np.gradient(measurement.reference_mm, measurement.time_s))[inside]
+    median = float(np.median(speed_mm_s))
+    spread = float(np.subtract(*np.percentile(speed_mm_s, [75, 25]))) / max(median, 1e-300)
+    if median <= 0.0 or spread > STEADY_SPEED_SPREAD:
+        return "", {}
+    rotation_hz = median / screw["lead_mm"]
+    sources = [("screw", rotation_hz, f"the screw's rotation at {median:.4g} mm/s over its "
+                                      f"{screw['lead_mm']:g} mm lead, {rotation_hz:.4g} Hz")]
+    motor = measurement.case.axis.motor
+    if motor.get("step_angle_deg") and motor.get("error_period_steps"):
+        per_turn = 360.0 / (motor["step_angle_deg"] * motor["error_period_steps"])
+        sources.append(("motor", rotation_hz * per_turn,
+                        f"the motor's angular error, {per_turn:.4g} periods per revolution "
+                        f"at {rotation_hz:.4g} rev/s, {rotation_hz * per_turn:.4g} Hz"))
+    for source, base_hz, text in sources:
+        harmonic = int(round(frequency_hz / base_hz))
+        if 1 <= harmonic <= MAX_HARMONIC and abs(frequency_hz - harmonic * base_hz) <= (
+                bin_hz + harmonic * base_hz * spread):
+            which = "" if harmonic == 1 else f"harmonic {harmonic} of "
+            return (f"{which}{text}: a force that turns with the {source}",
+                    {"source": source, "rotation_hz": base_hz, "harmonic": harmonic})
+    return "", {}
 
 
 class ConstantForce(Shape):
