@@ -259,6 +259,44 @@ def test_a_force_turning_with_the_screw_is_named_against_lead_and_speed(tmp_path
     assert "screw's rotation" in details["evidence"]
 
 
+def _point_to_point(t):
+    """Moves of 5 mm at 50 mm/s between rests of 0.4 s."""
+    cycle, phase = divmod(t, 0.5)
+    return 5.0 * cycle + 50.0 * min(phase, 0.1)
+
+
+@pytest.mark.parametrize("reference, words", (
+    (lambda t: 10.0 * math.sin(2.0 * math.pi * 0.5 * t), "a single sine at 0.5 Hz"),
+    (_point_to_point, "a point-to-point trajectory of 5 moves"),
+    (exciting, "a record with 9 velocity reversals")), ids=("sine", "point-to-point", "reversals"))
+def test_the_texts_name_what_the_reference_is(tmp_path, reference, words):
+    """What a loosely fixed parameter's reason and the report say the reference is: a sine,
+    a point-to-point trajectory with its moves, a record with its reversals (counted on the
+    reference as built, the first move within the start-up left out as every comparison
+    leaves it)."""
+    from feedaxis.measurement import Tracking
+
+    record = cascade_loop(reference, DURATION_S, "P-P")
+    measurement = Tracking(read_case(write_cascade_case(tmp_path / "case", record, "P-P", 3)))
+    assert measurement.reference_kind() == words
+    assert words in measurement.excitation()
+
+
+def test_the_report_shows_the_residual_apart_and_names_the_reference(tmp_path):
+    """The tracking page of a fitted cascade drive: the residual (measured − model) in a
+    panel of its own under the deviation, what the reference is, no seed numbers."""
+    record = cascade_loop(exciting, DURATION_S, "P-P", friction_N=5.0)
+    folder = str(write_cascade_case(tmp_path / "case", record, "P-P", 3))
+    model = str(tmp_path / "m.toml")
+    assert main(["fit", folder, "--add", "servo_plant", "--add", "coulomb_friction",
+                 "--out", model]) == 0
+    assert main(["report", folder, "--model", model, "--out", str(tmp_path / "r.html")]) == 0
+    page = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert "The reference: a record with 9 velocity reversals." in page
+    assert "and the residual below it" in page
+    assert "seed 0" not in page.lower()
+
+
 def test_the_built_fmu_runs_a_cascade_drive_as_the_fit_simulates_it(fmu_paths):
     """NpidServo with ``controller = "cascade"`` (its compiled loop) against the physics'
     loop stepped alike in Python (fmpy sets each step's input at the step's start), with

@@ -620,6 +620,20 @@ class Tracking(Measurement):
         since = time_s[:, None] - stops[None, :]
         return np.any((since >= -REVERSAL_LEAD_S) & (since <= REVERSAL_WINDOW_S), axis=1)
 
+    def reference_kind(self):
+        """What the reference is, in words (:func:`_reference_kind`)."""
+        return _reference_kind(self.time_s, self.reference_mm)
+
+    def excitation(self):
+        """What the reference is, and why it leaves a parameter loose: a single sine (its
+        loop's gain and phase at one frequency), a point-to-point trajectory (moves between
+        rests: a dwell where the speed stays under ``NEAR_STOP_SHARE`` of its largest over a
+        tenth of the record), or a record with reversals."""
+        what = self.reference_kind()
+        if what.startswith("a single sine"):
+            return f"the reference is {what}, which fixes only the loop's gain and phase there"
+        return f"the reference ({what}) does not excite it enough"
+
     def uniform_step_s(self):
         """The sampling step (s) when the record is evenly sampled over the samples compared
         (outliers left out are gaps of it), else None."""
@@ -636,6 +650,31 @@ class Tracking(Measurement):
         out: what the spectral tests take."""
         grid = np.arange(self.index[0], self.index[-1] + 1)
         return self.record_time_s[grid], np.interp(grid, self.index, values)
+
+
+def _reference_kind(time_s, reference_mm):
+    """What ``reference_mm`` is, in words: a single sine at its frequency (one sinusoid
+    describes it to 1 % RMS), a point-to-point trajectory of its moves, or a record with its
+    reversals."""
+    centred = reference_mm - np.mean(reference_mm)
+    step_s = float(np.median(np.diff(time_s)))
+    spectrum = np.abs(np.fft.rfft(centred))
+    if centred.size >= 8 and np.any(spectrum[1:]):
+        bin_hz = 1.0 / (centred.size * step_s)
+        peak_hz = (np.argmax(spectrum[1:]) + 1) * bin_hz
+        left, frequency_hz = min(
+            (_rms(centred - _regress(centred, _sinusoid(time_s, f))[1]), f)
+            for f in np.linspace(max(peak_hz - bin_hz, bin_hz / 2), peak_hz + bin_hz, 41))
+        if left <= 0.01 * _rms(centred):
+            return f"a single sine at {frequency_hz:.3g} Hz"
+    speed = np.abs(np.gradient(reference_mm, time_s))
+    resting = speed < NEAR_STOP_SHARE * max(float(np.max(speed)), 1e-300)
+    moves = int(np.count_nonzero(np.diff(resting.astype(int)) == -1))
+    if resting.mean() >= 0.1 and moves:
+        return f"a point-to-point trajectory of {moves} move{'s' if moves > 1 else ''}"
+    direction = np.sign(np.gradient(reference_mm, time_s))
+    turns = int(np.count_nonzero(np.diff(direction[direction != 0]) != 0))
+    return f"a record with {turns} velocity reversal{'s' if turns != 1 else ''}"
 
 
 def _first_settled(time_s):
