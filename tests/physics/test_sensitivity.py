@@ -123,3 +123,20 @@ def test_the_diagnosis_keeps_each_fit_once_and_finds_the_same(friction_case, mon
     monkeypatch.setattr(Refitter, "fit", lambda self, m: fit(m, self.measurement))
     refitted = diagnose(friction_case, model).to_json()
     assert kept == refitted
+
+
+def test_a_loop_parameter_without_sensitivity_is_differenced(friction_case):
+    """An effect on a loop parameter the sensitivities do not cover (here the force
+    constant) leaves the measurement without them: the fit differences, as before."""
+    from feedaxis.effects.tracking import TrackingEffect
+    from feedaxis.effects.base import Parameter
+    from feedaxis.measurement import Tracking
+
+    class ForceConstant(TrackingEffect):
+        name = "force_constant"
+        parameters = (Parameter("force_constant_N_per_V", "N/V", 1.0, 1e3, "K_F"),)
+        neutral = {"force_constant_N_per_V": 100.0}
+
+    measurement = Tracking(friction_case)
+    assert measurement.sensitivity(Model((CATALOG["servo_plant"],))) is not None
+    assert measurement.sensitivity(Model((CATALOG["servo_plant"], ForceConstant()))) is None

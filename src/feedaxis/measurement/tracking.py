@@ -31,7 +31,7 @@ from ..fmu_map import servo_to_fmu
 from ..physics.identify import identify_plant, loop_start
 from ..physics.servo import (MAX_POSITION_MM, PLANT_BOUNDS, ServoParams, check_runs,
                              loop_budget_problem, simulate, simulate_record, step_counts)
-from ..physics.servo_sensitivity import simulate_sensitivity
+from ..physics.servo_sensitivity import PARAMETERS as SENSITIVE, simulate_sensitivity
 from ..plausibility import tracking_problems, warn_implausible
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, autoregression,
                               locate_sinusoid, noise_floor_um, peak_p_value, short_time_peak,
@@ -423,7 +423,12 @@ class Tracking(Measurement):
     def sensitivity(self, model):
         """The deviation and its derivatives in the loop's parameters from one forward-mode
         pass of the loop (:func:`feedaxis.physics.servo_sensitivity.simulate_sensitivity`);
-        the slots' parameter names are the loop's (:func:`servo_params`)."""
+        the slots' parameter names are the loop's (:func:`servo_params`). None where an
+        effect sets a loop parameter the sensitivities do not differentiate (a user's effect
+        on the loop step, say): the fit then differences."""
+        names = {p.name for e in model.effects if not e.additive for p in e.parameters}
+        if not names <= set(SENSITIVE):
+            return None
         return lambda values, slots: self.deviation_sensitivity(
             self.params(model, values), [parameter for _, parameter in slots])
 
