@@ -74,7 +74,7 @@ def _plant_derivatives(params, name):
     matrix, gain = _augmented(params), params.plant_gain_mm_per_Vs2
     spans = ((1.0 - fraction) * h, fraction * h)
     if name == "plant_gain_mm_per_Vs2":
-        transition, late, early = discrete_plant(params)
+        _, late, early = discrete_plant(params)
         return np.zeros((2, 2)), late / gain, early / gain
     if name == "delay_s":  # dτ_L/dτ = −1, dτ_E/dτ = +1 (within the step)
         exps = [expm(matrix * span) for span in spans]
@@ -86,7 +86,8 @@ def _plant_derivatives(params, name):
         exps, derivs = [p[0] for p in pairs], [p[1] for p in pairs]
     (late_exp, early_exp), (d_late, d_early) = exps, derivs
     d_transition = d_late[:2, :2] @ early_exp[:2, :2] + late_exp[:2, :2] @ d_early[:2, :2]
-    d_early_column = gain * (d_late[:2, :2] @ early_exp[:2, 2] + late_exp[:2, :2] @ d_early[:2, 2])
+    d_early_column = gain * (d_late[:2, :2] @ early_exp[:2, 2]
+                             + late_exp[:2, :2] @ d_early[:2, 2])
     return d_transition, gain * d_late[:2, 2], d_early_column
 
 
@@ -175,7 +176,8 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                      d_positions_mm):
     """:func:`.servo.run_loop` with the derivatives of its state stepped beside it.
 
-    ``d_coefficients`` (p x 27) and ``d_disturbance_V`` (p,) are :func:`coefficient_jacobian`;
+    ``d_coefficients`` (27 x p: :func:`coefficient_jacobian` transposed, a parameter's
+    derivatives along a row for the inner loops) and ``d_disturbance_V`` (p,) its force;
     ``d_state`` (4 x p: position, velocity, integral, previous) and ``d_buffer`` (delay line
     x p) start at 0 for a loop started from given values; ``d_positions_mm`` (samples x p)
     receives d position / dθ at each sample. Each block below is one line of run_loop
@@ -205,16 +207,16 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
             if cascade != 0.0:
                 bracket = kp_per_s * error + feedforward * slope_mm_s - x2
                 for j in range(p):
-                    d_bracket = (dc[19, j] * error - kp_per_s * dx1[j]
-                                 + dc[22, j] * slope_mm_s - dx2[j])
+                    d_bracket = (dc[KP_PER_S, j] * error - kp_per_s * dx1[j]
+                                 + dc[FEEDFORWARD, j] * slope_mm_s - dx2[j])
                     d_integral[j] += 0.5 * (d_bracket + d_previous[j]) * dt
                     d_previous[j] = d_bracket
                 integral += 0.5 * (bracket + previous) * dt
                 previous = bracket
                 command = kv * bracket + kv_tn * integral
                 for j in range(p):
-                    d_command[j] = (dc[20, j] * bracket + kv * d_previous[j]
-                                    + dc[21, j] * integral + kv_tn * d_integral[j])
+                    d_command[j] = (dc[KV, j] * bracket + kv * d_previous[j]
+                                    + dc[KV_TN, j] * integral + kv_tn * d_integral[j])
             else:
                 raw = error
                 for j in range(p):
@@ -224,8 +226,8 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                     d_gain_e, d_gain_ko, d_gain_max = npid_tangent(raw, ko, e_max)
                     error = raw * gain
                     for j in range(p):
-                        d_command[j] = (d_command[j] * (gain + raw * d_gain_e)
-                                        + raw * (d_gain_ko * dc[11, j] + d_gain_max * dc[12, j]))
+                        d_command[j] = (d_command[j] * (gain + raw * d_gain_e) + raw * (
+                            d_gain_ko * dc[KO, j] + d_gain_max * dc[E_MAX, j]))
                 integral += 0.5 * (error + previous) * dt
                 derivative = (error - previous) / dt
                 for j in range(p):
@@ -233,8 +235,8 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                     d_integral[j] += 0.5 * (d_error + d_previous[j]) * dt
                     d_derivative = (d_error - d_previous[j]) / dt
                     d_previous[j] = d_error
-                    d_command[j] = (dc[8, j] * error + kp * d_error + dc[9, j] * integral
-                                    + ki * d_integral[j] + dc[10, j] * derivative
+                    d_command[j] = (dc[KP, j] * error + kp * d_error + dc[KI, j] * integral
+                                    + ki * d_integral[j] + dc[KD, j] * derivative
                                     + kd * d_derivative)
                 previous = error
                 command = kp * error + ki * integral + kd * derivative
@@ -255,9 +257,10 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
             u_early = command_early + force
             for j in range(p):
                 d_buffer[head, j] = d_command[j]
-                d_force = d_disturbance_V[j] - (f_v * dx2[j] + f_c * dc[14, j] + f_d * dc[15, j]
-                                                + f_r * dc[23, j] + f_s * dc[24, j]
-                                                + f_vs * dc[25, j] + f_w * dc[26, j])
+                d_force = d_disturbance_V[j] - (
+                    f_v * dx2[j] + f_c * dc[FRICTION, j] + f_d * dc[DAMPING, j]
+                    + f_r * dc[COULOMB, j] + f_s * dc[STATIC, j]
+                    + f_vs * dc[STRIBECK_VELOCITY, j] + f_w * dc[SMOOTHING, j])
                 du_late = d_buffer[late, j] + d_force
                 du_early = d_buffer[early, j] + d_force
                 d1 = (dc[0, j] * x1 + a11 * dx1[j] + dc[1, j] * x2 + a12 * dx2[j]
@@ -303,7 +306,8 @@ def simulate_sensitivity(params, names, time_s, reference_mm, disturbance_N=None
     state = np.array([reference_mm[0], 0.0, 0.0, 0.0, reference_mm[0], 0.0])
     positions_mm = np.empty_like(reference_mm)
     d_positions = np.zeros((reference_mm.size, len(names)))
-    compiled_tangent()(loop_coefficients(params), np.ascontiguousarray(d_coefficients.T), counts, reference_mm,
+    compiled_tangent()(loop_coefficients(params), np.ascontiguousarray(d_coefficients.T),
+                       counts, reference_mm,
                        forces_V(params, disturbance_N, reference_mm.size), d_force, state,
                        np.zeros(params.buffer_size), np.zeros((4, len(names))),
                        np.zeros((params.buffer_size, len(names))), positions_mm, d_positions)
