@@ -103,18 +103,19 @@ def _lines(path):
 @contextlib.contextmanager
 def slow_tracking_paths():
     """The tracking fit's paths before its sensitivities, for a baseline timed in the same
-    run: forward differences for every Jacobian (``feedaxis.fit.SENSITIVITIES`` off) and
+    run: forward differences for every Jacobian (``Measurement.sensitivities`` off) and
     every fit of a diagnosis made anew (its refitter's memo bypassed)."""
-    from feedaxis import fit as fit_module
     from feedaxis.diagnose import Refitter
+    from feedaxis.fit import fit
+    from feedaxis.measurement import Measurement
 
-    saved = fit_module.SENSITIVITIES, Refitter.fit
-    fit_module.SENSITIVITIES = False
-    Refitter.fit = lambda self, model: fit_module.fit(model, self.measurement)
+    saved = Measurement.sensitivities, Refitter.fit
+    Measurement.sensitivities = False
+    Refitter.fit = lambda self, model: fit(model, self.measurement)
     try:
         yield
     finally:
-        fit_module.SENSITIVITIES, Refitter.fit = saved
+        Measurement.sensitivities, Refitter.fit = saved
 
 
 def side_by_side(jobs, repeats):

@@ -31,10 +31,6 @@ SINGULAR_RATIO = 1e-6
 NOISE_DOF = 8
 FD_STEP = np.sqrt(np.finfo(float).eps)  # relative step of the finite differences
 MAX_NFEV_PER_PARAMETER = 100  # a trust-region pass's evaluations per parameter it moves
-# Jacobians of a measurement's core from its sensitivities (Measurement.sensitivity: one
-# forward-mode simulation) where it has them; False: forward differences everywhere (the
-# baseline benchmarks/bench_tracking_fit.py times beside it, and the tests' cross-check)
-SENSITIVITIES = True
 
 
 @dataclass(frozen=True)
@@ -297,7 +293,7 @@ class Problem:
         self.model, self.found, self.progress = model, found, progress
         self.measured_um = np.concatenate([m.measured_um for m in found])
         self.separators = [m.separable(model) for m in found]
-        self.sensitivities = [m.sensitivity(model) for m in found] if SENSITIVITIES else [None]
+        self.sensitivities = [m.sensitivity(model) for m in found]
         self._last = (None, None)
 
     def exact(self, layout):

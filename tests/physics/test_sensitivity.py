@@ -6,11 +6,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from feedaxis import fit as fit_module
 from feedaxis.case import read_case
 from feedaxis.diagnose import Refitter, diagnose
 from feedaxis.effects import CATALOG, Model
 from feedaxis.fit import fit
+from feedaxis.measurement import Measurement
 from feedaxis.physics.servo import ServoParams, simulate, step_counts
 from feedaxis.physics.servo_sensitivity import coefficient_jacobian, simulate_sensitivity
 from tracking_synthetic import step_loop, two_sines, write_tracking_case
@@ -103,7 +103,7 @@ def test_the_fit_from_sensitivities_reaches_the_differences_optimum(friction_cas
     (2.4e-5 relative, the delay)."""
     model = Model((CATALOG["servo_plant"], CATALOG["coulomb_friction"]))
     exact = fit(model, friction_case)
-    monkeypatch.setattr(fit_module, "SENSITIVITIES", False)
+    monkeypatch.setattr(Measurement, "sensitivities", False)
     differenced = fit(model, friction_case)
     exact_ss, differenced_ss = (float(r.residual_um @ r.residual_um)
                                 for r in (exact, differenced))

@@ -167,8 +167,6 @@ def _fitted_plant(measurement, plant, nuisances):
     parameters ``nuisances`` (from 0, at least 0) fitted beside it and dropped."""
     from scipy.optimize import least_squares
 
-    from .. import fit as fit_module
-
     keys = (*PLANT_KEYS, *nuisances)
     lower = np.array([PLANT_BOUNDS[k][0] if k in PLANT_BOUNDS else 0.0 for k in keys])
     upper = np.array([PLANT_BOUNDS[k][1] if k in PLANT_BOUNDS else np.inf for k in keys])
@@ -185,7 +183,7 @@ def _fitted_plant(measurement, plant, nuisances):
 
     with np.errstate(over="ignore", invalid="ignore"):
         solution = least_squares(residual, start, bounds=(lower, upper), x_scale="jac",
-                                 jac=jacobian if fit_module.SENSITIVITIES else "2-point",
+                                 jac=jacobian if measurement.sensitivities else "2-point",
                                  method="trf")
     return {k: float(v) for k, v in zip(PLANT_KEYS, solution.x)}
 
@@ -427,7 +425,7 @@ class Tracking(Measurement):
         effect sets a loop parameter the sensitivities do not differentiate (a user's effect
         on the loop step, say): the fit then differences."""
         names = {p.name for e in model.effects if not e.additive for p in e.parameters}
-        if not names <= set(SENSITIVE):
+        if not self.sensitivities or not names <= set(SENSITIVE):
             return None
         return lambda values, slots: self.deviation_sensitivity(
             self.params(model, values), [parameter for _, parameter in slots])
