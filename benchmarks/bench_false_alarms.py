@@ -21,8 +21,8 @@ spikes were found.
 Cascade drives (``--only cascade``): 2 s records at 1 ms of the four cascades of
 ``tests/cascade_synthetic.py`` (P-P and P-PI, with and without velocity feed-forward), the
 encoder noise above, diagnosed from the empty model (the start identified from the record:
-the path a drive's trace takes), every other null with the recorded controller output
-(control_V) so both starts are measured; a false alarm is any effect named or any structure
+the path a drive's trace takes), each cascade without and with the recorded controller
+output (control_V): eight families; a false alarm is any effect named or any structure
 described, a drift alone (the nuisance's own liberal test at ρ = 0.95) counted apart.
 
 Power: ISO 230-2 cases with a backlash B (0.3 µm noise, 105 pairs): the share of trials in
@@ -38,6 +38,7 @@ import argparse
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -104,14 +105,15 @@ def tracking_alarms(family, trials, seed, folder):
 TRACKING_FAMILIES = ("encoder (white + AR(1))", *NOISE_FAMILIES)
 
 
-def cascade_alarms(cascade, trials, seed, folder):
+def cascade_alarms(cascade, control, trials, seed, folder):
     """(nulls with an effect named or a structure other than a drift described, nulls with
-    only a drift (the nuisance's own test), of the first those with control_V) of one
-    cascade of :data:`cascade_synthetic.CASCADES`, from the empty model."""
+    only a drift (the nuisance's own test), what the alarms named) of one cascade of
+    :data:`cascade_synthetic.CASCADES`, with or without the recorded ``control`` output,
+    from the empty model."""
     record = cascade_loop(exciting, 2.0, cascade)
-    alarms = drifts = with_control = 0
+    alarms = drifts = 0
+    named = Counter()
     for k in range(trials):
-        control = k % 2 == 1
         case = read_case(write_cascade_case(Path(folder) / f"c{seed}-{k}", record, cascade,
                                             seed * 100_000 + k, control))
         found = diagnose(case, Model())
@@ -119,8 +121,11 @@ def cascade_alarms(cascade, trials, seed, folder):
         alarm = bool(found.candidates or kinds)
         alarms += alarm
         drifts += not alarm and bool(found.unexplained)
-        with_control += alarm and control
-    return alarms, drifts, with_control
+        named.update([c.effect for c in found.candidates] + kinds)
+    return alarms, drifts, named
+
+
+CASCADE_FAMILIES = [(cascade, control) for cascade in CASCADES for control in (False, True)]
 
 
 def smallest_with_power(grid, power, target=0.95):
@@ -164,12 +169,19 @@ def main(argv=None):
             print(f"{'tracking, ' + family:30s} {rate(named, args.trials):>34s}   "
                   f"{rate(other, args.trials):>34s}   {time.perf_counter() - started:.0f} s "
                   f"(outliers left out in {outliers}{found})", flush=True)
-        for seed, cascade in enumerate(CASCADES if "cascade" in parts else (), start=199):
+        total = 0
+        for seed, (cascade, control) in enumerate(
+                CASCADE_FAMILIES if "cascade" in parts else (), start=199):
             started = time.perf_counter()
-            alarms, drifts, with_control = cascade_alarms(cascade, args.trials, seed, folder)
-            print(f"{'cascade ' + cascade + ', empty model':30s} {rate(alarms, args.trials):>34s}"
-                  f"   {rate(drifts, args.trials):>34s}   {time.perf_counter() - started:.0f} s"
-                  f" ({with_control} of the alarms with control_V)", flush=True)
+            alarms, drifts, named = cascade_alarms(cascade, control, args.trials, seed,
+                                                   folder)
+            total += alarms
+            name = f"cascade {cascade}{', control_V' if control else ''}"
+            print(f"{name:30s} {rate(alarms, args.trials):>34s}   {rate(drifts, args.trials):>34s}"
+                  f"   {time.perf_counter() - started:.0f} s {dict(named) or ''}", flush=True)
+        if "cascade" in parts:
+            nulls = args.trials * len(CASCADE_FAMILIES)
+            print(f"{'cascade, all families':30s} {rate(total, nulls):>34s}")
     if "power" in parts:
         backlash_power(args.power_trials)
 

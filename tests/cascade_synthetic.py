@@ -7,7 +7,9 @@ step with the plant ẍ + a1·ẋ + a0·x = b·(u(t − τ) + F/K_F) integrated 
 Runge-Kutta with the input held (:func:`tracking_synthetic._plant_rk4`). Friction (Coulomb,
 or Stribeck: F_c + (F_s − F_c)·exp(−(v/v_s)²)) acts from the velocity at each step's start,
 its sign smoothed linearly over max(0.1 mm/s, the velocity one step of it would change):
-within that band the explicit friction would overshoot zero velocity in one step.
+within that band the explicit friction would overshoot zero velocity in one step. A
+reversal spike adds spike_N·exp(−(t − t_r)/spike_decay_s) to the friction's level, t_r the
+loop step at which the velocity last changed sign (friction that breaks away over time).
 """
 from __future__ import annotations
 
@@ -45,7 +47,8 @@ def _velocity_per_volt(plant, h):
 
 
 def cascade_loop(reference, duration_s, cascade, sample_s=1e-3, plant=None, friction_N=0.0,
-                 coulomb_N=0.0, static_N=0.0, stribeck_velocity_mm_s=1.0, force_N=None):
+                 coulomb_N=0.0, static_N=0.0, stribeck_velocity_mm_s=1.0, force_N=None,
+                 spike_N=0.0, spike_decay_s=0.01):
     """Noise-free (time_s, reference_mm, position_mm, control_V) every ``sample_s``.
 
     ``reference`` and ``force_N`` are functions of time (s); the set-points are ramped
@@ -66,10 +69,11 @@ def cascade_loop(reference, duration_s, cascade, sample_s=1e-3, plant=None, fric
     per_sample = int(round(sample_s / h))
     n_samples = int(round(duration_s / sample_s)) + 1
     set_points = [reference(i * sample_s) for i in range(n_samples)]
-    peak_V = (friction_N + max(coulomb_N, static_N)) / FORCE_CONSTANT_N_PER_V
+    peak_V = (friction_N + max(coulomb_N, static_N) + spike_N) / FORCE_CONSTANT_N_PER_V
     band_mm_s = max(0.1, peak_V * abs(_velocity_per_volt(plant, h)))
     commands = [0.0] * (whole + 2)
     x1, x2, integral, previous, output = set_points[0], 0.0, 0.0, 0.0, 0.0
+    moving, reversed_s = 0.0, -math.inf
     positions, controls = [x1], [0.0]
     for k in range((n_samples - 1) * per_sample):
         sample, within = divmod(k, per_sample)
@@ -86,6 +90,10 @@ def cascade_loop(reference, duration_s, cascade, sample_s=1e-3, plant=None, fric
         if coulomb_N or static_N:
             level += coulomb_N + (static_N - coulomb_N) * math.exp(
                 -(x2 / stribeck_velocity_mm_s) ** 2)
+        if x2 * moving < 0.0:
+            reversed_s = k * h
+        moving = x2 if x2 != 0.0 else moving
+        level += spike_N * math.exp(-(k * h - reversed_s) / spike_decay_s)
         force -= level * sign
         force_V = force / FORCE_CONSTANT_N_PER_V
         if early_s > 0.0:

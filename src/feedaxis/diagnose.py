@@ -486,7 +486,8 @@ def find_structures(measurement, left, shapes, stages, notify=None):
     the family-wise policy with Bonferroni over all shapes tried (a free-frequency search
     counts every resolvable frequency), added to the model as a linear basis, the model
     refitted and the search repeated (a shape with a location may be found again
-    elsewhere). Then the measurement's test for an irregular lack of fit.
+    elsewhere); a shape marked ``last`` ends the search. Then the measurement's test for an
+    irregular lack of fit.
     """
     structures, current, shapes = [], left, list(shapes)
     for _ in range(MAX_STRUCTURES):
@@ -499,6 +500,8 @@ def find_structures(measurement, left, shapes, stages, notify=None):
                                     f"{shape.describe(measurement, trial, fitted)} "
                                     f"({test.describe()})", fitted, trial.basis,
                                     dict(trial.extra or {})))
+        if getattr(shape, "last", False):
+            return structures, current
         if trial.location is None:
             shapes.remove(shape)
         model = current.model + BasisEffect(f"structure_{len(structures)}", trial.basis)

@@ -162,6 +162,11 @@ class Measurement(ABC):
             if reason:
                 raise InputError(f"effect {effect.name} {reason}", path=self.case.folder)
 
+    def excitation(self):
+        """Why a parameter the data fix only loosely is so, in the words of what the samples
+        are (for ``loose_share``)."""
+        return "the measurement does not excite it enough"
+
     def degenerate(self):
         """Why the samples cannot support any fit beyond their count (None when they can)."""
         return None

@@ -49,9 +49,14 @@ SETTLING_S = 1.0  # Anang et al. 2017 measures the tracking error after the firs
 # nuisance parameters) was tried: on a single-sine reference the fit then moved the plant to
 # a lightly damped one whose free ringing imitated a persistent 62.5 Hz force.
 START_WINDOW_S = 0.2
-REVERSAL_WINDOW_S = 0.2
-REVERSAL_BINS = 8
+REVERSAL_WINDOW_S = 0.2  # after a reversal or near-stop of the reference: where a spike of
+# friction at rest is looked for (the axis reverses later, by the loop's lag)
+REVERSAL_LEAD_S = 0.05  # and before it: the speed falls into the friction's rise at rest first
+REVERSAL_SHARE = 0.8  # of force steps near the reversals: the spikes there, not steps of a load
+NEAR_STOP_SHARE = 0.02  # of the largest reference speed: a near-stop, where friction at rest
+# acts as at a reversal
 UNIFORM_SAMPLING_TOLERANCE = 0.01
+HELD_SHARE = 0.01  # of a force's first response left after the start-up: the loop holds it
 WHOLE_RECORD_SHARE = 0.75  # of the periodic test's level: the record's periodogram, the rest
 # the short-time periodogram's
 ROUNDING_UM = 1e-3  # the diagnosis's resolution (diagnose.RESOLUTION_UM): below it, rounding
@@ -247,7 +252,7 @@ class Tracking(Measurement):
 
     kind = "tracking"
     file = TRACKING_FILE
-    capabilities = ("outliers", "nuisances", "shapes", "core", "correlated")
+    capabilities = ("outliers", "nuisances", "shapes", "core", "correlated", "resolution")
     measured_column = ("actual_mm", 1e-3)
     details = "feedaxis.tracking_details:tracking_details"
     views = "feedaxis.report.tracking:VIEWS"
@@ -318,6 +323,37 @@ class Tracking(Measurement):
 
     def subset(self, keep):
         return Tracking(self.case, self.index[keep])
+
+    def unresolvable(self, effect):
+        """A constant force the controller's integral action holds (``held_force``), where
+        no controller output is recorded: the position trace cannot show it."""
+        if effect.name == "constant_force" and self.case.tracking.control_V is None:
+            return self.held_force()
+        return None
+
+    def held_force(self):
+        """Why a constant force is hidden from the position trace, or None: the starting
+        loop's response to 1 N acting from the first sample, over the samples compared, under
+        ``HELD_SHARE`` of its largest over the whole record (the integral action has taken
+        it over within the start-up), so only the recorded controller output shows it."""
+        if not self.start.plant and self.start.problem:
+            return None
+        params = ServoParams(**{**servo_to_fmu(self.case.axis.servo), **self.start.plant})
+        ones = np.ones(self.record_time_s.size)
+        known = np.zeros_like(ones) if self.disturbance_N is None else self.disturbance_N
+        with np.errstate(all="ignore"):
+            moved_um = (simulate(params, self.record_time_s, self.record_reference_mm,
+                                 known + ones, self.counts)
+                        - simulate(params, self.record_time_s, self.record_reference_mm, known,
+                                   self.counts)) * 1e3
+        largest = float(np.max(np.abs(moved_um)))
+        lasting = float(np.max(np.abs(moved_um[self.index])))
+        if not np.isfinite(largest) or largest == 0.0 or lasting >= HELD_SHARE * largest:
+            return None
+        return (f"undetermined: the controller's integral action holds a constant force, "
+                f"leaving {lasting / largest:.1%} of its first response in the position "
+                f"trace after the first {self.start_s:.3g} s; record the controller output "
+                "(control_V) to see it")
 
     def recorded_findings(self, left, pending, stages):
         """A constant force the tracking error cannot show (an integral action holds it) but
@@ -588,6 +624,44 @@ class Tracking(Measurement):
         velocity = np.gradient(self.reference_mm, self.time_s)
         return self.time_s[1:][np.diff(np.sign(velocity)) != 0]
 
+    def stops_s(self):
+        """Times (s) at which the reference velocity changes sign or falls to a near-stop (a
+        local minimum of its magnitude under ``NEAR_STOP_SHARE`` of its largest, more than
+        two samples from a reversal): where friction at rest acts."""
+        velocity = np.abs(np.gradient(self.reference_mm, self.time_s))
+        inner = np.flatnonzero((velocity[1:-1] <= velocity[:-2])
+                               & (velocity[1:-1] < velocity[2:])) + 1
+        slow = self.time_s[inner[velocity[inner] < NEAR_STOP_SHARE * np.max(velocity)]]
+        reversals = self.reversals_s()
+        step_s = float(np.median(np.diff(self.time_s))) if self.time_s.size > 1 else 0.0
+        if reversals.size:
+            gap = np.min(np.abs(slow[:, None] - reversals[None, :]), axis=1)
+            slow = slow[gap > 2.0 * step_s]
+        return np.sort(np.concatenate((reversals, slow)))
+
+    def near_stop(self, time_s):
+        """Mask of the times (s) from ``REVERSAL_LEAD_S`` before to ``REVERSAL_WINDOW_S``
+        after a reversal or near-stop of the reference (:meth:`stops_s`)."""
+        stops = self.stops_s()
+        if not stops.size:
+            return np.zeros(np.shape(time_s), dtype=bool)
+        since = time_s[:, None] - stops[None, :]
+        return np.any((since >= -REVERSAL_LEAD_S) & (since <= REVERSAL_WINDOW_S), axis=1)
+
+    def reference_kind(self):
+        """What the reference is, in words (:func:`_reference_kind`)."""
+        return _reference_kind(self.time_s, self.reference_mm)
+
+    def excitation(self):
+        """What the reference is, and why it leaves a parameter loose: a single sine (its
+        loop's gain and phase at one frequency), a point-to-point trajectory (moves between
+        rests: a dwell where the speed stays under ``NEAR_STOP_SHARE`` of its largest over a
+        tenth of the record), or a record with reversals."""
+        what = self.reference_kind()
+        if what.startswith("a single sine"):
+            return f"the reference is {what}, which fixes only the loop's gain and phase there"
+        return f"the reference ({what}) does not excite it enough"
+
     def uniform_step_s(self):
         """The sampling step (s) when the record is evenly sampled over the samples compared
         (outliers left out are gaps of it), else None."""
@@ -604,6 +678,31 @@ class Tracking(Measurement):
         out: what the spectral tests take."""
         grid = np.arange(self.index[0], self.index[-1] + 1)
         return self.record_time_s[grid], np.interp(grid, self.index, values)
+
+
+def _reference_kind(time_s, reference_mm):
+    """What ``reference_mm`` is, in words: a single sine at its frequency (one sinusoid
+    describes it to 1 % RMS), a point-to-point trajectory of its moves, or a record with its
+    reversals."""
+    centred = reference_mm - np.mean(reference_mm)
+    step_s = float(np.median(np.diff(time_s)))
+    spectrum = np.abs(np.fft.rfft(centred))
+    if centred.size >= 8 and np.any(spectrum[1:]):
+        bin_hz = 1.0 / (centred.size * step_s)
+        peak_hz = (np.argmax(spectrum[1:]) + 1) * bin_hz
+        left, frequency_hz = min(
+            (_rms(centred - _regress(centred, _sinusoid(time_s, f))[1]), f)
+            for f in np.linspace(max(peak_hz - bin_hz, bin_hz / 2), peak_hz + bin_hz, 41))
+        if left <= 0.01 * _rms(centred):
+            return f"a single sine at {frequency_hz:.3g} Hz"
+    speed = np.abs(np.gradient(reference_mm, time_s))
+    resting = speed < NEAR_STOP_SHARE * max(float(np.max(speed)), 1e-300)
+    moves = int(np.count_nonzero(np.diff(resting.astype(int)) == -1))
+    if resting.mean() >= 0.1 and moves:
+        return f"a point-to-point trajectory of {moves} move{'s' if moves > 1 else ''}"
+    direction = np.sign(np.gradient(reference_mm, time_s))
+    turns = int(np.count_nonzero(np.diff(direction[direction != 0]) != 0))
+    return f"a record with {turns} velocity reversal{'s' if turns != 1 else ''}"
 
 
 def _first_settled(time_s):
@@ -677,10 +776,13 @@ class ForceSteps(Shape):
                                         jacobian, current.statistics.n_free)
         if not chosen:
             return None
+        times_s = measurement.record_time_s[np.array(chosen)]
+        if (self.kind == "force_steps"
+                and np.mean(measurement.near_stop(times_s)) >= REVERSAL_SHARE):
+            return None  # steps at the reversals: the spikes there (:class:`Reversal`)
         basis = self._basis(measurement, model, chosen)
         if _rivals(measurement, current, basis):
             return None
-        times_s = measurement.record_time_s[np.array(chosen)]
         return Trial(basis, None, test, {"event_times_s": [float(t) for t in times_s]})
 
     @staticmethod
@@ -735,16 +837,6 @@ class ForceSteps(Shape):
         trial.extra["event_sizes_N"] = [float(size) for size in sizes_N]
         period = _period_s(times_s)
         trial.extra["period_s"] = period
-        spikes = _reversal_spikes(measurement, times_s, fitted_um)
-        if spikes is not None:
-            trial.extra.update(spikes)
-            decay = (f"decaying to 1/e within {1e3 * spikes['decay_s']:.3g} ms"
-                     if spikes["decay_s"] is not None else "not decaying within 0.2 s")
-            return (f"a spike at the velocity reversals (a quadrant glitch): "
-                    f"{spikes['height_um']:.3g} µm high (median over the "
-                    f"{spikes['reversals']} reversals), {decay}; the loop's response to "
-                    f"{times_s.size} force steps there: friction that rises at rest above its "
-                    "Coulomb level (stribeck_friction), stick-slip, or backlash")
         listed = ", ".join(f"{t:.4g} s ({size:+.3g} N)"
                            for t, size in zip(times_s[:12], sizes_N[:12]))
         more = f" and {times_s.size - 12} more" if times_s.size > 12 else ""
@@ -753,41 +845,6 @@ class ForceSteps(Shape):
                 f"on the axis changes at {listed}{more} (median size "
                 f"{np.median(np.abs(sizes_N)):.3g} N), the loop's step response after each "
                 "(a cut starting or ending, a load put down)")
-
-
-REVERSAL_SHARE = 0.8  # of the steps in the REVERSAL_WINDOW_S after a reversal: reversal spikes
-
-
-def _reversal_spikes(measurement, times_s, fitted_um):
-    """{reversals, height_um, decay_s} when at least ``REVERSAL_SHARE`` of the steps sit in
-    the ``REVERSAL_WINDOW_S`` after a reversal of the reference (the axis reverses later, by
-    the loop's lag; a spike at the reversals, not steps of a load), else None: the height the median over the reversals of the largest fitted
-    deviation in the ``REVERSAL_WINDOW_S`` after each, the decay the median time from that
-    peak until the deviation falls below 1/e of it (None where it does not)."""
-    reversals = measurement.reversals_s()
-    if reversals.size == 0 or times_s.size == 0:
-        return None
-    since = times_s[:, None] - reversals[None, :]
-    near = np.any((since >= 0.0) & (since <= REVERSAL_WINDOW_S), axis=1)
-    if near.mean() < REVERSAL_SHARE:
-        return None
-    heights, decays = [], []
-    for reversal in reversals:
-        inside = np.flatnonzero((measurement.time_s >= reversal)
-                                & (measurement.time_s < reversal + REVERSAL_WINDOW_S))
-        if inside.size < 2:
-            continue
-        values = np.abs(fitted_um[inside])
-        peak = int(np.argmax(values))
-        heights.append(values[peak])
-        below = np.flatnonzero(values[peak:] < values[peak] / np.e)
-        decays.append(measurement.time_s[inside[peak + below[0]]] - measurement.time_s[
-            inside[peak]] if below.size else np.nan)
-    if not heights:
-        return None
-    decay = float(np.nanmedian(decays)) if np.isfinite(decays).any() else None
-    return {"reversals": int(reversals.size), "height_um": float(np.median(heights)),
-            "decay_s": decay}
 
 
 def _bic(residual_um, basis, parameters):
@@ -801,20 +858,17 @@ def _rivals(measurement, current, steps):
     """Whether another shape describes the residual of ``current`` at least as well as the
     force ``steps`` by the Bayesian information criterion (each step a time and a size):
     the strongest sinusoid (:class:`PeriodicForce`: amplitude, phase, frequency and a
-    window's two edges; a burst at 50 Hz is a periodic force, not a hundred steps), or the
-    profile locked to the velocity reversals (:class:`Reversal`: a spike at each reversal
-    is a reversal spike, not steps that happen to sit there)."""
+    window's two edges; a burst at 50 Hz is a periodic force, not a hundred steps)."""
     residual = current.residual_um
     steps_bic = _bic(residual, steps, ForceSteps.extra * steps.shape[1])
-    for shape in (PeriodicForce(), Reversal()):
-        if not shape.trials(measurement):
-            continue
-        trial = shape.trial(measurement, current)
-        parameters = (3 + (2 if trial.extra["localised"] else 0)
-                      if isinstance(shape, PeriodicForce) else shape.extra)
-        if _bic(residual, trial.basis, parameters) <= steps_bic:
-            return True
-    return False
+    shape = PeriodicForce()
+    if not shape.trials(measurement):
+        return False
+    trial = shape.trial(measurement, current)
+    if trial is None:
+        return False
+    parameters = 3 + (2 if trial.extra["localised"] else 0)
+    return _bic(residual, trial.basis, parameters) <= steps_bic
 
 
 def _step_column(response, sample, rows):
@@ -979,6 +1033,8 @@ class PeriodicForce(Shape):
             if test.p_value < FAMILY_ALPHA:  # only a sinusoid that may pass is refined
                 first, last = measurement.fit_window(current.model, current.residual_um,
                                                      frequency_hz, first, last)
+            if np.all(measurement.near_stop(record_s[first:last + 1])):
+                return None  # the ringing of a spike at the reversals: :class:`Reversal`'s
             start_s, end_s = float(record_s[first]), float(record_s[last])
             on = np.zeros(record_s.size)
             on[first:last + 1] = 1.0
@@ -998,18 +1054,65 @@ class PeriodicForce(Shape):
                                                                  location))[0][:2]))
 
     def describe(self, measurement, trial, fitted_um):
+        """The sinusoid, the force it answers (JSON ``force_N``) and, where the reference
+        runs at a steady speed, what turns at that frequency (:func:`_turning_at`: JSON
+        ``source``, ``rotation_hz``, ``harmonic``)."""
         amplitude_um = self.amplitude_um(measurement, fitted_um, trial.location)
         force_N = np.hypot(*_regress(fitted_um, trial.basis)[0])
+        bin_hz = 1.0 / max(trial.extra["end_s"] - trial.extra["start_s"], 1e-300)
+        named = _turning_at(measurement, trial.location, trial.extra["start_s"],
+                            trial.extra["end_s"], bin_hz)
+        trial.extra.update({**named[1], "force_N": float(force_N)})
         if trial.extra["localised"]:
             return (f"a sinusoid at {trial.location:.4g} Hz from {trial.extra['start_s']:.4g} s "
                     f"to {trial.extra['end_s']:.4g} s, {amplitude_um:.3g} µm in the residual "
                     f"(short-time periodogram {trial.test.statistic:.0f}x the noise level): the "
                     f"loop's response to a force of {force_N:.3g} N at that frequency during "
-                    "that time (e.g. a cutting force while the tool is engaged)")
+                    f"that time ({named[0] or 'e.g. a cutting force while the tool is engaged'})")
         return (f"a sinusoid at {trial.location:.4g} Hz, {amplitude_um:.3g} µm in the residual "
                 f"(whitened periodogram {trial.test.statistic:.0f}x its mean level): the loop's "
-                f"response to a force of {force_N:.3g} N at that frequency (e.g. a cutting "
-                "force at the tooth-passing frequency)")
+                f"response to a force of {force_N:.3g} N at that frequency "
+                f"({named[0] or 'e.g. a cutting force at the tooth-passing frequency'})")
+
+
+STEADY_SPEED_SPREAD = 0.05  # the reference's speed varies less (interquartile range over
+# median) while a sinusoid in time can be a rotation's
+MAX_HARMONIC = 10  # of a rotation, named as such
+
+
+def _turning_at(measurement, frequency_hz, start_s, end_s, bin_hz):
+    """(text, JSON fields) naming what turns at ``frequency_hz`` while the reference runs at
+    a steady speed v between ``start_s`` and ``end_s``: the screw, at v / lead (and its
+    harmonics up to ``MAX_HARMONIC``), or the motor's angular error, whose period is
+    ``error_period_steps`` steps of ``step_angle_deg`` (360 / (step angle × steps) per
+    revolution), where [motor] gives them; a match within ``bin_hz`` plus the speed's
+    spread. ("", {}) when the speed is not steady or nothing matches."""
+    inside = (measurement.time_s >= start_s) & (measurement.time_s <= end_s)
+    screw = measurement.case.axis.screw
+    if inside.sum() < 3 or not screw.get("lead_mm"):
+        return "", {}
+    speed_mm_s = np.abs(np.gradient(measurement.reference_mm, measurement.time_s))[inside]
+    median = float(np.median(speed_mm_s))
+    spread = float(np.subtract(*np.percentile(speed_mm_s, [75, 25]))) / max(median, 1e-300)
+    if median <= 0.0 or spread > STEADY_SPEED_SPREAD:
+        return "", {}
+    rotation_hz = median / screw["lead_mm"]
+    sources = [("screw", rotation_hz, f"the screw's rotation at {median:.4g} mm/s over its "
+                                      f"{screw['lead_mm']:g} mm lead, {rotation_hz:.4g} Hz")]
+    motor = measurement.case.axis.motor
+    if motor.get("step_angle_deg") and motor.get("error_period_steps"):
+        per_turn = 360.0 / (motor["step_angle_deg"] * motor["error_period_steps"])
+        sources.append(("motor", rotation_hz * per_turn,
+                        f"the motor's angular error, {per_turn:.4g} periods per revolution "
+                        f"at {rotation_hz:.4g} rev/s, {rotation_hz * per_turn:.4g} Hz"))
+    for source, base_hz, text in sources:
+        harmonic = int(round(frequency_hz / base_hz))
+        if 1 <= harmonic <= MAX_HARMONIC and abs(frequency_hz - harmonic * base_hz) <= (
+                bin_hz + harmonic * base_hz * spread):
+            which = "" if harmonic == 1 else f"harmonic {harmonic} of "
+            return (f"{which}{text}: a force that turns with the {source}",
+                    {"source": source, "rotation_hz": base_hz, "harmonic": harmonic})
+    return "", {}
 
 
 class ConstantForce(Shape):
@@ -1033,51 +1136,90 @@ class ConstantForce(Shape):
 
 
 class Reversal(Shape):
-    """Error locked to the reversals of another shape than the friction effects give: a
-    free profile over ``REVERSAL_WINDOW_S`` after each reversal, in ``REVERSAL_BINS`` bins."""
+    """Spikes at the velocity reversals (quadrant glitches) that the model does not carry: a
+    Stribeck rise where the catalog's law does not match it, friction breaking away over
+    time, stick-slip, backlash. The samples from ``REVERSAL_LEAD_S`` before to
+    ``REVERSAL_WINDOW_S`` after each reversal or near-stop of the reference
+    (:meth:`Tracking.stops_s`) are tested against the rest: the residual whitened by its
+    noise's autoregressive filter (as :class:`ForceSteps`), the ratio of its mean square
+    there to elsewhere an F statistic under white noise. What is described is the residual
+    in those windows itself (a spike's shape after a reversal is the loop's nonlinear
+    response to sticking, which no linear force term fits), and the search ends with it:
+    those windows hold about half of a record that reverses often, and a residual with them
+    taken out is no longer one the spectral tests can judge.
+    """
 
     kind = "reversal"
-    extra = REVERSAL_BINS
+    last = True  # the structure search ends with it
 
     def trials(self, measurement):
-        return 1 if measurement.reversals_s().size else 0
+        return 1 if measurement.uniform_step_s() and measurement.stops_s().size else 0
 
     def trial(self, measurement, current):
-        time_s = measurement.time_s
-        direction = np.sign(np.gradient(measurement.reference_mm, time_s))
-        turns = np.flatnonzero(np.diff(direction) != 0) + 1
-        basis = np.zeros((time_s.size, REVERSAL_BINS))
-        width = REVERSAL_WINDOW_S / REVERSAL_BINS
-        # each window's last sample or one past it: ``since < window`` below decides
-        ends = np.searchsorted(time_s, time_s[turns] + REVERSAL_WINDOW_S, side="right") + 1
-        for turn, end in zip(turns, ends):
-            since = time_s[turn:end] - time_s[turn]
-            inside = since < REVERSAL_WINDOW_S
-            rows = turn + np.flatnonzero(inside)
-            basis[rows, (since[inside] / width).astype(int)] += direction[turn]
-        return Trial(basis)
+        from scipy import stats
+
+        time_s, residual = measurement.gridded(current.residual_um)
+        noise = autoregression(residual, robust=True).cautious()
+        whitened = _ar_filter(noise.coefficients)(residual - np.mean(residual))[noise.order:]
+        near = measurement.near_stop(time_s)
+        inside, outside = near[noise.order:], ~near[noise.order:]
+        if inside.sum() < 2 or outside.sum() < 2:
+            return None
+        statistic = float(np.mean(whitened[inside] ** 2) / max(np.mean(whitened[outside] ** 2),
+                                                               1e-300))
+        dof = (int(inside.sum()), int(outside.sum()))
+        test = Test(statistic, dof, float(stats.f.sf(statistic, *dof)),
+                    "F test of the residual's mean square near the reversals against elsewhere, "
+                    f"whitened by its noise's autoregressive filter (order {noise.order})", "F")
+        near = measurement.near_stop(measurement.time_s)
+        return Trial(np.where(near, current.residual_um, 0.0)[:, None], None, test)
 
     def amplitude_um(self, measurement, fitted_um, location):
         return _max_abs(fitted_um)
 
     def describe(self, measurement, trial, fitted_um):
-        """The spike at each reversal with its height (the largest bin of the profile) and
-        its decay (the end of the first bin after the peak below 1/e of it), in the JSON as
-        ``height_um`` and ``decay_s``."""
-        profile = _regress(fitted_um, trial.basis)[0]
-        peak = int(np.argmax(np.abs(profile)))
-        width = REVERSAL_WINDOW_S / REVERSAL_BINS
-        below = np.flatnonzero(np.abs(profile[peak:]) < np.abs(profile[peak]) / np.e)
-        decay_s = float((peak + below[0]) * width) if below.size else None
-        trial.extra = {**(trial.extra or {}), "height_um": float(profile[peak]),
-                       "decay_s": decay_s}
-        decay = (f"decaying to 1/e within {1e3 * decay_s:.0f} ms" if decay_s is not None else
-                 f"not decayed to 1/e within {1e3 * REVERSAL_WINDOW_S:.0f} ms")
-        return (f"a spike at each of the {measurement.reversals_s().size} velocity reversals "
-                f"(a quadrant glitch): {abs(profile[peak]):.3g} µm high "
-                f"{1e3 * peak * width:.0f}-{1e3 * (peak + 1) * width:.0f} ms after the "
-                f"reversal, {decay}: a friction law other than Coulomb plus viscous (a rise at "
-                "rest, stick-slip), or backlash")
+        """``height_um`` (the largest departure near a reversal), ``median_height_um`` (its
+        median over the reversals), ``decay_s`` (the median time from each peak to 1/e of
+        it) and ``reversal_times_s``."""
+        stops = measurement.stops_s()
+        spike = _spike_size(measurement, stops, fitted_um) or {
+            "height_um": None, "median_height_um": None, "decay_s": None}
+        trial.extra = {"reversal_times_s": [float(t) for t in stops], **spike}
+        height = ("" if spike["height_um"] is None else
+                  f": up to {spike['height_um']:.3g} µm (median {spike['median_height_um']:.3g} "
+                  f"µm over the {stops.size} reversals and near-stops)")
+        decay = ("" if spike["decay_s"] is None else
+                 f", falling to 1/e of its peak within {1e3 * spike['decay_s']:.3g} ms")
+        return (f"a spike in the tracking error at the velocity reversals (a quadrant glitch)"
+                f"{height}{decay}: friction at rest the model does not carry (a Stribeck rise "
+                "of another shape, friction breaking away over time, stick-slip), or backlash")
+
+
+def _spike_size(measurement, stops_s, fitted_um):
+    """{height_um, median_height_um, decay_s} of ``fitted_um`` (at the samples compared)
+    near the reversals or near-stops at ``stops_s``: the largest departure in any window
+    (:meth:`Tracking.near_stop`), the median over the windows of the largest in each, the
+    median over the windows whose peak reaches half the largest of the time from that peak
+    until the departure falls below 1/e of it (None where it never does); None without a
+    window of two samples."""
+    heights, decays = [], []
+    for stop in stops_s:
+        inside = np.flatnonzero((measurement.time_s >= stop - REVERSAL_LEAD_S)
+                                & (measurement.time_s < stop + REVERSAL_WINDOW_S))
+        if inside.size < 2:
+            continue
+        values = np.abs(fitted_um[inside])
+        peak = int(np.argmax(values))
+        heights.append(values[peak])
+        below = np.flatnonzero(values[peak:] < values[peak] / np.e)
+        decays.append(measurement.time_s[inside[peak + below[0]]] - measurement.time_s[
+            inside[peak]] if below.size else np.nan)
+    if not heights:
+        return None
+    decays = np.array(decays)[np.array(heights) >= 0.5 * max(heights)]
+    decay = float(np.nanmedian(decays)) if np.isfinite(decays).any() else None
+    return {"height_um": float(np.max(heights)), "median_height_um": float(np.median(heights)),
+            "decay_s": decay}
 
 
 class TimeDrift(Shape):

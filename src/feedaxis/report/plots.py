@@ -385,16 +385,27 @@ def compensation_table(target_mm, means_um, table_mm, table_um):
                    "Compensation table over the measured means")
 
 
-def error_against_time(time_s, measured_um, predicted_um, reversals_s):
-    """Tracking deviation measured and predicted against time, reversals marked."""
-    figure, axes = plt.subplots(figsize=(9, 3.6))
-    _plot(axes, time_s, measured_um, color="0.55", lw=0.8, label="measured")
-    _plot(axes, time_s, predicted_um, color="tab:blue", lw=0.8, label="model")
-    for index, t in enumerate(reversals_s):
-        axes.axvline(t, color="tab:red", lw=0.5, alpha=0.5,
-                     label="velocity reversal" if index == 0 else None)
-    return _finish(figure, axes, "time (s)", "actual - reference (µm)",
-                   "Tracking deviation against time")
+def error_against_time(time_s, measured_um, predicted_um, reversals_s, reference):
+    """Tracking deviation measured and predicted against time, and below it, on its own
+    scale, the residual (measured − model): where the model covers the measurement the
+    upper panel shows one line, the lower one what is left. Reversals marked; ``reference``
+    names what the reference is (a sine, a point-to-point trajectory, reversals)."""
+    figure, (upper, lower) = plt.subplots(2, 1, figsize=(9, 5.4), sharex=True,
+                                          gridspec_kw={"height_ratios": (3, 2)})
+    _plot(upper, time_s, measured_um, color="0.55", lw=0.8, label="measured")
+    _plot(upper, time_s, predicted_um, color="tab:blue", lw=0.8, ls="--", label="model")
+    _plot(lower, time_s, np.asarray(measured_um) - np.asarray(predicted_um),
+          color="tab:orange", lw=0.8, label="residual (measured - model)")
+    for axes in (upper, lower):
+        for index, t in enumerate(reversals_s):
+            axes.axvline(t, color="tab:red", lw=0.5, alpha=0.5,
+                         label="velocity reversal" if index == 0 and axes is upper else None)
+        axes.grid(alpha=0.3)
+        _legend(axes)
+    upper.set(ylabel="actual - reference (µm)",
+              title=f"Tracking deviation against time ({reference})")
+    lower.set(xlabel="time (s)", ylabel="residual (µm)")
+    return _png(figure)
 
 
 def error_against_velocity(velocity_mm_s, measured_um, residual_um):

@@ -38,7 +38,7 @@ import scipy
 
 from . import judge
 from .coloured import (Autoregression, autocorrelation_time, least_squares_autoregression,
-                       ljung_box_p_value)
+                       ljung_box_p_value, noise_floor_um)
 from .judge import Test
 
 SERIAL_MAX_ORDER = 5
@@ -287,6 +287,9 @@ def spectral_gram(columns, spectrum):
     return pairs @ pairs.T
 
 
+SLOW_SHARE = 1.5  # the residual's RMS over its floor above which its slow part is named
+
+
 class Coloured:
     """A serially correlated residual: the effective sample count n / τ."""
 
@@ -311,11 +314,20 @@ class Coloured:
         return self.extra_ss_test(before_um, after_um, extra, n_free_after)
 
     def estimate_um(self, residual_um):
-        """(σ (µm), source): the RMS of the residual left, its autocorrelation time named."""
+        """(σ (µm), source): the measurement's noise as the high-frequency floor of the
+        residual left (:func:`~feedaxis.stats.coloured.noise_floor_um`: what no model of the
+        motion carries), not its RMS: a slow model error would pass for noise there. The
+        source names the RMS, its ratio to the floor and the autocorrelation time, and says
+        that the slow part is noise or model error, which one record cannot tell apart."""
+        floor_um = noise_floor_um(residual_um)
+        rms_um = float(np.sqrt(np.mean(residual_um ** 2)))
         tau = autocorrelation_time(residual_um)
-        return (float(np.sqrt(np.mean(residual_um ** 2))),
-                f"{self.label}: the residual left after the effects and structures found "
-                f"(autocorrelation time {tau:.1f} samples)")
+        slow = (f"; the residual left is {rms_um:.3g} µm RMS, {rms_um / floor_um:.3g}x the floor "
+                f"(autocorrelation time {tau:.1f} samples): its slow part is coloured noise "
+                "or a model error, which one record cannot tell apart"
+                if floor_um > 0.0 and rms_um > SLOW_SHARE * floor_um else "")
+        return (floor_um, f"{self.label}: the high-frequency floor of the residual left "
+                          f"(sample-to-sample changes){slow}")
 
     def error_scale(self, result):
         return 1.0
