@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from feedaxis.cosim.circular import run_circular
-from feedaxis.cosim.machine import MACHINE_SERVO, CircleInterpolator, machine_system
+from feedaxis.cosim.machine import CircleInterpolator, machine_system
 from feedaxis.cosim.master import Master
 from feedaxis.cosim.system import default_axis
 from feedaxis.diagnose import diagnose
@@ -69,7 +69,7 @@ def time_one_axis(fmu_paths, radius_mm, steps):
     started = time.perf_counter()
     with Master(system, fmu_paths) as master:
         master.run(steps * h, {"position_ref_mm": lambda t: path.position_mm(t + h, 0)},
-                   {"NpidServo": MACHINE_SERVO})
+                   {"NpidServo": circle.MACHINE_PLANT})
     return time.perf_counter() - started
 
 

@@ -23,10 +23,11 @@ def machine(motor=False, servo=None):
 
 def simulated_case(folder, fmu_paths, parameters=None, squareness_urad=0.0,
                    directions=(1, -1), noise_um=0.0, seed=1, samples_per_turn=1000,
-                   motor=False):
-    """Simulate the circular test of :func:`machine` with ``parameters``
-    ({component: {parameter: value}}) and read it back as a case."""
-    system = machine_from_case_axes(machine(motor), squareness_urad)
+                   motor=False, servo=None):
+    """Simulate the circular test of :func:`machine` (with ``servo`` as both axes'
+    ``[servo]``) with ``parameters`` ({component: {parameter: value}}) and read it back as
+    a case."""
+    system = machine_from_case_axes(machine(motor, servo), squareness_urad)
     with Master(system, fmu_paths) as master:
         simulate_circular(folder, master, MeasurementNoise(noise_um, seed) if noise_um else None,
                           radius_mm=RADIUS_MM, feed_mm_min=FEED_MM_MIN, center_mm=CENTER_MM,

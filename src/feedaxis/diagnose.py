@@ -349,14 +349,14 @@ def _screened_residual(measurement, left, effect):
 
 
 def _best_candidate(measurement, left, tested, pending, skipped, stages):
-    """The (test, effect, result) with the smallest p-value that passes the policy and is
+    """The (test, effect, result) with the smallest p-value (:func:`_strength`) that passes the policy and is
     what the data show (a rival shape passes it over, with the reason), or None. A
     screened candidate (no result yet) is fitted in full and takes its place again by the
     full fit's test (a linearised step may promise more than the fit gives)."""
     tries = len(tested)
     tested = list(tested)
     while tested:
-        tested.sort(key=lambda item: item[0].p_value)
+        tested.sort(key=_strength)
         test, effect, result = tested[0]
         if result is None:
             if not accepts(test.p_value, tries, stages):
@@ -377,6 +377,15 @@ def _best_candidate(measurement, left, tested, pending, skipped, stages):
         del pending[effect.name]
         tested.pop(0)
     return None
+
+
+def _strength(item):
+    """Sort key of a tested (test, effect, result): the smallest p-value first; among
+    p-values alike (each underflows to 0 where an effect explains thousands of noise
+    variances), the largest F times its numerator's degrees of freedom (the residual's fall
+    over the noise's variance) first."""
+    test = item[0]
+    return test.p_value, -test.statistic * test.dof[0]
 
 
 def _candidate(measurement, left, effect, result, test):

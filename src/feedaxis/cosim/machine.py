@@ -26,16 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from ..fmu_map import AXIS_KEYS, neutral_fmu_parameters, servo_to_fmu
-from ..physics.circle import axis_positions_mm
+from ..physics.circle import LEAD_IN_DEG, MACHINE_PLANT, axis_positions_mm
 from ..errors import InputError
 from .system import (DEFAULT_THERMAL_STEP_S, AxisSystem, Component, Connection, Output,
                      Variable, axis_overrides, default_axis, option_steps)
 
 AXIS_PARTS = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 ERROR_PARTS = ("StepperError", "GeometricError", "ThermalScrew")
-# Each axis runs its servo with a type-1 plant (a0 = 0), as the positioning tests do: with
-# the a0 of Anang et al. 2017 and its tiny integral gain the loop keeps a static error of position/364.
-MACHINE_SERVO = {"plant_stiffness_per_s2": 0.0}
 
 
 def component_name(axis, part):
@@ -67,7 +64,7 @@ def machine_system(axes=("X", "Y"), parts=None, squareness_urad=0.0, macro_step_
         inputs += [Variable(f"{axis}_{v.name}", v.unit, f"axis {axis}: {v.description}",
                             v.start) for v in one.inputs if v.name != "ambient_C"]
         components += [Component(component_name(axis, c.name), c.fmu, c.step_s,
-                                 {**c.parameters, **(MACHINE_SERVO if c.name == "NpidServo"
+                                 {**c.parameters, **(MACHINE_PLANT if c.name == "NpidServo"
                                                      else {})}, f"axis {axis}: {c.description}")
                        for c in one.components if c.name in kept]
         connections += [Connection(_renamed(c.source, axis), _renamed(c.target, axis))
@@ -181,7 +178,7 @@ class CircleInterpolator:
     center_mm: tuple
     direction: int = 1
     start_deg: float = 0.0
-    lead_in_deg: float = 45.0
+    lead_in_deg: float = LEAD_IN_DEG
     lead_out_deg: float = 45.0
 
     def __post_init__(self):
