@@ -180,13 +180,10 @@ def _options(sub):
 
 def _machine(args):
     """(the machine system, the circle's keywords) of the command line's options."""
-    if args.model:
-        raise InputError("a fitted circular model is not taken here yet; give its values with "
-                         "--set", parameter="--model")
     return circular_machine(
         args.machine, args.radius_mm, args.feed_mm_min,
         number_list(args.center_mm, "--center-mm") if args.center_mm else None,
-        args.squareness_urad, args.step_ms, args.thermal_step_s, args.set)
+        args.squareness_urad, args.step_ms, args.thermal_step_s, args.set, args.model)
 
 
 def _arguments(args):
