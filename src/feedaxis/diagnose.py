@@ -274,9 +274,12 @@ def _select(measurement, left, pending, skipped, stages, notify):
                         _screened_residual(measurement, left, effect))
             extra = sum(len(e.parameters) for e in (joined.effects if result else (effect,))
                         if e.name not in left.model)
-            tested.append((measurement.noise.extra_ss_test(
+            tested.append((float(after_um @ after_um), (measurement.noise.extra_ss_test(
                 left.residual_um, after_um, extra, left.statistics.n_free + extra), effect,
-                result))
+                result)))
+        # p-values alike (each underflows to 0 where effects explain thousands of noise
+        # variances) keep the order of what the candidates leave, the least first
+        tested = [item for _, item in sorted(tested, key=lambda pair: pair[0])]
         named = _best_candidate(measurement, left, tested, pending, skipped, stages)
         if named is None:
             break
@@ -349,14 +352,14 @@ def _screened_residual(measurement, left, effect):
 
 
 def _best_candidate(measurement, left, tested, pending, skipped, stages):
-    """The (test, effect, result) with the smallest p-value (:func:`_strength`) that passes the policy and is
+    """The (test, effect, result) with the smallest p-value that passes the policy and is
     what the data show (a rival shape passes it over, with the reason), or None. A
     screened candidate (no result yet) is fitted in full and takes its place again by the
     full fit's test (a linearised step may promise more than the fit gives)."""
     tries = len(tested)
     tested = list(tested)
     while tested:
-        tested.sort(key=_strength)
+        tested.sort(key=lambda item: item[0].p_value)
         test, effect, result = tested[0]
         if result is None:
             if not accepts(test.p_value, tries, stages):
@@ -377,15 +380,6 @@ def _best_candidate(measurement, left, tested, pending, skipped, stages):
         del pending[effect.name]
         tested.pop(0)
     return None
-
-
-def _strength(item):
-    """Sort key of a tested (test, effect, result): the smallest p-value first; among
-    p-values alike (each underflows to 0 where an effect explains thousands of noise
-    variances), the largest F times its numerator's degrees of freedom (the residual's fall
-    over the noise's variance) first."""
-    test = item[0]
-    return test.p_value, -test.statistic * test.dof[0]
 
 
 def _candidate(measurement, left, effect, result, test):

@@ -190,8 +190,13 @@ def test_compare_json_and_report_of_a_circular_case(tmp_path, capsys):
     synthetic_case(tmp_path / "c", deviation, columns)
     assert main(["compare", str(tmp_path / "c"), "--json"]) == 0
     figures = json.loads(capsys.readouterr().out)["figures"]
-    assert set(figures) == {"G_um", "G_ccw_um", "G_cw_um", "H_um", "F_max_um", "F_min_um"}
-    assert all(set(f) == {"name", "measured_um", "residual_um", "explained"}
+    assert set(figures) == {"G_um", "G_ccw_um", "G_cw_um", "H_um", "F_max_um", "F_min_um",
+                            "G_mz_um", "G_ccw_mz_um", "G_cw_mz_um"}
+    assert figures["G_um"]["center"] == "least squares, both paths"
+    assert figures["G_mz_um"]["center"] == "minimum zone, both paths"
+    for key in ("G_um", "G_ccw_um", "G_cw_um"):  # the minimum zone is the least G
+        assert figures[key[:-3] + "_mz_um"]["measured_um"] <= figures[key]["measured_um"]
+    assert all(set(f) == {"name", "measured_um", "residual_um", "explained", "center"}
                for f in figures.values())
     assert figures["H_um"]["measured_um"] == pytest.approx(3.0, abs=0.5)
     assert main(["fit", str(tmp_path / "c"), "--add", "backlash@Y", "--json",

@@ -29,7 +29,7 @@ import numpy as np
 from .. import kinds
 from ..case import AXIS_FILE, CaseError
 from ..circular_case import CIRCULAR_FILE, Machine, read_circular, read_machine
-from ..iso230_4 import circular_figures
+from ..iso230_4 import circular_figures, minimum_zone_figures
 from ..fmu_map import servo_to_fmu
 from ..physics import circle
 from ..physics.servo import check_runs
@@ -40,11 +40,21 @@ from .base import Measurement, Shape, Trial, figure_table
 MAX_HARMONIC = 90  # structure searched up to 90 cycles per turn (4° on the circle)
 ONE_DIRECTION = ("squareness", "servo_mismatch")
 SETUP = ("radius_um", "center_first_um", "center_second_um", "drift_um_per_s")
-FIGURE_NAMES = {"G_um": "circular deviation G (both directions)",
-                "G_ccw_um": "circular deviation G, counter-clockwise",
-                "G_cw_um": "circular deviation G, clockwise",
-                "H_um": "circular hysteresis H", "F_max_um": "radial deviation F max",
-                "F_min_um": "radial deviation F min"}
+LSC_BOTH = "least squares, both paths"
+LSC_OWN = "least squares, its own path"
+MZC_BOTH = "minimum zone, both paths"
+MZC_OWN = "minimum zone, its own path"
+FIGURE_NAMES = {  # key: (name, the centre it is taken about)
+    "G_um": ("circular deviation G (both directions)", LSC_BOTH),
+    "G_ccw_um": ("circular deviation G, counter-clockwise", LSC_OWN),
+    "G_cw_um": ("circular deviation G, clockwise", LSC_OWN),
+    "H_um": ("circular hysteresis H", LSC_BOTH),
+    "F_max_um": ("radial deviation F max", LSC_BOTH),
+    "F_min_um": ("radial deviation F min", LSC_BOTH),
+    "G_mz_um": ("circular deviation G (both directions)", MZC_BOTH),
+    "G_ccw_mz_um": ("circular deviation G, counter-clockwise", MZC_OWN),
+    "G_cw_mz_um": ("circular deviation G, clockwise", MZC_OWN)}
+EXPLAINED = ("G_um", "G_ccw_um", "G_cw_um", "H_um", "G_mz_um", "G_ccw_mz_um", "G_cw_mz_um")
 
 
 @kinds.register
@@ -302,19 +312,20 @@ class Circular(Measurement):
 
     def figures(self, result):
         """ISO 230-4 figures of the measurement and of what the model leaves, side by side;
-        ``explained`` = 1 - residual / measured."""
+        ``explained`` = 1 - residual / measured; ``center`` the centre a figure is taken
+        about (G also about the minimum-zone centre, the one figure whose definition allows
+        it)."""
         left_um = self.raw_um - self.model_um(result)
-        measured = circular_figures(self.angle_deg, self.raw_um, self.direction).as_dict()
-        residual = circular_figures(self.angle_deg, left_um, self.direction).as_dict()
+        measured, residual = (self.iso230_4(values) for values in (self.raw_um, left_um))
         figures = {}
-        for key, name in FIGURE_NAMES.items():
+        for key, (name, centre) in FIGURE_NAMES.items():
             if measured[key] is None:
                 continue
             explained = (1 - residual[key] / measured[key]
-                         if key in ("G_um", "G_ccw_um", "G_cw_um", "H_um") and measured[key]
-                         else None)
+                         if key in EXPLAINED and measured[key] else None)
             figures[key] = {"name": name, "measured_um": measured[key],
-                            "residual_um": residual[key], "explained": explained}
+                            "residual_um": residual[key], "explained": explained,
+                            "center": centre}
         return {"case": str(self.case.folder), "kind": self.kind,
                 "effects": list(result.model.names), "axes": list(self.test.axes),
                 "radius_mm": self.test.radius_mm, "feed_mm_min": self.test.feed_mm_min,
@@ -322,6 +333,12 @@ class Circular(Measurement):
                 "setup": self.setup(left_um),
                 "rms_measured_um": result.statistics.rms_before_um,
                 "rms_residual_um": result.statistics.rms_um, "figures": figures}
+
+    def iso230_4(self, deviation_um):
+        """{figure key: µm} of ISO 230-4 about the least-squares and the minimum-zone
+        centres (:data:`FIGURE_NAMES`)."""
+        return {**circular_figures(self.angle_deg, deviation_um, self.direction).as_dict(),
+                **minimum_zone_figures(self.angle_deg, deviation_um, self.direction)}
 
     def model_um(self, result):
         """The model's own prediction at the samples (µm), before the set-up's projection."""
@@ -376,7 +393,7 @@ def comparison_lines(comparison):
     lines = [f"circle R {comparison['radius_mm']:g} mm at {comparison['feed_mm_min']:g} mm/min, "
              f"axes {' '.join(comparison['axes'])}; model: "
              f"{', '.join(comparison['effects']) or '(none)'}",
-             *figure_table("ISO 230-4 figure (µm)", 40, comparison)]
+             *figure_table("ISO 230-4 figure (µm), about its centre", 72, comparison)]
     first, second = comparison["axes"]
     lines.append(f"set-up (not the machine's): centre off by {setup['center_first_um']:+.3f} µm "
                  f"along {first}, {setup['center_second_um']:+.3f} µm along {second}; radius "
