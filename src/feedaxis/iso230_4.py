@@ -150,3 +150,10 @@ def minimum_zone_figures(angle_deg, deviation_um, direction):
                      if mask.sum() >= 3 else None for mask in (direction > 0, direction < 0)]
     return {"G_mz_um": minimum_zone_um(angle_deg, deviation_um),
             "G_ccw_mz_um": per_direction[0], "G_cw_mz_um": per_direction[1]}
+
+
+def figures_um(angle_deg, deviation_um, direction):
+    """{figure key: µm} about both centres: :func:`circular_figures` and
+    :func:`minimum_zone_figures` together (None where a direction is missing)."""
+    return {**circular_figures(angle_deg, deviation_um, direction).as_dict(),
+            **minimum_zone_figures(angle_deg, deviation_um, direction)}

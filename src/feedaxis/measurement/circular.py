@@ -29,7 +29,7 @@ import numpy as np
 from .. import kinds
 from ..case import AXIS_FILE, CaseError
 from ..circular_case import CIRCULAR_FILE, Machine, read_circular, read_machine
-from ..iso230_4 import circular_figures, minimum_zone_figures
+from ..iso230_4 import figures_um
 from ..fmu_map import servo_to_fmu
 from ..physics import circle
 from ..physics.servo import check_runs
@@ -316,7 +316,8 @@ class Circular(Measurement):
         about (G also about the minimum-zone centre, the one figure whose definition allows
         it)."""
         left_um = self.raw_um - self.model_um(result)
-        measured, residual = (self.iso230_4(values) for values in (self.raw_um, left_um))
+        measured, residual = (figures_um(self.angle_deg, values, self.direction)
+                              for values in (self.raw_um, left_um))
         figures = {}
         for key, (name, centre) in FIGURE_NAMES.items():
             if measured[key] is None:
@@ -333,12 +334,6 @@ class Circular(Measurement):
                 "setup": self.setup(left_um),
                 "rms_measured_um": result.statistics.rms_before_um,
                 "rms_residual_um": result.statistics.rms_um, "figures": figures}
-
-    def iso230_4(self, deviation_um):
-        """{figure key: µm} of ISO 230-4 about the least-squares and the minimum-zone
-        centres (:data:`FIGURE_NAMES`)."""
-        return {**circular_figures(self.angle_deg, deviation_um, self.direction).as_dict(),
-                **minimum_zone_figures(self.angle_deg, deviation_um, self.direction)}
 
     def model_um(self, result):
         """The model's own prediction at the samples (µm), before the set-up's projection."""
