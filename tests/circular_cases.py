@@ -48,11 +48,12 @@ def circle_columns(samples_per_turn=720, directions=(1, -1), feed_mm_min=FEED_MM
     return {"angle_deg": angle, "direction": direction, "time_s": time_s}
 
 
-def synthetic_case(folder, deviation_um, columns, motor=False):
-    """Write and read a circular case of :func:`machine` with ``deviation_um`` at the
-    samples of ``columns`` (:func:`circle_columns`)."""
-    test = machine(motor)
-    axes = {name: {"screw": dict(a.screw), **({"motor": dict(a.motor)} if a.motor else {})}
+def synthetic_case(folder, deviation_um, columns, motor=False, servo=None):
+    """Write and read a circular case of :func:`machine` (``servo`` both axes' ``[servo]``)
+    with ``deviation_um`` at the samples of ``columns`` (:func:`circle_columns`)."""
+    test = machine(motor, servo)
+    axes = {name: {"screw": dict(a.screw), **({"motor": dict(a.motor)} if a.motor else {}),
+                   **({"servo": dict(a.servo)} if a.servo else {})}
             for name, a in test.axes.items()}
     axis_values = {"name": test.name, "circular": {
         "axes": list(test.circular.axes), "radius_mm": RADIUS_MM, "feed_mm_min": FEED_MM_MIN,
