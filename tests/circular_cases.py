@@ -23,10 +23,11 @@ def machine(motor=False, servo=None):
 
 def simulated_case(folder, fmu_paths, parameters=None, squareness_urad=0.0,
                    directions=(1, -1), noise_um=0.0, seed=1, samples_per_turn=1000,
-                   motor=False):
-    """Simulate the circular test of :func:`machine` with ``parameters``
-    ({component: {parameter: value}}) and read it back as a case."""
-    system = machine_from_case_axes(machine(motor), squareness_urad)
+                   motor=False, servo=None):
+    """Simulate the circular test of :func:`machine` (with ``servo`` as both axes'
+    ``[servo]``) with ``parameters`` ({component: {parameter: value}}) and read it back as
+    a case."""
+    system = machine_from_case_axes(machine(motor, servo), squareness_urad)
     with Master(system, fmu_paths) as master:
         simulate_circular(folder, master, MeasurementNoise(noise_um, seed) if noise_um else None,
                           radius_mm=RADIUS_MM, feed_mm_min=FEED_MM_MIN, center_mm=CENTER_MM,
@@ -47,11 +48,12 @@ def circle_columns(samples_per_turn=720, directions=(1, -1), feed_mm_min=FEED_MM
     return {"angle_deg": angle, "direction": direction, "time_s": time_s}
 
 
-def synthetic_case(folder, deviation_um, columns, motor=False):
-    """Write and read a circular case of :func:`machine` with ``deviation_um`` at the
-    samples of ``columns`` (:func:`circle_columns`)."""
-    test = machine(motor)
-    axes = {name: {"screw": dict(a.screw), **({"motor": dict(a.motor)} if a.motor else {})}
+def synthetic_case(folder, deviation_um, columns, motor=False, servo=None):
+    """Write and read a circular case of :func:`machine` (``servo`` both axes' ``[servo]``)
+    with ``deviation_um`` at the samples of ``columns`` (:func:`circle_columns`)."""
+    test = machine(motor, servo)
+    axes = {name: {"screw": dict(a.screw), **({"motor": dict(a.motor)} if a.motor else {}),
+                   **({"servo": dict(a.servo)} if a.servo else {})}
             for name, a in test.axes.items()}
     axis_values = {"name": test.name, "circular": {
         "axes": list(test.circular.axes), "radius_mm": RADIUS_MM, "feed_mm_min": FEED_MM_MIN,

@@ -775,12 +775,9 @@ def _machine_or_axis(args):
         return _axis_system(args)
     from .cosim.machine import circular_machine
 
-    if args.model:
-        raise InputError("a fitted circular model is not taken here yet; give its values with "
-                         "--set", parameter="--model")
     return circular_machine(machine or None, squareness_urad=args.squareness_urad,
                             step_ms=args.step_ms, thermal_step_s=args.thermal_step_s,
-                            set_items=args.set)[0]
+                            set_items=args.set, model_path=args.model)[0]
 
 
 def _export_ssp_options(parser):

@@ -293,9 +293,12 @@ def _select(measurement, left, pending, skipped, stages, notify):
                         _screened_residual(measurement, left, effect))
             extra = sum(len(e.parameters) for e in (joined.effects if result else (effect,))
                         if e.name not in left.model)
-            tested.append((measurement.noise.extra_ss_test(
+            tested.append((float(after_um @ after_um), (measurement.noise.extra_ss_test(
                 left.residual_um, after_um, extra, left.statistics.n_free + extra), effect,
-                result))
+                result)))
+        # p-values alike (each underflows to 0 where effects explain thousands of noise
+        # variances) keep the order of what the candidates leave, the least first
+        tested = [item for _, item in sorted(tested, key=lambda pair: pair[0])]
         named = _best_candidate(measurement, left, tested, pending, skipped, stages)
         if named is None:
             break

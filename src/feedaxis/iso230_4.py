@@ -17,8 +17,10 @@ definitions", of the 2005 edition, carried into ISO 230-4:2022):
 
 Here every figure is taken about the least-squares centre: G_ccw and G_cw about the LSC of
 their own path, G, F and H about the LSC of both paths together (one centre, so H is not
-changed by a centring difference). :func:`minimum_zone_um` offers G about the minimum-zone
-centre too. The LSC is the linearised least-squares circle, exact to first order in d/R
+changed by a centring difference). G, the one figure whose definition allows another
+centre, is also given about the minimum-zone centre (:func:`minimum_zone_figures`: G_mz
+of both paths about one centre, G_ccw_mz and G_cw_mz each about its own); F and H keep the
+LSC (the definitions give no minimum-zone form of them). The LSC is the linearised least-squares circle, exact to first order in d/R
 (the deviations are micrometres on a radius of millimetres): d ≈ r + a·cos θ + b·sin θ,
 (a, b) the centre's offset, r the mean radius deviation.
 """
@@ -136,3 +138,22 @@ def minimum_zone_um(angle_deg, deviation_um):
     if not solution.success:
         raise RuntimeError(f"minimum-zone linear program failed: {solution.message}")
     return float(solution.x[2] - solution.x[3])
+
+
+def minimum_zone_figures(angle_deg, deviation_um, direction):
+    """{G_mz_um, G_ccw_mz_um, G_cw_mz_um}: G about the minimum-zone centre
+    (:func:`minimum_zone_um`) of both paths together and of each direction alone (None
+    where that direction has fewer than 3 samples)."""
+    angle_deg, deviation_um = np.asarray(angle_deg, float), np.asarray(deviation_um, float)
+    direction = np.asarray(direction, float)
+    per_direction = [minimum_zone_um(angle_deg[mask], deviation_um[mask])
+                     if mask.sum() >= 3 else None for mask in (direction > 0, direction < 0)]
+    return {"G_mz_um": minimum_zone_um(angle_deg, deviation_um),
+            "G_ccw_mz_um": per_direction[0], "G_cw_mz_um": per_direction[1]}
+
+
+def figures_um(angle_deg, deviation_um, direction):
+    """{figure key: µm} about both centres: :func:`circular_figures` and
+    :func:`minimum_zone_figures` together (None where a direction is missing)."""
+    return {**circular_figures(angle_deg, deviation_um, direction).as_dict(),
+            **minimum_zone_figures(angle_deg, deviation_um, direction)}

@@ -7,7 +7,7 @@ import pytest
 import tomli_w
 
 from feedaxis.case import CaseError, read_case, write_case
-from feedaxis.iso230_4 import circular_figures, minimum_zone_um
+from feedaxis.iso230_4 import circular_figures, minimum_zone_figures, minimum_zone_um
 
 AXIS = {"name": "VMC XY ballbar", "circular": {"axes": ["X", "Y"], "radius_mm": 100.0,
                                                "feed_mm_min": 1000.0,
@@ -127,6 +127,13 @@ def test_minimum_zone_hand_worked():
     assert circular_figures(ANGLES, spike, np.ones(8)).G_um == pytest.approx(
         7.5 + 2.5 * math.sqrt(0.5))
     assert minimum_zone_um(ANGLES, spike) == pytest.approx(5 + 5 * math.sqrt(0.5))
+    both = np.concatenate((spike, np.zeros(8)))
+    figures = minimum_zone_figures(np.tile(ANGLES, 2), both, np.repeat([1.0, -1.0], 8))
+    assert figures["G_ccw_mz_um"] == pytest.approx(5 + 5 * math.sqrt(0.5))
+    assert figures["G_cw_mz_um"] == pytest.approx(0.0, abs=1e-9)
+    # both paths about one centre: 10 and 0 µm at the same angle 0° whatever the centre,
+    # and every sample within [0, 10] about the nominal one: G = 10
+    assert figures["G_mz_um"] == pytest.approx(10.0)
 
 
 @pytest.mark.parametrize("argv, parameter", [

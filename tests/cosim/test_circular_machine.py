@@ -102,3 +102,35 @@ def test_lag_mismatch_flips_with_the_direction(runs):
     assert fitted == pytest.approx(np.max(expected), rel=0.01)
     assert fitted == pytest.approx(FEED_MM_MIN / 60 * (lag_s(0.6) - lag_s()) / 2 * 1e3, rel=0.01)
 
+
+
+def test_simulate_circular_takes_a_fitted_model(tmp_path, capsys):
+    """``simulate circular --model`` sets the model's effects in the machine's FMUs, the
+    same trace as their values given with --set; a servo_mismatch (no FMU parameter) is
+    refused naming the model file."""
+    import json
+
+    from circular_cases import circle_columns, synthetic_case
+    from feedaxis.cli import main
+
+    case = synthetic_case(tmp_path / "c", np.zeros(720), circle_columns()).folder
+    model = tmp_path / "m.toml"
+    model.write_text('["backlash@Y"]\nbacklash_um = 4.0\nlag_deg = 0.0\n'
+                     '["lead_error@X"]\nslope_um_per_mm = 0.2\n'
+                     '[squareness]\nsquareness_urad = 50.0\n')
+    common = ["--machine", str(case), "--samples-per-turn", "360", "--json"]
+    assert main(["simulate", "circular", str(tmp_path / "a"), "--model", str(model),
+                 *common]) == 0
+    assert main(["simulate", "circular", str(tmp_path / "b"), "--squareness-urad", "50",
+                 "--set", "Y_GeometricError.backlash_um=4", "--set",
+                 "X_GeometricError.slope_um_per_mm=0.2", *common]) == 0
+    capsys.readouterr()
+    traces = [np.loadtxt(tmp_path / name / "circular.csv", delimiter=",", skiprows=1,
+                         usecols=1) for name in ("a", "b")]
+    assert np.ptp(traces[0]) > 4.0
+    np.testing.assert_array_equal(traces[0], traces[1])
+    model.write_text('[servo_mismatch]\nlag_difference_ms = 1.0\n')
+    assert main(["simulate", "circular", str(tmp_path / "d"), "--model", str(model),
+                 *common]) == 2
+    error = json.loads(capsys.readouterr().out)
+    assert error["column"] == "servo_mismatch" and not (tmp_path / "d").exists()

@@ -118,15 +118,63 @@ def test_simulated_machine_effect_named_on_its_axis(tmp_path, fmu_paths, add):
     assert value(diagnosis, add, parameter) == pytest.approx(size, rel=tolerance)
 
 
-def test_friction_through_the_servo_is_named_on_its_axis(tmp_path, fmu_paths):
-    """Coulomb friction F on X's P-loop: X trails its motion by F / (k_F kp) = 3.33 µm each
-    way (a reversal of -6.67 µm) and sticks at its reversals; nothing named on Y."""
+SERVO = {"controller": "pid", "kp_V_per_mm": 0.8998, "ki_V_per_mm_s": 0.0006077,
+         "kd_V_s_per_mm": 0.005155, "force_constant_N_per_V": 100.0, "loop_step_s": 1e-4}
+
+
+def test_loop_along_the_circle_is_the_cosimulated_machine(tmp_path, fmu_paths):
+    """Where [servo] is given the model runs each axis's loop along the circle (the
+    NpidServo kernel): on a noise-free case with 0.5 N of friction on X and X's kp at 0.6
+    (a 40 µm lag against Y's 27 µm) it predicts the co-simulated radius to 0.01 µm."""
+    from feedaxis import kinds
+    from feedaxis.effects import Model
+
+    case = simulated_case(tmp_path / "c", fmu_paths, servo=SERVO, parameters={
+        "X_NpidServo": {"friction_N": 0.5, "kp_V_per_mm": 0.6}})
+    measurement = kinds.kind("circular")(case)
+    friction = circular_effects(case.axis)["coulomb_friction@X"]
+    predicted_um = measurement.predictor(Model((friction,)))(
+        {friction.name: {"friction_N": 0.5}})
+    assert np.ptp(measurement.measured_um) > 10.0
+    assert np.abs(measurement.measured_um - predicted_um).max() < 0.01
+
+
+@pytest.mark.parametrize("axis, friction_N", [("X", 0.3), ("Y", 1.0)])
+def test_friction_through_a_given_servo_is_named_with_its_size(tmp_path, fmu_paths, axis,
+                                                               friction_N):
+    """Coulomb friction through the loop of an axis whose [servo] is given: named as
+    coulomb_friction on that axis with the force the case was simulated with, and no
+    backlash invented for its reversal step; reversal spikes are not offered there."""
+    case = simulated_case(tmp_path / "c", fmu_paths, noise_um=NOISE_UM, servo=SERVO,
+                          parameters={f"{axis}_NpidServo": {"friction_N": friction_N}})
+    diagnosis = diagnosed(case)
+    assert named(diagnosis) == [("coulomb_friction", axis, f"coulomb_friction@{axis}")]
+    assert value(diagnosis, f"coulomb_friction@{axis}", "friction_N") == pytest.approx(
+        friction_N, rel=0.01)
+    assert "servo loop" in diagnosis["skipped"][f"reversal_spike@{axis}"]
+
+
+@pytest.mark.parametrize("parameters", [{}, {"X_NpidServo": {"kp_V_per_mm": 0.6}}])
+def test_given_servos_alone_are_adequate(tmp_path, fmu_paths, parameters):
+    """Nulls with [servo] given: equal loops, and unequal controllers as given (the 45°
+    ellipse of their lags is predicted from the controllers, not named): adequate."""
+    case = simulated_case(tmp_path / "c", fmu_paths, noise_um=NOISE_UM, servo=SERVO,
+                          parameters=parameters, seed=3)
+    diagnosis = diagnosed(case)
+    assert diagnosis["verdict"] == "adequate", named(diagnosis)
+
+
+def test_friction_without_a_servo_is_a_reversal_of_its_axis(tmp_path, fmu_paths):
+    """Without [servo] the loop is not modelled: Coulomb friction F on X's P-loop trails X
+    by F / (k_F kp) = 3.33 µm each way, a reversal of -6.67 µm of X; nothing named on Y,
+    and coulomb_friction@X is not offered (it needs the controller)."""
     case = simulated_case(tmp_path / "c", fmu_paths, noise_um=NOISE_UM,
                           parameters={"X_NpidServo": {"friction_N": 0.3}})
     diagnosis = diagnosed(case)
     assert {axis for _, axis, _ in named(diagnosis)} == {"X"}
     assert value(diagnosis, "backlash@X", "backlash_um") == pytest.approx(
         -2 * 0.3 / 100.0 / 0.8998 * 1e3, rel=0.01)
+    assert "needs [axes.X.servo]" in diagnosis["skipped"]["coulomb_friction@X"]
 
 
 def test_compare_json_and_report_of_a_circular_case(tmp_path, capsys):
@@ -142,8 +190,13 @@ def test_compare_json_and_report_of_a_circular_case(tmp_path, capsys):
     synthetic_case(tmp_path / "c", deviation, columns)
     assert main(["compare", str(tmp_path / "c"), "--json"]) == 0
     figures = json.loads(capsys.readouterr().out)["figures"]
-    assert set(figures) == {"G_um", "G_ccw_um", "G_cw_um", "H_um", "F_max_um", "F_min_um"}
-    assert all(set(f) == {"name", "measured_um", "residual_um", "explained"}
+    assert set(figures) == {"G_um", "G_ccw_um", "G_cw_um", "H_um", "F_max_um", "F_min_um",
+                            "G_mz_um", "G_ccw_mz_um", "G_cw_mz_um"}
+    assert figures["G_um"]["center"] == "least squares, both paths"
+    assert figures["G_mz_um"]["center"] == "minimum zone, both paths"
+    for key in ("G_um", "G_ccw_um", "G_cw_um"):  # the minimum zone is the least G
+        assert figures[key[:-3] + "_mz_um"]["measured_um"] <= figures[key]["measured_um"]
+    assert all(set(f) == {"name", "measured_um", "residual_um", "explained", "center"}
                for f in figures.values())
     assert figures["H_um"]["measured_um"] == pytest.approx(3.0, abs=0.5)
     assert main(["fit", str(tmp_path / "c"), "--add", "backlash@Y", "--json",

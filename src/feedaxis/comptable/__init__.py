@@ -264,10 +264,12 @@ def _figure_lines(report):
     """The ISO 230-2 figures expected before and after the table, and the model's view
     between the targets."""
     title = f"{report.get('standard', 'ISO 230-2')} figure, expected"
-    width = max(34, *(len(f["name"]) for f in report["figures"].values()))
+    names = [f"{f['name']} ({f['center']})" if "center" in f else f["name"]
+             for f in report["figures"].values()]
+    width = max(34, *map(len, names))
     lines = [f"{title:{width}s} {'before':>9s} {'after':>9s}  (µm)"]
-    lines += [f"{f['name']:{width}s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
-              for f in report["figures"].values()]
+    lines += [f"{name:{width}s} {f['before_um']:9.3f} {f['after_um']:9.3f}"
+              for name, f in zip(names, report["figures"].values())]
     between = report.get("between_targets")
     if between:
         lines.append(f"{'between targets (model), P-V':34s} {between['pv_before_um']:9.3f} "

@@ -8,8 +8,9 @@ It is read back as the controller applies it, and the circle after it predicted:
 measured radial deviation less the table's correction at the axis's position and direction
 of motion, projected on the radius (e cos θ or e sin θ). The ISO 230-4 figures before and
 after decide: a table expected to raise G is refused (nothing written) unless forced.
-The machine's effects (squareness, servo mismatch) and a reversal spike are no position
-table's: they are left out and said.
+The machine's effects (squareness, servo mismatch) and an axis's servo effects (a reversal
+spike, friction or the plant in its loop) are no position table's: they are left out and
+said.
 """
 from __future__ import annotations
 
@@ -21,13 +22,14 @@ from ..effects import Model
 from ..effects.catalog import Backlash
 from ..effects.circular import CircleBacklash, OnAxis, axis_case, axis_index
 from ..errors import InputError
-from ..iso230_4 import circular_figures
+from ..iso230_4 import figures_um
 from ..measurement.circular import FIGURE_NAMES
 from ..physics import circle
 from . import CONTROLLERS, RefusedTable, _grid
 from .table import default_spacing_mm, from_model
 
-SPIKE_REASON = "a reversal spike is the servo's, not a position's: no table removes it"
+SERVO_REASON = ("it acts in the axis's servo (a reversal spike, friction or the plant of its "
+                "loop), not at its positions: no position table removes it")
 MACHINE_REASON = "an effect of the machine (both axes), not of one axis's positions"
 NO_LEAD_POINTS = 64  # table intervals over the circle's span when the axis's lead is unknown
 
@@ -44,7 +46,7 @@ def axis_model(model, axis):
             effects.append(Backlash())
             values["backlash"] = {"backlash_um": fitted["backlash_um"]}
         elif effect.axis == axis:
-            excluded[effect.name] = SPIKE_REASON
+            excluded[effect.name] = SERVO_REASON
         elif effect.axis is None:
             excluded[effect.name] = MACHINE_REASON
     return Model(effects, values), excluded
@@ -106,12 +108,12 @@ def circle_comp_table(case, model, controller, out_path, axis, spacing_mm=None, 
     out_path = Path(out_path)
     files = {**chosen.companions(out_path, axis_id), out_path: text}
     samples = case.circular
-    before = circular_figures(samples.angle_deg, samples.deviation_um, samples.direction)
-    after = circular_figures(samples.angle_deg, circle_after_um(case, model, axis, applied),
-                             samples.direction)
-    before, after = before.as_dict(), after.as_dict()
-    figures = {key: {"name": name, "before_um": before[key], "after_um": after[key]}
-               for key, name in FIGURE_NAMES.items() if before[key] is not None}
+    before = figures_um(samples.angle_deg, samples.deviation_um, samples.direction)
+    after = figures_um(samples.angle_deg, circle_after_um(case, model, axis, applied),
+                       samples.direction)
+    figures = {key: {"name": name, "center": centre, "before_um": before[key],
+                     "after_um": after[key]}
+               for key, (name, centre) in FIGURE_NAMES.items() if before[key] is not None}
     report = {"controller": controller, "axis": axis, "standard": "ISO 230-4",
               "source": "model", "points": table.size,
               "first_mm": float(table.position_mm[0]), "last_mm": float(table.position_mm[-1]),

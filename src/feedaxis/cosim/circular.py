@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError, number_list
-from ..fmu_map import AXIS_KEYS
+from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..iso230_4 import circular_figures
+from ..physics.circle import LEAD_IN_DEG
 from .machine import CircleInterpolator, circular_machine, component_name
 from .master import SimulationInterrupted
 from .physics_check import start_value
@@ -26,7 +27,7 @@ DIRECTIONS = {"both": (1, -1), "ccw": (1,), "cw": (-1,)}
 
 
 def run_circular(master, radius_mm=100.0, feed_mm_min=1000.0, center_mm=(0.0, 0.0),
-                 directions=(1, -1), samples_per_turn=3600, lead_in_deg=45.0,
+                 directions=(1, -1), samples_per_turn=3600, lead_in_deg=LEAD_IN_DEG,
                  lead_out_deg=45.0, start_deg=0.0, parameters=None, progress=None):
     """Simulate a circular test in memory.
 
@@ -120,7 +121,9 @@ def _samples(rows, path, axes, samples_per_turn, elapsed_s):
 
 def machine_axis_values(master, run):
     """axis.toml of the simulated circular test: ``[circular]`` and, per axis, the
-    ``[screw]`` (and ``[motor]`` where the axis has a StepperError) its FMUs ran with."""
+    ``[screw]`` (and ``[motor]`` where the axis has a StepperError) its FMUs ran with, and
+    its ``[servo]`` where its controller was given (a ``[servo]`` of ``--machine``, or
+    ``--set X_NpidServo.controller``): the controller, not the plant or friction."""
     system = master.system.with_parameters(run.parameters["parameters"])
     names = {c.name for c in system.components}
     axes = {}
@@ -134,6 +137,9 @@ def machine_axis_values(master, run):
                                       component_name(axis, fmu) in names else {})}
         if component_name(axis, "StepperError") in names:
             tables["motor"] = values("StepperError", AXIS_KEYS["motor"]["StepperError"])
+        if "controller" in system.component(component_name(axis, "NpidServo")).parameters:
+            tables["servo"] = servo_from_fmu(values("NpidServo",
+                                                    [*SERVO_KEYS.values(), "nonlinear"]))
         axes[axis] = tables
     return {"name": run.name, "circular": run.parameters["circular"], "axes": axes}
 
@@ -174,13 +180,10 @@ def _options(sub):
 
 def _machine(args):
     """(the machine system, the circle's keywords) of the command line's options."""
-    if args.model:
-        raise InputError("a fitted circular model is not taken here yet; give its values with "
-                         "--set", parameter="--model")
     return circular_machine(
         args.machine, args.radius_mm, args.feed_mm_min,
         number_list(args.center_mm, "--center-mm") if args.center_mm else None,
-        args.squareness_urad, args.step_ms, args.thermal_step_s, args.set)
+        args.squareness_urad, args.step_ms, args.thermal_step_s, args.set, args.model)
 
 
 def _arguments(args):

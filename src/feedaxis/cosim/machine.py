@@ -26,16 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from ..fmu_map import AXIS_KEYS, neutral_fmu_parameters, servo_to_fmu
-from ..physics.circle import axis_positions_mm
+from ..physics.circle import LEAD_IN_DEG, MACHINE_PLANT, axis_positions_mm
 from ..errors import InputError
 from .system import (DEFAULT_THERMAL_STEP_S, AxisSystem, Component, Connection, Output,
                      Variable, axis_overrides, default_axis, option_steps)
 
 AXIS_PARTS = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
 ERROR_PARTS = ("StepperError", "GeometricError", "ThermalScrew")
-# Each axis runs its servo with a type-1 plant (a0 = 0), as the positioning tests do: with
-# the a0 of Anang et al. 2017 and its tiny integral gain the loop keeps a static error of position/364.
-MACHINE_SERVO = {"plant_stiffness_per_s2": 0.0}
 
 
 def component_name(axis, part):
@@ -67,7 +64,7 @@ def machine_system(axes=("X", "Y"), parts=None, squareness_urad=0.0, macro_step_
         inputs += [Variable(f"{axis}_{v.name}", v.unit, f"axis {axis}: {v.description}",
                             v.start) for v in one.inputs if v.name != "ambient_C"]
         components += [Component(component_name(axis, c.name), c.fmu, c.step_s,
-                                 {**c.parameters, **(MACHINE_SERVO if c.name == "NpidServo"
+                                 {**c.parameters, **(MACHINE_PLANT if c.name == "NpidServo"
                                                      else {})}, f"axis {axis}: {c.description}")
                        for c in one.components if c.name in kept]
         connections += [Connection(_renamed(c.source, axis), _renamed(c.target, axis))
@@ -109,20 +106,29 @@ def machine_from_case_axes(machine, squareness_urad=0.0, macro_step_s=1e-3,
 
 
 def circular_machine(machine_path=None, radius_mm=None, feed_mm_min=None, center_mm=None,
-                     squareness_urad=0.0, step_ms=1.0, thermal_step_s=None, set_items=()):
+                     squareness_urad=0.0, step_ms=1.0, thermal_step_s=None, set_items=(),
+                     model_path=None):
     """(system, circle) of ``feedaxis simulate circular``: the machine of a circular case's
     axis.toml (or case folder) ``machine_path``, else axes X and Y with the FMUs' defaults;
     the circle's radius, feed and centre (``{"radius_mm", "feed_mm_min", "center_mm"}``)
     from the options, else that axis.toml's ``[circular]``, else R 100 mm, F 1000 mm/min,
-    centre (R, R). ``--set`` items name the machine's components (``X_NpidServo.kp_V_per_mm``).
+    centre (R, R). A fitted model ``model_path`` (of a circular case on that machine) sets
+    its effects' FMU parameters (:func:`model_parameters`) and its squareness; ``--set``
+    items name the machine's components (``X_NpidServo.kp_V_per_mm``) and come last.
     """
     step_s, thermal_step_s = option_steps(step_ms, thermal_step_s)
     circle = {"radius_mm": 100.0, "feed_mm_min": 1000.0, "center_mm": None}
+    overrides = {}
+    if model_path and not machine_path:
+        raise InputError("needs --machine (the axis.toml or case folder it was fitted on): "
+                         "the FMU parameters depend on the machine", parameter="--model")
     if machine_path:
         from ..circular_case import read_machine
 
         path = Path(machine_path)
         machine = read_machine(path / "axis.toml" if path.is_dir() else path)
+        if model_path:
+            overrides, squareness_urad = model_parameters(machine, model_path, squareness_urad)
         system = machine_from_case_axes(machine, squareness_urad, step_s, thermal_step_s)
         circle = {"radius_mm": machine.circular.radius_mm,
                   "feed_mm_min": machine.circular.feed_mm_min,
@@ -142,7 +148,31 @@ def circular_machine(machine_path=None, radius_mm=None, feed_mm_min=None, center
     if len(circle["center_mm"]) != 2 or not all(map(math.isfinite, circle["center_mm"])):
         raise InputError("expected two finite coordinates C1,C2", parameter="--center-mm")
     circle["center_mm"] = tuple(float(c) for c in circle["center_mm"])
-    return system.with_parameters(axis_overrides(set_items=set_items)), circle
+    return (system.with_parameters(overrides).with_parameters(axis_overrides(set_items=set_items)),
+            circle)
+
+
+def model_parameters(machine, model_path, squareness_urad=0.0):
+    """({component: {parameter: value}}, squareness in µrad) of a model fitted on a circular
+    case of ``machine``: each effect of an axis in that axis's FMUs (``X_GeometricError``),
+    the model's ``squareness`` in place of ``squareness_urad``. A ``servo_mismatch`` (a lag
+    difference fitted without the plants) has no FMU parameter and is refused."""
+    from ..effects import load_model
+    from ..effects.circular import circular_effects
+
+    model = load_model(model_path, circular_effects(machine))
+    if "servo_mismatch" in model:
+        raise InputError("[servo_mismatch] is a lag difference fitted without the axes' "
+                         "plants: no FMU parameter reproduces it; fit servo_plant@AXIS on a "
+                         "case with [axes.AXIS.servo], or set X_NpidServo values with --set",
+                         path=model_path, column="servo_mismatch")
+    overrides = {}
+    for effect in model.effects:
+        for component, values in effect.fmu_parameters(machine,
+                                                       model.values[effect.name]).items():
+            overrides.setdefault(component, {}).update(values)
+    return overrides, model.values.get("squareness", {}).get("squareness_urad",
+                                                              squareness_urad)
 
 
 def _parts_of(axis):
@@ -181,7 +211,7 @@ class CircleInterpolator:
     center_mm: tuple
     direction: int = 1
     start_deg: float = 0.0
-    lead_in_deg: float = 45.0
+    lead_in_deg: float = LEAD_IN_DEG
     lead_out_deg: float = 45.0
 
     def __post_init__(self):

@@ -9,6 +9,12 @@ backlash crosses the nut's play as the GeometricError FMU does. The machine's ef
 offset of the instrument's pivot, a slow drift of its length, the radius) is not an
 effect: the circular measurement fits it with every model.
 
+Where an axis's ``[servo]`` is given, the effects acting inside its closed loop
+(``coulomb_friction@X``, ``servo_plant@X``) set the loop's parameters; the circular
+measurement runs that loop along the commanded circle (:class:`InLoop`) and adds its error
+beyond the loop's error with every such effect off. Where it is not, friction at a reversal
+is a free spike of that axis (``reversal_spike@X``).
+
 A lead error's offset moves the axis as a whole: on the circle a centring offset, so only
 its slope (a scale error, an ellipse along the axes) is fitted.
 """
@@ -21,6 +27,7 @@ from ..measurement.positioning import Positioning, PositioningSamples
 from ..physics import circle
 from .base import Effect, Needs, Parameter
 from .catalog import AssemblyEccentricity, LeadError, MotorStepError
+from .tracking import CoulombFriction, ServoPlant
 
 LEAD_KEYS = ("lead_mm",)
 
@@ -164,6 +171,47 @@ class CircleBacklash(CircularEffect):
                 f"where the axis reverses ({points}, {values['lag_deg']:.2f}° late)")
 
 
+class InLoop(CircularEffect):
+    """A tracking effect (``inner``: its parameters are NpidServo's) inside the closed loop
+    of axis ``axis``, whose ``[servo]`` is given: the circular measurement simulates that
+    loop along the commanded circle (:func:`feedaxis.physics.circle.loop_error_um`), so
+    this effect is not additive. With ``screened`` the diagnosis ranks it by one
+    linearised step before fitting it (the plant: its lag moves the circle nearly
+    linearly); a friction is always fitted (its smoothed sign makes a step from 0 fall
+    short: 0.27 µm RMS left where the fit leaves the 0.1 µm noise). Its neutral values are the loop of the machine
+    (:data:`feedaxis.physics.circle.MACHINE_PLANT`, no friction)."""
+
+    additive = False
+    fmu = "NpidServo"
+
+    def __init__(self, inner, axis, screened=False):
+        self.inner, self.axis, self.screened = inner, axis, screened
+        self.effect, self.name = inner.name, f"{inner.name}@{axis}"
+        self.meaning = f"axis {axis}, through its servo loop: {inner.meaning}"
+        self.parameters, self.probe = inner.parameters, inner.probe
+        self.neutral = {key: circle.MACHINE_PLANT.get(key, value)
+                        for key, value in inner.neutral.items()}
+
+    def unavailable(self, case):
+        reason = super().unavailable(case)
+        if reason is None and not case.axis.axes[self.axis].servo:
+            return (f"needs [axes.{self.axis}.servo] (the controller as set in the drive): "
+                    f"without it friction on {self.axis} is a reversal spike")
+        return reason
+
+    def guess(self, case, residual_um):
+        return dict(self.neutral)
+
+    def fmu_parameters(self, axis, values):
+        return {self.component(self.fmu): dict(values)}
+
+    def evidence(self, case, values, contribution_um):
+        changed = ", ".join(f"{name} {self.neutral[name]:.4g} -> {values[name]:.4g}"
+                            for name in self.parameter_names)
+        return (f"axis {self.axis}, its servo loop run along the circle: {changed}; "
+                f"{np.ptp(contribution_um) / 2:.3g} µm on the radius")
+
+
 class ReversalSpike(CircularEffect):
     """Friction at a reversal of one axis whose servo loop is not given: the axis sticks
     and trails its new motion by h·exp(−φ/φ0) (:func:`feedaxis.physics.circle.reversal_spike_um`)."""
@@ -257,7 +305,8 @@ def circular_effects(machine):
                            lagged=True),
                     OnAxis(MotorStepError(), axis, needs=Needs(screw_keys=LEAD_KEYS),
                            lagged=True),
-                    CircleBacklash(axis), ReversalSpike(axis)]
+                    CircleBacklash(axis), ReversalSpike(axis),
+                    InLoop(CoulombFriction(), axis), InLoop(ServoPlant(), axis, screened=True)]
     effects += [Squareness(), ServoMismatch()]
     return {effect.name: effect for effect in effects}
 

@@ -352,7 +352,9 @@ def figure_table(title, width, comparison):
     lines = [f"{title:{width}s} {'measured':>10s} {'residual':>10s} {'explained':>10s}"]
     for figure in comparison["figures"].values():
         explained = figure["explained"]
-        lines.append(f"{figure['name']:{width}s} {figure['measured_um']:10.4g} "
+        name = f"{figure['name']} ({figure['center']})" if "center" in figure else \
+            figure["name"]
+        lines.append(f"{name:{width}s} {figure['measured_um']:10.4g} "
                      f"{figure['residual_um']:10.4g} "
                      f"{'' if explained is None else f'{100 * explained:9.1f}%':>10s}")
     lines.append(f"{'RMS':{width}s} {comparison['rms_measured_um']:10.4g} "

@@ -12,7 +12,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from .servo import ServoParams, simulate
+
 UM_PER_MM = 1e3
+# Each axis of a machine runs its servo with a type-1 plant (a0 = 0), as the positioning
+# tests do: with the a0 of Anang et al. 2017 and its tiny integral gain the loop keeps a
+# static error of position/364.
+MACHINE_PLANT = {"plant_stiffness_per_s2": 0.0}
+LEAD_IN_DEG = 45.0  # the arc an interpolator travels from standing before the measured turn
+INTERPOLATION_STEP_S = 1e-3  # the interpolator's cycle: a new command every 1 ms
 
 
 def unit_vector(angle_deg, axis_index):
@@ -24,6 +32,15 @@ def unit_vector(angle_deg, axis_index):
 def radial_um(angle_deg, axis_index, axis_error_um):
     """The radial deviation (µm) an error ``axis_error_um`` of one axis gives."""
     return unit_vector(angle_deg, axis_index) * axis_error_um
+
+
+def radius_change_um(angle_deg, radius_mm, first_error_um, second_error_um):
+    """The change (µm) of the radius when the axes' errors (µm) move the commanded point
+    R(cos θ, sin θ) about the centre: exact, not first order as :func:`radial_um`."""
+    theta = np.radians(angle_deg)
+    radius_um = radius_mm * UM_PER_MM
+    return (np.hypot(radius_um * np.cos(theta) + first_error_um,
+                     radius_um * np.sin(theta) + second_error_um) - radius_um)
 
 
 def axis_positions_mm(angle_deg, radius_mm, center_mm, axis_index):
@@ -135,3 +152,45 @@ def reversal_spike_shape(angle_deg, direction, axis_index):
     outward = -axis_direction(angle_deg, direction, axis_index) * unit_vector(angle_deg,
                                                                              axis_index)
     return lambda height_um, decay_deg: height_um * outward * np.exp(-phi / decay_deg)
+
+
+def passes(direction):
+    """(start, stop) index of each pass: the runs of samples of one direction."""
+    direction = np.asarray(direction)
+    edges = np.flatnonzero(np.diff(direction) != 0) + 1
+    return list(zip(np.r_[0, edges], np.r_[edges, direction.size]))
+
+
+def loop_error_um(params, angle_deg, direction, radius_mm, feed_mm_min, center_mm,
+                  axis_index, lead_in_deg=LEAD_IN_DEG, step_s=INTERPOLATION_STEP_S):
+    """The error (µm, position − command) of one axis's closed loop at each sample of a
+    circular test, the loop simulated by :func:`feedaxis.physics.servo.simulate` (the kernel
+    of the NpidServo FMU) under ``params`` (:class:`~feedaxis.physics.servo.ServoParams`).
+
+    Each pass (a run of one direction) starts from standing ``lead_in_deg`` before its
+    first sample's angle; the interpolator commands the circle at the feed every
+    ``step_s`` (the loop ramps between commands), as the co-simulated machine's
+    interpolator does. A sample's angle is the commanded angle at its instant (as a
+    ballbar assigns it from the programmed feed).
+    """
+    angle_deg = np.asarray(angle_deg, float)
+    error_um = np.empty_like(angle_deg)
+    deg_per_s = np.degrees(feed_mm_min / 60.0 / radius_mm)
+    for start, stop in passes(direction):
+        way = float(direction[start])
+        turned_deg = np.degrees(np.unwrap(np.radians(way * angle_deg[start:stop])))
+        sample_s = (lead_in_deg + turned_deg - turned_deg[0]) / deg_per_s
+        time_s = np.arange(int(np.ceil(sample_s.max() / step_s - 1e-9)) + 1) * step_s
+        commanded_deg = angle_deg[start] + way * (time_s * deg_per_s - lead_in_deg)
+        command_mm = axis_positions_mm(commanded_deg, radius_mm, center_mm, axis_index)
+        position_mm = simulate(params, time_s, command_mm)
+        with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
+            error_um[start:stop] = np.interp(sample_s, time_s,
+                                             position_mm - command_mm) * UM_PER_MM
+    return error_um
+
+
+def servo_params(servo, values=None):
+    """:class:`ServoParams` of an axis of a machine: its ``[servo]`` controller (as NpidServo
+    parameters) on the machine's plant (:data:`MACHINE_PLANT`), then ``values``."""
+    return ServoParams(**{**servo, **MACHINE_PLANT, **(values or {})})

@@ -27,13 +27,14 @@ def views(analysis):
 
 def figures(analysis):
     comparison = analysis.comparison
-    rows = [(f["name"], f"{f['measured_um']:.4g}", f"{f['residual_um']:.4g}",
+    rows = [(f["name"], f["center"], f"{f['measured_um']:.4g}", f"{f['residual_um']:.4g}",
              "" if f["explained"] is None else f"{100 * f['explained']:.1f} %")
             for f in comparison["figures"].values()]
     setup = comparison["setup"]
     first, second = comparison["axes"]
     return ["<h2>ISO 230-4 figures</h2>",
-            page.table(("ISO 230-4 figure", "measured (µm)", "residual (µm)", "explained"), rows),
+            page.table(("ISO 230-4 figure", "about the centre", "measured (µm)", "residual (µm)",
+                        "explained"), rows),
             "<h2>The set-up (not the machine's)</h2>",
             page.table(("set-up", "value"),
                   [(f"centre offset along {first}", f"{setup['center_first_um']:.4g} µm"),
