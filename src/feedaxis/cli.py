@@ -622,6 +622,9 @@ STANDALONE_HELP = ("each FMU carries the Python its physics needs (about 21 MB e
 def _build_fmus_options(parser):
     parser.add_argument("--out", default="build/fmus", help="FMU folder (default: build/fmus)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
+    parser.add_argument("--fmi", type=int, choices=(2, 3), default=2,
+                        help="FMI version of the FMUs: 2 (FMI 2.0, default) or 3 (FMI 3.0 "
+                             "co-simulation, same physics and results; docs/fmus.md)")
 
 
 @command("build-fmus", help="build the four FMUs",
@@ -631,8 +634,12 @@ def _cmd_build_fmus(args):
     from . import fmu_build
 
     check_writable_target(args.out, "folder")
+    if args.fmi == 3 and args.standalone:
+        raise InputError("standalone FMI 3.0 FMUs are not built yet: use --fmi 2 with "
+                         "--standalone", parameter="--standalone")
     with _progress("building FMUs", "FMU") as tick, _standalone_errors():
-        paths = fmu_build.build_fmus(args.out, standalone=args.standalone, progress=tick)
+        paths = fmu_build.build_fmus(args.out, standalone=args.standalone, progress=tick,
+                                     fmi=args.fmi)
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
 
 

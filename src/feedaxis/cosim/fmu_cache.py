@@ -27,10 +27,11 @@ def source_hash():
     """SHA-256 (first 12 hex digits) of every source file that goes into the FMUs."""
     digest = hashlib.sha256()
     sources = fmu_sources()
-    files = sorted([*sources.glob("*/*.py"), *sources.glob("common/*.c"),
-                    *sources.glob("common/fmi2/*.h"), *(SOURCE_DIR / "physics").glob("*.py"),
+    files = sorted([*sources.glob("*/*.py"), *sources.glob("common/host/*.[ch]"),
+                    *sources.glob("common/fmi[23]/*.h"), *(SOURCE_DIR / "physics").glob("*.py"),
                     *(SOURCE_DIR / name for name in ("fmu_build.py", "fmu_standalone.py",
-                                                     "fmu_trace.py", "kernel_build.py"))])
+                                                     "fmu_fmi3.py", "fmu_trace.py",
+                                                     "kernel_build.py"))])
     for path in files:
         digest.update(path.name.encode())
         digest.update(path.read_bytes())

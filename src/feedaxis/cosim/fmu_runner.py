@@ -1,4 +1,4 @@
-"""Run one FMU through fmpy's low-level FMI 2 co-simulation API.
+"""Run one FMU through fmpy's low-level FMI 2.0 or FMI 3.0 co-simulation API.
 
 The step convention is the one every comparison in the project uses: input value k is set
 before step k (held over [t_k, t_k + h)), output value k is read after it, at t_k + h.
@@ -15,6 +15,7 @@ from pathlib import PurePosixPath
 import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
 
 from ..errors import InputError
 
@@ -53,16 +54,18 @@ class LoadedFmu:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
             raise
         self.variables = {v.name: v for v in self.description.modelVariables}
+        self.fmi3 = self.description.fmiVersion.startswith("3.")
 
     def instantiate(self, instance_name):
-        """Return an instantiated :class:`fmpy.fmi2.FMU2Slave`; its log goes to stdout.
-        A shared library that does not load (damaged, another platform's) is an
-        :class:`InputError` naming the FMU."""
+        """Return an instantiated :class:`fmpy.fmi2.FMU2Slave` (an FMI 3.0 FMU:
+        :class:`fmpy.fmi3.FMU3Slave`); its log goes to stdout. A shared library that does
+        not load (damaged, another platform's) is an :class:`InputError` naming the FMU."""
         working_folder = os.getcwd()
         try:
-            slave = FMU2Slave(guid=self.description.guid, unzipDirectory=self.unzip_dir,
-                              modelIdentifier=self.description.coSimulation.modelIdentifier,
-                              instanceName=instance_name)
+            slave = (FMU3Slave if self.fmi3 else FMU2Slave)(
+                guid=self.description.guid, unzipDirectory=self.unzip_dir,
+                modelIdentifier=self.description.coSimulation.modelIdentifier,
+                instanceName=instance_name)
         except Exception as error:  # fmpy raises a bare Exception for a library not loading
             raise InputError(f"its shared library does not load: {error}",
                              path=self.path) from None
@@ -71,17 +74,28 @@ class LoadedFmu:
         slave.instantiate(loggingOn=True)
         return slave
 
+    def enter_initialisation(self, slave, start_time_s=0.0):
+        """Set up the experiment from ``start_time_s`` and enter initialisation mode."""
+        if self.fmi3:
+            slave.enterInitializationMode(startTime=start_time_s)
+        else:
+            slave.setupExperiment(startTime=start_time_s)
+            slave.enterInitializationMode()
+
     def set_values(self, slave, values):
-        """Set Real, Integer, Boolean or String variables by name."""
+        """Set Real (Float64), Integer (Int32), Boolean or String variables by name."""
         for name, value in values.items():
             variable = self.variables[name]
-            setter = {"Real": slave.setReal, "Integer": slave.setInteger,
-                      "Boolean": slave.setBoolean, "String": slave.setString}[variable.type]
+            setter = getattr(slave, {"Real": "setReal", "Float64": "setFloat64",
+                                     "Integer": "setInteger", "Int32": "setInt32",
+                                     "Boolean": "setBoolean",
+                                     "String": "setString"}[variable.type])
             setter([variable.valueReference], [value])
 
     def get_reals(self, slave, names):
-        """Current values of Real variables, in the order of ``names``."""
-        return slave.getReal([self.variables[n].valueReference for n in names])
+        """Current values of Real (Float64) variables, in the order of ``names``."""
+        getter = slave.getFloat64 if self.fmi3 else slave.getReal
+        return getter([self.variables[n].valueReference for n in names])
 
     def close(self):
         """Remove the extracted files."""
@@ -115,8 +129,7 @@ def run_fmu(fmu, step_size_s, n_steps, inputs=None, parameters=None, outputs=(),
     slave = loaded.instantiate(instance_name)
     try:
         loaded.set_values(slave, parameters or {})
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
+        loaded.enter_initialisation(slave)
         loaded.set_values(slave, {name: values[0].item() for name, values in inputs.items()})
         slave.exitInitializationMode()
         recorded = np.empty((n_steps, len(outputs)))
