@@ -176,6 +176,18 @@ class Measurement(ABC):
         the model has none (their prediction is 0)."""
         return None
 
+    # Whether a measurement with sensitivities (:meth:`sensitivity`) gives them; False:
+    # the fit differences everywhere (the baseline benchmarks/bench_tracking_fit.py and
+    # bench_cascade.py time beside them, and the tests' cross-check)
+    sensitivities = True
+
+    def sensitivity(self, model):
+        """``f(values, slots) -> (core_um, d core_um / d slots)``: the core's prediction
+        (:meth:`core`) and its derivatives in the ``(effect, parameter)`` slots of effects
+        that are not additive, from one pass (forward-mode sensitivities), or None when the
+        measurement has none (the fit then differences)."""
+        return None
+
     def separable(self, model):
         """``f(values) -> (base_um, columns_um)``: the prediction is ``base_um + columns_um
         @ linear values``, columns in the order ``(effect, parameter) for effect in
