@@ -70,6 +70,12 @@ def fmu_paths(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def fmi3_paths(tmp_path_factory):
+    """Name -> path of each freshly built FMI 3.0 FMU (``build-fmus --fmi 3``)."""
+    return {path.stem: path for path in build_fmus(tmp_path_factory.mktemp("fmi3"), fmi=3)}
+
+
+@pytest.fixture(scope="session")
 def loaded_fmus(fmu_paths):
     """Name -> extracted :class:`LoadedFmu`, shared by the session."""
     loaded = {name: LoadedFmu(fmu_paths[name]) for name in FMU_NAMES}

@@ -23,10 +23,10 @@ class StepperError(AxisSlave):
         self.parameter("lead_mm", 1.0, "Screw lead", "mm", (0, None))
         self.parameter("step_angle_deg", 0.72, "Full-step angle", "deg", (0, None))
         self.parameter("error_period_steps", 10, "Steps in one period of the angular error", None, (1, None))
-        self.parameter("harmonic1_cos_um", 0.08, "First harmonic, cosine amplitude", "um")
-        self.parameter("harmonic1_sin_um", 0.06, "First harmonic, sine amplitude", "um")
-        self.parameter("harmonic2_cos_um", 0.0, "Second harmonic, cosine amplitude", "um")
-        self.parameter("harmonic2_sin_um", 0.0, "Second harmonic, sine amplitude", "um")
+        self.parameter("harmonic1_cos_um", 0.08, "First harmonic, cosine amplitude", "um", tunable=True)
+        self.parameter("harmonic1_sin_um", 0.06, "First harmonic, sine amplitude", "um", tunable=True)
+        self.parameter("harmonic2_cos_um", 0.0, "Second harmonic, cosine amplitude", "um", tunable=True)
+        self.parameter("harmonic2_sin_um", 0.0, "Second harmonic, sine amplitude", "um", tunable=True)
 
     def build(self):
         return motor.motor_error_period_mm(self.lead_mm, self.step_angle_deg, self.error_period_steps)

@@ -47,7 +47,8 @@ class ThermalScrew(AxisSlave):
         self.output("error_um", "Thermal positioning error at position_mm, TE (Eq. 15-16)", "um")
         self.output("elongation_um", "Free-end elongation of the screw TE_m(L)", "um")
         self.output("peak_rise_K", "Largest temperature rise of the screw above ambient", "K")
-        self.parameter("reference_ambient_C", 20.0, "Ambient at which TE_a = 0 (Eq. 1)", "degC")
+        self.parameter("reference_ambient_C", 20.0, "Ambient at which TE_a = 0 (Eq. 1)", "degC",
+                       tunable=True)
         for field in fields(thermal.ThermalScrewParams):
             limits = None if field.name.endswith("_mm") else (0, None)
             self.parameter(field.name, float(field.default), DESCRIPTIONS[field.name],

@@ -107,10 +107,13 @@ class AxisSlave(Fmi2Slave):
         if limits:
             self.limits[name] = limits
 
-    def parameter(self, name, value, description, unit=None, limits=None):
-        """Declare a fixed parameter with its default ``value`` (bool, int, float or str)."""
+    def parameter(self, name, value, description, unit=None, limits=None, tunable=False):
+        """Declare a parameter with its default ``value`` (bool, int, float or str): fixed,
+        or ``tunable`` where :meth:`step` reads it at every step (a set between steps holds
+        from the next one on; the host layer checks it as it is set)."""
+        variability = Fmi2Variability.tunable if tunable else Fmi2Variability.fixed
         self._declare(name, value, description, unit, limits,
-                      causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
+                      causality=Fmi2Causality.parameter, variability=variability)
 
     def input(self, name, value, description, unit=None):
         """Declare a Real input with its start ``value``; NaN or infinity is refused."""

@@ -619,9 +619,20 @@ STANDALONE_HELP = ("each FMU carries the Python its physics needs (about 21 MB e
                    "are small and need this machine's Python")
 
 
+FMI_HELP = ("FMI version of the FMUs: 2 (FMI 2.0, default) or 3 (FMI 3.0 co-simulation, the "
+            "same physics and results; docs/fmus.md)")
+
+
+def _refuse_standalone_fmi3(args):
+    if getattr(args, "fmi", 2) == 3 and getattr(args, "standalone", False):
+        raise InputError("standalone FMI 3.0 FMUs are not built yet: use --fmi 2 with "
+                         "--standalone", parameter="--standalone")
+
+
 def _build_fmus_options(parser):
     parser.add_argument("--out", default="build/fmus", help="FMU folder (default: build/fmus)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
+    parser.add_argument("--fmi", type=int, choices=(2, 3), default=2, help=FMI_HELP)
 
 
 @command("build-fmus", help="build the four FMUs",
@@ -631,8 +642,10 @@ def _cmd_build_fmus(args):
     from . import fmu_build
 
     check_writable_target(args.out, "folder")
+    _refuse_standalone_fmi3(args)
     with _progress("building FMUs", "FMU") as tick, _standalone_errors():
-        paths = fmu_build.build_fmus(args.out, standalone=args.standalone, progress=tick)
+        paths = fmu_build.build_fmus(args.out, standalone=args.standalone, progress=tick,
+                                     fmi=args.fmi)
     _emit(args, [str(p) for p in paths], "\n".join(str(p) for p in paths))
 
 
@@ -660,8 +673,9 @@ def _axis_system(args):
 def _fmu_paths(args):
     from .cosim.fmu_cache import fmu_paths
 
+    _refuse_standalone_fmi3(args)
     with _standalone_errors():
-        return fmu_paths(args.fmus, getattr(args, "standalone", False))
+        return fmu_paths(args.fmus, getattr(args, "standalone", False), getattr(args, "fmi", 2))
 
 
 @contextmanager
@@ -790,6 +804,7 @@ def _export_ssp_options(parser):
                         help="with --machine: the second axis out of square with the first "
                              "(µrad), a term of the first axis's table position (printed)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
+    parser.add_argument("--fmi", type=int, choices=(2, 3), default=2, help=FMI_HELP)
     parser.add_argument("--stop-time", type=float, default=1.0, metavar="S",
                         help="DefaultExperiment stopTime in s (default 1)")
     parser.add_argument("--osp-step-hints", action="store_true",

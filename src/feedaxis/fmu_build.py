@@ -110,10 +110,14 @@ SI_UNITS = {
 }
 
 
-def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None):
+def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None, fmi=2):
     """Build the named FMUs into ``out_dir``; return their paths. ``standalone``: each
     carries the Python its step path needs (:mod:`feedaxis.fmu_standalone`); ``progress``
-    is called after each FMU."""
+    is called after each FMU; ``fmi``: 2 or 3 (:mod:`feedaxis.fmu_fmi3`)."""
+    if fmi not in (2, 3):
+        raise ValueError(f"FMI version {fmi!r}: 2 or 3")
+    if fmi == 3 and standalone:
+        raise ValueError("standalone FMI 3.0 FMUs are not built yet")
     out_dir = Path(out_dir)
     with writing(out_dir):
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -125,15 +129,16 @@ def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None):
             runtime = stack.enter_context(RuntimeBuilder(fmu_sources()))
         paths = []
         for name in names:
-            paths.append(build_fmu(name, out_dir, runtime))
+            paths.append(build_fmu(name, out_dir, runtime, fmi))
             if progress:
                 progress()
         return paths
 
 
-def build_fmu(name, out_dir, runtime=None):
+def build_fmu(name, out_dir, runtime=None, fmi=2):
     """Build one FMU ``<out_dir>/<name>.fmu``: pythonfmu, then the host layer and description;
-    with ``runtime`` (a :class:`~feedaxis.fmu_standalone.RuntimeBuilder`) a standalone FMU.
+    with ``runtime`` (a :class:`~feedaxis.fmu_standalone.RuntimeBuilder`) a standalone FMU;
+    ``fmi`` 3: an FMI 3.0 FMU over the same slave (:mod:`feedaxis.fmu_fmi3`).
 
     The FMU is completed in a private folder and then written whole under its name (a
     temporary file renamed), so an interrupted build or a full disk leaves no partial FMU,
@@ -160,9 +165,17 @@ def build_fmu(name, out_dir, runtime=None):
         if runtime is not None:
             _make_standalone(fmu_path, name, sources, (variables, guid), staging, runtime,
                              missing)
+        elif missing is None and fmi == 3:
+            from .fmu_fmi3 import repackage
+
+            host_layer = _compile_host_layer(sources, variables, guid, staging, fmi=3)
+            _write_fmu(fmu_path, repackage(_read_fmu(fmu_path), name, host_layer.read_bytes(),
+                                           PYTHONFMU_LIBRARY))
         elif missing is None:
             _install_host_layer(fmu_path, name, _compile_host_layer(sources, variables, guid,
                                                                            staging))
+        elif fmi == 3:
+            raise HostLayerUnavailable(f"{missing}: FMI 3.0 FMUs are the C host layer's")
         elif os.environ.get("CI") == "true":
             raise HostLayerUnavailable(f"{missing}: CI requires the FMUs' C host layer")
         else:
@@ -200,9 +213,11 @@ def _make_standalone(fmu_path, name, sources, description, work_dir, runtime, mi
     runtime.add_runtime(fmu_path, trace)
 
 
-def host_layer_sources(sources):
-    """The C files of the host layer (fmus/common/host/, one job each)."""
-    return sorted((sources / "common" / "host").glob("*.c"))
+def host_layer_sources(sources, fmi=2):
+    """The C files of the host layer (fmus/common/host/, one job each); the fmi3 ones only
+    for an FMI 3.0 FMU."""
+    return sorted(path for path in (sources / "common" / "host").glob("*.c")
+                  if fmi == 3 or not path.name.startswith("fmi3_"))
 
 
 def _c_double(value, infinite_sign):
@@ -212,10 +227,10 @@ def _c_double(value, infinite_sign):
     return repr(float(value))
 
 
-def _compile_host_layer(sources, variables, guid, work_dir, defines=None):
+def _compile_host_layer(sources, variables, guid, work_dir, defines=None, fmi=2):
     """Compile the host layer (:func:`host_layer_sources`) for this FMU's variables and GUID;
     return the .so. ``defines``: a standalone FMU's constants, else the Python that builds
-    (its paths)."""
+    (its paths); ``fmi`` 3: with the FMI 3.0 exports."""
     rows = [f'    {{{vr}, \'{kind}\', \'{type_code}\', "{variable}", {_c_double(low, -1)}, '
             f'{_c_double(high, 1)}}},'
             for vr, kind, type_code, variable, (low, high) in variables]
@@ -232,12 +247,24 @@ def _compile_host_layer(sources, variables, guid, work_dir, defines=None):
     output = work_dir / "host.so"
     command = [c_compiler(), "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-Wall",
                f"-I{sysconfig.get_paths()['include']}", f"-I{sources / 'common' / 'fmi2'}",
-               f"-I{sources / 'common' / 'host'}", f"-I{work_dir}", *(f'-D{name}="{value}"' for name, value in defines.items()),
-               "-o", str(output), *map(str, host_layer_sources(sources)), "-ldl", "-lpthread"]
+               f"-I{sources / 'common' / 'fmi3'}", f"-I{sources / 'common' / 'host'}",
+               f"-I{work_dir}", *(f'-D{name}="{value}"' for name, value in defines.items()),
+               *(_fmi3_defines(variables) if fmi == 3 else []),
+               "-o", str(output), *map(str, host_layer_sources(sources, fmi)), "-ldl",
+               "-lpthread"]
     result = subprocess.run(command, capture_output=True, text=True)
     if result.returncode != 0:
         raise RuntimeError(f"compiling the FMU host layer failed:\n{result.stderr}")
     return output
+
+
+def _fmi3_defines(variables):
+    """The compiler's options of the FMI 3.0 exports: on, and the independent variable's value
+    reference."""
+    from .fmu_fmi3 import time_value_reference
+
+    return ["-DFEEDAXIS_FMI3",
+            f"-DFEEDAXIS_TIME_VR={time_value_reference(row[0] for row in variables)}u"]
 
 
 def _install_host_layer(fmu_path, name, host_library):

@@ -298,7 +298,7 @@ def test_a_broken_fmu_in_the_cache_is_rebuilt(user_fmu_cache, fmu_paths, monkeyp
     victim.write_bytes(data[:len(data) // 2] if damage == "truncated" else b"")
     built = []
 
-    def build(folder, standalone=False):  # the real build is tested in test_fmus.py
+    def build(folder, standalone=False, fmi=2):  # the real build: test_fmus.py, test_fmi3.py
         built.append(folder)
         for path in fmu_paths.values():
             shutil.copy2(path, Path(folder) / path.name)

@@ -263,9 +263,9 @@ def test_fixed_parameter_set_after_initialisation_is_refused(loaded_fmus):
     before = slave.getReal([vr(loaded, "error_um")])
     healthy = slave.getFMUstate()
     with pytest.raises(FMICallException) as failure:
-        slave.setReal([vr(loaded, "harmonic1_cos_um")], [0.5])
+        slave.setReal([vr(loaded, "lead_mm")], [0.5])
     assert failure.value.status == ERROR
-    assert b"harmonic1_cos_um is a fixed parameter" in messages.records[-1][2]
+    assert b"lead_mm is a fixed parameter" in messages.records[-1][2]
     slave.setFMUstate(healthy)
     slave.doStep(0.01, 0.01)
     assert slave.getReal([vr(loaded, "error_um")]) == before

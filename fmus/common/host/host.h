@@ -10,6 +10,9 @@
  *   exports.c      the fmi2 functions
  *   saved_states.c fmi2GetFMUstate and the other state functions
  *   unloading.c    the pool of freed instances, and unloading
+ * and, in an FMI 3.0 FMU (FEEDAXIS_FMI3), over the fmi2 functions above:
+ *   fmi3_states.c  the FMI 3.0 state machine, as one table
+ *   fmi3_exports.c the fmi3 functions
  * See fmus/README.md for why a layer between the host and pythonfmu exists at all. */
 #ifndef FEEDAXIS_HOST_H
 #define FEEDAXIS_HOST_H
@@ -19,6 +22,11 @@
 #include <math.h>
 #include <stddef.h>
 
+#ifdef FEEDAXIS_FMI3
+/* An FMI 3.0 FMU: the fmi2 functions below are internal (hidden, not exported); the
+ * fmi3 functions of fmi3_exports.c are its interface, checked against fmi3_states.c. */
+#define FMI2_Export __attribute__((visibility("hidden")))
+#endif
 #include "fmi2Functions.h" /* the official FMI 2.0 headers (fmi2/): every export checked */
 #include "feedaxis_fmi_vars.h"
 

@@ -27,30 +27,34 @@ def source_hash():
     """SHA-256 (first 12 hex digits) of every source file that goes into the FMUs."""
     digest = hashlib.sha256()
     sources = fmu_sources()
-    files = sorted([*sources.glob("*/*.py"), *sources.glob("common/*.c"),
-                    *sources.glob("common/fmi2/*.h"), *(SOURCE_DIR / "physics").glob("*.py"),
+    files = sorted([*sources.glob("*/*.py"), *sources.glob("common/host/*.[ch]"),
+                    *sources.glob("common/fmi[23]/*.h"), *(SOURCE_DIR / "physics").glob("*.py"),
                     *(SOURCE_DIR / name for name in ("fmu_build.py", "fmu_standalone.py",
-                                                     "fmu_trace.py", "kernel_build.py"))])
+                                                     "fmu_fmi3.py", "fmu_trace.py",
+                                                     "kernel_build.py"))])
     for path in files:
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()[:12]
 
 
-def cache_folder(root=None, standalone=False):
+def cache_folder(root=None, standalone=False, fmi=2):
     """The cache folder of this version's FMUs (``root`` defaults to :func:`cache_root`);
-    standalone FMUs (:mod:`feedaxis.fmu_standalone`) have their own, and so have FMUs
-    without the C host layer or the compiled servo loop."""
+    standalone FMUs (:mod:`feedaxis.fmu_standalone`) have their own, and so have FMI 3.0
+    FMUs and FMUs without the C host layer or the compiled servo loop."""
     kind = "-standalone" if standalone else "-python-hosts" if host_layer_missing() else ""
+    version = "-fmi3" if fmi == 3 else ""
     python_loop = "-python-loop" if kernel_missing() else ""
-    return Path(root or cache_root()) / f"fmus-{__version__}-{source_hash()}{kind}{python_loop}"
+    return Path(root or cache_root()) / (f"fmus-{__version__}-{source_hash()}{version}{kind}"
+                                         f"{python_loop}")
 
 
-def cached_fmus(root=None, standalone=False):
-    """{FMU name: path} of the four FMUs (``standalone``: carrying their Python), built into
-    the cache on first use."""
-    folder = built_once(cache_folder(root, standalone),
-                        lambda staging: build_fmus(staging, standalone=standalone), _complete)
+def cached_fmus(root=None, standalone=False, fmi=2):
+    """{FMU name: path} of the four FMUs (``standalone``: carrying their Python; ``fmi``: 2
+    or 3), built into the cache on first use."""
+    folder = built_once(cache_folder(root, standalone, fmi),
+                        lambda staging: build_fmus(staging, standalone=standalone, fmi=fmi),
+                        _complete)
     return {name: folder / f"{name}.fmu" for name in FMU_NAMES}
 
 
@@ -60,12 +64,12 @@ def _complete(folder):
     return intact({name: folder / f"{name}.fmu" for name in FMU_NAMES})
 
 
-def fmu_paths(folder=None, standalone=False):
+def fmu_paths(folder=None, standalone=False, fmi=2):
     """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``: each checked to be a safe
     FMU archive with the interface the axis needs), else of the cache; ``standalone``: FMUs that carry their Python (those in
     ``folder`` must be)."""
     if folder is None:
-        return cached_fmus(standalone=standalone)
+        return cached_fmus(standalone=standalone, fmi=fmi)
     paths = {name: Path(folder) / f"{name}.fmu" for name in FMU_NAMES}
     missing = [str(p) for p in paths.values() if not p.exists()]
     if missing:

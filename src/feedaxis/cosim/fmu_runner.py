@@ -1,10 +1,12 @@
-"""Run one FMU through fmpy's low-level FMI 2 co-simulation API.
+"""Run one FMU through fmpy's low-level FMI 2.0 or FMI 3.0 co-simulation API.
 
 The step convention is the one every comparison in the project uses: input value k is set
 before step k (held over [t_k, t_k + h)), output value k is read after it, at t_k + h.
 """
 from __future__ import annotations
 
+import copy
+import ctypes
 import os
 import shutil
 import tempfile
@@ -15,8 +17,13 @@ from pathlib import PurePosixPath
 import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
 
 from ..errors import InputError
+
+# FMI 3.0's names of the variable types these FMUs use, and FMI 2.0's, which the project's
+# code reads (LoadedFmu.variables holds these for FMUs of either version)
+FMI2_TYPES = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean", "String": "String"}
 
 
 def check_fmu_archive(path):
@@ -52,17 +59,19 @@ class LoadedFmu:
         except BaseException:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
             raise
-        self.variables = {v.name: v for v in self.description.modelVariables}
+        self.fmi3 = self.description.fmiVersion.startswith("3.")
+        self.variables = fmi2_variables(self.description)
 
     def instantiate(self, instance_name):
-        """Return an instantiated :class:`fmpy.fmi2.FMU2Slave`; its log goes to stdout.
-        A shared library that does not load (damaged, another platform's) is an
-        :class:`InputError` naming the FMU."""
+        """Return an instantiated :class:`fmpy.fmi2.FMU2Slave` (an FMI 3.0 FMU:
+        :class:`fmpy.fmi3.FMU3Slave`); its log goes to stdout. A shared library that does
+        not load (damaged, another platform's) is an :class:`InputError` naming the FMU."""
         working_folder = os.getcwd()
         try:
-            slave = FMU2Slave(guid=self.description.guid, unzipDirectory=self.unzip_dir,
-                              modelIdentifier=self.description.coSimulation.modelIdentifier,
-                              instanceName=instance_name)
+            slave = (FMU3Slave if self.fmi3 else FMU2Slave)(
+                guid=self.description.guid, unzipDirectory=self.unzip_dir,
+                modelIdentifier=self.description.coSimulation.modelIdentifier,
+                instanceName=instance_name)
         except Exception as error:  # fmpy raises a bare Exception for a library not loading
             raise InputError(f"its shared library does not load: {error}",
                              path=self.path) from None
@@ -71,21 +80,61 @@ class LoadedFmu:
         slave.instantiate(loggingOn=True)
         return slave
 
+    def enter_initialisation(self, slave, start_time_s=0.0):
+        """Set up the experiment from ``start_time_s`` and enter initialisation mode."""
+        if self.fmi3:
+            slave.enterInitializationMode(startTime=start_time_s)
+        else:
+            slave.setupExperiment(startTime=start_time_s)
+            slave.enterInitializationMode()
+
     def set_values(self, slave, values):
-        """Set Real, Integer, Boolean or String variables by name."""
+        """Set Real (Float64), Integer (Int32), Boolean or String variables by name."""
+        names = {"Real": "Float64", "Integer": "Int32"} if self.fmi3 else {}
         for name, value in values.items():
             variable = self.variables[name]
-            setter = {"Real": slave.setReal, "Integer": slave.setInteger,
-                      "Boolean": slave.setBoolean, "String": slave.setString}[variable.type]
+            setter = getattr(slave, f"set{names.get(variable.type, variable.type)}")
             setter([variable.valueReference], [value])
 
+    def stepping_functions(self, slave):
+        """fmpy's raw ctypes functions (set_real, do_step, get_real) of ``slave``, each
+        called as FMI 2.0's fmi2SetReal(c, vrs, n, values), fmi2DoStep(c, t, h,
+        noSetFMUStatePriorToCurrentPoint) and fmi2GetReal(c, vrs, n, values) whichever the
+        FMU's version; each returns the call's status."""
+        if not self.fmi3:
+            return tuple(slave._functions[f] for f in ("fmi2SetReal", "fmi2DoStep",
+                                                       "fmi2GetReal"))
+        set_float, do_step, get_float = (slave._functions[f] for f in (
+            "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"))
+        results = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
+        pointers = tuple(map(ctypes.byref, results))
+        return (lambda c, vrs, n, values: set_float(c, vrs, n, values, n),
+                lambda c, t, h, no_prior: do_step(c, t, h, no_prior, *pointers),
+                lambda c, vrs, n, values: get_float(c, vrs, n, values, n))
+
     def get_reals(self, slave, names):
-        """Current values of Real variables, in the order of ``names``."""
-        return slave.getReal([self.variables[n].valueReference for n in names])
+        """Current values of Real (FMI 3.0: Float64) variables, in the order of ``names``."""
+        getter = slave.getFloat64 if self.fmi3 else slave.getReal
+        return getter([self.variables[n].valueReference for n in names])
 
     def close(self):
         """Remove the extracted files."""
         shutil.rmtree(self.unzip_dir, ignore_errors=True)
+
+
+def fmi2_variables(description):
+    """{name: model variable} of the FMU ``description`` describes, FMI 3.0's types under
+    FMI 2.0's names (which the project's code reads), the independent variable left out."""
+    fmi3 = description.fmiVersion.startswith("3.")
+    return {v.name: _fmi2_typed(v) if fmi3 else v for v in description.modelVariables
+            if v.causality != "independent"}
+
+
+def _fmi2_typed(variable):
+    """A copy of FMI 3.0 ``variable`` with its type's FMI 2.0 name."""
+    typed = copy.copy(variable)
+    typed.type = FMI2_TYPES[variable.type]
+    return typed
 
 
 def run_fmu(fmu, step_size_s, n_steps, inputs=None, parameters=None, outputs=(),
@@ -115,8 +164,7 @@ def run_fmu(fmu, step_size_s, n_steps, inputs=None, parameters=None, outputs=(),
     slave = loaded.instantiate(instance_name)
     try:
         loaded.set_values(slave, parameters or {})
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
+        loaded.enter_initialisation(slave)
         loaded.set_values(slave, {name: values[0].item() for name, values in inputs.items()})
         slave.exitInitializationMode()
         recorded = np.empty((n_steps, len(outputs)))

@@ -1,4 +1,4 @@
-"""Multi-rate fixed-step co-simulation master over fmpy's low-level FMI 2 API.
+"""Multi-rate fixed-step co-simulation master over fmpy's low-level FMI 2.0 or 3.0 API.
 
 The master runs an :class:`~feedaxis.cosim.system.AxisSystem` (the scheme is stated there):
 fixed macro step h, each component stepped every ``ratio`` macro steps, components in
@@ -9,7 +9,9 @@ a structured NumPy array addressed by variable name (``result["NpidServo.positio
 Speed: every value reference is resolved before the run; all signals live in one
 preallocated ctypes array that each FMU's ``fmi2GetReal`` writes straight into; the loop
 calls fmpy's raw ctypes functions ``fmi2SetReal``/``fmi2DoStep``/``fmi2GetReal`` and checks
-their status, with no per-step dict lookup or allocation.
+their status, with no per-step dict lookup or allocation (FMI 3.0 FMUs: ``fmi3SetFloat64``/
+``fmi3DoStep``/``fmi3GetFloat64`` behind the same signatures,
+:meth:`~feedaxis.cosim.fmu_runner.LoadedFmu.stepping_functions`).
 """
 from __future__ import annotations
 
@@ -100,7 +102,7 @@ class Master:
         except BaseException:  # a damaged FMU or a stop signal: no extracted folder left
             self.close()
             raise
-        self.outputs = {c.name: [v.name for v in self.loaded[c.fmu].description.modelVariables
+        self.outputs = {c.name: [v.name for v in self.loaded[c.fmu].variables.values()
                                  if v.causality == "output" and v.type == "Real"]
                         for c in system.components}
         self.signal_names = [v.name for v in system.inputs] + [
@@ -237,9 +239,8 @@ class Master:
         slave = loaded.instantiate(component.name)
         slaves.append(slave)
         loaded.set_values(slave, component.parameters)
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
-        functions = [slave._functions[f] for f in ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal")]
+        loaded.enter_initialisation(slave)
+        functions = loaded.stepping_functions(slave)
         if fmu_time is not None:
             functions = [_timed(f, fmu_time) for f in functions]
         set_real, do_step, get_real = functions

@@ -79,5 +79,7 @@ def fmu_variables(system, fmu_paths):
     """{component: {name: model variable}} from each component's FMU."""
     from fmpy import read_model_description
 
-    return {c.name: {v.name: v for v in read_model_description(
-        str(fmu_paths[c.fmu])).modelVariables} for c in system.components}
+    from .fmu_runner import fmi2_variables
+
+    return {c.name: fmi2_variables(read_model_description(str(fmu_paths[c.fmu])))
+            for c in system.components}
