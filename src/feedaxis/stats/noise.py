@@ -193,7 +193,23 @@ class ResidualMeanSquare:
         return 1.0
 
 
-class Serial:
+class _WhiteUnlessCorrelated:
+    """What a noise model that may find correlation shares: where its ``autoregression``
+    is white, the ``white`` model's shape test and error scale."""
+
+    def shape_test(self, before_um, after_um, extra, n_free_after):
+        """The white model's shape test where the noise is white, else the serial test."""
+        if self.autoregression(after_um).order == 0:
+            return self.white.shape_test(before_um, after_um, extra, n_free_after)
+        return self.extra_ss_test(before_um, after_um, extra, n_free_after)
+
+    def error_scale(self, result):
+        if self.autoregression(result.residual_um).order == 0:
+            return self.white.error_scale(result)
+        return 1.0
+
+
+class Serial(_WhiteUnlessCorrelated):
     """Noise possibly correlated along the test: ``order`` sorts the samples in the order
     they were taken; ``white`` decides where the residual shows no correlation."""
 
@@ -240,22 +256,12 @@ class Serial:
 
     def _spectral_test(self, noise, before_um, after_um, extra, n_free_after):
         """F test of the term (before - after) against ``noise``'s power at its frequencies."""
-        fitted = (before_um - after_um)[self.order]
-        n_fft = 1 << int(np.ceil(np.log2(2 * fitted.size)))
-        power = np.abs(np.fft.rfft(fitted, n_fft)) ** 2
-        power[1:-1] *= 2.0
-        effective = float(noise.spectrum(n_fft) @ power / max(power.sum(), 1e-300))
+        effective = noise_power_at(noise, (before_um - after_um)[self.order])
         return _f_test(_rss(before_um), _rss(after_um), extra, effective,
                        after_um.size - n_free_after - noise.order,
                        f"F test against the serially correlated noise at the term's "
                        f"frequencies (AR({noise.order}), neighbours correlated "
                        f"{noise.lag_one():.2f})")
-
-    def shape_test(self, before_um, after_um, extra, n_free_after):
-        """The white model's shape test where the noise is white, else the serial test."""
-        if self.autoregression(after_um).order == 0:
-            return self.white.shape_test(before_um, after_um, extra, n_free_after)
-        return self.extra_ss_test(before_um, after_um, extra, n_free_after)
 
     def estimate_um(self, residual_um):
         """(σ (µm), source): the white model's estimate, or the marginal standard deviation of
@@ -267,11 +273,6 @@ class Serial:
                 f"serially correlated along the test ({self.label}): AR({noise.order}), "
                 f"neighbouring samples correlated {noise.lag_one():.2f}")
 
-    def error_scale(self, result):
-        if self.autoregression(result.residual_um).order == 0:
-            return self.white.error_scale(result)
-        return 1.0
-
     def gram(self, jacobian, residual_um, variance):
         """J'ΣJ of the Jacobian (samples x parameters) under the noise of ``residual_um``:
         ``variance`` · J'J when it is white, else through the AR spectrum (the sandwich
@@ -281,6 +282,16 @@ class Serial:
             return variance * (jacobian.T @ jacobian)
         return spectral_gram(jacobian.T[:, self.order] if self.reordered else jacobian.T,
                              noise.spectrum)
+
+
+def noise_power_at(noise, *series):
+    """σ²_eff = Σ S(f)|C(f)|² / Σ|C(f)|²: the power of ``noise`` (an AR model) at the
+    frequencies of a term, C the spectra of its ``series`` (each in sample order, their
+    powers added; zero-padded to the next power of two ≥ 2n)."""
+    n_fft = 1 << int(np.ceil(np.log2(2 * series[0].size)))
+    power = sum(np.abs(np.fft.rfft(values, n_fft)) ** 2 for values in series)
+    power[1:-1] *= 2.0
+    return float(noise.spectrum(n_fft) @ power / max(power.sum(), 1e-300))
 
 
 def spectral_gram(columns, spectrum):
@@ -342,7 +353,7 @@ PAIRS_ALPHA = 0.05  # the von Neumann test of the half-differences: a dozen or t
 #                   cautious (ρ = 0.8 nulls named a lead error in 9 % at 0.01, 5 % at 0.05)
 
 
-class SerialPairs:
+class SerialPairs(_WhiteUnlessCorrelated):
     """One pass each way, read as target means and half-differences along the travel (the
     n targets in ``along`` order, each with one + and one - reading): slow noise in the
     readings (air, a drift) correlates both alike from target to target, a trend in the
@@ -355,7 +366,8 @@ class SerialPairs:
     twice, mirrored about the turn: no series for an AR model.)"""
 
     def __init__(self, pairs, direction, along):
-        self.pairs, self.along = pairs, np.asarray(along)
+        self.pairs = self.white = pairs
+        self.along = np.asarray(along)
         self.plus = np.asarray(direction) > 0
         self.label, self.source = pairs.label, pairs.source
         self.name = (f"{pairs.name}; where their half-differences are serially correlated "
@@ -398,21 +410,12 @@ class SerialPairs:
         if noise.order == 0:
             return self.pairs.extra_ss_test(before_um, after_um, extra, n_free_after)
         noise = noise.cautious()
-        means, halves = self._halves(before_um - after_um)
-        n_fft = 1 << int(np.ceil(np.log2(2 * means.size)))
-        power = np.abs(np.fft.rfft(means, n_fft)) ** 2 + np.abs(np.fft.rfft(halves, n_fft)) ** 2
-        power[1:-1] *= 2.0
-        effective = float(noise.spectrum(n_fft) @ power / max(power.sum(), 1e-300))
+        effective = noise_power_at(noise, *self._halves(before_um - after_um))
         return _f_test(_rss(before_um) / 2, _rss(after_um) / 2, extra, effective,
                        self.pairs.dof - n_free_after - noise.order,
                        f"F test against the serially correlated noise of the pairs along the "
                        f"travel at the term's frequencies (AR({noise.order}), neighbouring "
                        f"targets correlated {noise.lag_one():.2f})")
-
-    def shape_test(self, before_um, after_um, extra, n_free_after):
-        if self.autoregression(after_um).order == 0:
-            return self.pairs.shape_test(before_um, after_um, extra, n_free_after)
-        return self.extra_ss_test(before_um, after_um, extra, n_free_after)
 
     def estimate_um(self, residual_um):
         """(σ of one reading (µm), source): the pairs' estimate, or the correlated noise's."""
@@ -422,8 +425,3 @@ class SerialPairs:
         return (float(np.sqrt(2.0 * noise.variance)),
                 f"{self.source}, serially correlated along the travel: AR({noise.order}), "
                 f"neighbouring targets correlated {noise.lag_one():.2f}")
-
-    def error_scale(self, result):
-        if self.autoregression(result.residual_um).order == 0:
-            return self.pairs.error_scale(result)
-        return 1.0
