@@ -3,7 +3,8 @@
 The model's effects add errors at each target (:attr:`feedaxis.effects.Effect.additive`).
 The noise model the samples support (:mod:`feedaxis.stats.noise`): replicates where
 samples repeat at a target and direction (the pure error); in a single pass each way, the
-+ and - readings at a target with a reversal linear along the travel; otherwise the
++ and - readings at a target about a reversal, constant or linear along the travel where
+the pairs show it, their noise looked for along the travel; otherwise the
 residual mean square; and wherever there are enough samples in the order they were taken,
 serially correlated noise estimated from the residual, used by every test when the data
 show it. Structure is searched along the travel: a sinusoid of free wavelength, a reversal
