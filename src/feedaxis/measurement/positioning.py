@@ -21,7 +21,7 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-import scipy.stats
+import scipy
 from scipy.optimize import minimize_scalar
 
 from .. import kinds, standards
@@ -246,7 +246,7 @@ class Positioning(Measurement):
         reversal that changes along the travel, or a drift linear in time over the two
         passes, would otherwise be taken for noise and hide a trend."""
         if self.layout.has_repeats:
-            return PureError(self.layout.groups, measured_um=self.measured_um)
+            return PureError(self.layout.groups)
         if not self.bidirectional:
             return None
         _, target = self.clusters
