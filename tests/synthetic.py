@@ -269,3 +269,58 @@ def backlash_power(diagnose, model, backlash_um, trials, seed):
         named += [c.effect for c in diagnose(case, model).candidates][:1] == ["backlash"]
         t_test += paired_t_p_value(case) < 1e-3
     return named / trials, t_test / trials
+
+
+# One + and one - pass per target, the shapes of real acceptance tests (issue 33): the
+# families the single-pass benchmark and tests/fit_diagnosis/test_single_pass.py use.
+# trend_um: the lead error's change over the travel; pair_scatter_um: the standard
+# deviation of the + reading less the - reading at a target (noise alone).
+SINGLE_PASS_FAMILIES = {
+    "null, white, 11 targets": dict(n_targets=11),
+    "null, white, 15 targets": dict(n_targets=15),
+    "null, white, 21 targets": dict(n_targets=21),
+    "null, Student-t (3), 15 targets": dict(noise="t3"),
+    "null, AR(1) 0.5 in time, 15 targets": dict(noise="ar0.5"),
+    "null, AR(1) 0.8 in time, 21 targets": dict(n_targets=21, noise="ar0.8"),
+    "null, reversal random per target": dict(reversal_spread_um=4.0),
+    "null, reversal changing 8 µm, 21 targets": dict(n_targets=21, reversal_change_um=8.0),
+    "null, a bow of 8 µm": dict(bow_um=8.0),
+    "trend, 11 unequal targets": dict(n_targets=11, trend_um=-16.9, unequal=True),
+    "trend + bow, AR(1) 0.8 in time": dict(trend_um=-16.9, bow_um=6.0, noise="ar0.8"),
+    "trend + bow, reversal changing 8 µm": dict(trend_um=-16.9, bow_um=6.0,
+                                                reversal_change_um=8.0),
+    "trend, reversal changing 12 µm, 21 targets": dict(n_targets=21, trend_um=-16.9,
+                                                       reversal_change_um=12.0),
+    "trend + bow, 17 unequal, t(3), zero at 12 µm": dict(
+        n_targets=17, trend_um=-16.9, bow_um=5.0, unequal=True, noise="t3",
+        reversal_spread_um=3.0, zero_um=12.0),
+}
+
+
+def single_pass_trial(rng, n_targets=15, travel_mm=600.0, trend_um=0.0, bow_um=0.0,
+                      pair_scatter_um=4.1, reversal_um=3.0, reversal_spread_um=0.0,
+                      reversal_change_um=0.0, noise="white", unequal=False, zero_um=None):
+    """An acceptance test of one + pass then one - pass over ``n_targets`` targets
+    (evenly spaced with ±3 mm jitter, or ``unequal``: uniform at random between both ends):
+    a lead error changing ``trend_um`` over the travel, a bow of ``bow_um`` at mid-travel,
+    a reversal of ``reversal_um`` changing by ``reversal_change_um`` along the travel and
+    scattering ``reversal_spread_um`` from target to target, noise of the family ``noise``
+    (:func:`noise_um`) in the order taken with the pairs scattering ``pair_scatter_um``;
+    the deviations referenced to their mean, or with the first reading at ``zero_um``."""
+    if unequal:
+        inner = rng.uniform(0.0, travel_mm, n_targets - 2)
+    else:
+        inner = np.linspace(0.0, travel_mm, n_targets)[1:-1] + rng.uniform(-3, 3, n_targets - 2)
+    targets = np.round(np.sort(np.concatenate(([0.0, travel_mm], inner))), 3)
+    fraction = targets / travel_mm
+    systematic = (geometry.lead_error_um(targets, 0.0, trend_um / travel_mm)
+                  + bow_um * 4 * fraction * (1 - fraction))
+    reversal = (reversal_um + reversal_change_um * (fraction - 0.5)
+                + rng.normal(0.0, reversal_spread_um, n_targets))
+    noise = noise_um(rng, 2 * n_targets, noise, pair_scatter_um / np.sqrt(2))
+    error_um = np.concatenate([systematic + reversal / 2 + noise[:n_targets],
+                               (systematic - reversal / 2)[::-1] + noise[n_targets:]])
+    error_um -= error_um[0] - zero_um if zero_um is not None else error_um.mean()
+    return in_memory_case(ISO_AXIS, target_mm=np.concatenate([targets, targets[::-1]]),
+                          error_um=error_um, direction=np.repeat([1.0, -1.0], n_targets),
+                          run=np.ones(2 * n_targets))

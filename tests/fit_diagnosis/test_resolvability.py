@@ -9,13 +9,15 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import synthetic as syn
 from feedaxis.analysis import analyse
 from feedaxis.case import read_case
 from feedaxis.cli import main
-from feedaxis.effects import CATALOG, load_model
+from feedaxis.diagnose import diagnose
+from feedaxis.effects import CATALOG, Model, load_model
 from feedaxis.examples import LASER_EXAMPLE
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -109,3 +111,26 @@ def test_a_resolvable_eccentricity_is_named_determined_and_tabled(resolvable, tm
     code, out, _ = cli(capsys, "comp-table", resolvable, "--model", model, "--controller",
                        "siemens", "--out", tmp_path / "x.ini", "--json")
     assert code == 0 and "assembly_eccentricity" in json.loads(out)["included"]
+
+
+@pytest.mark.parametrize("jitter_mm", [0.0, 1.0])
+def test_a_zigzag_on_the_aliases_of_the_lead_names_no_eccentricity(jitter_mm):
+    """A repeat test (5 runs each way) at 21 targets every 15 mm (± ``jitter_mm``) on a
+    10 mm lead, with a ±4.5 µm zig-zag between neighbouring targets: at the targets
+    cos(2πx/10 mm) is that zig-zag, so an eccentricity would fit it; the rule passes it
+    over (phases not sampled, or aliased with about 30 mm) and the zig-zag is reported as a
+    periodic error at twice the spacing."""
+    rng = np.random.default_rng(7)
+    targets = np.arange(21) * 15.0 + np.round(rng.uniform(-jitter_mm, jitter_mm, 21), 3)
+    zigzag_um = 4.5 * (-1.0) ** np.arange(21)
+    index = np.concatenate([np.r_[0:21, 20:-1:-1]] * 5)
+    direction = np.tile(np.repeat([1.0, -1.0], 21), 5)
+    error_um = (0.01 * targets[index] + zigzag_um[index] + direction
+                + rng.normal(0.0, 0.5, index.size))
+    case = syn.in_memory_case(syn.ISO_AXIS, target_mm=targets[index], error_um=error_um,
+                              direction=direction, run=np.repeat(np.arange(1.0, 6.0), 42))
+    found = diagnose(case, Model([CATALOG["lead_error"]]))
+    assert "assembly_eccentricity" not in [c.effect for c in found.candidates]
+    assert "10 mm wavelength" in found.skipped["assembly_eccentricity"]
+    assert found.unexplained[0].kind == "periodic"
+    assert found.unexplained[0].wavelength_mm == pytest.approx(30.0, rel=0.05)
