@@ -313,3 +313,31 @@ def test_report_shows_every_standard_with_all(tmp_path):
     for standard in STANDARDS.values():
         assert f"<h3>{standard.title}</h3>" in page
     assert "No figures: ASME B5.54-2005" in page and "No figures: not a thermal case" in page
+
+
+def test_compare_and_the_report_label_the_rms_of_the_model_alone(tmp_path, capsys):
+    """The bundled laser file: fit gives 0.4074 µm with its artefacts (a drift) fitted
+    beside the model and 0.4265 µm of the model alone on every sample; compare's RMS row
+    and the report's figure table show the latter and say so."""
+    from importlib.resources import files
+
+    laser = files("feedaxis") / "data" / "laser_example"
+    folder, model = tmp_path / "case", tmp_path / "m.toml"
+    assert main(["import", str(laser / "X-axis.rtl"), "--axis", str(laser / "axis.toml"),
+                 "--out", str(folder)]) == 0
+    capsys.readouterr()
+    assert main(["fit", str(folder), "--add", "lead_error", "--add", "backlash", "--out",
+                 str(model), "--json"]) == 0
+    fitted = json.loads(capsys.readouterr().out)
+    alone = fitted["rms_model_alone_um"]
+    assert fitted["rms_after_um"] == pytest.approx(0.4074, abs=5e-5)
+    assert alone == pytest.approx(0.4265, abs=5e-5)
+    assert main(["compare", str(folder), "--model", str(model)]) == 0
+    row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("RMS")]
+    assert row[0].split()[:4] == ["RMS", "(the", "model", "alone)"]
+    assert float(row[0].split()[-1]) == pytest.approx(alone, rel=1e-3)
+    page = tmp_path / "r.html"
+    assert main(["report", str(folder), "--model", str(model), "--out", str(page)]) == 0
+    assert f'<td>RMS (the model alone)</td><td class="number">' \
+           f'{fitted["rms_before_um"]:.4g}</td><td class="number">{alone:.4g}</td>' \
+        in page.read_text()
