@@ -218,7 +218,46 @@ def test_the_monte_carlo_propagates_to_every_standard(tmp_path, capsys):
     assert main(["uncertainty", str(folder), "--standard", "nmtba"]) == 2
     assert "NMTBA" in capsys.readouterr().err
     assert main(["uncertainty", str(folder), "--standard", "iso230-3"]) == 2
-    assert "thermal figures get no uncertainty yet" in capsys.readouterr().err
+    assert "need a thermal case" in capsys.readouterr().err
+
+
+def test_iso230_3_uncertainty_matches_the_spread_over_repeated_thermal_tests(tmp_path,
+                                                                             capsys):
+    """A thermal test from known screw parameters with σ = 0.3 µm per reading: the
+    per-reading noise the data give is near σ, and the Monte Carlo's standard uncertainty of
+    each ISO 230-3 figure (the repeatability alone) is the spread of that figure over 400
+    tests generated again from the same model with fresh noise."""
+    from feedaxis.case import read_case
+    from feedaxis.examples import write_table2_case
+    from feedaxis.physics import thermal
+    from feedaxis.standards.thermal import ThermalFigures
+    from feedaxis.uncertainty.positioning import ReadingNoise
+
+    sigma_um = 0.3
+    folder = write_table2_case(tmp_path / "thermal", 6000.0, noise_um=sigma_um, seed=11)
+    positioning = read_case(folder).positioning
+    noise = ReadingNoise.of(positioning)
+    assert noise.sigma_um == pytest.approx(sigma_um, rel=0.25) and noise.dof >= 40
+    params = thermal.ThermalScrewParams()
+    truth_um = thermal.thermal_error_um(params, thermal.simulate_duty(
+        params, thermal.table2_cycle(6000.0, 0.0, 500.0), positioning.time_s),
+        positioning.target_mm)
+    repeated = truth_um + np.random.default_rng(7).normal(0.0, sigma_um,
+                                                          (400, positioning.size))
+    figures = ThermalFigures(positioning)
+    spread = {key: float(np.std(values, ddof=1)) for key, values in
+              figures.of(positioning.target_mm, repeated, positioning.direction).items()}
+    assert main(["uncertainty", str(folder), "--standard", "iso230-3", "--trials", "4000",
+                 "--seed", "3", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["standard"] == "ISO 230-3:2020" and set(result["figures"]) == set(spread)
+    assert result["repeatability"] == noise.source
+    for key, entry in result["figures"].items():
+        alone = entry["contributions"]["repeatability"]["standard_uncertainty_um"]
+        assert alone == pytest.approx(spread[key], rel=0.25), key
+        assert entry["standard_uncertainty_um"] >= alone
+    drift = result["figures"]["drift_500mm_um"]
+    assert drift["contributions"]["setup"]["standard_uncertainty_um"] < 1e-9  # cancels
 
 
 def test_iso230_3_figures_of_a_seeded_thermal_case_match_the_generating_model(tmp_path,

@@ -40,6 +40,14 @@ PROVENANCE = {
 def thermal_figures(positioning, drift_um):
     """{key: (name, value µm or µm/m, time_s, sample index)} of the drifts ``drift_um``
     (one per sample of ``positioning``)."""
+    return {key: (name, float(value), float(positioning.time_s[sample]), int(sample))
+            for key, (name, value, sample) in figure_values(positioning, drift_um).items()}
+
+
+def figure_values(positioning, drift_um):
+    """{key: (name, value, sample index)} of the drifts ``drift_um`` (..., samples): one
+    set of drifts, or many Monte Carlo trials' (a leading trials axis; values and sample
+    indices then have that axis)."""
     visit = visits(positioning)[0]
     centres_mm, cluster = target_clusters(positioning.target_mm)
     signs = [s for s in (1.0, -1.0) if np.any(positioning.direction == s)]
@@ -50,56 +58,88 @@ def thermal_figures(positioning, drift_um):
         named = "" if len(signs) == 1 else (" (+)" if sign > 0 else " (-)")
         index = np.full((centres_mm.size, visit.max() + 1), -1)
         index[cluster[chosen], visit[chosen]] = chosen
-        figures.update(_side_figures(index, centres_mm, drift_um, positioning.time_s,
-                                     label, named))
+        figures.update(_side_figures(index, centres_mm, np.asarray(drift_um, float), label,
+                                     named))
     return figures
 
 
-def _side_figures(index, centres_mm, drift_um, time_s, label, named):
+def _side_figures(index, centres_mm, drift_um, label, named):
     """The figures of one direction from ``index`` (target, visit) -> sample (-1: none)."""
-    table = np.where(index >= 0, drift_um[index], np.nan)
+    table = np.where(index >= 0, drift_um[..., index], np.nan)  # (..., target, visit)
     rows = np.flatnonzero(np.any(index >= 0, axis=1))
     figures = {}
     for row in rows:
-        column = int(np.nanargmax(np.abs(table[row])))
-        figures[f"drift_{centres_mm[row]:g}mm{label}_um"] = _entry(
-            f"drift at {centres_mm[row]:g} mm{named}", table[row, column], index[row, column],
-            time_s)
+        value, column = _extreme(table[..., row, :], np.abs)
+        figures[f"drift_{centres_mm[row]:g}mm{label}_um"] = (
+            f"drift at {centres_mm[row]:g} mm{named}", value, index[row, column])
     if rows.size < 2:
         return figures
     near, far = rows[0], rows[-1]
-    expansion = table[far] - table[near]
+    expansion = table[..., far, :] - table[..., near, :]
     if np.any(np.isfinite(expansion)):
-        column = int(np.nanargmax(np.abs(expansion)))
+        value, column = _extreme(expansion, np.abs)
         span_m = (centres_mm[far] - centres_mm[near]) / 1000
         where = f"{centres_mm[near]:g} to {centres_mm[far]:g} mm{named}"
-        figures[f"expansion{label}_um"] = _entry(f"expansion {where}", expansion[column],
-                                                 index[far, column], time_s)
-        figures[f"expansion{label}_um_per_m"] = _entry(
-            f"expansion per metre {where} (µm/m)", expansion[column] / span_m,
-            index[far, column], time_s)
-    spread = np.nanmax(table[rows], axis=0) - np.nanmin(table[rows], axis=0)
-    column = int(np.nanargmax(spread))
-    last = index[rows[np.argmax(index[rows, column])], column]
-    figures[f"linear_error_change{label}_um"] = _entry(
-        f"change of the linear positioning error{named}", spread[column], last, time_s)
+        figures[f"expansion{label}_um"] = (f"expansion {where}", value, index[far, column])
+        figures[f"expansion{label}_um_per_m"] = (
+            f"expansion per metre {where} (µm/m)", value / span_m, index[far, column])
+    within = table[..., rows, :]
+    value, column = _extreme(np.nanmax(within, axis=-2) - np.nanmin(within, axis=-2))
+    figures[f"linear_error_change{label}_um"] = (
+        f"change of the linear positioning error{named}", value,
+        np.max(index[rows][:, column], axis=0))
     return figures
 
 
-def _entry(name, value, sample, time_s):
-    return name, float(value), float(time_s[sample]), int(sample)
+def _extreme(values, by=None):
+    """(the value of ``values`` (..., visit) whose ``by(value)`` is largest over the visits,
+    its visit), NaN (no reading) left out."""
+    column = np.nanargmax(values if by is None else by(values), axis=-1)
+    return np.take_along_axis(values, column[..., None], axis=-1)[..., 0], column
+
+
+class ThermalFigures:
+    """ISO 230-3's figures of a thermal test as the Monte Carlo propagates to them: the
+    same targets, visits and reference readings, the deviations of many trials. Each
+    reading is uncertain on its own (a drift cancels what moves a target's readings
+    together), so :attr:`per_reading` asks the Monte Carlo for a per-reading noise model."""
+
+    per_reading = True
+
+    def __init__(self, positioning):
+        self.positioning, self.title = positioning, THERMAL_TITLE
+        self.reference = visits(positioning)[1]
+        self._names = {key: name for key, (name, _, _) in figure_values(
+            positioning, thermal_error_um(positioning)).items()}
+
+    def names(self):
+        """{key: figure name} in the order ``compare`` gives them."""
+        return dict(self._names)
+
+    def of(self, target_mm, error_um, direction):
+        """{key: value (µm, or µm/m)} of the deviations ``error_um`` (..., samples) of the
+        test's readings (``target_mm`` and ``direction`` are the test's own)."""
+        error_um = np.asarray(error_um, float)
+        drift_um = error_um - error_um[..., self.reference]
+        return {key: value for key, (_, value, _) in
+                figure_values(self.positioning, drift_um).items()}
+
+
+def check_thermal(case):
+    """Refuse (exit 2) a case that is no thermal test: no duty, or no target read twice."""
+    if not case.is_thermal:
+        raise InputError(f"{THERMAL_TITLE}'s figures need a thermal case (duty.csv and "
+                         "time_s in positioning.csv)", path=case.folder)
+    if visits(case.positioning)[0].max() == 0:
+        raise InputError(f"{THERMAL_TITLE}'s figures need targets read again and again; "
+                         "no target is read twice", path=case.folder)
 
 
 def thermal_comparison(case, model):
     """``compare``'s ISO 230-3 block of a thermal case: each figure measured, predicted by
     the model's thermal effects and left after their compensation (None without them)."""
-    if not case.is_thermal:
-        raise InputError(f"{THERMAL_TITLE}'s figures need a thermal case (duty.csv and "
-                         "time_s in positioning.csv)", path=case.folder)
+    check_thermal(case)
     positioning = case.positioning
-    if visits(positioning)[0].max() == 0:
-        raise InputError(f"{THERMAL_TITLE}'s figures need targets read again and again; "
-                         "no target is read twice", path=case.folder)
     drift_um = thermal_error_um(positioning)
     measured = thermal_figures(positioning, drift_um)
     predicted = compensated = {}
