@@ -106,7 +106,8 @@ def _thermal_plot(case):
 
     positioning = case.positioning
     return image(plots.thermal_drift(positioning.time_s, positioning.target_mm,
-                                     thermal_error_um(positioning), case.duty.segments),
+                                     positioning.direction, thermal_error_um(positioning),
+                                     case.duty.segments),
                  "ISO 230-3 deviations over time with the duty")
 
 
