@@ -566,7 +566,9 @@ def _uncertainty_options(parser):
                      "calibration, temperature and expansion coefficient of the 20 °C "
                      "correction, misalignment, set-up/Abbe, EVE) with the repeatability "
                      "from the case's own runs: 95 % coverage intervals (symmetric and "
-                     "shortest), standard uncertainties and each input's share. See "
+                     "shortest), standard uncertainties and each input's share. "
+                     "--standard: another standard's figures, or ISO 230-3's of a thermal "
+                     "case, each reading then scattering on its own (docs/standards.md). See "
                      "docs/uncertainty.md.",
          options=_uncertainty_options)
 def _cmd_uncertainty(args):

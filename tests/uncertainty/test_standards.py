@@ -66,6 +66,58 @@ EXPECTED = {"iso230-2:2014": ISO_K2, "iso230-2:2006": ISO_K2, "iso230-2:1997": I
             "iso230-2:1988": ISO_1988, "vdi3441": VDI}
 
 
+# A published ISO 230-2 report: the test report of the EPICS ecmc motion-test scripts in
+# paulscherrerinstitute/ecmccfg, examples/test/fat_sat/report.md (an axis read at 5 targets,
+# 5 runs each way). Deviations (nm) = reference - target position, run j of target i, from
+# its input tables; its results as it prints them (mm there, nm here).
+ECMC_TARGETS_MM = np.array([-10.0, -4.88, 0.24, 5.36, 10.48])
+ECMC_UP_NM = np.array([[-81.02, -102.02, -87.02, -92.02, -100.02],
+                       [-87.02, -97.02, -97.02, -95.02, -82.02],
+                       [-72.02, -90.02, -88.02, -87.02, -87.02],
+                       [-102.02, -86.02, -86.02, -93.02, -78.02],
+                       [-100.02, -112.02, -129.02, -109.02, -97.02]])
+ECMC_DOWN_NM = np.array([[-99.02, -94.02, -82.02, -91.02, -94.02],
+                         [-103.02, -104.02, -95.02, -111.02, -93.02],
+                         [-86.02, -102.02, -91.02, -76.02, -99.02],
+                         [-72.02, -92.02, -95.02, -103.02, -81.02],
+                         [-104.02, -126.02, -130.02, -141.02, -107.02]])
+ECMC_REPORT_NM = {  # per target i = 1..5
+    "mean_up": [-92.42, -91.62, -84.82, -89.02, -109.42],
+    "mean_down": [-92.02, -101.22, -90.82, -88.62, -121.62],
+    "mean": [-92.22, -96.42, -87.82, -88.82, -115.52],
+    "B_i": [-0.4, 9.6, 6.0, -0.4, 12.2],
+    "s_up": [8.79, 6.77, 7.26, 9.0, 12.58], "s_down": [6.28, 7.29, 10.43, 12.18, 15.73],
+    "R_i": [35.17, 37.72, 41.7, 48.71, 68.82]}
+# Its axis figures that follow ISO 230-2's definitions; its bidirectional E and R lines
+# print E↑ (24.6) and max(R↑, R↓) (62.9) instead, so E and R are checked against its own
+# per-target table: E = max - min of both columns of means = -84.82 - (-121.62) = 36.8,
+# R = max R_i = 68.82.
+ECMC_AXIS_NM = {"B_um": 12.2, "B_mean_um": 5.4, "R_up_um": 50.33, "R_down_um": 62.9,
+                "E_up_um": 24.6, "E_down_um": 33.0, "M_um": 27.7, "A_up_um": 64.28,
+                "A_down_um": 88.81, "A_um": 88.81, "E_um": 36.8, "R_um": 68.82}
+
+
+def test_a_published_iso230_2_report_is_reproduced():
+    """Every per-target value and axis figure of the ecmc report, to the digits it prints
+    (0.01 nm), from its raw deviations: its numbers were computed by another program."""
+    runs = ECMC_UP_NM.shape[1]
+    target = np.concatenate([np.repeat(ECMC_TARGETS_MM, runs)] * 2)
+    error_um = np.concatenate([ECMC_UP_NM.ravel(), ECMC_DOWN_NM.ravel()]) / 1000
+    direction = np.repeat([1.0, -1.0], ECMC_TARGETS_MM.size * runs)
+    _, sides = statistics(target, error_um, direction)
+    (_, mean_up, std_up, _), (_, mean_down, std_down, _) = sides["up"], sides["down"]
+    reversal = mean_up - mean_down
+    found = {"mean_up": mean_up, "mean_down": mean_down, "mean": (mean_up + mean_down) / 2,
+             "B_i": reversal, "s_up": std_up, "s_down": std_down,
+             "R_i": np.maximum(2 * std_up + 2 * std_down + np.abs(reversal),
+                               4 * np.maximum(std_up, std_down))}
+    for key, printed in ECMC_REPORT_NM.items():
+        assert found[key] * 1000 == pytest.approx(printed, abs=0.0051), key
+    figures = evaluate(STANDARDS["iso230-2:2014"], target, error_um, direction)
+    assert {key: figures[key] * 1000 for key in ECMC_AXIS_NM} == pytest.approx(
+        ECMC_AXIS_NM, abs=0.0051)
+
+
 def test_the_per_target_statistics_are_the_hand_worked_ones():
     targets, sides = statistics(*hand_case())
     assert targets == 5 and set(sides) == {"up", "down"}
@@ -218,7 +270,46 @@ def test_the_monte_carlo_propagates_to_every_standard(tmp_path, capsys):
     assert main(["uncertainty", str(folder), "--standard", "nmtba"]) == 2
     assert "NMTBA" in capsys.readouterr().err
     assert main(["uncertainty", str(folder), "--standard", "iso230-3"]) == 2
-    assert "thermal figures get no uncertainty yet" in capsys.readouterr().err
+    assert "need a thermal case" in capsys.readouterr().err
+
+
+def test_iso230_3_uncertainty_matches_the_spread_over_repeated_thermal_tests(tmp_path,
+                                                                             capsys):
+    """A thermal test from known screw parameters with σ = 0.3 µm per reading: the
+    per-reading noise the data give is near σ, and the Monte Carlo's standard uncertainty of
+    each ISO 230-3 figure (the repeatability alone) is the spread of that figure over 400
+    tests generated again from the same model with fresh noise."""
+    from feedaxis.case import read_case
+    from feedaxis.examples import write_table2_case
+    from feedaxis.physics import thermal
+    from feedaxis.standards.thermal import ThermalFigures
+    from feedaxis.uncertainty.positioning import ReadingNoise
+
+    sigma_um = 0.3
+    folder = write_table2_case(tmp_path / "thermal", 6000.0, noise_um=sigma_um, seed=11)
+    positioning = read_case(folder).positioning
+    noise = ReadingNoise.of(positioning)
+    assert noise.sigma_um == pytest.approx(sigma_um, rel=0.25) and noise.dof >= 40
+    params = thermal.ThermalScrewParams()
+    truth_um = thermal.thermal_error_um(params, thermal.simulate_duty(
+        params, thermal.table2_cycle(6000.0, 0.0, 500.0), positioning.time_s),
+        positioning.target_mm)
+    repeated = truth_um + np.random.default_rng(7).normal(0.0, sigma_um,
+                                                          (400, positioning.size))
+    figures = ThermalFigures(positioning)
+    spread = {key: float(np.std(values, ddof=1)) for key, values in
+              figures.of(positioning.target_mm, repeated, positioning.direction).items()}
+    assert main(["uncertainty", str(folder), "--standard", "iso230-3", "--trials", "4000",
+                 "--seed", "3", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["standard"] == "ISO 230-3:2020" and set(result["figures"]) == set(spread)
+    assert result["repeatability"] == noise.source
+    for key, entry in result["figures"].items():
+        alone = entry["contributions"]["repeatability"]["standard_uncertainty_um"]
+        assert alone == pytest.approx(spread[key], rel=0.25), key
+        assert entry["standard_uncertainty_um"] >= alone
+    drift = result["figures"]["drift_500mm_um"]
+    assert drift["contributions"]["setup"]["standard_uncertainty_um"] < 1e-9  # cancels
 
 
 def test_iso230_3_figures_of_a_seeded_thermal_case_match_the_generating_model(tmp_path,
@@ -303,6 +394,17 @@ def test_iso230_3_says_what_a_thermal_test_lacks(tmp_path, capsys):
         "time_s": positioning.time_s[first]})
     assert main(["compare", str(folder), "--standard", "iso230-3"]) == 2
     assert "no target is read twice" in capsys.readouterr().err
+    from dataclasses import replace
+
+    from feedaxis.effects import Model
+    from feedaxis.standards.thermal import thermal_comparison
+
+    longer = full.with_samples("positioning", replace(positioning,
+                                                      target_mm=positioning.target_mm * 5))
+    block = thermal_comparison(longer, Model([], {}))  # targets over 2500 mm
+    assert set(block["needs"]) == {"expansion_um", "expansion_um_per_m",
+                                   "linear_error_change_um"}
+    assert "at most 2000 mm" in block["needs"]["expansion_um"][0]
 
 
 def test_report_shows_every_standard_with_all(tmp_path):
@@ -313,3 +415,51 @@ def test_report_shows_every_standard_with_all(tmp_path):
     for standard in STANDARDS.values():
         assert f"<h3>{standard.title}</h3>" in page
     assert "No figures: ASME B5.54-2005" in page and "No figures: not a thermal case" in page
+
+
+def test_compare_and_the_report_label_the_rms_of_the_model_alone(tmp_path, capsys):
+    """The bundled laser file: fit gives 0.4074 µm with its artefacts (a drift) fitted
+    beside the model and 0.4265 µm of the model alone on every sample; compare's RMS row
+    and the report's figure table show the latter and say so."""
+    from importlib.resources import files
+
+    laser = files("feedaxis") / "data" / "laser_example"
+    folder, model = tmp_path / "case", tmp_path / "m.toml"
+    assert main(["import", str(laser / "X-axis.rtl"), "--axis", str(laser / "axis.toml"),
+                 "--out", str(folder)]) == 0
+    capsys.readouterr()
+    assert main(["fit", str(folder), "--add", "lead_error", "--add", "backlash", "--out",
+                 str(model), "--json"]) == 0
+    fitted = json.loads(capsys.readouterr().out)
+    alone = fitted["rms_model_alone_um"]
+    assert fitted["rms_after_um"] == pytest.approx(0.4074, abs=5e-5)
+    assert alone == pytest.approx(0.4265, abs=5e-5)
+    assert main(["compare", str(folder), "--model", str(model)]) == 0
+    row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("RMS")]
+    assert row[0].split()[:4] == ["RMS", "(the", "model", "alone)"]
+    assert float(row[0].split()[-1]) == pytest.approx(alone, rel=1e-3)
+    page = tmp_path / "r.html"
+    assert main(["report", str(folder), "--model", str(model), "--out", str(page)]) == 0
+    assert f'<td>RMS (the model alone)</td><td class="number">' \
+           f'{fitted["rms_before_um"]:.4g}</td><td class="number">{alone:.4g}</td>' \
+        in page.read_text()
+
+
+def test_the_iso230_3_plot_draws_each_target_and_direction_over_the_duty(monkeypatch):
+    """Two targets read both ways over time: four lines (- dashed), one label per target,
+    the duty's feed shaded on the right axis."""
+    from feedaxis.physics.thermal import DutySegment
+    from feedaxis.report import plots
+
+    monkeypatch.setattr(plots, "_png", lambda figure: figure)
+    time_s = np.arange(12) * 60.0
+    target_mm = np.tile([0.0, 0.0, 400.0, 400.0], 3)
+    direction = np.tile([1.0, -1.0], 6)
+    figure = plots.thermal_drift(time_s, target_mm, direction, time_s / 100.0,
+                                 [DutySegment(0.0, 300.0, 6000.0, 0.0, 400.0)])
+    drift_axes, duty_axes = figure.axes
+    assert [line.get_linestyle() for line in drift_axes.lines] == ["-", "--", "-", "--"]
+    assert [line.get_label() for line in drift_axes.lines if not
+            line.get_label().startswith("_")] == ["0 mm", "400 mm"]
+    assert duty_axes.get_ylabel() == "duty feed (m/min)" and duty_axes.collections
+    plots.plt.close(figure)

@@ -16,6 +16,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import ScalarFormatter  # noqa: E402
 
+from ..iso230 import target_clusters  # noqa: E402
+
 MARK_COLOURS = ("tab:red", "tab:purple", "tab:brown", "tab:olive")
 DIRECTION_COLOURS = {1.0: "tab:blue", -1.0: "tab:orange"}
 MODEL_COLOURS = {1.0: "navy", -1.0: "saddlebrown"}  # a direction's model over its dots
@@ -345,9 +347,10 @@ def thermal_compensation(target_mm, visit, time_s, thermal_error_um, left_um):
                    "Largest error of each run")
 
 
-def thermal_drift(time_s, target_mm, drift_um, segments):
+def thermal_drift(time_s, target_mm, direction, drift_um, segments):
     """ISO 230-3: each target's drift (deviation less its first reading) against time, one
-    line per target coloured by position, over the duty's feed (shaded, right axis)."""
+    line per target and approach direction (- dashed) coloured by position, over the
+    duty's feed (shaded, right axis)."""
     figure, axes = plt.subplots(figsize=(9, 3.8))
     duty = axes.twinx()
     for segment in segments:
@@ -357,13 +360,17 @@ def thermal_drift(time_s, target_mm, drift_um, segments):
     axes.set_zorder(duty.get_zorder() + 1)
     axes.patch.set_visible(False)
     colours = plt.get_cmap("viridis")
-    targets = np.unique(target_mm)
-    for index, target in enumerate(targets):
-        chosen = np.flatnonzero(target_mm == target)
-        order = chosen[np.argsort(time_s[chosen])]
-        axes.plot(time_s[order] / 60.0, drift_um[order], ".-", ms=3, lw=0.9,
-                  color=colours(index / max(targets.size - 1, 1)),
-                  label=f"{target:g} mm" if targets.size <= 12 else None)
+    centres_mm, cluster = target_clusters(target_mm)
+    for index, target in enumerate(centres_mm):
+        for sign, style in ((1.0, ".-"), (-1.0, ".--")):
+            chosen = np.flatnonzero((cluster == index) & (direction == sign))
+            if chosen.size == 0:
+                continue
+            order = chosen[np.argsort(time_s[chosen])]
+            first = sign > 0 or not np.any((cluster == index) & (direction > 0))
+            axes.plot(time_s[order] / 60.0, drift_um[order], style, ms=3, lw=0.9,
+                      color=colours(index / max(centres_mm.size - 1, 1)),
+                      label=f"{target:g} mm" if centres_mm.size <= 12 and first else None)
     return _finish(figure, axes, "time (min)", "drift (µm)",
                    "Deviation over time at each target, with the duty (ISO 230-3)")
 

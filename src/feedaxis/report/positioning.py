@@ -9,6 +9,7 @@ import numpy as np
 
 from . import plots
 from .compensation_table import compensation_table_html
+from ..standards.text import RMS_LABEL
 from .page import image, sample_contributions, table
 
 
@@ -85,7 +86,7 @@ def _standard_html(block, comparison):
     columns = [key for key in COLUMNS if figures and key in figures[0]]
     rows = [(f["name"], *(_number(f[key], key) for key in columns)) for f in figures]
     if "residual_um" in columns:
-        rows.append(("RMS", f"{comparison['rms_measured_um']:.4g}",
+        rows.append((RMS_LABEL, f"{comparison['rms_measured_um']:.4g}",
                      f"{comparison['rms_residual_um']:.4g}", ""))
     lacking = sorted({item for items in block.get("needs", {}).values() for item in items})
     return [f"<h3>{title}</h3>",
@@ -105,7 +106,8 @@ def _thermal_plot(case):
 
     positioning = case.positioning
     return image(plots.thermal_drift(positioning.time_s, positioning.target_mm,
-                                     thermal_error_um(positioning), case.duty.segments),
+                                     positioning.direction, thermal_error_um(positioning),
+                                     case.duty.segments),
                  "ISO 230-3 deviations over time with the duty")
 
 

@@ -92,8 +92,12 @@ def _iso(coverage):
 ISO_RUNS = "the standard test cycle: five runs in each direction"
 ISO_TARGETS = ("target positions: at least five per metre and five in all over up to 2000 mm, "
                "unevenly spaced")
-ISO_FORMULAS = ("the formulas as feedaxis has always used them (x̄, s with n - 1, B_i, "
-                "R_i = max(2s↑ + 2s↓ + |B_i|, 4s↑, 4s↓), E, M, A with ±2s); the 2006 "
+ISO_FORMULAS = ("the per-target and axis formulas (x̄, s with n - 1, B_i, B, B̄, "
+                "R_i = max(2s↑ + 2s↓ + |B_i|, 4s↑, 4s↓), R↑, R↓, E↑, E↓, M, A↑, A↓, A with "
+                "±2s) as an independent implementation prints them, reproduced to 0.01 nm "
+                "(the ecmc ISO 230-2 test report, github.com/paulscherrerinstitute/ecmccfg, "
+                "examples/test/fat_sat/report.md; its bidirectional E and R lines combine "
+                "otherwise and are checked against its own per-target table); the 2006 "
                 "edition's change from ±3 standard deviations to ±2 standard uncertainties, "
                 "computed as standard deviations, and its superseding NMTBA and VDI/DGQ "
                 "3441: AMT (amtonline.org, article 133530)")
@@ -125,8 +129,10 @@ def _iso230_2_1988():
         confirmed="the ±3 standard deviation convention of the standards before the 2006 "
                   "edition (AMT, amtonline.org article 133530)",
         unconfirmed="the 1988 text: which figures it defines. feedaxis gives A↑, A↓, A "
-                    "(x̄ ± 3s), R↑, R↓ (6s), B and B̄; E, M and the bidirectional R_i "
-                    "(introduced, to our knowledge, in 1997) are not given")
+                    "(x̄ ± 3s), R↑, R↓ (6s), B and B̄; E, M and the bidirectional R are not "
+                    "given. The ±3s era did know a bidirectional repeatability at a target, "
+                    "max(3s↑ + 3s↓ + |B_i|, 6s↑, 6s↓) (JIS B 0182, term 346, as kk.jisw.com "
+                    "reproduces it), but that ISO 230-2:1988 defines it is not confirmed")
 
 
 def vdi3441_formulas(targets, sides):
@@ -179,17 +185,30 @@ def _vdi3441():
                     "two directions' standard deviations is not confirmed")
 
 
-UNDEFINED = {  # accepted names whose definitions no public source gave us
+UNDEFINED = {  # accepted names whose formulas no public source gave us: what was found
     "asme-b5.54": ("ASME B5.54-2005 (and B5.57-1998, lathes)",
-                   "its linear displacement figures' formulas (coverage factor, how the "
-                   "reversal enters) could not be confirmed from a public source"),
+                   "public sources name its linear displacement test (ASME B5.64-2022's "
+                   "scope calls its own tests equivalent to those of B5.54, B5.57 and ISO "
+                   "230; Klabunde and Schmidt, Modern Machine Shop, compare B5.54-92 with five "
+                   "other standards) but none we could read gives its formulas: the coverage "
+                   "factor and how the reversal enters could not be confirmed"),
     "nmtba": ("NMTBA (1972), with and without offset",
-              "the NMTBA formulas and the meaning of its offset could not be confirmed "
-              "from a public source"),
-    "bsi3800": ("BS 3800", "no public source of its positioning figures was found"),
-    "jis-b6330": ("JIS B 6330:1980", "its positioning accuracy, repeatability (7 runs) and "
-                  "lost-motion definitions could not be confirmed from a public source"),
-    "gb10931-89": ("GB 10931-89", "no public source of its formulas was found"),
+              "public sources give its title ('Definition and Evaluation of Accuracy and "
+              "Repeatability of Numerically Controlled Machine Tools'), its ±3 standard "
+              "deviation convention and that ISO 230-2:2006 supersedes it (AMT, "
+              "amtonline.org article 133530), not its formulas nor what its offset is"),
+    "bsi3800": ("BS 3800", "BS 3800 is the general British test code other machine-tool "
+                "specifications refer to (a BS milling-machine specification's catalogue "
+                "entry, ndls.org.cn); no public source gives positioning formulas of it (the "
+                "British positioning standard the literature compares is BS 4656 Part 16)"),
+    "jis-b6330": ("JIS B 6330:1980", "JIS B 6330, the general test code of NC machine "
+                  "tools, is cited by JIS B 6333-1986 (kikakurui.com), and JIS B 0182's terms "
+                  "define the reversal value at a target (term 342) and, with 3 standard "
+                  "deviations, the bidirectional repeatability at a target (term 346); its "
+                  "own positioning accuracy, its 7-run repeatability and its lost motion "
+                  "could not be confirmed from a public source"),
+    "gb10931-89": ("GB 10931-89", "laser software lists it (Keysight E1733A), but no public "
+                   "source of its text or formulas was found"),
 }
 
 
@@ -201,7 +220,10 @@ def _adoption(name, title, edition, note):
 STANDARDS = {standard.name: standard for standard in (
     _iso230_2(2014), _iso230_2(2006), _iso230_2(1997), _iso230_2_1988(), _vdi3441(),
     _adoption("jis-b6190-2", "JIS B 6190-2:2008", 2006,
-              "adopted as ISO 230-2:2006 (its identical adoption is not confirmed publicly)"),
+              "JIS B 6190-2 is the Japanese counterpart of ISO 230-2 that the identical "
+              "adoption of ISO 3070-2:2016, JIS B 6210-2:2021, cites for its NC positioning "
+              "tests (jis.eomec.com); that it adopts ISO 230-2:2006 unchanged is not "
+              "confirmed publicly"),
     _adoption("jis-b6192", "JIS B 6192:1999", 1997,
               "adopted as ISO 230-2:1997 (not confirmed publicly): where JIS B 6190-2 "
               "differs, it is by edition only, and the 1997 and 2006 figures are equal"),
@@ -209,8 +231,10 @@ STANDARDS = {standard.name: standard for standard in (
               "adopted as ISO 230-2:1997 (its identical adoption is not confirmed "
               "publicly); the edition is listed by laser software (Keysight E1733A)"),
     _adoption("gbt17421.2:2016", "GB/T 17421.2-2016", 2014,
-              "adopted as ISO 230-2:2014 (the edition and its identical adoption are not "
-              "confirmed publicly)"))}
+              "the edition (published 2016-04-25, in force 2016-11-01, since replaced) and "
+              "its scope, ISO 230-2:2014's (uncertainty annex A, step cycle annex B, "
+              "ISO/TR 230-9:2005 annex C): gbstd.com; its identical adoption of ISO "
+              "230-2:2014 is not confirmed publicly"))}
 DEFAULT = "iso230-2:2014"
 THERMAL = "iso230-3"
 ALL = "all"

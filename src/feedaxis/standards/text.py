@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from .definitions import DEFAULT, STANDARDS
 
+RMS_LABEL = "RMS (the model alone)"  # every sample, no artefact fitted beside (fit prints both)
 COLUMNS = {"measured_um": "measured", "residual_um": "residual", "explained": "explained",
            "predicted_um": "model", "compensated_um": "compensated"}
 
@@ -24,7 +25,7 @@ def standard_lines(block, rms=None):
         lines.append(f"{figure['name']:{width}s} "
                      + " ".join(_cell(figure, key) for key in columns))
     if rms and "residual_um" in columns:
-        lines.append(f"{'RMS':{width}s} " + " ".join(f"{value:10.4g}" for value in rms))
+        lines.append(f"{RMS_LABEL:{width}s} " + " ".join(f"{value:10.4g}" for value in rms))
     lines += _needs_lines(block) + [f"  note: {note}" for note in block.get("notes", [])]
     if block.get("not_confirmed_publicly") and not default:
         lines.append(f"  not confirmed publicly: {block['not_confirmed_publicly']}")

@@ -13,11 +13,13 @@ import numpy as np
 from ..measurement.positioning import POSITIONING_FILE
 from ..errors import InputError
 from ..fit import fit
-from ..standards import ALL, DEFAULT, STANDARDS, UNDEFINED, FigureSet
+from ..standards import DEFAULT, STANDARDS, THERMAL, UNDEFINED, FigureSet
+from ..standards.thermal import ThermalFigures, check_thermal
 from . import engine
 from .budget import CONTRIBUTIONS, default_budget
 from .correction import OPTION, corrected_case, correction_for
-from .positioning import LINEARISATION_TOLERANCE, REPEATABILITY, PositioningMeasurement
+from .positioning import (LINEARISATION_TOLERANCE, REPEATABILITY, PositioningMeasurement,
+                          ReadingNoise)
 
 CHUNK_VALUES = 2 ** 21  # deviations or table values at once: 16 MB, whatever the trials
 CHECK_TRIALS = 4  # trials refitted to check the linearisation
@@ -109,7 +111,7 @@ def evaluate(case, model=None, budget=None, trials=engine.DEFAULT_TRIALS, tolera
         raise InputError(f"must be at least {engine.MIN_TRIALS} (JCGM 101 §7.2: a 95 % "
                          "interval needs many more than 1/(1 - p) = 20 trials)",
                          parameter="--trials")
-    outputs = _figure_set(standard)
+    outputs = _figure_set(standard, case)
     budget = budget or default_budget()
     correction = correction_for(case, temperature) if temperature is not None else None
     case = corrected_case(case, temperature)
@@ -200,19 +202,17 @@ def _contribution_entries(alone, shares, key, index=()):
                    "share": _optional(shares[key][name][index])} for name in alone}
 
 
-def _figure_set(standard):
-    """The figures of ``standard`` the Monte Carlo propagates to (refusing the standards
-    it cannot: those without a public definition, and ISO 230-3's thermal figures)."""
+def _figure_set(standard, case):
+    """The figures of ``standard`` the Monte Carlo propagates to: a positioning standard's
+    (``all``: every defined one) or ISO 230-3's of a thermal case; the standards without a
+    public definition are refused."""
     if standard in UNDEFINED:
         title, reason = UNDEFINED[standard]
         raise InputError(f"{title} has no figures in feedaxis: {reason}",
                          parameter="--standard")
-    if standard != ALL and standard not in STANDARDS:
-        raise InputError(f"the Monte Carlo propagates to the positioning figures; "
-                         f"{standard}'s thermal figures get no uncertainty yet: its "
-                         "repeatability moves a target's readings together, which cancels in "
-                         "a drift, and a per-reading noise model is not built",
-                         parameter="--standard")
+    if standard == THERMAL:
+        check_thermal(case)
+        return ThermalFigures(case.positioning)
     return FigureSet(standard)
 
 
@@ -297,6 +297,8 @@ def _notes(measurement, correction):
     if skipped:
         notes.append(f"not corrected to 20 °C ({OPTION}): {', '.join(skipped)} do not apply; "
                      "ISO 230-2 reports at 20 °C")
+    if isinstance(measurement.repeatability, ReadingNoise):
+        return notes + _reading_notes(measurement.repeatability)
     counts = measurement.repeatability.counts
     if REPEATABILITY in measurement.inputs and counts.max() > 1:
         runs = int(np.median(counts))
@@ -311,6 +313,18 @@ def _notes(measurement, correction):
             warnings.warn(few)
             notes.insert(0, few)
     return notes
+
+
+def _reading_notes(noise):
+    """What the per-reading noise model of a thermal test means for its figures."""
+    if not noise.available:
+        return ["no three adjacent targets read in two successive runs: the readings' "
+                "scatter is not estimated and not in the result"]
+    return [f"ISO 230-3: every reading moves on its own by σ = {noise.sigma_um:.3g} µm "
+            f"(ν = {noise.dof}; {noise.source}), so each drift carries the scatter of its "
+            "reading and of its target's first reading; the laser's environmental drift "
+            "(eve) enters the drifts, a scale or set-up error moves a target's readings "
+            "together and cancels"]
 
 
 def _few_runs(repeatability):

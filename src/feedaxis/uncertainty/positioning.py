@@ -35,6 +35,7 @@ from scipy import sparse
 
 from ..comptable import default_spacing_mm, from_measurement, from_model, grid_mm
 from ..fit import SINGULAR_RATIO, fit
+from ..compensate import visits
 from ..iso230 import per_target, target_clusters, target_groups
 from ..standards import FigureSet
 from .budget import CONTRIBUTIONS
@@ -118,6 +119,76 @@ class Repeatability:
         return shift[:, self.group]
 
 
+@dataclass(frozen=True)
+class ReadingNoise:
+    """Each reading's own repeatability, for a thermal test (ISO 230-3), whose targets are
+    read again and again while they drift: a drift is a reading less the target's first,
+    so what moves a target's readings together cancels, and each reading's scatter is what
+    its figures are uncertain by.
+
+    The drift can change faster than the targets are revisited (a duty switching on and
+    off), so the scatter is estimated across the targets of a run, not along its time: the
+    change z_i = y_i(v+1) - y_i(v) of target i's reading between two successive runs
+    (disjoint pairs of runs) leaves out the static errors, and its second divided
+    difference over three adjacent targets (disjoint triples, x_0 < x_1 < x_2), d = Σ c_j
+    z_j with c_j = 1/Π_{k≠j}(x_j - x_k), is zero for a drift change linear over the three
+    targets and has Var d = 2σ²·Σ c_j² from the noise of the six readings; σ² is the mean
+    of d²/(2 Σ c_j²) over the m such (triple, pair), ν = m degrees of freedom. What of the
+    drift's change is not linear over three targets adds to σ: the estimate errs on the
+    large side."""
+
+    sigma_um: float | None
+    dof: int
+    size: int
+    source: str
+
+    @classmethod
+    def of(cls, positioning):
+        visit = visits(positioning)[0]
+        centres_mm, cluster = target_clusters(positioning.target_mm)
+        triples = np.arange(centres_mm.size // 3 * 3).reshape(-1, 3)
+        apart = centres_mm[triples][:, :, None] - centres_mm[triples][:, None, :]
+        apart[:, np.arange(3), np.arange(3)] = 1.0
+        weights = 1.0 / np.prod(apart, axis=2)  # (triples, 3)
+        scaled = []
+        for sign in (1.0, -1.0):
+            chosen = positioning.direction == sign
+            grid = np.full((centres_mm.size, visit.max() + 1), np.nan)
+            grid[cluster[chosen], visit[chosen]] = positioning.error_um[chosen]
+            pairs = grid.shape[1] // 2
+            change = grid[:, 1:2 * pairs:2] - grid[:, 0:2 * pairs:2]  # (targets, pairs)
+            difference = np.einsum("tj,tjp->tp", weights, change[triples])
+            found = difference[np.isfinite(difference)]
+            scaled.append(found ** 2 / (2 * np.sum(weights ** 2, axis=1)[
+                np.nonzero(np.isfinite(difference))[0]]))
+        scaled = np.concatenate(scaled)
+        if scaled.size == 0:
+            return cls(None, 0, positioning.size, "none: no three adjacent targets read in "
+                                                  "two successive runs")
+        return cls(float(np.sqrt(np.mean(scaled))), int(scaled.size), positioning.size,
+                   f"each reading's scatter about a drift change linear over three adjacent "
+                   f"targets between two successive runs ({scaled.size} disjoint groups)")
+
+    @property
+    def available(self):
+        return self.sigma_um is not None
+
+    @property
+    def moments(self):
+        """The moments the outputs have: a t distribution with ν degrees of freedom has a
+        mean for ν > 1 and a variance for ν > 2 (JCGM 101 §6.4.9)."""
+        if not self.available:
+            return ("mean", "standard_uncertainty")
+        return tuple(name for name, least in (("mean", 2), ("standard_uncertainty", 3))
+                     if self.dof >= least)
+
+    def draw(self, rng, trials):
+        """The trials' noise (trials, readings): one σ* = σ·sqrt(ν/χ²(ν)) per trial (the
+        uncertainty of σ itself), then an independent σ*·z at every reading."""
+        sigma = self.sigma_um * np.sqrt(self.dof / rng.chisquare(self.dof, (trials, 1)))
+        return sigma * rng.standard_normal((trials, self.size))
+
+
 class PositioningMeasurement:
     """The Monte Carlo model of one positioning case (:meth:`sample`), its input quantities
     (:attr:`inputs`) and outputs, with the fitted model (a :class:`~feedaxis.fit.FitResult`
@@ -135,7 +206,9 @@ class PositioningMeasurement:
         order = (positioning.time_s if positioning.time_s is not None
                  else np.arange(positioning.size, dtype=float))
         self.elapsed = (order - order.min()) / max(float(np.ptp(order)), 1e-12)
-        self.repeatability = Repeatability.of(positioning, fitted)
+        self.repeatability = (ReadingNoise.of(positioning)
+                              if getattr(self.outputs, "per_reading", False)
+                              else Repeatability.of(positioning, fitted))
         self.budget = budget
         self.errors = {name: distribution for name, distribution in budget.distributions.items()
                        if distribution.size > 0
