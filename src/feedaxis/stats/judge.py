@@ -151,6 +151,8 @@ def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
     if n < 8:
         return np.flatnonzero(flagged)
     limit = scipy.stats.norm.isf(alpha / (2 * n))
+    if layout.has_repeats:  # the drift is fitted robustly once, to every sample
+        residual_um = residual_um - _robust_drift(layout, residual_um)
     for _ in range(MAX_OUTLIER_PASSES):
         if layout.has_repeats:
             deviation = _against_group(layout, residual_um, ~flagged)
@@ -166,10 +168,9 @@ def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
 
 
 def _against_group(layout, residual_um, valid):
-    """Deviation of each sample from the mean of the other valid samples of its group,
-    drift removed, over its standard deviation in noise units (√(1 + 1/(m - 1))); NaN
-    where the group has no other valid sample."""
-    residual_um = residual_um - _robust_drift(layout, residual_um)
+    """Deviation of each sample (its drift removed) from the mean of the other valid
+    samples of its group, over its standard deviation in noise units (√(1 + 1/(m - 1)));
+    NaN where the group has no other valid sample."""
     weights = valid.astype(float)
     sizes = np.bincount(layout.groups, weights, layout.n_groups)[layout.groups]
     totals = np.bincount(layout.groups, residual_um * weights, layout.n_groups)[layout.groups]
