@@ -4,15 +4,19 @@
    velocity feed-forward and hidden Coulomb friction (tests/cascade_synthetic.py, encoder
    noise white 0.1 µm + AR(1) 0.3 µm): ``diagnose`` from the empty model (the start
    identified from the record), ``fit`` with the effects named added, ``diagnose`` again,
-   until nothing more is named (at most three rounds). Target: 10 s.
+   until nothing more is named (at most three rounds). Target: 10 s. Timed beside the
+   paths before the loop's sensitivities (forward-difference Jacobians, every fit of a
+   diagnosis made anew: ``common.slow_tracking_paths``), interleaved, wall and CPU time.
 2. ``identify_plant`` (inverse dynamics on control_V) on 10^5 samples. Target: 0.1 s.
 
 Each is timed ``--repeats`` times; medians and their ratio to the target are printed side
-by side (the machine is shared: medians, not single runs).
+by side (the machine is shared: medians, not single runs; CPU time is the fairer figure
+under load).
 
 Run: ``python benchmarks/bench_cascade.py [--repeats 5]``.
 """
 import argparse
+import contextlib
 import statistics
 import sys
 import tempfile
@@ -26,7 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from cascade_synthetic import (FORCE_CONSTANT_N_PER_V, cascade_loop, exciting,  # noqa: E402
                                write_cascade_case)
-from common import arguments, machine  # noqa: E402
+from common import (arguments, machine, ratio_lines, side_by_side,  # noqa: E402
+                    slow_tracking_paths)
 from feedaxis.case import read_case  # noqa: E402
 from feedaxis.diagnose import diagnose  # noqa: E402
 from feedaxis.effects import CATALOG, Model  # noqa: E402
@@ -39,10 +44,9 @@ CASCADE = "P-PI ff"
 
 
 def the_loop(folder):
-    """(seconds, effects named in order) of diagnose / fit --add / diagnose until done, on a
-    freshly read case (nothing cached from an earlier run)."""
+    """Effects named in order by diagnose / fit --add / diagnose until done, on a freshly
+    read case (nothing cached from an earlier run)."""
     case = read_case(folder)
-    started = time.perf_counter()
     model, named = Model(), []
     for _ in range(3):
         found = diagnose(case, model)
@@ -52,7 +56,7 @@ def the_loop(folder):
             named.append(candidate.effect)
             model = model + CATALOG[candidate.effect]
         model = fit(model, case).model
-    return time.perf_counter() - started, named
+    return named
 
 
 def identification(samples):
@@ -78,18 +82,27 @@ def main(argv=None):
         record = cascade_loop(exciting, args.duration_s, CASCADE, friction_N=5.0)
         folder = write_cascade_case(Path(scratch) / "trace", record, CASCADE, 1)
         the_loop(folder)  # compiles and caches the kernels once
-        loops = [the_loop(folder) for _ in range(args.repeats)]
+        loops = side_by_side({"sensitivities, fits kept": (contextlib.nullcontext,
+                                                           lambda: the_loop(folder)),
+                              "differences, every fit anew": (slow_tracking_paths,
+                                                              lambda: the_loop(folder))},
+                             args.repeats)
     long_record = cascade_loop(exciting, (args.samples - 1) * 1e-3, CASCADE, friction_N=5.0)
     noisy = (long_record[0],
              long_record[2] + np.random.default_rng(1).normal(0.0, 3e-5, long_record[0].size),
              long_record[3])
     identification(noisy)
     identifications = [identification(noisy) for _ in range(max(args.repeats, 5))]
-    loop_s = statistics.median(seconds for seconds, _ in loops)
+    walls, cpus, named = loops["sensitivities, fits kept"]
     identify_s = statistics.median(identifications)
     print(f"the loop on {args.duration_s:g} s at 1 kHz ({CASCADE}, Coulomb friction hidden), "
-          f"effects named {' + '.join(loops[0][1]) or 'none'}: median {loop_s:.2f} s over "
-          f"{len(loops)} runs, {loop_s / LOOP_TARGET_S:.2f} of the {LOOP_TARGET_S:g} s target")
+          f"effects named {' + '.join(named) or 'none'} (before: "
+          f"{' + '.join(loops['differences, every fit anew'][2]) or 'none'}):")
+    print("\n".join(ratio_lines(loops, "sensitivities, fits kept",
+                                "differences, every fit anew")))
+    print(f"  median {statistics.median(walls):.2f} s wall, {statistics.median(cpus):.2f} s "
+          f"CPU: {statistics.median(cpus) / LOOP_TARGET_S:.2f} of the {LOOP_TARGET_S:g} s "
+          f"target in CPU time")
     print(f"identification from control_V on {args.samples} samples: median "
           f"{1e3 * identify_s:.1f} ms over {len(identifications)} runs, "
           f"{identify_s / IDENTIFY_TARGET_S:.2f} of the {1e3 * IDENTIFY_TARGET_S:g} ms target")

@@ -27,11 +27,17 @@ rejection rate at α = 0.01 and 0.001 of the periodic tests (the record's and th
 periodogram's) and of the n/τ F test (for a trend and for a square wave locked to the
 reversals).
 
+The fit and ``diagnose`` on a long trace (``--long-s``, default 500 s at 1 ms: the
+5·10^6-step loop of bench_diagnose_scale.py, model servo_plant at the truth) are also timed
+beside the paths before the loop's sensitivities (forward-difference Jacobians, every fit of
+a diagnosis made anew: ``common.slow_tracking_paths``), interleaved, wall and CPU time.
+
 Run: ``python benchmarks/bench_tracking_fit.py [--repeats 5] [--seeds 100] [--rates-only]``
 (``--smoke``: one of each, for CI). Times are medians of repeats in this one run, BLAS on
 one thread for both.
 """
 import argparse
+import contextlib
 import statistics
 import sys
 import tempfile
@@ -56,8 +62,8 @@ from feedaxis.stats.coloured import peak_p_value, short_time_peak  # noqa: E402
 from feedaxis.stats.noise import Coloured  # noqa: E402
 from tracking_synthetic import noise_um, step_loop, two_sines, write_tracking_case  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import arguments  # noqa: E402
+from bench_diagnose_scale import tracking_trace  # noqa: E402
+from common import (machine, ratio_lines, side_by_side, slow_tracking_paths)  # noqa: E402
 
 PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
          "plant_stiffness_per_s2": 250.0, "delay_s": 0.0015}
@@ -185,7 +191,12 @@ def speed(folder, args):
     one_fast_s, _ = timed(lambda: simulate(params, *run[:2]), args.repeats)
     one_plain_s, _ = timed(lambda: step_loop(two_sines, args.record_s, plant=PLANT,
                                              friction_N=FRICTION_N), args.repeats)
-    fast_s, result = timed(lambda: fit(MODEL, case), args.repeats)
+    fits = {"fit, sensitivities": (contextlib.nullcontext, lambda: fit(MODEL, case)),
+            "fit, differences": (slow_tracking_paths, lambda: fit(MODEL, case))}
+    side_by_side(fits, 1)  # both paths' kernels compiled or loaded from numba's cache
+    paths = side_by_side(fits, args.repeats)
+    fast_s, result = statistics.median(paths["fit, sensitivities"][0]), \
+        paths["fit, sensitivities"][2]
     plain_s, (plain_values, evaluations, plain_rms) = timed(
         lambda: baseline_fit(case, start_model), args.baseline_repeats)
     print(f"record: {case.tracking.time_s.size} samples at 1 ms, loop 0.1 ms; numba "
@@ -206,6 +217,24 @@ def speed(folder, args):
           f"{1e3 * PLANT['delay_s']:.4f} ms; baseline {evaluations} evaluations")
     print(f"ratio baseline / feedaxis: {plain_s / fast_s:.0f}x; target <= 10 s: "
           f"{'met' if fast_s <= 10.0 else 'MISSED'} ({fast_s:.2f} s)")
+    print("the fit's Jacobians from the loop's sensitivities against forward differences:")
+    print("\n".join(ratio_lines(paths, "fit, sensitivities", "fit, differences")))
+
+
+def long_trace(args):
+    """diagnose on ``args.long_s`` of trace, the new paths beside the old."""
+    trace = tracking_trace(args.long_s)
+    plant = Model([CATALOG["servo_plant"]], {"servo_plant": PLANT})
+    diagnose(tracking_trace(3.0), plant)  # the kernels compiled or loaded once
+    runs = side_by_side({"diagnose, sensitivities, fits kept": (
+        contextlib.nullcontext, lambda: diagnose(trace, plant).verdict),
+        "diagnose, differences, every fit anew": (
+        slow_tracking_paths, lambda: diagnose(trace, plant).verdict)}, args.long_repeats)
+    print(f"diagnose on {args.long_s:g} s at 1 ms ({trace.tracking.time_s.size} samples, loop "
+          f"0.1 ms), verdicts {runs['diagnose, sensitivities, fits kept'][2]} / "
+          f"{runs['diagnose, differences, every fit anew'][2]}:")
+    print("\n".join(ratio_lines(runs, "diagnose, sensitivities, fits kept",
+                                "diagnose, differences, every fit anew")))
 
 
 def main(argv=None):
@@ -215,12 +244,22 @@ def main(argv=None):
     parser.add_argument("--seeds", type=int, default=100)
     parser.add_argument("--record-s", type=float, default=5.0,
                         help="length of the fitted record (default 5 s)")
+    parser.add_argument("--long-s", type=float, default=500.0,
+                        help="length of the long trace diagnosed (default 500 s)")
+    parser.add_argument("--long-repeats", type=int, default=3)
     parser.add_argument("--rates-only", action="store_true",
                         help="only the error rates and the calibration (no timing)")
-    args = arguments(parser, argv, repeats=1, baseline_repeats=1, seeds=1, record_s=0.5)
+    parser.add_argument("--speed-only", action="store_true",
+                        help="only the timings (no error rates, no calibration)")
+    args = arguments(parser, argv, repeats=1, baseline_repeats=1, seeds=1, record_s=0.5,
+                     long_s=3.0, long_repeats=1)
     with tempfile.TemporaryDirectory() as folder, threadpool_limits(limits=1, user_api="blas"):
         if not args.rates_only:
+            print(machine())
             speed(folder, args)
+            long_trace(args)
+        if args.speed_only:
+            return
         false_alarm, power = error_rates(folder, args.seeds)
         print(f"diagnosis over {args.seeds} seeds (2 s records, noise 0.1 um white + 0.3 um "
               f"AR(1)): null false-alarm rate {false_alarm:.3f}; power:")

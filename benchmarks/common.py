@@ -7,6 +7,7 @@ their output, with the machine and the date.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import platform
 import statistics
@@ -97,3 +98,48 @@ def _lines(path):
             return stream.read().splitlines()
     except OSError:
         return []
+
+
+@contextlib.contextmanager
+def slow_tracking_paths():
+    """The tracking fit's paths before its sensitivities, for a baseline timed in the same
+    run: forward differences for every Jacobian (``feedaxis.fit.SENSITIVITIES`` off) and
+    every fit of a diagnosis made anew (its refitter's memo bypassed)."""
+    from feedaxis import fit as fit_module
+    from feedaxis.diagnose import Refitter
+
+    saved = fit_module.SENSITIVITIES, Refitter.fit
+    fit_module.SENSITIVITIES = False
+    Refitter.fit = lambda self, model: fit_module.fit(model, self.measurement)
+    try:
+        yield
+    finally:
+        fit_module.SENSITIVITIES, Refitter.fit = saved
+
+
+def side_by_side(jobs, repeats):
+    """{label: ([wall s], [CPU s], last result)} of ``jobs`` ({label: (context, function)})
+    run in turn ``repeats`` times, interleaved so that a change of the machine's load falls
+    on every job alike."""
+    timings = {label: ([], [], None) for label in jobs}
+    for _ in range(repeats):
+        for label, (context, function) in jobs.items():
+            with context():
+                wall, cpu = time.perf_counter(), time.process_time()
+                result = function()
+                walls, cpus, _ = timings[label]
+                walls.append(time.perf_counter() - wall)
+                cpus.append(time.process_time() - cpu)
+            timings[label] = (walls, cpus, result)
+    return timings
+
+
+def ratio_lines(timings, new, old):
+    """Lines of each job's wall and CPU medians with their ranges, then old / new."""
+    lines = [f"  {label:44s} wall {describe(walls)}; CPU {describe(cpus)}"
+             for label, (walls, cpus, _) in timings.items()]
+    old_cpu, new_cpu = (statistics.median(timings[label][1]) for label in (old, new))
+    old_wall, new_wall = (statistics.median(timings[label][0]) for label in (old, new))
+    lines.append(f"  ratio {old} / {new}: CPU {old_cpu / new_cpu:.2f}x, wall "
+                 f"{old_wall / new_wall:.2f}x")
+    return lines

@@ -212,16 +212,35 @@ class Refitter:
 
     def __init__(self, measurement, catalog):
         self.measurement, self.catalog = measurement, catalog
+        self._fits = {}
 
     def __call__(self, model, names=()):
         for name in names:
             model = model + self.catalog[name]
-        return fit(model, self.measurement)
+        return self.fit(model)
+
+    def fit(self, model):
+        """``fit(model, measurement)``, once per model: a hook refits what the selection
+        fitted already (the same effects, the same start: the same fit)."""
+        key = (tuple(id(e) for e in model.effects),
+               repr([sorted(model.values[name].items()) for name in model.names]))
+        if key not in self._fits:
+            self._fits[key] = fit(model, self.measurement)
+        return self._fits[key]
 
     def with_basis(self, model, basis):
         columns = BasisEffect("columns", basis)
         result = fit(model + columns, self.measurement)
         return result, columns.prepare(self.measurement.case)(result.model.values["columns"])
+
+
+def _fit(model, measurement):
+    """``fit(model, measurement)``, through the measurement's :class:`Refitter` where it
+    has its own (its fits are kept for the hooks)."""
+    refitter = measurement.refitter
+    if refitter is not None and refitter.measurement is measurement:
+        return refitter.fit(model)
+    return fit(model, measurement)
 
 
 def _unstarted(measurement, model, reason):
@@ -268,7 +287,7 @@ def _select(measurement, left, pending, skipped, stages, notify):
                 continue
             notify(effect.name)
             joined = _joined(left.model, effect, pending)
-            result = (fit(joined, measurement)
+            result = (_fit(joined, measurement)
                       if effect.additive or not effect.screened else None)
             after_um = (result.residual_um if result else
                         _screened_residual(measurement, left, effect))

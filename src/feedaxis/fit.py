@@ -31,6 +31,10 @@ SINGULAR_RATIO = 1e-6
 NOISE_DOF = 8
 FD_STEP = np.sqrt(np.finfo(float).eps)  # relative step of the finite differences
 MAX_NFEV_PER_PARAMETER = 100  # a trust-region pass's evaluations per parameter it moves
+# Jacobians of a measurement's core from its sensitivities (Measurement.sensitivity: one
+# forward-mode simulation) where it has them; False: forward differences everywhere (the
+# baseline benchmarks/bench_tracking_fit.py times beside it, and the tests' cross-check)
+SENSITIVITIES = True
 
 
 @dataclass(frozen=True)
@@ -293,7 +297,25 @@ class Problem:
         self.model, self.found, self.progress = model, found, progress
         self.measured_um = np.concatenate([m.measured_um for m in found])
         self.separators = [m.separable(model) for m in found]
+        self.sensitivities = [m.sensitivity(model) for m in found] if SENSITIVITIES else [None]
         self._last = (None, None)
+
+    def exact(self, layout):
+        """Whether every nonlinear parameter's column comes from the measurements'
+        sensitivities: each has them and those parameters all act in its core (an additive
+        effect's nonlinear parameters move its columns, which they do not cover)."""
+        additive = {e.name for e in self.model.effects if e.additive}
+        return (all(s is not None for s in self.sensitivities)
+                and not any(layout.slots[i][0] in additive for i in layout.nonlinear_index))
+
+    def core_derivatives(self, layout, x):
+        """d base_um / d the nonlinear parameters (samples x their count) at ``x``, from
+        one sensitivity pass of each measurement."""
+        if self.progress:
+            self.progress()
+        slots = [layout.slots[i] for i in layout.nonlinear_index]
+        values = layout.values(x)
+        return np.vstack([sensitivity(values, slots)[1] for sensitivity in self.sensitivities])
 
     def predicted_um(self, values):
         base_um, columns_um = self.split(values)
@@ -325,14 +347,19 @@ class Problem:
 
     def jacobian(self, layout):
         """``f(x) -> d residual / dx``: the linear parameters' columns exactly, the others
-        by forward differences stepped into the bounds."""
+        from the sensitivities (:meth:`exact`), else by forward differences stepped into the
+        bounds."""
         nonlinear = layout.nonlinear_index
+        exact = self.exact(layout)
 
         def jacobian(x):
             base_um, columns_um = self._split_at(layout, x)
             here_um = base_um + columns_um @ x[layout.linear_index]
             matrix = np.empty((here_um.size, layout.size))
             matrix[:, layout.linear_index] = -columns_um
+            if exact and nonlinear.size:
+                matrix[:, nonlinear] = -self.core_derivatives(layout, x)
+                return matrix
             for index in nonlinear:
                 step = FD_STEP * max(1.0, abs(x[index]))
                 if x[index] + step > layout.upper[index]:
@@ -393,16 +420,33 @@ def variable_projection(problem, layout):
     if linear.size == 0:
         return x
 
+    last = {}
+
     def project(x_nonlinear):
         x[nonlinear] = x_nonlinear
         base_um, columns_um = problem.split(layout.values(x))
         target_um = problem.measured_um - base_um
         x[linear] = bounded_linear_solve(columns_um, target_um, lower[linear], upper[linear])
+        last.update(columns_um=columns_um, free=(x[linear] > lower[linear])
+                    & (x[linear] < upper[linear]))
         return target_um - columns_um @ x[linear]
+
+    def projected_jacobian(x_nonlinear):
+        """d project / d x_nonlinear with the columns fixed (they are where
+        :meth:`Problem.exact` holds): −(I − C_f C_f⁺)·d base / dθ, C_f the columns of the
+        linear parameters inside their bounds (those at a bound stay there)."""
+        if not np.array_equal(x[nonlinear], x_nonlinear):
+            project(x_nonlinear)
+        derivatives = problem.core_derivatives(layout, x)
+        free = last["columns_um"][:, last["free"]]
+        if free.shape[1]:
+            derivatives = derivatives - free @ np.linalg.lstsq(free, derivatives, rcond=None)[0]
+        return -derivatives
 
     if nonlinear.size:
         solution = least_squares(project, x[nonlinear], bounds=(lower[nonlinear],
                                                                 upper[nonlinear]),
+                                 jac=projected_jacobian if problem.exact(layout) else "2-point",
                                  x_scale="jac", method="trf",
                                  max_nfev=MAX_NFEV_PER_PARAMETER * nonlinear.size)
         project(solution.x)

@@ -91,3 +91,17 @@ def test_row_groups_are_numpys_unique_rows(seed):
     for count in (1, 2, 3):
         expected = np.unique(np.column_stack(columns[:count]), axis=0, return_inverse=True)[1]
         np.testing.assert_array_equal(row_groups(*columns[:count]), expected.ravel())
+
+
+@pytest.mark.parametrize("size", [1, 2, 7, 1000, 4801, 24799])
+def test_the_autocovariance_by_fft_is_the_lagged_sum(size):
+    """Zero-padded to a fast length (24,799 makes 2n a large prime's double): the biased
+    autocovariance (1/n) Σ x_t x_{t+k} of the mean-removed samples, at every lag."""
+    from feedaxis.stats.coloured import _autocovariance
+
+    values = np.random.default_rng(size).normal(size=size).cumsum()
+    centred = values - values.mean()
+    lags = np.arange(size) if size <= 1000 else np.array([0, 1, 2, 17, size // 2, size - 1])
+    direct = np.array([centred[:size - k] @ centred[k:] for k in lags]) / size
+    fast = _autocovariance(values)[lags]
+    np.testing.assert_allclose(fast, direct, rtol=1e-12, atol=1e-12 * abs(direct[0]))

@@ -176,6 +176,13 @@ class Measurement(ABC):
         the model has none (their prediction is 0)."""
         return None
 
+    def sensitivity(self, model):
+        """``f(values, slots) -> (core_um, d core_um / d slots)``: the core's prediction
+        (:meth:`core`) and its derivatives in the ``(effect, parameter)`` slots of effects
+        that are not additive, from one pass (forward-mode sensitivities), or None when the
+        measurement has none (the fit then differences)."""
+        return None
+
     def separable(self, model):
         """``f(values) -> (base_um, columns_um)``: the prediction is ``base_um + columns_um
         @ linear values``, columns in the order ``(effect, parameter) for effect in

@@ -31,6 +31,7 @@ from ..fmu_map import servo_to_fmu
 from ..physics.identify import identify_plant, loop_start
 from ..physics.servo import (MAX_POSITION_MM, PLANT_BOUNDS, ServoParams, check_runs,
                              loop_budget_problem, simulate, simulate_record, step_counts)
+from ..physics.servo_sensitivity import PARAMETERS as SENSITIVE, simulate_sensitivity
 from ..plausibility import tracking_problems, warn_implausible
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, autoregression,
                               locate_sinusoid, noise_floor_um, peak_p_value, short_time_peak,
@@ -166,6 +167,8 @@ def _fitted_plant(measurement, plant, nuisances):
     parameters ``nuisances`` (from 0, at least 0) fitted beside it and dropped."""
     from scipy.optimize import least_squares
 
+    from .. import fit as fit_module
+
     keys = (*PLANT_KEYS, *nuisances)
     lower = np.array([PLANT_BOUNDS[k][0] if k in PLANT_BOUNDS else 0.0 for k in keys])
     upper = np.array([PLANT_BOUNDS[k][1] if k in PLANT_BOUNDS else np.inf for k in keys])
@@ -176,8 +179,13 @@ def _fitted_plant(measurement, plant, nuisances):
         params = ServoParams(**{**base, **dict(zip(keys, x))})
         return measurement.measured_um - measurement.deviation_um(params)
 
+    def jacobian(x):
+        params = ServoParams(**{**base, **dict(zip(keys, x))})
+        return -measurement.deviation_sensitivity(params, keys)[1]
+
     with np.errstate(over="ignore", invalid="ignore"):
         solution = least_squares(residual, start, bounds=(lower, upper), x_scale="jac",
+                                 jac=jacobian if fit_module.SENSITIVITIES else "2-point",
                                  method="trf")
     return {k: float(v) for k, v in zip(PLANT_KEYS, solution.x)}
 
@@ -411,6 +419,28 @@ class Tracking(Measurement):
 
     def core(self, model):
         return lambda values: self.deviation_um(self.params(model, values))
+
+    def sensitivity(self, model):
+        """The deviation and its derivatives in the loop's parameters from one forward-mode
+        pass of the loop (:func:`feedaxis.physics.servo_sensitivity.simulate_sensitivity`);
+        the slots' parameter names are the loop's (:func:`servo_params`). None where an
+        effect sets a loop parameter the sensitivities do not differentiate (a user's effect
+        on the loop step, say): the fit then differences."""
+        names = {p.name for e in model.effects if not e.additive for p in e.parameters}
+        if not names <= set(SENSITIVE):
+            return None
+        return lambda values, slots: self.deviation_sensitivity(
+            self.params(model, values), [parameter for _, parameter in slots])
+
+    def deviation_sensitivity(self, params, names):
+        """(:meth:`deviation_um` under ``params``, its derivatives in ``names``: samples x
+        len(names), µm per unit)."""
+        position_mm, d_position_mm = simulate_sensitivity(
+            params, names, self.record_time_s, self.record_reference_mm, self.disturbance_N,
+            self.counts)
+        with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
+            return ((position_mm - self.record_reference_mm)[self.index] * 1e3,
+                    d_position_mm[self.index] * 1e3)
 
     def loop_response_um(self, model, disturbance_N):
         """Change of the predicted deviation (µm) at the samples when ``disturbance_N``

@@ -348,9 +348,13 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
                 command = kp * error + ki * integral + kd * derivative
             buffer[head] = command
             controls_V[i] = command
-            command_late = buffer[(head - shift) % size]
-            command_early = buffer[(head - shift - 1) % size]
-            head = (head + 1) % size
+            late = head - shift  # the delay line's index arithmetic without a modulo
+            if late < 0:  # (an integer division per step, on the head's dependency chain)
+                late += size
+            early = late - 1 if late > 0 else size - 1
+            command_late = buffer[late]
+            command_early = buffer[early]
+            head = head + 1 if head + 1 < size else 0
             force = force_V - friction_V(x2, coulomb_V, damping_V_s_per_mm, rise_V, static_V,
                                          stribeck_mm_s, smoothing_mm_s)
             u_late = command_late + force

@@ -1,0 +1,315 @@
+"""Forward sensitivities of the servo loop: d position / d parameters from one simulation.
+
+The loop of :func:`.servo.run_loop` is a discrete-time recursion z⁺ = f(z, u; c) in the
+coefficient vector c (:func:`.servo.loop_coefficients`). Differentiating each of its lines
+gives the tangent recursion dz⁺/dθ = ∂f/∂z · dz/dθ + ∂f/∂c · dc/dθ, stepped beside the loop
+itself (forward mode): one pass yields the positions and their derivatives with respect to
+every parameter θ, where finite differences need one more simulation per parameter.
+
+- :func:`coefficient_jacobian`: dc/dθ exactly. The plant's entries are functions of the
+  zero-order-hold exponentials; their derivatives come from the block exponential
+  d e^{Mτ}/dθ = the upper right block of exp([[M, E], [0, M]]·τ), E = dM/dθ (Van Loan,
+  "Computing integrals involving the matrix exponential", IEEE Trans. Automatic Control 23
+  (1978), Theorem 1), and from d e^{Mτ}/dτ = M·e^{Mτ} for the delay's fraction.
+- :func:`run_loop_tangent`: :func:`.servo.run_loop`'s lines, each followed by its derivative
+  (its positions equal run_loop's bitwise: tests/physics/test_sensitivity.py).
+
+The friction's sign is a clipped ramp and the NPID gain is held beyond e_max: both are
+differentiated piecewise (the side the value is on), as finite differences see them away
+from the kinks. The integer part of the delay (whole loop steps) is held: the derivative in
+``delay_s`` is the one within its step.
+"""
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from .servo import (FRICTION_SMOOTHING_MM_S, discrete_plant, expm, forces_V, friction_V,
+                    loop_coefficients, npid_gain, step_counts, stribeck_V,
+                    with_compiled_callees)
+from .threads import one_blas_thread
+
+COEFFICIENTS = 27  # the length of loop_coefficients' vector
+# the indices in loop_coefficients' vector
+TRANSITION, LATE, EARLY = slice(0, 4), slice(4, 6), slice(6, 8)
+KP, KI, KD, KO, E_MAX = 8, 9, 10, 11, 12
+FRICTION, DAMPING = 14, 15
+KP_PER_S, KV, KV_TN, FEEDFORWARD = 19, 20, 21, 22
+COULOMB, STATIC, STRIBECK_VELOCITY, SMOOTHING = 23, 24, 25, 26
+# the parameters :func:`coefficient_jacobian` differentiates
+PLANT = ("plant_gain_mm_per_Vs2", "plant_damping_per_s", "plant_stiffness_per_s2", "delay_s")
+PER_NEWTON = {"friction_N": FRICTION, "damping_N_s_per_mm": DAMPING, "coulomb_N": COULOMB,
+              "static_N": STATIC}
+GAINS = {"kp_V_per_mm": KP, "ki_V_per_mm_s": KI, "kd_V_s_per_mm": KD, "ko_per_mm": KO,
+         "e_max_mm": E_MAX, "kp_per_s": KP_PER_S, "velocity_feedforward": FEEDFORWARD,
+         "stribeck_velocity_mm_s": STRIBECK_VELOCITY}
+PARAMETERS = (*PLANT, *PER_NEWTON, *GAINS, "kv_V_s_per_mm", "tn_s", "force_N")
+
+
+def _augmented(params):
+    """M of the zero-order hold (:func:`.servo._zoh`), unit input column."""
+    return np.array([[0.0, 1.0, 0.0],
+                     [-params.plant_stiffness_per_s2, -params.plant_damping_per_s, 1.0],
+                     [0.0, 0.0, 0.0]])
+
+
+def _exp_and_derivative(matrix, direction, duration_s):
+    """(e^{M·τ}, its derivative along E: M → M + εE), from one 6x6 block exponential."""
+    size = len(matrix)
+    block = np.zeros((2 * size, 2 * size))
+    block[:size, :size] = block[size:, size:] = matrix
+    block[:size, size:] = direction
+    full = expm(block * duration_s)
+    return full[:size, :size], full[:size, size:]
+
+
+def _plant_derivatives(params, name):
+    """d(transition (2x2), late (2,), early (2,))/d``name`` for one plant parameter, as
+    :func:`.servo.discrete_plant` composes them: transition = Φ_L·Φ_E, late = b·G_L,
+    early = Φ_L·b·G_E with (Φ, G) blocks of e^{M·τ} at τ_L = (1 − f)·h and τ_E = f·h."""
+    h = params.time_step_s
+    fraction = min(max(params.delay_s / h - params.delay_steps, 0.0), 1.0)
+    matrix, gain = _augmented(params), params.plant_gain_mm_per_Vs2
+    spans = ((1.0 - fraction) * h, fraction * h)
+    if name == "plant_gain_mm_per_Vs2":
+        _, late, early = discrete_plant(params)
+        return np.zeros((2, 2)), late / gain, early / gain
+    if name == "delay_s":  # dτ_L/dτ = −1, dτ_E/dτ = +1 (within the step)
+        exps = [expm(matrix * span) for span in spans]
+        derivs = [sign * matrix @ e for sign, e in zip((-1.0, 1.0), exps)]
+    else:
+        direction = np.zeros((3, 3))
+        direction[1, 1 if name == "plant_damping_per_s" else 0] = -1.0
+        pairs = [_exp_and_derivative(matrix, direction, span) for span in spans]
+        exps, derivs = [p[0] for p in pairs], [p[1] for p in pairs]
+    (late_exp, early_exp), (d_late, d_early) = exps, derivs
+    d_transition = d_late[:2, :2] @ early_exp[:2, :2] + late_exp[:2, :2] @ d_early[:2, :2]
+    d_early_column = gain * (d_late[:2, :2] @ early_exp[:2, 2]
+                             + late_exp[:2, :2] @ d_early[:2, 2])
+    return d_transition, gain * d_late[:2, 2], d_early_column
+
+
+def coefficient_jacobian(params, names):
+    """dc/dθ ((len(names), 27)) of :func:`.servo.loop_coefficients` for the parameters
+    ``names`` (of :data:`PARAMETERS`), and d(force as a command, V)/dθ (len(names),):
+    ``force_N`` enters as force_N / force_constant over every interval."""
+    unknown = [name for name in names if name not in PARAMETERS]
+    if unknown:
+        raise ValueError(f"no sensitivity for {', '.join(unknown)}")
+    coefficients = loop_coefficients(params)
+    volts_per_N = 1.0 / params.force_constant_N_per_V
+    jacobian = np.zeros((len(names), COEFFICIENTS))
+    force = np.zeros(len(names))
+    peak_V = (params.friction_N + max(params.coulomb_N, params.static_N)) * volts_per_N
+    velocity_per_V = coefficients[LATE][1] + coefficients[EARLY][1]
+    widened = peak_V * abs(velocity_per_V) > FRICTION_SMOOTHING_MM_S  # smoothing's branch
+    cascade = params.controller == "cascade"
+    for row, name in enumerate(names):
+        d = jacobian[row]
+        d_peak_V = 0.0
+        if name in PLANT:
+            d_transition, d_late, d_early = _plant_derivatives(params, name)
+            d[TRANSITION], d[LATE], d[EARLY] = d_transition.ravel(), d_late, d_early
+        elif name in PER_NEWTON:
+            d[PER_NEWTON[name]] = volts_per_N
+            # the peak friction friction_N + max(coulomb_N, static_N) sets the smoothing
+            larger = "coulomb_N" if params.coulomb_N >= params.static_N else "static_N"
+            d_peak_V = volts_per_N if name in ("friction_N", larger) else 0.0
+        elif name in GAINS:
+            d[GAINS[name]] = 1.0
+        elif name == "kv_V_s_per_mm" and cascade:
+            d[KV] = 1.0
+            d[KV_TN] = 1.0 / params.tn_s if params.tn_s > 0.0 else 0.0
+        elif name == "tn_s" and cascade and params.tn_s > 0.0:
+            d[KV_TN] = -params.kv_V_s_per_mm / params.tn_s ** 2
+        elif name == "force_N":
+            force[row] = volts_per_N
+        if widened:  # smoothing = peak_V·|late₂ + early₂|
+            d_velocity = d[LATE][1] + d[EARLY][1]
+            d[SMOOTHING] = (d_peak_V * abs(velocity_per_V)
+                            + peak_V * math.copysign(1.0, velocity_per_V) * d_velocity)
+    return jacobian, force
+
+
+def friction_tangent(velocity_mm_s, coulomb_V, damping_V_s_per_mm, rise_coulomb_V, static_V,
+                     stribeck_velocity_mm_s, smoothing_mm_s):
+    """The partial derivatives of :func:`.servo.friction_V` with respect to its seven
+    arguments, in their order (floats; the clipped sign differentiated on its side)."""
+    d_damping = velocity_mm_s
+    d_velocity = damping_V_s_per_mm
+    d_coulomb = d_rise = d_static = d_stribeck = d_smoothing = 0.0
+    if coulomb_V != 0.0 or rise_coulomb_V != 0.0 or static_V != 0.0:
+        ramp = velocity_mm_s / smoothing_mm_s
+        sign = min(max(ramp, -1.0), 1.0)
+        inside = -1.0 < ramp < 1.0
+        magnitude = coulomb_V
+        d_coulomb = sign
+        if rise_coulomb_V != 0.0 or static_V != 0.0:
+            magnitude += stribeck_V(velocity_mm_s, rise_coulomb_V, static_V,
+                                    stribeck_velocity_mm_s)
+            ratio = velocity_mm_s / stribeck_velocity_mm_s
+            decay = math.exp(-ratio * ratio)
+            slope = (static_V - rise_coulomb_V) * decay * -2.0 * ratio
+            d_rise = (1.0 - decay) * sign
+            d_static = decay * sign
+            d_velocity += slope / stribeck_velocity_mm_s * sign
+            d_stribeck = -slope * ratio / stribeck_velocity_mm_s * sign
+        if inside:
+            d_velocity += magnitude / smoothing_mm_s
+            d_smoothing = -magnitude * ramp / smoothing_mm_s
+    return (d_velocity, d_coulomb, d_damping, d_rise, d_static, d_stribeck, d_smoothing)
+
+
+def npid_tangent(error_mm, ko_per_mm, e_max_mm):
+    """(dK/de, dK/dKO, dK/de_max) of :func:`.servo.npid_gain` K = cosh(KO·min(|e|, e_max))."""
+    held = abs(error_mm) >= e_max_mm
+    level = e_max_mm if held else abs(error_mm)
+    rate = math.sinh(ko_per_mm * level)
+    d_level = 0.0 if held else math.copysign(1.0, error_mm)
+    return rate * ko_per_mm * d_level, rate * level, rate * ko_per_mm if held else 0.0
+
+
+def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturbances_V,
+                     d_disturbance_V, state, buffer, d_state, d_buffer, positions_mm,
+                     d_positions_mm):
+    """:func:`.servo.run_loop` with the derivatives of its state stepped beside it.
+
+    ``d_coefficients`` (27 x p: :func:`coefficient_jacobian` transposed, a parameter's
+    derivatives along a row for the inner loops) and ``d_disturbance_V`` (p,) its force;
+    ``d_state`` (4 x p: position, velocity, integral, previous) and ``d_buffer`` (delay line
+    x p) start at 0 for a loop started from given values; ``d_positions_mm`` (samples x p)
+    receives d position / dθ at each sample. Each block below is one line of run_loop
+    followed by its derivative.
+    """
+    a11, a12, a21, a22, late1, late2, early1, early2 = coefficients[0:8]
+    kp, ki, kd, ko, e_max, nonlinear = coefficients[8:14]
+    dt, delay = coefficients[16], coefficients[17]
+    cascade, kp_per_s, kv, kv_tn, feedforward = coefficients[18:23]
+    coulomb_V, damping_V_s_per_mm = coefficients[14], coefficients[15]
+    rise_V, static_V, stribeck_mm_s, smoothing_mm_s = coefficients[23:27]
+    dc = d_coefficients
+    p = dc.shape[1]
+    x1, x2, integral, previous, start_mm = state[0], state[1], state[2], state[3], state[4]
+    head = int(state[5])
+    size = len(buffer)
+    shift = int(delay)
+    dx1, dx2, d_integral, d_previous = d_state[0], d_state[1], d_state[2], d_state[3]
+    d_command = np.empty(p)
+    for i in range(len(steps)):
+        n_steps = steps[i]
+        end_mm = references_mm[i]
+        force_V = disturbances_V[i]
+        slope_mm_s = (end_mm - start_mm) / (n_steps * dt) if n_steps > 0 else 0.0
+        for k in range(1, n_steps + 1):
+            error = start_mm + (end_mm - start_mm) * (k - 1) / n_steps - x1
+            if cascade != 0.0:
+                bracket = kp_per_s * error + feedforward * slope_mm_s - x2
+                for j in range(p):
+                    d_bracket = (dc[KP_PER_S, j] * error - kp_per_s * dx1[j]
+                                 + dc[FEEDFORWARD, j] * slope_mm_s - dx2[j])
+                    d_integral[j] += 0.5 * (d_bracket + d_previous[j]) * dt
+                    d_previous[j] = d_bracket
+                integral += 0.5 * (bracket + previous) * dt
+                previous = bracket
+                command = kv * bracket + kv_tn * integral
+                for j in range(p):
+                    d_command[j] = (dc[KV, j] * bracket + kv * d_previous[j]
+                                    + dc[KV_TN, j] * integral + kv_tn * d_integral[j])
+            else:
+                raw = error
+                for j in range(p):
+                    d_command[j] = -dx1[j]  # d error, before the gain
+                if nonlinear != 0.0:
+                    gain = npid_gain(raw, ko, e_max)
+                    d_gain_e, d_gain_ko, d_gain_max = npid_tangent(raw, ko, e_max)
+                    error = raw * gain
+                    for j in range(p):
+                        d_command[j] = (d_command[j] * (gain + raw * d_gain_e) + raw * (
+                            d_gain_ko * dc[KO, j] + d_gain_max * dc[E_MAX, j]))
+                integral += 0.5 * (error + previous) * dt
+                derivative = (error - previous) / dt
+                for j in range(p):
+                    d_error = d_command[j]
+                    d_integral[j] += 0.5 * (d_error + d_previous[j]) * dt
+                    d_derivative = (d_error - d_previous[j]) / dt
+                    d_previous[j] = d_error
+                    d_command[j] = (dc[KP, j] * error + kp * d_error + dc[KI, j] * integral
+                                    + ki * d_integral[j] + dc[KD, j] * derivative
+                                    + kd * d_derivative)
+                previous = error
+                command = kp * error + ki * integral + kd * derivative
+            buffer[head] = command
+            late = head - shift
+            if late < 0:
+                late += size
+            early = late - 1 if late > 0 else size - 1
+            command_late = buffer[late]
+            command_early = buffer[early]
+            friction = friction_V(x2, coulomb_V, damping_V_s_per_mm, rise_V, static_V,
+                                  stribeck_mm_s, smoothing_mm_s)
+            f_v, f_c, f_d, f_r, f_s, f_vs, f_w = friction_tangent(
+                x2, coulomb_V, damping_V_s_per_mm, rise_V, static_V, stribeck_mm_s,
+                smoothing_mm_s)
+            force = force_V - friction
+            u_late = command_late + force
+            u_early = command_early + force
+            for j in range(p):
+                d_buffer[head, j] = d_command[j]
+                d_force = d_disturbance_V[j] - (
+                    f_v * dx2[j] + f_c * dc[FRICTION, j] + f_d * dc[DAMPING, j]
+                    + f_r * dc[COULOMB, j] + f_s * dc[STATIC, j]
+                    + f_vs * dc[STRIBECK_VELOCITY, j] + f_w * dc[SMOOTHING, j])
+                du_late = d_buffer[late, j] + d_force
+                du_early = d_buffer[early, j] + d_force
+                d1 = (dc[0, j] * x1 + a11 * dx1[j] + dc[1, j] * x2 + a12 * dx2[j]
+                      + dc[4, j] * u_late + late1 * du_late + dc[6, j] * u_early
+                      + early1 * du_early)
+                d2 = (dc[2, j] * x1 + a21 * dx1[j] + dc[3, j] * x2 + a22 * dx2[j]
+                      + dc[5, j] * u_late + late2 * du_late + dc[7, j] * u_early
+                      + early2 * du_early)
+                dx1[j], dx2[j] = d1, d2
+            head = head + 1 if head + 1 < size else 0
+            x1, x2 = (a11 * x1 + a12 * x2 + late1 * u_late + early1 * u_early,
+                      a21 * x1 + a22 * x2 + late2 * u_late + early2 * u_early)
+        if n_steps > 0:
+            start_mm = end_mm
+        positions_mm[i] = x1
+        for j in range(p):
+            d_positions_mm[i, j] = dx1[j]
+    state[0], state[1], state[2], state[3], state[4], state[5] = (
+        x1, x2, integral, previous, start_mm, float(head))
+
+
+@lru_cache(maxsize=1)
+def compiled_tangent():
+    """:func:`run_loop_tangent` compiled by numba's JIT (cached on disk), its calls of the
+    loop's friction and NPID gain and their tangents bound to compiled copies."""
+    import numba
+
+    from .numba_cache import cached_njit
+
+    return cached_njit(numba, with_compiled_callees(
+        numba, run_loop_tangent, npid_gain, npid_tangent,
+        with_compiled_callees(numba, friction_V, stribeck_V),
+        with_compiled_callees(numba, friction_tangent, stribeck_V)), nogil=True)
+
+
+@one_blas_thread
+def simulate_sensitivity(params, names, time_s, reference_mm, disturbance_N=None, counts=None):
+    """(position_mm (samples,), d position_mm / d``names`` (samples x len(names))) at each
+    sample of a tracking record, as :func:`.servo.simulate` steps it, from one pass."""
+    reference_mm = np.ascontiguousarray(reference_mm, dtype=float)
+    counts = step_counts(time_s, params.time_step_s) if counts is None else counts
+    d_coefficients, d_force = coefficient_jacobian(params, names)
+    state = np.array([reference_mm[0], 0.0, 0.0, 0.0, reference_mm[0], 0.0])
+    positions_mm = np.empty_like(reference_mm)
+    d_positions = np.zeros((reference_mm.size, len(names)))
+    compiled_tangent()(loop_coefficients(params), np.ascontiguousarray(d_coefficients.T),
+                       counts, reference_mm,
+                       forces_V(params, disturbance_N, reference_mm.size), d_force, state,
+                       np.zeros(params.buffer_size), np.zeros((4, len(names))),
+                       np.zeros((params.buffer_size, len(names))), positions_mm, d_positions)
+    return positions_mm, d_positions
+
