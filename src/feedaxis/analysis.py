@@ -52,12 +52,17 @@ def measurement_for(case, model, kind=None):
     return measurement_of(case, kind or kinds_for([case], model)[0])
 
 
-def compare(case, model, kind=None, standard=DEFAULT):
+def compare(case, model, kind=None, standard=DEFAULT, progress=None):
     """The figures of ``model`` (as it stands) on the ``kind`` samples of ``case`` (the
     kind's own: for positioning those of ``standard``, :mod:`feedaxis.standards`; the tracking
-    error of Anang et al. 2017; a dict for ``--json``)."""
+    error of Anang et al. 2017; a dict for ``--json``); ``progress`` is called with a label
+    before each step."""
+    notify = progress or (lambda label: None)
     measurement = measurement_for(case, model, kind)
-    return _figures(measurement, evaluate(model, measurement), standard)
+    notify("model")
+    result = evaluate(model, measurement)
+    notify("figures")
+    return _figures(measurement, result, standard)
 
 
 def _figures(measurement, result, standard):

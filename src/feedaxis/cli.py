@@ -54,9 +54,12 @@ def command_group(name, options, **parser_kwargs):
 
 @contextmanager
 def _progress(label, unit):
-    """A tqdm counter on stderr that shows itself only when the work takes over a second;
+    """A tqdm counter on stderr that shows itself only when the work takes over a second
+    and then redraws every second (a long step shows its elapsed time, not a frozen line);
     the callback takes an optional label of the step under way, or ``total=N``: N more
     steps at most (the bar's total grows by N, nothing is counted)."""
+    import threading
+
     from tqdm import tqdm
 
     with tqdm(desc=label, unit=unit, delay=1.0, leave=False, file=sys.stderr,
@@ -69,7 +72,21 @@ def _progress(label, unit):
                 bar.set_postfix_str(str(step), refresh=False)
             bar.update()
 
-        yield tick
+        done = threading.Event()
+
+        def redraw():
+            while not done.wait(1.0):
+                bar.refresh()
+
+        redrawing = threading.Thread(target=redraw, daemon=True)
+        if not bar.disable:
+            redrawing.start()
+        try:
+            yield tick
+        finally:
+            done.set()
+            if redrawing.is_alive():
+                redrawing.join()
 
 
 def _effects(args, cases=()):
@@ -277,11 +294,13 @@ def _compare_options(parser):
 def _cmd_compare(args):
     from .analysis import compare
 
-    _, case, model, kinds = _case_and_model(args)
     outputs = []
-    for kind in kinds:
-        comparison = compare(case, model, kind, args.standard)
-        outputs.append((kind, comparison, text.comparison_lines(comparison)))
+    with _progress("comparing", " steps") as tick:
+        tick("reading the case")
+        _, case, model, kinds = _case_and_model(args)
+        for kind in kinds:
+            comparison = compare(case, model, kind, args.standard, progress=tick)
+            outputs.append((kind, comparison, text.comparison_lines(comparison)))
     _emit_each(args, outputs)
 
 

@@ -547,10 +547,10 @@ def uncertainties(jacobian, residual, active_mask, layout, found):
     scale, singular, vt, strong = _unit_column_svd(jacobian)
     inverse = (vt[strong].T / singular[strong] ** 2) @ vt[strong]
     bounds = np.cumsum([0] + [m.size for m in found])
-    scaled = jacobian / scale
-    gram = sum(m.noise_gram(scaled[start:stop], residual[start:stop], variance)
-               for m, start, stop in zip(found, bounds[:-1], bounds[1:]))
-    covariance = inverse @ gram @ inverse / np.outer(scale, scale)
+    unit = np.outer(scale, scale)  # J'ΣJ is bilinear: that of the unit columns, without them
+    gram = sum(m.noise_gram(jacobian[start:stop], residual[start:stop], variance)
+               for m, start, stop in zip(found, bounds[:-1], bounds[1:])) / unit
+    covariance = inverse @ gram @ inverse / unit
     keys = [f"{effect_name}.{parameter_name}" for effect_name, parameter_name in layout.slots]
     undetermined = _inseparable(vt, strong, keys)
     sigma = {name: {} for name in layout.model.names}
@@ -580,11 +580,11 @@ def _unit_column_svd(jacobian):
     """(column norms, singular values, right singular vectors, strong mask) of
     ``jacobian`` with unit columns, from the eigen-decomposition of its Gram matrix (a
     parameters x parameters problem, where an SVD of samples x parameters costs seconds at
-    10^6 samples; SINGULAR_RATIO squared stays far above the Gram matrix's rounding)."""
+    10^6 samples; SINGULAR_RATIO squared stays far above the Gram matrix's rounding), scaled
+    after the product (no scaled copy of the Jacobian)."""
     scale = np.linalg.norm(jacobian, axis=0)
     scale[scale == 0.0] = 1.0
-    scaled = jacobian / scale
-    eigenvalues, vectors = np.linalg.eigh(scaled.T @ scaled)
+    eigenvalues, vectors = np.linalg.eigh((jacobian.T @ jacobian) / np.outer(scale, scale))
     order = np.argsort(eigenvalues)[::-1]
     singular, vt = np.sqrt(np.maximum(eigenvalues[order], 0.0)), vectors[:, order].T
     strong = singular > SINGULAR_RATIO * max(singular[0] if singular.size else 0.0, 1e-300)

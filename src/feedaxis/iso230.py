@@ -30,6 +30,18 @@ def target_clusters(target_mm, tolerance_mm=SAME_TARGET_MM):
     return np.bincount(index, target_mm) / np.bincount(index), index
 
 
+def row_groups(*columns):
+    """Index (0-based) of each sample's distinct row of ``columns`` (1-D arrays of one
+    length), rows numbered in lexicographic order: ``np.unique(np.column_stack(columns),
+    axis=0, return_inverse=True)[1]``, through one integer key per column in turn (the
+    structured sort of rows costs ten times a sort of integers at 10^6 samples)."""
+    key = np.zeros(np.asarray(columns[0]).size, dtype=np.int64)
+    for column in columns:
+        values, index = np.unique(column, return_inverse=True)
+        key = np.unique(key * values.size + index.ravel(), return_inverse=True)[1].ravel()
+    return key
+
+
 def per_target(target_mm, error_um, direction, sign):
     """Targets, mean, sample standard deviation (NaN for one run) and run count of one
     direction; the targets are :func:`target_clusters` of both directions together, so
@@ -153,8 +165,8 @@ def sampling_notes(target_mm, direction, run=None):
     direction = np.asarray(direction, float)
     notes = []
     if run is not None:
-        keys = np.column_stack((cluster, direction, np.asarray(run, float)))
-        repeated = keys.shape[0] - np.unique(keys, axis=0).shape[0]
+        groups = row_groups(cluster, direction, np.asarray(run, float))
+        repeated = groups.size - (int(groups.max()) + 1 if groups.size else 0)
         if repeated:
             notes.append(f"{repeated} sample{'s' if repeated > 1 else ''} repeat the target, "
                          "direction and run of another: pooled with it as further runs at "

@@ -13,6 +13,8 @@ import warnings
 
 import numpy as np
 
+from .iso230 import row_groups
+
 # A laser interferometer resolves about 1 nm; a positioning test whose repeat scatter is
 # below this is deviations written in mm (µm / 1000).
 MIN_SCATTER_UM = 1e-3
@@ -34,8 +36,7 @@ class ImplausibleWarning(UserWarning):
 def replicate_scatter_um(target_mm, direction, error_um):
     """The pooled standard deviation (µm) of the deviations about their (target, direction)
     means; None without replicates."""
-    groups = np.unique(np.column_stack([target_mm, direction]), axis=0, return_inverse=True)[1]
-    groups = groups.ravel()
+    groups = row_groups(target_mm, direction)
     counts = np.bincount(groups)
     freedom = error_um.size - counts.size
     if freedom < 1:

@@ -180,7 +180,7 @@ def test_a_bug_exits_1_with_one_line_and_debug_shows_the_traceback(tmp_path, cap
 
 def test_a_bug_under_json_is_a_json_error_with_exit_1(tmp_path, capsys, monkeypatch):
     case = small_case(tmp_path / "c")
-    monkeypatch.setattr("feedaxis.analysis.compare", lambda *a: 1 / 0)
+    monkeypatch.setattr("feedaxis.analysis.compare", lambda *a, **k: 1 / 0)
     code, out, _ = run(capsys, "compare", case, "--json")
     assert code == 1 and "ZeroDivisionError" in _strict(out)["error"]
 

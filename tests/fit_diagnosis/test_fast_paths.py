@@ -79,6 +79,20 @@ def test_autoregression_kept_by_content():
                                   serial._autoregression(other).coefficients)
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_row_groups_are_numpys_unique_rows(seed):
+    """The groups of distinct rows through integer keys: NumPy's structured unique rows."""
+    from feedaxis.iso230 import row_groups
+
+    rng = np.random.default_rng(seed)
+    n = 5000
+    columns = (np.round(rng.uniform(-50.0, 50.0, n), 1), rng.choice([-1.0, 1.0], n),
+               rng.integers(1, 4 + seed, n).astype(float))
+    for count in (1, 2, 3):
+        expected = np.unique(np.column_stack(columns[:count]), axis=0, return_inverse=True)[1]
+        np.testing.assert_array_equal(row_groups(*columns[:count]), expected.ravel())
+
+
 @pytest.mark.parametrize("size", [1, 2, 7, 1000, 4801, 24799])
 def test_the_autocovariance_by_fft_is_the_lagged_sum(size):
     """Zero-padded to a fast length (24,799 makes 2n a large prime's double): the biased

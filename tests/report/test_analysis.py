@@ -98,3 +98,13 @@ def test_a_thermal_case_is_drawn_run_by_run(tmp_path):
         assert np.unique(target_mm[chosen]).size == chosen.sum()   # each target once a run
     assert runs.max() >= 20                     # the 28 passes of the Table 2 test
     assert analyse(read_case(BUNDLED_CASE), Model()).details.run_of_sample is None
+
+
+def test_compare_names_its_steps_and_gives_the_same_figures(loop):
+    """compare's progress (the CLI's bar) is told each step; the figures do not change."""
+    from feedaxis.analysis import compare
+
+    case, model, _, _ = loop
+    steps = []
+    assert compare(case, model, progress=steps.append) == compare(case, model)
+    assert steps == ["model", "figures"]

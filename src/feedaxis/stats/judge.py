@@ -151,6 +151,8 @@ def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
     if n < 8:
         return np.flatnonzero(flagged)
     limit = scipy.stats.norm.isf(alpha / (2 * n))
+    if layout.has_repeats:  # the drift is fitted robustly once, to every sample
+        residual_um = residual_um - _robust_drift(layout, residual_um)
     for _ in range(MAX_OUTLIER_PASSES):
         if layout.has_repeats:
             deviation = _against_group(layout, residual_um, ~flagged)
@@ -166,10 +168,9 @@ def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
 
 
 def _against_group(layout, residual_um, valid):
-    """Deviation of each sample from the mean of the other valid samples of its group,
-    drift removed, over its standard deviation in noise units (√(1 + 1/(m - 1))); NaN
-    where the group has no other valid sample."""
-    residual_um = residual_um - _robust_drift(layout, residual_um)
+    """Deviation of each sample (its drift removed) from the mean of the other valid
+    samples of its group, over its standard deviation in noise units (√(1 + 1/(m - 1)));
+    NaN where the group has no other valid sample."""
     weights = valid.astype(float)
     sizes = np.bincount(layout.groups, weights, layout.n_groups)[layout.groups]
     totals = np.bincount(layout.groups, residual_um * weights, layout.n_groups)[layout.groups]
@@ -184,13 +185,14 @@ def _robust_drift(layout, residual_um):
     """A quadratic drift along the clock, fitted within the groups with a soft-L1 loss."""
     if not layout.clock_varies_within_groups:
         return np.zeros_like(residual_um)
-    basis = drift_basis(layout.clock)
-    within = basis - np.column_stack([layout.group_means(c) for c in basis.T])
+    within = drift_basis(layout.clock)
+    for column in within.T:  # in place: no second samples x 2 array beside the fit's own
+        column -= layout.group_means(column)
     target = residual_um - layout.group_means(residual_um)
     scale = MAD_TO_SIGMA * np.median(np.abs(target))
     if not scale > TINY_UM:  # the groups agree to rounding: any loss scale will do, and a
         scale = 1.0          # tiny one would underflow (f_scale² = 0) inside least_squares
-    solution = least_squares(lambda c: within @ c - target, np.zeros(basis.shape[1]),
+    solution = least_squares(lambda c: within @ c - target, np.zeros(within.shape[1]),
                              loss="soft_l1", f_scale=scale)
     return within @ solution.x
 

@@ -298,18 +298,25 @@ def spectral_gram(columns, spectrum):
     """Σ_f S(f)|C(f)|²-weighted Gram matrix of ``columns`` (one row per column, in sample
     order): Re(C W Cᴴ) over the one-sided FFT C of each row zero-padded to the next power
     of two ≥ 2n, W the spectrum ``spectrum(n_fft) / n_fft`` with the inner frequencies
-    doubled (a circulant Σ: J'ΣJ without forming Σ). The rows are transformed one by one
-    into one array and weighted by √W in place: it holds that transform (rows x n_fft/2
-    complex), one padded row and no copy."""
+    doubled (a circulant Σ: J'ΣJ without forming Σ). Two rows' transforms, weighted by √W,
+    are held at a time (each row's against every later one's: k(k+1)/2 transforms of k rows,
+    in the memory of two; at 10^7 samples one is 270 MB)."""
     n_fft = 1 << int(np.ceil(np.log2(2 * columns.shape[1])))
     weights = spectrum(n_fft) / n_fft
     weights[1:-1] *= 2.0
-    transform = np.empty((columns.shape[0], n_fft // 2 + 1), dtype=complex)
-    for column, row in zip(columns, transform):
-        np.fft.rfft(column, n_fft, out=row)
-    transform *= np.sqrt(weights)
-    pairs = transform.view(np.float64)  # (re, im) interleaved: one real product sums both
-    return pairs @ pairs.T
+    root = np.sqrt(weights)
+    first, other = (np.empty(n_fft // 2 + 1, dtype=complex) for _ in range(2))
+    gram = np.empty((columns.shape[0],) * 2)
+    for i, column in enumerate(columns):
+        np.fft.rfft(column, n_fft, out=first)
+        first *= root
+        pairs = first.view(np.float64)  # (re, im) interleaved: one real product sums both
+        gram[i, i] = pairs @ pairs
+        for j in range(i + 1, columns.shape[0]):
+            np.fft.rfft(columns[j], n_fft, out=other)
+            other *= root
+            gram[i, j] = gram[j, i] = pairs @ other.view(np.float64)
+    return gram
 
 
 SLOW_SHARE = 1.5  # the residual's RMS over its floor above which its slow part is named
