@@ -611,3 +611,23 @@ def test_a_damaged_partial_sweep_file_is_refused_naming_it_or_read_whole(tmp_pat
     assert sorted(loaded.results) == [r.trial for r in saved]
     for result in saved:
         assert loaded.results[result.trial].figures == result.figures
+
+
+def test_a_part_file_with_any_one_byte_changed_is_refused_naming_it(tmp_path):
+    """Every single-byte change of a saved part file is refused on resume (exit 2 naming
+    it), including changes Parquet would read as other values (its name's digest)."""
+    from feedaxis.cosim.sweep.store import Store, TrialResult
+
+    out = tmp_path / "out"
+    identity = {"scenario": "iso230", "seed": 0}
+    store = Store(out, identity, resume=False)
+    store.add([TrialResult(k, (("E_um", 1.5 * k),), np.arange(3.0) + k, None)
+               for k in range(4)], {"x": [0, 1, 2]})
+    store.flush()
+    path = next((out / ".partial").glob("part-*.parquet"))
+    data = path.read_bytes()
+    for at in range(len(data)):
+        path.write_bytes(data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1:])
+        with pytest.raises(InputError) as refused:
+            Store(out, identity, resume=True).load()
+        assert refused.value.path == path, at

@@ -3,6 +3,7 @@
 ``summary.txt``, ``report.html``), and reading them back (:func:`read_sweep`)."""
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import shutil
@@ -19,6 +20,7 @@ from ...output import write_atomically
 PARTIAL = ".partial"
 TRIALS_FILE = "trials.parquet"
 FLUSH_S = 10.0        # finished trials reach OUT/.partial at least this often (s)
+DIGEST_CHARS = 16     # hex characters of a part file's SHA-256 kept in its name
 
 
 class TrialResult(NamedTuple):
@@ -47,8 +49,9 @@ class Collected:
 class Store:
     """The output folder of a sweep: finished trials saved as they arrive, outputs at the end.
 
-    ``OUT/.partial/plan.json`` holds the plan's identity, ``OUT/.partial/part-N.parquet``
-    the finished trials; the outputs are ``trials.parquet``, ``summary.json``,
+    ``OUT/.partial/plan.json`` holds the plan's identity, ``OUT/.partial/part-N-DIGEST.parquet``
+    the finished trials (DIGEST: the start of the file's SHA-256, so a resume finds a part
+    damaged anywhere, also where Parquet itself would read changed values); the outputs are ``trials.parquet``, ``summary.json``,
     ``summary.txt`` and ``report.html``.
     """
 
@@ -94,7 +97,7 @@ class Store:
         collected = Collected()
         for path in sorted(self.partial.glob("part-*.parquet")):
             try:
-                results, axis = _part(pq.read_table(path))
+                results, axis = _part(pq.read_table(io.BytesIO(_checked_bytes(path))))
             except (OSError, ValueError, KeyError, TypeError) as error:  # pyarrow's: OSError
                 raise InputError(f"damaged ({type(error).__name__}: {error}); remove it and "
                                  "run the same command with --resume again to rerun its "
@@ -130,12 +133,28 @@ class Store:
             table = table.replace_schema_metadata(
                 {"feedaxis.series": json.dumps(self.series_axis)})
         self.parts += 1
-        write_atomically(self.partial / f"part-{self.parts:06d}.parquet", parquet_bytes(table))
+        data = parquet_bytes(table)
+        write_atomically(self.partial / f"part-{self.parts:06d}-{_digest(data)}.parquet", data)
         self.pending = []
 
     def complete(self):
         """Remove the saved parts once the outputs hold every trial."""
         shutil.rmtree(self.partial, ignore_errors=True)
+
+
+def _digest(data):
+    """The start of the SHA-256 of ``data`` (bytes) that a part file's name carries."""
+    return hashlib.sha256(data).hexdigest()[:DIGEST_CHARS]
+
+
+def _checked_bytes(path):
+    """The bytes of the part file ``path``; ValueError where they no longer match the
+    digest in its name."""
+    data = path.read_bytes()
+    named = path.stem.rsplit("-", 1)[-1]
+    if named != _digest(data):
+        raise ValueError(f"its content no longer matches the digest {named} in its name")
+    return data
 
 
 def _part(table):
