@@ -144,7 +144,8 @@ def test_hidden_coulomb_friction_is_named_with_its_size(tmp_path, cascade):
 STRIBECK = {"coulomb_N": 3.0, "static_N": 6.0, "stribeck_velocity_mm_s": 2.0}
 
 
-@pytest.mark.parametrize("cascade, control", (("P-P", False), ("P-P ff", True), ("P-PI", True)))
+@pytest.mark.parametrize("cascade, control", (("P-P", False), ("P-P ff", True), ("P-PI", True),
+                                              ("P-PI ff", False), ("P-PI ff", True)))
 def test_hidden_stribeck_friction_is_named_with_its_size(tmp_path, cascade, control):
     """A Stribeck rise the catalog's law describes: named with its three sizes within 3
     standard uncertainties, nothing left at the reversals."""

@@ -133,6 +133,9 @@ class Start:
                                                                   problem)
         self.refine = refine
         self.basin = plant  # where a fit of servo_plant starts (:func:`_refined`)
+        # the Coulomb friction (N) fitted beside the basin's plant: where a friction law
+        # starts (None where the start was not refined)
+        self.friction_N = None
 
 
 _STARTS = {}  # id(tracking record) -> (weak reference to it, Start)
@@ -149,27 +152,29 @@ def loop_start_of(case):
     start = _find_start(case)
     _STARTS[id(trace)] = (weakref.ref(trace), start)
     if start.plant and start.refine:
-        start.basin, start.plant = _refined(case, start.plant)
+        start.basin, start.friction_N, start.plant = _refined(case, start.plant)
     return start
 
 
 def _refined(case, plant):
-    """(basin, plant): ``plant`` after two closed-loop least-squares fits of the plant, the
-    first with a Coulomb friction beside it as a nuisance (friction at the reversals would
-    otherwise draw the search's plant into another optimum: the basin, where a fit of the
-    plant with the effects starts), the second alone from there: the model without
-    effects is the plant alone that fits the record best, so an effect is judged on top
-    of it as on any model (a plant tuned beside a friction makes the plant alone, or that
-    friction, look significant on a null). Bounded least squares on the samples compared
-    (scipy's trust-region reflective, as the fit's)."""
+    """(basin, friction_N, plant): ``plant`` after two closed-loop least-squares fits of the
+    plant, the first with a Coulomb friction beside it as a nuisance (friction at the
+    reversals would otherwise draw the search's plant into another optimum: the basin,
+    where a fit of the plant with the effects starts, and friction_N, where a friction
+    law's level starts), the second alone from there: the model without effects is the
+    plant alone that fits the record best, so an effect is judged on top of it as on any
+    model (a plant tuned beside a friction makes the plant alone, or that friction, look
+    significant on a null). Bounded least squares on the samples compared (scipy's
+    trust-region reflective, as the fit's)."""
     measurement = Tracking(case)
     beside = _fitted_plant(measurement, plant, ("friction_N",))
-    return beside, _fitted_plant(measurement, beside, ())
+    basin = {key: beside[key] for key in PLANT_KEYS}
+    return basin, beside["friction_N"], _fitted_plant(measurement, basin, ())
 
 
 def _fitted_plant(measurement, plant, nuisances):
-    """The plant (``PLANT_KEYS``) that fits ``measurement`` best from ``plant``, the loop
-    parameters ``nuisances`` (from 0, at least 0) fitted beside it and dropped."""
+    """The plant (``PLANT_KEYS``) that fits ``measurement`` best from ``plant``, and the
+    loop parameters ``nuisances`` (from 0, at least 0) fitted beside it."""
     from scipy.optimize import least_squares
 
     keys = (*PLANT_KEYS, *nuisances)
@@ -190,7 +195,7 @@ def _fitted_plant(measurement, plant, nuisances):
         solution = least_squares(residual, start, bounds=(lower, upper), x_scale="jac",
                                  jac=jacobian if measurement.sensitivities else "2-point",
                                  method="trf")
-    return {k: float(v) for k, v in zip(PLANT_KEYS, solution.x)}
+    return {k: float(v) for k, v in zip(keys, solution.x)}
 
 
 def _runs(params, trace, counts):

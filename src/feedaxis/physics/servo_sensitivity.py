@@ -136,30 +136,27 @@ def coefficient_jacobian(params, names):
 def friction_tangent(velocity_mm_s, coulomb_V, damping_V_s_per_mm, rise_coulomb_V, static_V,
                      stribeck_velocity_mm_s, smoothing_mm_s):
     """The partial derivatives of :func:`.servo.friction_V` with respect to its seven
-    arguments, in their order (floats; the clipped sign differentiated on its side)."""
-    d_damping = velocity_mm_s
-    d_velocity = damping_V_s_per_mm
-    d_coulomb = d_rise = d_static = d_stribeck = d_smoothing = 0.0
-    if coulomb_V != 0.0 or rise_coulomb_V != 0.0 or static_V != 0.0:
-        ramp = velocity_mm_s / smoothing_mm_s
-        sign = min(max(ramp, -1.0), 1.0)
-        inside = -1.0 < ramp < 1.0
-        magnitude = coulomb_V
-        d_coulomb = sign
-        if rise_coulomb_V != 0.0 or static_V != 0.0:
-            magnitude += stribeck_V(velocity_mm_s, rise_coulomb_V, static_V,
-                                    stribeck_velocity_mm_s)
-            ratio = velocity_mm_s / stribeck_velocity_mm_s
-            decay = math.exp(-ratio * ratio)
-            slope = (static_V - rise_coulomb_V) * decay * -2.0 * ratio
-            d_rise = (1.0 - decay) * sign
-            d_static = decay * sign
-            d_velocity += slope / stribeck_velocity_mm_s * sign
-            d_stribeck = -slope * ratio / stribeck_velocity_mm_s * sign
-        if inside:
-            d_velocity += magnitude / smoothing_mm_s
-            d_smoothing = -magnitude * ramp / smoothing_mm_s
-    return (d_velocity, d_coulomb, d_damping, d_rise, d_static, d_stribeck, d_smoothing)
+    arguments, in their order (floats; the clipped sign differentiated on its side).
+
+    Also where every friction force is 0 (a fit's start, where friction_V skips them): the
+    friction is linear in each force there, so its column is the sign's (times the Stribeck
+    decay for the rise), not 0, or a fit started at 0 never moves them.
+    """
+    ramp = velocity_mm_s / smoothing_mm_s
+    sign = min(max(ramp, -1.0), 1.0)
+    ratio = velocity_mm_s / stribeck_velocity_mm_s
+    decay = math.exp(-ratio * ratio)
+    magnitude = coulomb_V + stribeck_V(velocity_mm_s, rise_coulomb_V, static_V,
+                                       stribeck_velocity_mm_s)
+    slope = (static_V - rise_coulomb_V) * decay * -2.0 * ratio  # d stribeck_V / d ratio
+    d_velocity = damping_V_s_per_mm + slope / stribeck_velocity_mm_s * sign
+    d_stribeck = -slope * ratio / stribeck_velocity_mm_s * sign
+    d_smoothing = 0.0
+    if -1.0 < ramp < 1.0:
+        d_velocity += magnitude / smoothing_mm_s
+        d_smoothing = -magnitude * ramp / smoothing_mm_s
+    return (d_velocity, sign, velocity_mm_s, (1.0 - decay) * sign, decay * sign, d_stribeck,
+            d_smoothing)
 
 
 def npid_tangent(error_mm, ko_per_mm, e_max_mm):
