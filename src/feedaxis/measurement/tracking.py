@@ -29,6 +29,7 @@ from .. import kinds
 from ..case import (AXIS_FILE, DEFAULT_LOOP_STEP_S, CaseError, _first_bad, _read_csv)
 from ..fmu_map import servo_to_fmu
 from ..physics.identify import identify_plant, loop_start
+from ..physics.motor import motor_error_period_mm
 from ..physics.servo import (MAX_POSITION_MM, PLANT_BOUNDS, ServoParams, check_runs,
                              loop_budget_problem, simulate, simulate_record, step_counts)
 from ..physics.servo_sensitivity import PARAMETERS as SENSITIVE, simulate_sensitivity
@@ -1106,7 +1107,8 @@ def _turning_at(measurement, frequency_hz, start_s, end_s, bin_hz):
                                       f"{screw['lead_mm']:g} mm lead, {rotation_hz:.4g} Hz")]
     motor = measurement.case.axis.motor
     if motor.get("step_angle_deg") and motor.get("error_period_steps"):
-        per_turn = 360.0 / (motor["step_angle_deg"] * motor["error_period_steps"])
+        per_turn = screw["lead_mm"] / motor_error_period_mm(
+            screw["lead_mm"], motor["step_angle_deg"], motor["error_period_steps"])
         sources.append(("motor", rotation_hz * per_turn,
                         f"the motor's angular error, {per_turn:.4g} periods per revolution "
                         f"at {rotation_hz:.4g} rev/s, {rotation_hz * per_turn:.4g} Hz"))
