@@ -649,10 +649,18 @@ class Tracking(Measurement):
         """Mask of the times (s) from ``REVERSAL_LEAD_S`` before to ``REVERSAL_WINDOW_S``
         after a reversal or near-stop of the reference (:meth:`stops_s`)."""
         stops = self.stops_s()
+        near = np.zeros(np.shape(time_s), dtype=bool)
         if not stops.size:
-            return np.zeros(np.shape(time_s), dtype=bool)
-        since = time_s[:, None] - stops[None, :]
-        return np.any((since >= -REVERSAL_LEAD_S) & (since <= REVERSAL_WINDOW_S), axis=1)
+            return near
+        # the stops are sorted, so a time's window holds a stop if and only if it holds the
+        # first stop at or after time - REVERSAL_WINDOW_S (or, at a rounding boundary, one
+        # beside it): three candidates per time, not a times x stops matrix
+        first = np.searchsorted(stops, time_s - REVERSAL_WINDOW_S)
+        for offset in (-1, 0, 1):
+            index = np.clip(first + offset, 0, stops.size - 1)
+            since = time_s - stops[index]
+            near |= (since >= -REVERSAL_LEAD_S) & (since <= REVERSAL_WINDOW_S)
+        return near
 
     def reference_kind(self):
         """What the reference is, in words (:func:`_reference_kind`)."""
@@ -1210,9 +1218,10 @@ def _spike_size(measurement, stops_s, fitted_um):
     until the departure falls below 1/e of it (None where it never does); None without a
     window of two samples."""
     heights, decays = [], []
-    for stop in stops_s:
-        inside = np.flatnonzero((measurement.time_s >= stop - REVERSAL_LEAD_S)
-                                & (measurement.time_s < stop + REVERSAL_WINDOW_S))
+    starts = np.searchsorted(measurement.time_s, stops_s - REVERSAL_LEAD_S)
+    ends = np.searchsorted(measurement.time_s, stops_s + REVERSAL_WINDOW_S)
+    for start, end in zip(starts, ends):
+        inside = np.arange(start, end)  # the samples compared are sorted in time
         if inside.size < 2:
             continue
         values = np.abs(fitted_um[inside])
