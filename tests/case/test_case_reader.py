@@ -135,6 +135,42 @@ def test_near_valid_tables_read_as_the_per_cell_reader_did(tmp_path_factory, dat
     assert_same(path, spec)
 
 
+@settings(FUZZ, max_examples=300)
+@given(data=near_valid_csv(), chunk=st.integers(1, 40))
+def test_tables_checked_in_small_chunks_read_as_the_per_cell_reader_did(tmp_path_factory,
+                                                                        data, chunk):
+    """A large file is checked chunk by chunk before NumPy reads it from the file: with
+    chunks of a few bytes, every blank line, comment, CR or NUL past the first chunk sends
+    the file to the whole-text reader, which refuses or reads it as before."""
+    import feedaxis.case as case_module
+
+    path = tmp_path_factory.mktemp("csv") / "data.csv"
+    path.write_bytes(data)
+    spec = {**TRACKING_COLUMNS, "target_mm": False, "error_um": False}
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(case_module, "READ_CHUNK_BYTES", chunk)
+        assert_same(path, spec)
+
+
+def test_a_plain_file_is_never_held_as_text(tmp_path, monkeypatch):
+    """A CSV of data rows only is read by NumPy from the file, its text never held whole;
+    a NaN in it is named by its row as before (the text read then)."""
+    import feedaxis.case as case_module
+
+    rows = "\n".join(f"{i},{i * 0.5}" for i in range(5000))
+    path = tmp_path / "positioning.csv"
+    path.write_text(f"target_mm,error_um\n{rows}\n")
+    monkeypatch.setattr(case_module, "READ_CHUNK_BYTES", 1000)
+    monkeypatch.setattr(case_module, "_read_text", lambda path: pytest.fail("text read"))
+    values, _ = _read_csv(path, POSITIONING_COLUMNS)
+    assert np.array_equal(values["error_um"], np.arange(5000) * 0.5)
+    monkeypatch.undo()
+    path.write_text(f"target_mm,error_um\n{rows}\n4,nan\n")
+    with pytest.raises(CaseError) as refused:
+        _read_csv(path, POSITIONING_COLUMNS)
+    assert (refused.value.row, refused.value.column) == ("5002", "error_um")
+
+
 def test_a_long_file_with_a_bad_cell_at_the_end_is_named_there(tmp_path):
     rows = "\n".join(f"{i},{i * 0.5}" for i in range(5000))
     path = tmp_path / "positioning.csv"
