@@ -341,6 +341,14 @@ class Problem:
             return self.measured_um - base_um - columns_um @ x[layout.linear_index]
         return residual
 
+    def linear_jacobian(self, layout, x):
+        """d residual / dx at ``x`` of a model whose parameters all enter linearly: its
+        columns negated in place (the split kept at ``x`` is dropped, so no second samples x
+        parameters array is made)."""
+        _, columns_um = self._split_at(layout, x)
+        self._last = (None, None)
+        return np.negative(columns_um, out=columns_um)
+
     def jacobian(self, layout):
         """``f(x) -> d residual / dx``: the linear parameters' columns exactly, the others
         from the sensitivities (:meth:`exact`), else by forward differences stepped into the
@@ -486,7 +494,7 @@ def _linear_solution(problem, layout, x):
     margin = 2e-9 * (upper - lower)
     active = np.where(x <= lower + margin, -1, np.where(x >= upper - margin, 1, 0))
     return SimpleNamespace(x=x, fun=problem.residual(layout)(x),
-                           jac=problem.jacobian(layout)(x), active_mask=active)
+                           jac=problem.linear_jacobian(layout, x), active_mask=active)
 
 
 def starting_values(model, found):
@@ -581,10 +589,12 @@ def _unit_column_svd(jacobian):
     ``jacobian`` with unit columns, from the eigen-decomposition of its Gram matrix (a
     parameters x parameters problem, where an SVD of samples x parameters costs seconds at
     10^6 samples; SINGULAR_RATIO squared stays far above the Gram matrix's rounding), scaled
-    after the product (no scaled copy of the Jacobian)."""
-    scale = np.linalg.norm(jacobian, axis=0)
+    after the product and the norms from its diagonal (no scaled or squared copy of the
+    Jacobian)."""
+    gram = jacobian.T @ jacobian
+    scale = np.sqrt(np.diag(gram))  # the column norms, without a squared copy of J
     scale[scale == 0.0] = 1.0
-    eigenvalues, vectors = np.linalg.eigh((jacobian.T @ jacobian) / np.outer(scale, scale))
+    eigenvalues, vectors = np.linalg.eigh(gram / np.outer(scale, scale))
     order = np.argsort(eigenvalues)[::-1]
     singular, vt = np.sqrt(np.maximum(eigenvalues[order], 0.0)), vectors[:, order].T
     strong = singular > SINGULAR_RATIO * max(singular[0] if singular.size else 0.0, 1e-300)
