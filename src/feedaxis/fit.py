@@ -23,6 +23,7 @@ from .effects import BasisEffect, FitRecord, Model
 from .errors import InputError
 from .measurement import Measurement, kinds_for, measurement_of
 from .physics.threads import one_blas_thread
+from .stats.linear import normal_solve, unit_gram
 
 SINGULAR_RATIO = 1e-6
 # Residual degrees of freedom a fit must leave for the noise: with nu of them the noise
@@ -476,13 +477,12 @@ def bounded_linear_solve(columns, target, lower, upper):
     bounds: the normal equations of the unit-scaled columns (a k x k solve, minimum norm
     where the columns are dependent) when that solution is inside the bounds, else
     bounded-variable least squares (scipy's BVLS)."""
-    scale = np.linalg.norm(columns, axis=0)
-    scale[scale == 0.0] = 1.0
-    scaled = columns / scale
-    free = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ target, rcond=None)[0] / scale
+    free = normal_solve(columns, target)
     if np.all((free >= lower) & (free <= upper)):
         return free
-    solution = lsq_linear(scaled, target, method="bvls", bounds=(lower * scale, upper * scale))
+    scale = unit_gram(columns)[1]
+    solution = lsq_linear(columns / scale, target, method="bvls",
+                          bounds=(lower * scale, upper * scale))
     return np.clip(solution.x / scale, lower, upper)
 
 
@@ -591,10 +591,8 @@ def _unit_column_svd(jacobian):
     10^6 samples; SINGULAR_RATIO squared stays far above the Gram matrix's rounding), scaled
     after the product and the norms from its diagonal (no scaled or squared copy of the
     Jacobian)."""
-    gram = jacobian.T @ jacobian
-    scale = np.sqrt(np.diag(gram))  # the column norms, without a squared copy of J
-    scale[scale == 0.0] = 1.0
-    eigenvalues, vectors = np.linalg.eigh(gram / np.outer(scale, scale))
+    gram, scale = unit_gram(jacobian)
+    eigenvalues, vectors = np.linalg.eigh(gram)
     order = np.argsort(eigenvalues)[::-1]
     singular, vt = np.sqrt(np.maximum(eigenvalues[order], 0.0)), vectors[:, order].T
     strong = singular > SINGULAR_RATIO * max(singular[0] if singular.size else 0.0, 1e-300)
