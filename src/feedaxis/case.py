@@ -403,26 +403,48 @@ def _read_csv(path, spec):
 ANALYSIS_BYTES_PER_ROW = 500
 TEXT_COPIES = 3
 SAMPLE_BYTES = 1 << 16  # the file's start, from which its rows are counted
+MEMORY_LIMIT_VARIABLE = "FEEDAXIS_MEMORY_LIMIT_MB"  # a lower limit than the machine's
 READ_CHUNK_BYTES = 1 << 24  # a large CSV is checked in chunks of this many bytes
 
 
 def check_fits_in_memory(path, available_bytes=None):
     """Refuse (:class:`CaseError`) a CSV whose reading and analysis would not fit in the
-    memory the machine has available, before reading it: its rows estimated from its size
-    and the lines of its first 64 kB, each row costing ``ANALYSIS_BYTES_PER_ROW``."""
+    memory the machine has available (or the limit ``FEEDAXIS_MEMORY_LIMIT_MB`` sets),
+    before reading it: its rows estimated from its size and the lines of its first 64 kB,
+    each row costing ``ANALYSIS_BYTES_PER_ROW``, and its text ``TEXT_COPIES`` times where
+    that start shows it is read whole (comments, blank lines, CR line ends)."""
     size = path.stat().st_size if path.is_file() else 0
     if size <= SAMPLE_BYTES:
         return
     with open(path, "rb") as stream:
         start = stream.read(SAMPLE_BYTES)
     rows = size * max(start.count(b"\n"), 1) / len(start)
-    needed = TEXT_COPIES * size + rows * ANALYSIS_BYTES_PER_ROW
-    available = available_memory_bytes() if available_bytes is None else available_bytes
+    whole = any(mark in start for mark in (b"#", b"\r", b"\n\n"))
+    needed = (TEXT_COPIES * size if whole else 0) + rows * ANALYSIS_BYTES_PER_ROW
+    available, where = memory_limit()
+    available = available if available_bytes is None else available_bytes
     if available is not None and needed > available:
         raise CaseError(path, f"{size / 1e9:.3g} GB, about {rows:.3g} rows: reading and "
                               f"analysing it needs about {needed / 1e9:.3g} GB of memory "
-                              f"and this machine has {available / 1e9:.3g} GB available; "
-                              "split the measurement into several cases or thin it")
+                              f"and {where.format(f'{available / 1e9:.3g} GB')}; split the "
+                              "measurement into several cases or thin it")
+
+
+def memory_limit():
+    """(bytes a case may use, where that figure comes from as a phrase to format with it):
+    ``FEEDAXIS_MEMORY_LIMIT_MB`` (megabytes) when set, else
+    :func:`available_memory_bytes`."""
+    text = os.environ.get(MEMORY_LIMIT_VARIABLE)
+    if text is None:
+        return available_memory_bytes(), "this machine has {} available"
+    try:
+        limit_mb = finite_float(text.strip())
+    except ValueError:
+        limit_mb = None
+    if limit_mb is None or limit_mb <= 0:
+        raise InputError(f"{MEMORY_LIMIT_VARIABLE}={text!r}: expected a positive number of "
+                         "megabytes")
+    return limit_mb * 1e6, f"{MEMORY_LIMIT_VARIABLE} allows {{}}"
 
 
 def available_memory_bytes():

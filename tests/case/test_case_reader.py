@@ -8,6 +8,7 @@ CRLF or CR only (a form feed or U+2028 in a comment no longer splits it, issue 2
 number is ASCII without Python's ``1_000`` (:func:`feedaxis.errors.finite_float`).
 """
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -203,7 +204,7 @@ def test_a_case_beyond_the_memory_is_refused_before_it_is_read(tmp_path, monkeyp
     lines = [f"{0.5 * (i % 1000):.4f},{(i % 7) * 0.1:.4f}" for i in range(rows)]
     (folder / "positioning.csv").write_text("target_mm,error_um\n" + "\n".join(lines) + "\n")
     size = (folder / "positioning.csv").stat().st_size
-    needed = case_module.TEXT_COPIES * size + rows * case_module.ANALYSIS_BYTES_PER_ROW
+    needed = rows * case_module.ANALYSIS_BYTES_PER_ROW  # a plain file: its text never held
 
     def never(path):
         raise AssertionError("the file was read")
@@ -221,3 +222,29 @@ def test_a_case_beyond_the_memory_is_refused_before_it_is_read(tmp_path, monkeyp
     assert case_module.read_case(folder).positioning.size == rows
     monkeypatch.setattr(case_module, "available_memory_bytes", lambda: 0.9 * needed)
     assert main(["compare", str(folder), "--json"]) == 2
+
+
+def test_the_memory_limit_variable_refuses_a_case_by_its_size(tmp_path):
+    """``FEEDAXIS_MEMORY_LIMIT_MB`` stands for the machine's available memory: a case over
+    it is refused before it is read (exit 2, the file, its size and the limit named); a
+    value that is not a positive number is refused naming the variable."""
+    folder = tmp_path / "big"
+    folder.mkdir()
+    (folder / "axis.toml").write_text('name = "big"\n\n[screw]\nlead_mm = 10.0\n')
+    lines = [f"{0.5 * (i % 1000):.4f},{(i % 7) * 0.1:.4f}" for i in range(20_000)]
+    (folder / "positioning.csv").write_text("target_mm,error_um\n" + "\n".join(lines) + "\n")
+    size = (folder / "positioning.csv").stat().st_size
+
+    def compare(limit):
+        environment = {**os.environ, "FEEDAXIS_MEMORY_LIMIT_MB": limit}
+        return subprocess.run([sys.executable, "-m", "feedaxis", "compare", str(folder)],
+                              capture_output=True, text=True, env=environment, timeout=120)
+
+    refused = compare("1")
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert "positioning.csv" in refused.stderr and f"{size / 1e9:.3g} GB" in refused.stderr
+    assert "FEEDAXIS_MEMORY_LIMIT_MB allows 0.001 GB" in refused.stderr
+    assert compare("1000").returncode == 0
+    for bad in ("lots", "-5", "nan"):
+        wrong = compare(bad)
+        assert wrong.returncode == 2 and "FEEDAXIS_MEMORY_LIMIT_MB" in wrong.stderr
