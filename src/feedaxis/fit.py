@@ -292,7 +292,8 @@ class Problem:
 
     def __init__(self, model, found, progress=None):
         self.model, self.found, self.progress = model, found, progress
-        self.measured_um = np.concatenate([m.measured_um for m in found])
+        self.measured_um = (found[0].measured_um if len(found) == 1   # no copy per fit
+                            else np.concatenate([m.measured_um for m in found]))
         self.separators = [m.separable(model) for m in found]
         self.sensitivities = [m.sensitivity(model) for m in found]
         self._last = (None, None)
