@@ -644,12 +644,6 @@ FMI_HELP = ("FMI version of the FMUs: 2 (FMI 2.0, default) or 3 (FMI 3.0 co-simu
             "same physics and results; docs/fmus.md)")
 
 
-def _refuse_standalone_fmi3(args):
-    if getattr(args, "fmi", 2) == 3 and getattr(args, "standalone", False):
-        raise InputError("standalone FMI 3.0 FMUs are not built yet: use --fmi 2 with "
-                         "--standalone", parameter="--standalone")
-
-
 def _build_fmus_options(parser):
     parser.add_argument("--out", default="build/fmus", help="FMU folder (default: build/fmus)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
@@ -663,7 +657,6 @@ def _cmd_build_fmus(args):
     from . import fmu_build
 
     check_writable_target(args.out, "folder")
-    _refuse_standalone_fmi3(args)
     with _progress("building FMUs", "FMU") as tick, _standalone_errors():
         paths = fmu_build.build_fmus(args.out, standalone=args.standalone, progress=tick,
                                      fmi=args.fmi)
@@ -694,7 +687,6 @@ def _axis_system(args):
 def _fmu_paths(args):
     from .cosim.fmu_cache import fmu_paths
 
-    _refuse_standalone_fmi3(args)
     with _standalone_errors():
         return fmu_paths(args.fmus, getattr(args, "standalone", False), getattr(args, "fmi", 2))
 
