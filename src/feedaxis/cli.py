@@ -860,15 +860,16 @@ def _cmd_export_ssp(args):
 def _export_fmu_options(parser):
     parser.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
+    parser.add_argument("--fmi", type=int, choices=(2, 3), default=2, help=FMI_HELP)
     _add_axis_options(parser, thermal_step=False)
 
 
 @command("export-fmu", help="the axis as one FMU (fmpy container FMU)",
-         description="Wrap the four FMUs in one FMI 2.0 co-simulation FMU with fmpy's container "
-                     "FMU: inputs position_ref_mm, disturbance_N, ambient_C; every component "
-                     "output; the parameter values as fixed parameters. All four FMUs step at "
-                     "the container's one step (--step-ms), "
-                     "Jacobi: the error FMUs see the servo one step late.",
+         description="Wrap the four FMUs in one co-simulation FMU of their FMI version (2.0, "
+                     "or 3.0 with --fmi 3) with fmpy's container FMU: inputs position_ref_mm, "
+                     "disturbance_N, ambient_C; every component output; the parameter values "
+                     "as fixed parameters. All four FMUs step at the container's one step "
+                     "(--step-ms), Jacobi: the error FMUs see the servo one step late.",
          options=_export_fmu_options)
 def _cmd_export_fmu(args):
     from .cosim.container import export_container_fmu
