@@ -126,18 +126,21 @@ def test_fmu_check_runs_each_standalone_fmu_in_a_root_without_python(standalone,
     assert_cross_check_passed(name, run, bare_root / f"{name}_out.csv")
 
 
-def test_omsimulator_runs_the_standalone_ssp_in_a_root_without_python(standalone, tmp_path):
+@pytest.mark.parametrize("fmi", (2, 3))
+def test_omsimulator_runs_the_standalone_ssp_in_a_root_without_python(request, tmp_path, fmi):
     """The program's own libraries (ldd) join the root, and /proc: OMSimulator reads
-    /proc/self/maps and ends with a segmentation fault without it."""
+    /proc/self/maps and ends with a segmentation fault without it. FMI 3.0: ``export-ssp
+    --fmi 3 --standalone`` of the standalone FMI 3.0 FMUs."""
     program = OMS_DIR / "bin" / "OMSimulator"
     require_tool(program)
+    standalone = request.getfixturevalue("standalone" if fmi == 2 else "standalone3")
     listing = subprocess.run(["ldd", str(program)], capture_output=True, text=True).stdout
     own = [line.split(" => ")[1].split()[0] for line in listing.splitlines() if " => /" in line
            and line.split()[0] not in GLIBC + GCC_RUNTIME]
     root = make_root(tmp_path / "root", own)
     shutil.copytree(OMS_DIR, root / "oms")
-    code, out = cli("export-ssp", str(root / "axis.ssp"), "--standalone", "--fmus",
-                    str(standalone["NpidServo"].parent), "--json")
+    code, out = cli("export-ssp", str(root / "axis.ssp"), "--standalone", "--fmi", str(fmi),
+                    "--fmus", str(standalone["NpidServo"].parent), "--json")
     assert code == 0 and json.loads(out)["open_inputs"][0]["input"] == "NpidServo.position_ref_mm"
     (root / "proc").mkdir()
     if subprocess.run(["mount", "-t", "proc", "proc", str(root / "proc")]).returncode != 0:
