@@ -490,23 +490,31 @@ def _plain_header(path):
     """(line number, text) of the header of a CSV whose body is :func:`_plain` UTF-8 with
     LF line ends, found by reading the file in chunks of whole lines (never the whole text
     at once: at 10^7 rows the text and its copies were three times the table); None for
-    any other file (comments, blank lines, CR line ends, another encoding), which is read
-    whole."""
-    with open(path, "rb") as stream:
-        first = stream.read(READ_CHUNK_BYTES) + stream.readline()
-        if first.startswith((b"\xff\xfe", b"\xfe\xff")) or not _plain_bytes(first):
+    any other file (comments, blank lines, CR line ends, another encoding) or path (a
+    folder, an unreadable file), which the whole-text reader reads or refuses."""
+    try:
+        with open(path, "rb") as stream:
+            return _plain_chunks(stream)
+    except OSError:
+        return None
+
+
+def _plain_chunks(stream):
+    """:func:`_plain_header` of the open binary ``stream``."""
+    first = stream.read(READ_CHUNK_BYTES) + stream.readline()
+    if first.startswith((b"\xff\xfe", b"\xfe\xff")) or not _plain_bytes(first):
+        return None
+    try:
+        header = _first_record(first.decode("utf-8-sig"))
+    except UnicodeDecodeError:
+        return None
+    if header is None or not _plain(header[2]):
+        return None
+    while chunk := stream.read(READ_CHUNK_BYTES) + stream.readline():
+        # each chunk starts a line: one starting with LF starts with a blank line
+        if (b"#" in chunk or b"\n\n" in chunk or chunk.startswith(b"\n")
+                or not _plain_bytes(chunk)):
             return None
-        try:
-            header = _first_record(first.decode("utf-8-sig"))
-        except UnicodeDecodeError:
-            return None
-        if header is None or not _plain(header[2]):
-            return None
-        while chunk := stream.read(READ_CHUNK_BYTES) + stream.readline():
-            # each chunk starts a line: one starting with LF starts with a blank line
-            if (b"#" in chunk or b"\n\n" in chunk or chunk.startswith(b"\n")
-                    or not _plain_bytes(chunk)):
-                return None
     return header[:2]
 
 
