@@ -16,8 +16,8 @@ import numpy as np
 from ..errors import InputError, number_list
 from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..iso230_4 import circular_figures
-from ..physics.circle import LEAD_IN_DEG
-from .machine import CircleInterpolator, circular_machine, component_name
+from ..physics.circle import LEAD_IN_DEG, CircleInterpolator
+from .machine import circular_machine, component_name
 from .master import SimulationInterrupted
 from .physics_check import start_value
 from .scenarios.base import (Scenario, ScenarioInterrupted, ScenarioRun, Series, axis_table,
