@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from feedaxis.cosim.circular import run_circular
-from feedaxis.cosim.machine import CircleInterpolator, machine_system
+from feedaxis.cosim.machine import machine_system
 from feedaxis.cosim.master import Master
 from feedaxis.cosim.system import default_axis
 from feedaxis.diagnose import diagnose
@@ -45,6 +45,7 @@ from feedaxis.effects.circular import circular_effects
 from feedaxis.fmu_build import build_fmus
 from feedaxis.fmu_map import servo_to_fmu
 from feedaxis.physics import circle
+from feedaxis.physics.circle import CircleInterpolator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from circular_cases import CENTER_MM, RADIUS_MM, circle_columns, synthetic_case  # noqa: E402
