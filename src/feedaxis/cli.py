@@ -832,8 +832,9 @@ def _export_ssp_options(parser):
     parser.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
     parser.add_argument("--machine", nargs="?", const="", metavar="AXIS",
                         help="the machine of two axes instead of one axis (components "
-                             "X_NpidServo, ...): alone the default axes X and Y, or those of "
-                             "the axis.toml (or case folder) of a circular case")
+                             "X_NpidServo, ...), driven round its circle by the "
+                             "CircleInterpolator FMU: alone the default axes X and Y, or those "
+                             "of the axis.toml (or case folder) of a circular case")
     parser.add_argument("--squareness-urad", type=float, default=0.0,
                         help="with --machine: the second axis out of square with the first "
                              "(µrad), a term of the first axis's table position (printed)")
@@ -853,7 +854,7 @@ def _export_ssp_options(parser):
 
 @command("export-ssp", help="the axis as an SSP file for other FMI system simulators",
          description="Write OUT.ssp: SystemStructure.ssd (components, connections, step "
-                     "sizes), resources/<Component>.ssv (parameter values) and the four FMUs. "
+                     "sizes), resources/<Component>.ssv (parameter values) and the FMUs. "
                      "Runs in fmpy.ssp.simulate_ssp, OSP libcosim (libcosimpy), OMSimulator and "
                      "ecos; see README.",
          options=_export_ssp_options)
