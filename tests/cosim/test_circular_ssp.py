@@ -231,3 +231,37 @@ def test_omsimulator_runs_the_machine_ssp_like_the_master(system, ssp_path, mast
     instance.delete()
     assert_same_trace(system, {k: np.array(v) for k, v in columns.items()}, master_rows,
                       lagging_errors=True)
+
+
+def test_export_ssp_machine_connects_the_interpolator_to_both_servos(user_fmu_cache, tmp_path,
+                                                                       capsys):
+    """``export-ssp --machine CASE --direction cw`` writes the case's circle into the
+    CircleInterpolator's parameters (one macro step ahead), connects its outputs to both
+    servos' references and stops the experiment at the end of the lead-out arc."""
+    import json
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    from fmpy.ssp.ssd import read_ssd
+
+    from circular_cases import circle_columns, synthetic_case
+    from feedaxis.cli import main
+
+    case = synthetic_case(tmp_path / "c", np.zeros(720), circle_columns()).folder
+    out = tmp_path / "m.ssp"
+    assert main(["export-ssp", str(out), "--machine", str(case), "--direction", "cw",
+                 "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    path = CircleInterpolator(20.0, 1000.0, (60.0, 40.0), -1)
+    assert payload["interpolator"] == interpolator_parameters(path, H_S)
+    assert "X_NpidServo.position_ref_mm" not in {i["input"] for i in payload["open_inputs"]}
+    ssd = read_ssd(str(out))
+    connections = {(c.startElement, c.startConnector, c.endElement, c.endConnector)
+                   for c in ssd.system.connections}
+    assert {("CircleInterpolator", output, f"{axis}_NpidServo", "position_ref_mm")
+            for axis, output in zip("XY", INTERPOLATOR_OUTPUTS)} <= connections
+    with zipfile.ZipFile(out) as archive:
+        root = ET.fromstring(archive.read("SystemStructure.ssd"))
+    experiment = next(e for e in root.iter() if e.tag.endswith("DefaultExperiment"))
+    assert float(experiment.get("stopTime")) == pytest.approx(
+        np.ceil(path.duration_s / H_S - 1e-9) * H_S, abs=1e-12)
