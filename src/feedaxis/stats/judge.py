@@ -25,7 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy
-from scipy.optimize import least_squares
 
 from ..iso230 import target_groups
 from .wording import p_text
@@ -192,8 +191,9 @@ def _robust_drift(layout, residual_um):
     scale = MAD_TO_SIGMA * np.median(np.abs(target))
     if not scale > TINY_UM:  # the groups agree to rounding: any loss scale will do, and a
         scale = 1.0          # tiny one would underflow (f_scale² = 0) inside least_squares
-    solution = least_squares(lambda c: within @ c - target, np.zeros(within.shape[1]),
-                             loss="soft_l1", f_scale=scale)
+    solution = scipy.optimize.least_squares(lambda c: within @ c - target,
+                                            np.zeros(within.shape[1]), loss="soft_l1",
+                                            f_scale=scale)
     return within @ solution.x
 
 
