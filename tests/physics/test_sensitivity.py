@@ -162,3 +162,21 @@ def test_a_loop_parameter_without_sensitivity_is_differenced(friction_case):
     measurement = Tracking(friction_case)
     assert measurement.sensitivity(Model((CATALOG["servo_plant"],))) is not None
     assert measurement.sensitivity(Model((CATALOG["servo_plant"], ForceConstant()))) is None
+
+
+@pytest.mark.parametrize("label", ("PID", "P-PI cascade with feed-forward"))
+def test_the_frictionless_pass_equals_the_full_friction_tangent_to_the_bit(label):
+    """Without friction and without a friction parameter the pass leaves the friction's
+    tangent out (its terms multiply zeros): the plant's columns are those of the pass that
+    evaluates it (a friction parameter among the names, at zero force), to the bit."""
+    params = {"PID": PID, "P-PI cascade with feed-forward":
+              replace(CASCADE, tn_s=0.02, velocity_feedforward=1.0,
+                      damping_N_s_per_mm=0.02)}[label]
+    plant = ("plant_gain_mm_per_Vs2", "plant_damping_per_s", "plant_stiffness_per_s2",
+             "delay_s")
+    counts = step_counts(TIME_S, params.time_step_s)
+    short = simulate_sensitivity(params, plant, TIME_S, REFERENCE_MM, None, counts)
+    full = simulate_sensitivity(params, (*plant, "friction_N"), TIME_S, REFERENCE_MM, None,
+                                counts)
+    np.testing.assert_array_equal(short[0], full[0])
+    np.testing.assert_array_equal(short[1], full[1][:, :len(plant)])
