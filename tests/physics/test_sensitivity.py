@@ -147,6 +147,37 @@ def test_the_diagnosis_keeps_each_fit_once_and_finds_the_same(friction_case, mon
     assert kept == refitted
 
 
+def test_the_loops_kept_results_are_those_of_simulating_anew(friction_case, monkeypatch):
+    """The measurement keeps the loop's last results by parameters (a fit asks again where
+    it stands): a diagnosis with them kept finds what one simulating every time finds, to
+    the bit, in fewer simulations; what is kept cannot be written to."""
+    from feedaxis.measurement import tracking
+
+    model = Model((CATALOG["servo_plant"],))
+    calls = {"loop": 0}
+    simulate_once = tracking.simulate
+
+    def counted(*args, **kwargs):
+        calls["loop"] += 1
+        return simulate_once(*args, **kwargs)
+
+    monkeypatch.setattr(tracking, "simulate", counted)
+    kept = diagnose(friction_case, model)
+    kept_calls, calls["loop"] = calls["loop"], 0
+    monkeypatch.setattr(tracking, "RECENT_BYTES", 0)
+    anew = diagnose(friction_case, model)
+    assert kept.to_json() == anew.to_json()
+    np.testing.assert_array_equal(kept.final.residual_um, anew.final.residual_um)
+    assert kept_calls < calls["loop"]
+    monkeypatch.undo()
+    measurement = tracking.Tracking(friction_case)
+    params = measurement.params(model, {"servo_plant": PLANT})
+    positions = measurement.positions_mm(params)
+    assert measurement.positions_mm(params) is positions and not positions.flags.writeable
+    deviation, _ = measurement.deviation_sensitivity(params, ["delay_s"])
+    np.testing.assert_array_equal(deviation, measurement.deviation_um(params))
+
+
 def test_a_loop_parameter_without_sensitivity_is_differenced(friction_case):
     """An effect on a loop parameter the sensitivities do not cover (here the force
     constant) leaves the measurement without them: the fit differences, as before."""

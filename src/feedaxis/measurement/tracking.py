@@ -19,6 +19,7 @@ has died out by then, does not bend the plant.
 from __future__ import annotations
 
 import weakref
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -62,6 +63,9 @@ WHOLE_RECORD_SHARE = 0.75  # of the periodic test's level: the record's periodog
 # the short-time periodogram's
 ROUNDING_UM = 1e-3  # the diagnosis's resolution (diagnose.RESOLUTION_UM): below it, rounding
 TRACKING_FILE = "tracking.csv"
+# the loop's results kept per record (:class:`Recent`): a 500 s trace at 1 ms holds 4 MB of
+# positions, 16 MB of a plant's sensitivities
+RECENT_BYTES = 2**27
 
 TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
                     "disturbance_N": False, "control_V": False}
@@ -286,6 +290,8 @@ class Tracking(Measurement):
         self.reference_mm = trace.reference_mm[self.index]
         self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
         self.start = loop_start_of(case)
+        self._reference_kind = None
+        self.recent = Recent()
 
     start_of = staticmethod(loop_start_of)  # the start the tracking effects guess from
 
@@ -328,7 +334,9 @@ class Tracking(Measurement):
         return spikes(residual_um, OUTLIER_ALPHA, floor=ROUNDING_UM)
 
     def subset(self, keep):
-        return Tracking(self.case, self.index[keep])
+        subset = Tracking(self.case, self.index[keep])
+        subset.recent = self.recent  # the same record: the same loop
+        return subset
 
     def unresolvable(self, effect):
         """A constant force the controller's integral action holds (``held_force``), where
@@ -440,11 +448,23 @@ class Tracking(Measurement):
         """Predicted deviation position - reference (µm) at the samples under ``params``,
         with ``disturbance_N`` (over the whole record; default the record's own) acting on
         the axis; the loop is simulated from rest at the record's first sample."""
-        force = self.disturbance_N if disturbance_N is None else disturbance_N
-        position_mm = simulate(params, self.record_time_s, self.record_reference_mm, force,
-                               self.counts)
+        position_mm = (self.positions_mm(params) if disturbance_N is None else
+                       simulate(params, self.record_time_s, self.record_reference_mm,
+                                disturbance_N, self.counts))
         with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
             return (position_mm - self.record_reference_mm)[self.index] * 1e3
+
+    def positions_mm(self, params):
+        """The loop's positions (mm) over the record under ``params`` with the record's own
+        force, kept for the next calls (:class:`Recent`): a fit asks again where it stands,
+        a diagnosis where the model it tests on top stands."""
+        key = ("positions", params)
+        kept = self.recent.get(key)
+        if kept is None:
+            kept = self.recent.put(key, simulate(params, self.record_time_s,
+                                                 self.record_reference_mm, self.disturbance_N,
+                                                 self.counts))
+        return kept
 
     def check_start(self, model, values):
         """The closed loop must not run away with ``values``
@@ -454,8 +474,7 @@ class Tracking(Measurement):
         if self.start.problem and "servo_plant" not in model:
             raise NoStart(self.start.problem)
         params = self.params(model, values)
-        check_runs(params, simulate(params, self.record_time_s, self.record_reference_mm,
-                                    self.disturbance_N, self.counts))
+        check_runs(params, self.positions_mm(params))
 
     def core(self, model):
         return lambda values: self.deviation_um(self.params(model, values))
@@ -474,10 +493,18 @@ class Tracking(Measurement):
 
     def deviation_sensitivity(self, params, names):
         """(:meth:`deviation_um` under ``params``, its derivatives in ``names``: samples x
-        len(names), µm per unit)."""
-        position_mm, d_position_mm = simulate_sensitivity(
-            params, names, self.record_time_s, self.record_reference_mm, self.disturbance_N,
-            self.counts)
+        len(names), µm per unit), kept for the next calls as :meth:`positions_mm` (the
+        positions too: the pass's are the loop's to the bit)."""
+        key = ("sensitivity", params, tuple(names))
+        d_position_mm = self.recent.get(key)
+        if d_position_mm is None:
+            position_mm, d_position_mm = simulate_sensitivity(
+                params, names, self.record_time_s, self.record_reference_mm,
+                self.disturbance_N, self.counts)
+            d_position_mm = self.recent.put(key, d_position_mm)
+            position_mm = self.recent.put(("positions", params), position_mm)
+        else:
+            position_mm = self.positions_mm(params)
         with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
             return ((position_mm - self.record_reference_mm)[self.index] * 1e3,
                     d_position_mm[self.index] * 1e3)
@@ -663,8 +690,11 @@ class Tracking(Measurement):
         return near
 
     def reference_kind(self):
-        """What the reference is, in words (:func:`_reference_kind`)."""
-        return _reference_kind(self.time_s, self.reference_mm)
+        """What the reference is, in words (:func:`_reference_kind`), found once: every fit
+        of the samples asks for it."""
+        if self._reference_kind is None:
+            self._reference_kind = _reference_kind(self.time_s, self.reference_mm)
+        return self._reference_kind
 
     def excitation(self):
         """What the reference is, and why it leaves a parameter loose: a single sine (its
@@ -692,6 +722,35 @@ class Tracking(Measurement):
         out: what the spectral tests take."""
         grid = np.arange(self.index[0], self.index[-1] + 1)
         return self.record_time_s[grid], np.interp(grid, self.index, values)
+
+
+class Recent:
+    """The loop's last results over one record by key (its parameters, the sensitivities'
+    names), kept read-only within ``budget_bytes``, the oldest dropped first: a fit
+    evaluates where it stands more than once (its start's check and first residual, the
+    projection's optimum and the polish's start), a diagnosis the model it tests on top."""
+
+    def __init__(self, budget_bytes=None):
+        self.budget_bytes = RECENT_BYTES if budget_bytes is None else budget_bytes
+        self.items = OrderedDict()
+
+    def get(self, key):
+        """The result kept under ``key``, or None."""
+        value = self.items.get(key)
+        if value is not None:
+            self.items.move_to_end(key)
+        return value
+
+    def put(self, key, value):
+        """Keep ``value`` (an array, made read-only) under ``key`` while the budget allows;
+        returns it."""
+        value.setflags(write=False)
+        self.items[key] = value
+        self.items.move_to_end(key)
+        while self.items and sum(kept.nbytes for kept in self.items.values()) > \
+                self.budget_bytes:
+            self.items.popitem(last=False)
+        return value
 
 
 def _reference_kind(time_s, reference_mm):
