@@ -178,6 +178,36 @@ def test_the_loops_kept_results_are_those_of_simulating_anew(friction_case, monk
     np.testing.assert_array_equal(deviation, measurement.deviation_um(params))
 
 
+@pytest.mark.parametrize("friction_N", (0.0, 1.5))
+def test_the_friction_screen_changes_no_finding(tmp_path, friction_N, monkeypatch):
+    """The friction laws screened by their score test before their fit (where the screen
+    passes they are fitted as before): the diagnosis finds what fitting them every time
+    finds, to the bit, on a null and with friction; on the null neither law is fitted."""
+    from feedaxis import diagnose as diagnosis
+    from feedaxis.effects.tracking import CoulombFriction, StribeckFriction
+
+    run = step_loop(two_sines, 2.0, plant=PLANT, friction_N=friction_N)
+    case = read_case(write_tracking_case(tmp_path / "case", run, 11))
+    model = Model((CATALOG["servo_plant"],))
+    fitted = []
+    fit_once = diagnosis._fit
+    monkeypatch.setattr(diagnosis, "_fit",
+                        lambda m, data: fitted.append(m.names[-1]) or fit_once(m, data))
+    screened = diagnose(case, model)
+    laws_fitted, fitted[:] = list(fitted), []
+    for law in (CoulombFriction, StribeckFriction):
+        monkeypatch.setattr(law, "score_screened", False)
+    always = diagnose(case, model)
+    assert screened.to_json() == always.to_json()
+    np.testing.assert_array_equal(screened.final.residual_um, always.final.residual_um)
+    assert {"coulomb_friction", "stribeck_friction"} <= set(fitted)
+    if friction_N == 0.0:
+        assert screened.verdict == "adequate" and not set(laws_fitted) & {
+            "coulomb_friction", "stribeck_friction"}
+    else:
+        assert [c.effect for c in screened.candidates] == ["coulomb_friction"]
+
+
 def test_a_loop_parameter_without_sensitivity_is_differenced(friction_case):
     """An effect on a loop parameter the sensitivities do not cover (here the force
     constant) leaves the measurement without them: the fit differences, as before."""
