@@ -763,9 +763,9 @@ def _reference_kind(time_s, reference_mm):
     if centred.size >= 8 and np.any(spectrum[1:]):
         bin_hz = 1.0 / (centred.size * step_s)
         peak_hz = (np.argmax(spectrum[1:]) + 1) * bin_hz
-        left, frequency_hz = min(
-            (_rms(centred - _regress(centred, _sinusoid(time_s, f))[1]), f)
-            for f in np.linspace(max(peak_hz - bin_hz, bin_hz / 2), peak_hz + bin_hz, 41))
+        frequencies_hz = np.linspace(max(peak_hz - bin_hz, bin_hz / 2), peak_hz + bin_hz, 41)
+        left, frequency_hz = min(zip(_sine_fits_rms(time_s, centred, frequencies_hz),
+                                     frequencies_hz))
         if left <= 0.01 * _rms(centred):
             return f"a single sine at {frequency_hz:.3g} Hz"
     speed = np.abs(np.gradient(reference_mm, time_s))
@@ -776,6 +776,30 @@ def _reference_kind(time_s, reference_mm):
     direction = np.sign(np.gradient(reference_mm, time_s))
     turns = int(np.count_nonzero(np.diff(direction[direction != 0]) != 0))
     return f"a record with {turns} velocity reversal{'s' if turns != 1 else ''}"
+
+
+def _sine_fits_rms(time_s, values, frequencies_hz):
+    """The RMS of ``values`` less its least-squares sinusoid (cosine, sine and a constant) at
+    each of the evenly spaced ``frequencies_hz``: each fit by its 3 x 3 normal equations (the
+    columns are near orthogonal over the record), the cosine and sine of the next frequency
+    by turning the phasor e^{iωt} by the spacing, not anew (a complex product per sample
+    where a cosine and a sine cost ten times that)."""
+    elapsed = time_s - time_s[0]
+    phasor = np.exp(2j * np.pi * frequencies_hz[0] * elapsed)
+    turn = np.exp(2j * np.pi * (frequencies_hz[1] - frequencies_hz[0]) * elapsed) \
+        if frequencies_hz.size > 1 else phasor
+    total = float(np.sum(values))
+    left = []
+    for _ in frequencies_hz:
+        cosine, sine = np.ascontiguousarray(phasor.real), np.ascontiguousarray(phasor.imag)
+        cross = float(cosine @ sine)
+        gram = np.array([[cosine @ cosine, cross, np.sum(cosine)],
+                         [cross, sine @ sine, np.sum(sine)],
+                         [np.sum(cosine), np.sum(sine), values.size]])
+        a, b, c = np.linalg.lstsq(gram, [cosine @ values, sine @ values, total], rcond=None)[0]
+        left.append(_rms(values - a * cosine - b * sine - c))
+        phasor *= turn
+    return left
 
 
 def _first_settled(time_s):
