@@ -3,9 +3,9 @@
 The trace of bench_diagnose_scale.py: 500 s at 1 ms (500,000 samples, 5·10^6 loop steps per
 simulation) of Anang et al. 2017's PID on another plant, white + AR(1) noise, no friction and
 no force; model servo_plant at the truth (issue 35's target: ≤ 2 s). Each run is a fresh
-process importing either this checkout's ``src`` or the baseline commit's (extracted by
-``git archive``; default the commit before the speed work), alternating, so a change of the
-machine's load falls on both alike. A process first diagnoses a 3 s trace (numba's kernels
+process importing either this checkout's ``src`` (copied when the run starts) or the
+baseline commit's (extracted by ``git archive``; default the commit before the speed work),
+alternating, so a change of the machine's load falls on both alike. A process first diagnoses a 3 s trace (numba's kernels
 compiled or loaded), then times one diagnosis of the long trace: CPU seconds (the machine is
 shared, so CPU, not wall time, is the figure) and wall seconds, medians with their ranges,
 and the ratio baseline / this version. Each run's verdict and the named effects and
@@ -24,6 +24,7 @@ import argparse
 import io
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -61,14 +62,15 @@ print(json.dumps({"cpu_s": cpu, "wall_s": wall, "verdict": found.verdict,
 
 
 def baseline_source(commit, folder):
-    """The ``src`` folder of ``commit`` extracted into ``folder``, or (None, why)."""
+    """The ``src`` folder of ``commit`` extracted into ``folder`` / baseline, or (None,
+    why)."""
     done = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", commit, "src"],
                           capture_output=True)
     if done.returncode:
         return None, done.stderr.decode(errors="replace").strip() or "git archive failed"
     with tarfile.open(fileobj=io.BytesIO(done.stdout)) as archive:
-        archive.extractall(folder, filter="data")
-    return Path(folder) / "src", None
+        archive.extractall(Path(folder) / "baseline", filter="data")
+    return Path(folder) / "baseline" / "src", None
 
 
 def one_run(source, long_s):
@@ -91,7 +93,10 @@ def main(argv=None):
     print(machine())
     with tempfile.TemporaryDirectory() as folder:
         old, why = baseline_source(args.baseline, folder)
-        sources = {"this version": ROOT / "src"}
+        current = Path(folder) / "current"  # this version as it is now, whatever changes
+        shutil.copytree(ROOT / "src", current / "src",  # during the run
+                        ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+        sources = {"this version": current / "src"}
         if old is None:
             print(f"baseline {args.baseline} not available ({why}): this version alone")
         else:

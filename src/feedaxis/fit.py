@@ -311,7 +311,8 @@ class Problem:
             self.progress()
         slots = [layout.slots[i] for i in layout.nonlinear_index]
         values = layout.values(x)
-        return np.vstack([sensitivity(values, slots)[1] for sensitivity in self.sensitivities])
+        parts = [sensitivity(values, slots)[1] for sensitivity in self.sensitivities]
+        return parts[0] if len(parts) == 1 else np.vstack(parts)
 
     def predicted_um(self, values):
         base_um, columns_um = self.split(values)

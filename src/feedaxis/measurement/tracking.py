@@ -286,6 +286,7 @@ class Tracking(Measurement):
         self.counts = step_counts(trace.time_s, case.axis.servo["loop_step_s"])
         self.index = (np.arange(_first_settled(trace.time_s), trace.time_s.size)
                       if index is None else np.asarray(index, dtype=int))
+        self.compared = _selector(self.index)
         self.time_s = self.coordinate = trace.time_s[self.index]
         self.reference_mm = trace.reference_mm[self.index]
         self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
@@ -452,7 +453,7 @@ class Tracking(Measurement):
                        simulate(params, self.record_time_s, self.record_reference_mm,
                                 disturbance_N, self.counts))
         with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
-            return (position_mm - self.record_reference_mm)[self.index] * 1e3
+            return (position_mm[self.compared] - self.record_reference_mm[self.compared]) * 1e3
 
     def positions_mm(self, params):
         """The loop's positions (mm) over the record under ``params`` with the record's own
@@ -506,8 +507,8 @@ class Tracking(Measurement):
         else:
             position_mm = self.positions_mm(params)
         with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
-            return ((position_mm - self.record_reference_mm)[self.index] * 1e3,
-                    d_position_mm[self.index] * 1e3)
+            return ((position_mm[self.compared] - self.record_reference_mm[self.compared])
+                    * 1e3, d_position_mm[self.compared] * 1e3)
 
     def loop_response_um(self, model, disturbance_N):
         """Change of the predicted deviation (µm) at the samples when ``disturbance_N``
@@ -526,9 +527,10 @@ class Tracking(Measurement):
             self.disturbance_N
         kicked = known.copy()
         kicked[1] += 1.0
-        record_um = [(simulate(params, self.record_time_s, self.record_reference_mm, force,
-                               self.counts) - self.record_reference_mm) * 1e3
-                     for force in (known, kicked)]
+        record_um = [(position_mm - self.record_reference_mm) * 1e3 for position_mm in (
+            self.positions_mm(params),  # the record's own force: kept where the fit ran it
+            simulate(params, self.record_time_s, self.record_reference_mm, kicked,
+                     self.counts))]
         return (record_um[1] - record_um[0])[1:]
 
     def fit_window(self, model, residual_um, frequency_hz, first, last):
@@ -800,6 +802,14 @@ def _sine_fits_rms(time_s, values, frequencies_hz):
         left.append(_rms(values - a * cosine - b * sine - c))
         phasor *= turn
     return left
+
+
+def _selector(index):
+    """``index`` (increasing record samples) as a slice where it is a run of consecutive
+    samples (no outlier left out): a view, not a copy, of what the loop gives."""
+    if index.size and index[-1] - index[0] + 1 == index.size:
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
 
 
 def _first_settled(time_s):
