@@ -21,7 +21,7 @@ encoder noise white 0.1 µm + AR(1) 0.3 µm) and each friction size (0: the null
   friction the screen would hide: it must be 0); beside it the largest screen p-value
   among the records the full fit names (the margin below SCREEN_ALPHA).
 
-Run: ``python benchmarks/bench_friction_screen.py [--seeds 20]`` (``--smoke``: one seed).
+Run: ``python benchmarks/bench_friction_screen.py [--seeds 25]`` (``--smoke``: one seed).
 """
 import argparse
 import sys
@@ -114,7 +114,7 @@ def rates(folder, seeds):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--seeds", type=int, default=25)
     args = arguments(parser, argv, seeds=1)
     if args.smoke:
         for family in SIZES:

@@ -5,15 +5,16 @@ simulation) of Anang et al. 2017's PID on another plant, white + AR(1) noise, no
 no force; model servo_plant at the truth (issue 35's target: ≤ 2 s). Each run is a fresh
 process importing either this checkout's ``src`` (copied when the run starts) or the
 baseline commit's (extracted by ``git archive``; default the commit before the speed work),
-alternating, so a change of the machine's load falls on both alike. A process first diagnoses a 3 s trace (numba's kernels
-compiled or loaded), then times one diagnosis of the long trace: CPU seconds (the machine is
+alternating, so a change of the machine's load falls on both alike. A process first
+diagnoses a 3 s trace (numba's kernels compiled or loaded), then times one diagnosis of the
+long trace: CPU seconds (the machine is
 shared, so CPU, not wall time, is the figure) and wall seconds, medians with their ranges,
 and the ratio baseline / this version. Each run's verdict and the named effects and
 structures are printed beside it: the faster path must find the same.
 
 Where the speed went (the 500 s trace, under load; docs/tracking.md): the friction laws were
-fitted in full on top of the plant (14 simulations and 9 sensitivity passes, 19 of 29 s of
-CPU); they are now screened by their score test first (bench_friction_screen.py); the loop's
+fitted in full on top of the plant (28 simulations and 19 sensitivity passes, 19.3 of 28.7 s
+of CPU); they are now screened by their score test first (bench_friction_screen.py); the loop's
 results are kept by parameters (53 -> 15 simulations); the sensitivity pass without friction
 skips the friction's tangent (1.7x); the reference's description is found once (was 4 x 2 s).
 
