@@ -2,9 +2,9 @@
 
 Run: ``python benchmarks/bench_standalone.py [--repeats 9] [--steps 2000] [--instructions]``.
 It builds both
-sets of the four FMUs, compiles ``tests/fmi_c_host.c`` (a C host: no Python in the process
-until an FMU starts one) and, per FMU and repeat, runs it in a fresh process on the unpacked
-FMU, the two builds interleaved (standalone, not, standalone, ...). Each run reports the
+sets of the four FMUs, compiles ``tests/fmi_c_host.c`` with ``tests/fmi2_c_host.c`` (a C host:
+no Python in the process until an FMU starts one) and, per FMU and repeat, runs it in a fresh
+process on the unpacked FMU, the two builds interleaved (standalone, not, standalone, ...). Each run reports the
 first ``fmi2Instantiate`` (the standalone FMU starts the Python it carries, the other the
 build machine's) and the µs per step (set the inputs, ``fmi2DoStep``, get the outputs) on
 the axis schedule (1 ms; the thermal screw 0.1 s, a tenth as many). It prints medians with
@@ -40,7 +40,8 @@ INPUT_VALUES = {"position_ref_mm": 5.0, "disturbance_N": 0.0, "position_mm": 5.0
 def compile_host(folder):
     program = Path(folder) / "fmi_c_host"
     subprocess.run(["cc", "-O2", f"-I{ROOT / 'fmus' / 'common' / 'fmi2'}", "-o", str(program),
-                    str(ROOT / "tests" / "fmi_c_host.c"), "-ldl"], check=True)
+                    str(ROOT / "tests" / "fmi_c_host.c"), str(ROOT / "tests" / "fmi2_c_host.c"),
+                    "-ldl"], check=True)
     return program
 
 

@@ -644,12 +644,6 @@ FMI_HELP = ("FMI version of the FMUs: 2 (FMI 2.0, default) or 3 (FMI 3.0 co-simu
             "same physics and results; docs/fmus.md)")
 
 
-def _refuse_standalone_fmi3(args):
-    if getattr(args, "fmi", 2) == 3 and getattr(args, "standalone", False):
-        raise InputError("standalone FMI 3.0 FMUs are not built yet: use --fmi 2 with "
-                         "--standalone", parameter="--standalone")
-
-
 def _build_fmus_options(parser):
     parser.add_argument("--out", default="build/fmus", help="FMU folder (default: build/fmus)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
@@ -663,7 +657,6 @@ def _cmd_build_fmus(args):
     from . import fmu_build
 
     check_writable_target(args.out, "folder")
-    _refuse_standalone_fmi3(args)
     with _progress("building FMUs", "FMU") as tick, _standalone_errors():
         paths = fmu_build.build_fmus(args.out, standalone=args.standalone, progress=tick,
                                      fmi=args.fmi)
@@ -694,7 +687,6 @@ def _axis_system(args):
 def _fmu_paths(args):
     from .cosim.fmu_cache import fmu_paths
 
-    _refuse_standalone_fmi3(args)
     with _standalone_errors():
         return fmu_paths(args.fmus, getattr(args, "standalone", False), getattr(args, "fmi", 2))
 
@@ -868,15 +860,16 @@ def _cmd_export_ssp(args):
 def _export_fmu_options(parser):
     parser.add_argument("out", metavar="OUT.fmu", help="FMU file to write")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
+    parser.add_argument("--fmi", type=int, choices=(2, 3), default=2, help=FMI_HELP)
     _add_axis_options(parser, thermal_step=False)
 
 
 @command("export-fmu", help="the axis as one FMU (fmpy container FMU)",
-         description="Wrap the four FMUs in one FMI 2.0 co-simulation FMU with fmpy's container "
-                     "FMU: inputs position_ref_mm, disturbance_N, ambient_C; every component "
-                     "output; the parameter values as fixed parameters. All four FMUs step at "
-                     "the container's one step (--step-ms), "
-                     "Jacobi: the error FMUs see the servo one step late.",
+         description="Wrap the four FMUs in one co-simulation FMU of their FMI version (2.0, "
+                     "or 3.0 with --fmi 3) with fmpy's container FMU: inputs position_ref_mm, "
+                     "disturbance_N, ambient_C; every component output; the parameter values "
+                     "as fixed parameters. All four FMUs step at the container's one step "
+                     "(--step-ms), Jacobi: the error FMUs see the servo one step late.",
          options=_export_fmu_options)
 def _cmd_export_fmu(args):
     from .cosim.container import export_container_fmu

@@ -116,8 +116,6 @@ def build_fmus(out_dir, names=FMU_NAMES, standalone=False, progress=None, fmi=2)
     is called after each FMU; ``fmi``: 2 or 3 (:mod:`feedaxis.fmu_fmi3`)."""
     if fmi not in (2, 3):
         raise ValueError(f"FMI version {fmi!r}: 2 or 3")
-    if fmi == 3 and standalone:
-        raise ValueError("standalone FMI 3.0 FMUs are not built yet")
     out_dir = Path(out_dir)
     with writing(out_dir):
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -164,16 +162,10 @@ def build_fmu(name, out_dir, runtime=None, fmi=2):
         missing = host_layer_missing()
         if runtime is not None:
             _make_standalone(fmu_path, name, sources, (variables, guid), staging, runtime,
-                             missing)
-        elif missing is None and fmi == 3:
-            from .fmu_fmi3 import repackage
-
-            host_layer = _compile_host_layer(sources, variables, guid, staging, fmi=3)
-            _write_fmu(fmu_path, repackage(_read_fmu(fmu_path), name, host_layer.read_bytes(),
-                                           PYTHONFMU_LIBRARY))
+                             missing, fmi)
         elif missing is None:
-            _install_host_layer(fmu_path, name, _compile_host_layer(sources, variables, guid,
-                                                                           staging))
+            _install_host_layer(fmu_path, name, _compile_host_layer(
+                sources, variables, guid, staging, fmi=fmi), fmi)
         elif fmi == 3:
             raise HostLayerUnavailable(f"{missing}: FMI 3.0 FMUs are the C host layer's")
         elif os.environ.get("CI") == "true":
@@ -201,16 +193,27 @@ def _stage_package(sources, name, package_dir):
         (package_dir / source.name).write_text(text, encoding="utf-8")
 
 
-def _make_standalone(fmu_path, name, sources, description, work_dir, runtime, missing):
-    """The host layer that starts the FMU's own Python, and that Python's files."""
+def _make_standalone(fmu_path, name, sources, description, work_dir, runtime, missing, fmi):
+    """The host layer that starts the FMU's own Python, and that Python's files, in the
+    binaries folder of FMI version ``fmi``."""
     from .fmu_standalone import StandaloneUnavailable, trace_fmu, host_layer_defines
 
     if missing is not None:
         raise StandaloneUnavailable(f"{missing}: a standalone FMU needs the C host layer")
     trace = trace_fmu(fmu_path, name, sources / name / f"{name}_in.csv")
-    host_layer = _compile_host_layer(sources, *description, work_dir, host_layer_defines(trace))
-    _install_host_layer(fmu_path, name, host_layer)
-    runtime.add_runtime(fmu_path, trace)
+    platform = binaries_platform(fmi)
+    host_layer = _compile_host_layer(sources, *description, work_dir,
+                                     host_layer_defines(trace, platform), fmi)
+    _install_host_layer(fmu_path, name, host_layer, fmi)
+    runtime.add_runtime(fmu_path, trace, platform)
+
+
+def binaries_platform(fmi):
+    """The binaries folder of the FMUs of FMI version ``fmi`` (2 or 3), the only one they
+    carry."""
+    from .fmu_fmi3 import FMI2_PLATFORM, PLATFORM
+
+    return PLATFORM if fmi == 3 else FMI2_PLATFORM
 
 
 def host_layer_sources(sources, fmi=2):
@@ -267,12 +270,18 @@ def _fmi3_defines(variables):
             f"-DFEEDAXIS_TIME_VR={time_value_reference(row[0] for row in variables)}u"]
 
 
-def _install_host_layer(fmu_path, name, host_library):
-    """Make the host layer the model-identifier library; keep pythonfmu's beside it."""
+def _install_host_layer(fmu_path, name, host_library, fmi=2):
+    """Make the host layer the model-identifier library; keep pythonfmu's beside it; ``fmi``
+    3: the FMU becomes FMI 3.0's (:func:`feedaxis.fmu_fmi3.repackage`)."""
+    from .fmu_fmi3 import FMI2_PLATFORM, repackage
+
     entries = _read_fmu(fmu_path)
-    binary = f"binaries/linux64/{name}.so"
-    entries[f"binaries/linux64/{PYTHONFMU_LIBRARY}"] = entries[binary]
-    entries[binary] = Path(host_library).read_bytes()
+    if fmi == 3:
+        entries = repackage(entries, name, Path(host_library).read_bytes(), PYTHONFMU_LIBRARY)
+    else:
+        binary = f"binaries/{FMI2_PLATFORM}/{name}.so"
+        entries[f"binaries/{FMI2_PLATFORM}/{PYTHONFMU_LIBRARY}"] = entries[binary]
+        entries[binary] = Path(host_library).read_bytes()
     _write_fmu(fmu_path, entries)
 
 

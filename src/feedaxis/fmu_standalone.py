@@ -1,9 +1,11 @@
 """Standalone FMUs: each carries the CPython its step path needs, for hosts without Python.
 
 How (issue 22): the FMU carries the build machine's own CPython, pruned, in
-``binaries/linux64/python`` (a CPython prefix: ``lib/libpython3.x.so``, ``lib/python3.x``
-with the standard library and ``site-packages``), and the host layer starts it from there,
-found through the resource location the host passes to fmi2Instantiate. Why this and not a
+``binaries/linux64/python`` (``binaries/x86_64-linux/python`` in an FMI 3.0 FMU: a CPython
+prefix, ``lib/libpython3.x.so``, ``lib/python3.x`` with the standard library and
+``site-packages``), and the host layer starts it from there, found through the resource
+location the host passes to fmi2Instantiate (the resource path of
+fmi3InstantiateCoSimulation). Why this and not a
 relocatable CPython from a registry: the interpreter that built the FMU is the one its
 wheels (numpy, scipy) were installed for and the one the whole test suite ran, so the FMU
 runs exactly what was tested, and nothing is downloaded. What goes in:
@@ -44,8 +46,10 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-RUNTIME = "python"  # binaries/linux64/<RUNTIME>: the CPython prefix inside a standalone FMU
-RUNTIME_ROOT = f"binaries/linux64/{RUNTIME}"
+from .fmu_fmi3 import FMI2_PLATFORM, PLATFORM as FMI3_PLATFORM
+
+RUNTIME = "python"  # binaries/<platform>/<RUNTIME>: the CPython prefix of a standalone FMU
+PLATFORMS = (FMI2_PLATFORM, FMI3_PLATFORM)  # the binaries folder: FMI 2.0's, FMI 3.0's
 PYTHON_VERSION = f"{sys.version_info.major}.{sys.version_info.minor}"
 STDLIB = f"lib/python{PYTHON_VERSION}"
 SITE_PACKAGES = f"{STDLIB}/site-packages"
@@ -186,9 +190,16 @@ def libpython_path():
     return Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME")
 
 
-def host_layer_defines(trace):
-    """The host layer's build constants of a standalone FMU (no path of this machine)."""
-    return {"FEEDAXIS_RUNTIME": RUNTIME,
+def runtime_root(platform):
+    """The folder of a standalone FMU's CPython in the FMU, for its binaries folder
+    ``platform`` (:data:`PLATFORMS`)."""
+    return f"binaries/{platform}/{RUNTIME}"
+
+
+def host_layer_defines(trace, platform):
+    """The host layer's build constants of a standalone FMU whose binaries folder is
+    ``platform`` (no path of this machine)."""
+    return {"FEEDAXIS_RUNTIME": runtime_root(platform),
             "FEEDAXIS_LIBPYTHON_NAME": sysconfig.get_config_var("INSTSONAME"),
             "FEEDAXIS_REQUIRED_MODULES": " ".join(trace.packages)}
 
@@ -218,8 +229,9 @@ class RuntimeBuilder:
     def __exit__(self, *exc_info):
         self.close()
 
-    def add_runtime(self, fmu_path, trace):
-        """Rewrite ``fmu_path`` with the runtime ``trace`` asks for in :data:`RUNTIME_ROOT`."""
+    def add_runtime(self, fmu_path, trace, platform):
+        """Rewrite ``fmu_path`` with the runtime ``trace`` asks for in
+        :func:`runtime_root` of ``platform``."""
         files = dict(self._shared_files())
         runtime_module = self._sources / "common" / f"{RUNTIME_MODULE}.py"
         files[Path(SITE_PACKAGES) / runtime_module.name] = (runtime_module, runtime_module)
@@ -233,7 +245,7 @@ class RuntimeBuilder:
             unpacked = Path(unpacked)
             with zipfile.ZipFile(fmu_path) as archive:
                 archive.extractall(unpacked)
-            runtime = unpacked / RUNTIME_ROOT
+            runtime = unpacked / runtime_root(platform)
             origins = {}
             for target, (content, origin) in files.items():
                 (runtime / target).parent.mkdir(parents=True, exist_ok=True)
@@ -343,10 +355,18 @@ class RuntimeBuilder:
                            check=True, capture_output=True)
 
 
+def carried_runtime(fmu_path):
+    """The folder of the Python a standalone FMU carries (:func:`runtime_root`), None for
+    an FMU that carries none."""
+    with zipfile.ZipFile(fmu_path) as archive:
+        names = set(archive.namelist())
+    return next((runtime_root(platform) for platform in PLATFORMS
+                 if f"{runtime_root(platform)}/{MANIFEST}" in names), None)
+
+
 def is_standalone(fmu_path):
     """Whether the FMU carries its own Python (a standalone FMU)."""
-    with zipfile.ZipFile(fmu_path) as archive:
-        return f"{RUNTIME_ROOT}/{MANIFEST}" in archive.namelist()
+    return carried_runtime(fmu_path) is not None
 
 
 def _manifest(trace):
@@ -390,19 +410,19 @@ def runtime_sizes(fmu_path):
     """{part: (unpacked bytes, compressed bytes)} of a standalone FMU: libpython, the
     standard library, its extension modules, other libraries, each site-packages entry,
     and the FMU's own files."""
-    sizes = {}
+    sizes, root = {}, carried_runtime(fmu_path)
     with zipfile.ZipFile(fmu_path) as archive:
         for info in archive.infolist():
-            part = _part(info.filename)
+            part = _part(info.filename, root)
             unpacked, packed = sizes.get(part, (0, 0))
             sizes[part] = (unpacked + info.file_size, packed + info.compress_size)
     return sizes
 
 
-def _part(name):
-    if not name.startswith(RUNTIME_ROOT + "/"):
+def _part(name, root):
+    if root is None or not name.startswith(root + "/"):
         return "the FMU's own files"
-    relative = Path(name).relative_to(RUNTIME_ROOT)
+    relative = Path(name).relative_to(root)
     if relative.is_relative_to(SITE_PACKAGES):
         return relative.relative_to(SITE_PACKAGES).parts[0]
     if relative.is_relative_to(LIB_DYNLOAD):

@@ -1,8 +1,12 @@
-"""The axis as one FMU (fmpy container): valid, runs in fmpy and libcosim, equals the master.
+"""The axis as one FMU (fmpy container): valid, runs in fmpy and libcosim, equals the master;
+in FMI 3.0 too (``export-fmu --fmi 3``), equal to the FMI 2.0 container; each carries and
+declares Linux x86-64 alone, the one platform of the FMUs inside.
 
 The container steps all four FMUs at its one step, Jacobi: the servo's outputs are the
 master's, the error FMUs see the servo one step late. Both are asserted exactly (1e-9).
 """
+import shutil
+
 import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
@@ -11,7 +15,9 @@ from feedaxis.cli import main
 from feedaxis.cosim.fmu_runner import run_fmu
 from feedaxis.cosim.master import Master
 from feedaxis.cosim.system import default_axis
+from feedaxis.fmu_build import binaries_platform
 from libcosim_driver import simulate_with_libcosim
+from test_fmus import assert_carries_one_platform
 from test_ssp import ERRORS, PARAMETERS, assert_same
 
 SETS = ("--set", "NpidServo.nonlinear=true", "--set", "GeometricError.backlash_um=2.0",
@@ -19,16 +25,47 @@ SETS = ("--set", "NpidServo.nonlinear=true", "--set", "GeometricError.backlash_u
 OUTPUTS = ("NpidServo.position_mm",) + ERRORS + ("ThermalScrew.error_um",)
 
 
-@pytest.fixture(scope="module")
-def container_path(fmu_paths, tmp_path_factory):
-    path = tmp_path_factory.mktemp("container") / "axis.fmu"
+def export(fmu_paths, folder, *options):
+    """``export-fmu`` of the FMUs ``fmu_paths`` with :data:`SETS`; the container's path."""
+    path = folder / "axis.fmu"
     fmu_dir = str(next(iter(fmu_paths.values())).parent)
-    assert main(["export-fmu", str(path), "--fmus", fmu_dir, *SETS]) == 0
+    assert main(["export-fmu", str(path), "--fmus", fmu_dir, *SETS, *options]) == 0
     return path
 
 
-def test_container_fmu_passes_fmpy_validation(container_path):
-    assert validate_fmu(str(container_path)) == []
+@pytest.fixture(scope="module")
+def container_path(fmu_paths, tmp_path_factory):
+    return export(fmu_paths, tmp_path_factory.mktemp("container"))
+
+
+@pytest.fixture(scope="module")
+def fmi3_container_path(fmi3_paths, tmp_path_factory):
+    return export(fmi3_paths, tmp_path_factory.mktemp("container3"), "--fmi", "3")
+
+
+@pytest.mark.parametrize("fmi", (2, 3))
+def test_container_fmu_passes_fmpy_validation_and_carries_one_platform(request, fmi):
+    """fmpy packs its container binary for Linux, macOS and Windows; the FMUs inside run on
+    Linux x86-64 only, and so the container keeps that platform's binary alone."""
+    from fmpy import read_model_description
+
+    path = request.getfixturevalue("container_path" if fmi == 2 else "fmi3_container_path")
+    assert validate_fmu(str(path)) == []
+    assert read_model_description(str(path)).fmiVersion == f"{fmi}.0"
+    assert_carries_one_platform(path, binaries_platform(fmi))
+
+
+def test_fmi3_container_runs_as_the_fmi2_one(container_path, fmi3_container_path):
+    """The FMI 3.0 container of the FMI 3.0 FMUs, through fmpy's FMI 3 API: every output the
+    FMI 2.0 container gives, to 1e-12."""
+    h, n_steps = 1e-3, 300
+    inputs = {"position_ref_mm": 40.0 * np.sin(2 * np.pi * 0.5 * np.arange(n_steps) * h),
+              "ambient_C": np.full(n_steps, 25.0)}
+    runs = [run_fmu(path, h, n_steps, inputs, {}, OUTPUTS)
+            for path in (container_path, fmi3_container_path)]
+    for name in OUTPUTS:
+        np.testing.assert_allclose(runs[1][name], runs[0][name], rtol=0, atol=1e-12)
+        assert np.ptp(runs[1][name]) > 0, name
 
 
 def test_container_variables_keep_the_components_units_and_descriptions(container_path,
@@ -80,3 +117,14 @@ def test_bad_parameter_is_refused_before_writing(fmu_paths, tmp_path, capsys):
                  "--set", "NpidServo.nonlinear=3.5"]) == 2
     assert "NpidServo.nonlinear: Boolean parameter, got 3.5" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def test_fmus_of_two_fmi_versions_are_refused_before_writing(fmu_paths, fmi3_paths, tmp_path,
+                                                             capsys):
+    folder = tmp_path / "mixed"
+    folder.mkdir()
+    for name, path in fmu_paths.items():
+        shutil.copy2(fmi3_paths[name] if name == "ThermalScrew" else path, folder)
+    assert main(["export-fmu", str(tmp_path / "axis.fmu"), "--fmus", str(folder)]) == 2
+    assert "ThermalScrew.fmu 3.0" in capsys.readouterr().err
+    assert not (tmp_path / "axis.fmu").exists()

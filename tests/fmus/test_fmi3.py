@@ -1,7 +1,8 @@
 """The FMI 3.0 co-simulation FMUs (``build-fmus --fmi 3``): valid, carrying linux64 only,
 the FMI 2.0 FMUs' results to 1e-12 from the same slave and physics, and the FMI 3.0 state
 machine as a host sees it through fmpy's low-level FMI 3 API (tests/fmi3_probe.py, one
-process per FMU)."""
+process per FMU); fmi3InstantiateCoSimulation's arguments through the FMI 3.0 C host of the
+tests (tests/fmi3_c_host.c). The standalone FMI 3.0 FMUs: tests/fmus/test_standalone.py."""
 import json
 import subprocess
 import sys
@@ -20,6 +21,8 @@ from feedaxis.cosim.fmu_runner import LoadedFmu, run_fmu
 from feedaxis.fmu_build import FMU_NAMES
 from feedaxis.fmu_fmi3 import PLATFORM
 from scenarios import N_STEPS, OUTPUTS, PARAMETERS, STEP_SIZE_S, scripted_inputs
+from test_fmi_contract import c_host_instantiate, check_instantiate_answer, compile_c_host
+from test_fmus import assert_carries_one_platform
 
 TESTS = Path(__file__).resolve().parents[1]
 FMU_SOURCES = TESTS.parent / "fmus"
@@ -76,9 +79,8 @@ def expected(function, state):
 @pytest.mark.parametrize("name", FMU_NAMES)
 def test_fmi3_fmu_passes_fmpy_validation_and_carries_linux64_only(fmi3_paths, name):
     assert validate_fmu(str(fmi3_paths[name])) == []
-    with zipfile.ZipFile(fmi3_paths[name]) as archive:
-        binaries = {n.split("/")[1] for n in archive.namelist() if n.startswith("binaries/")}
-    assert binaries == {PLATFORM} == {"x86_64-linux"}
+    assert PLATFORM == "x86_64-linux"
+    assert_carries_one_platform(fmi3_paths[name], PLATFORM)
 
 
 @pytest.mark.parametrize("name", FMU_NAMES)
@@ -327,10 +329,29 @@ def test_the_fmi3_ssp_runs_in_the_omsimulator_program_as_the_fmi2_one(fmu_paths,
     assert runs[1][geometric][-1] == pytest.approx(0.45106988665543396, rel=1e-12)
 
 
-@pytest.mark.parametrize("command", (["build-fmus", "--out"], ["export-ssp"]))
-def test_standalone_fmi3_is_refused_by_name(command, tmp_path, capsys):
-    from feedaxis.cli import main
+def fmi3_instantiate_cases(folder, token):
+    """(name, instantiation token, resource path, instantiable) for the FMI 3.0 FMU of
+    ``token`` unpacked in ``folder`` (as its host sees the path): the absolute path FMI 3.0
+    passes, with its final '/' or without, and what a resource path is not."""
+    path = f"{folder}/resources/"
+    return [("probe", token, path, True), ("probe", token, path.rstrip("/"), True),
+            ("probe", token, f"{folder}/missing/", False), ("probe", token, "resources/", False),
+            ("probe", token, (Path(folder) / "resources").as_uri(), False),
+            ("probe", token, "<NULL>", False), ("<NULL>", token, path, False),
+            ("", token, path, False),
+            ("probe", "{00000000-0000-0000-0000-000000000000}", path, False),
+            ("probe", "<NULL>", path, False)]
 
-    assert main([*command, str(tmp_path / "out.ssp"), "--fmi", "3", "--standalone"]) == 2
-    assert "--standalone" in capsys.readouterr().err
-    assert not (tmp_path / "out.ssp").exists()
+
+def test_fmi3_instantiate_answers_every_argument_in_a_c_host(fmi3_paths, tmp_path):
+    """The FMI 3.0 C host of the tests, one process per case: an instance that steps, or
+    NULL and one error of fmi3InstantiateCoSimulation saying why; never a signal."""
+    folder = tmp_path / "servo dé#"
+    with zipfile.ZipFile(fmi3_paths["NpidServo"]) as archive:
+        archive.extractall(folder)
+    program = compile_c_host(tmp_path / "fmi3_c_host", fmi=3)
+    token = read_model_description(str(folder)).guid
+    for case in fmi3_instantiate_cases(folder, token):
+        check_instantiate_answer(case, *c_host_instantiate([str(program)], case, folder,
+                                                           "NpidServo"),
+                                 function="fmi3InstantiateCoSimulation")

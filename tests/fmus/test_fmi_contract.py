@@ -25,7 +25,7 @@ from test_fmus import initialised
 
 TESTS = Path(__file__).resolve().parents[1]
 PROBE = TESTS / "fmi2_probe.py"
-FMI2_HEADERS = TESTS.parent / "fmus" / "common" / "fmi2"
+HEADERS = TESTS.parent / "fmus" / "common"
 OK, DISCARD, ERROR = 0, 2, 3
 STATES = ("instantiated", "initialisation", "step complete", "terminated", "error")
 
@@ -122,8 +122,9 @@ def instantiate_cases(folder, guid):
                ("probe", "<NULL>", uri, False)])
 
 
-def check_instantiate_answer(case, instance, stepped, messages):
-    """Instantiable: an instance that steps, no error; else NULL and one error naming why."""
+def check_instantiate_answer(case, instance, stepped, messages, function="fmi2Instantiate"):
+    """Instantiable: an instance that steps, no error; else NULL and one error of
+    ``function`` naming why."""
     *_, instantiable = case
     assert instance == instantiable, (case, messages)
     assert stepped == instantiable, (case, messages)
@@ -131,7 +132,7 @@ def check_instantiate_answer(case, instance, stepped, messages):
     if instantiable:
         assert not errors, (case, errors)
     else:
-        assert len(errors) == 1 and "fmi2Instantiate: " in errors[0], (case, messages)
+        assert len(errors) == 1 and f"{function}: " in errors[0], (case, messages)
 
 
 def test_fmi2_instantiate_answers_every_argument_in_fmpy(unpacked):
@@ -143,15 +144,22 @@ def test_fmi2_instantiate_answers_every_argument_in_fmpy(unpacked):
                                  result["messages"])
 
 
-@pytest.fixture(scope="module")
-def c_host(tmp_path_factory):
-    """tests/fmi_c_host.c compiled (a host with no Python in the process)."""
+def compile_c_host(program, fmi=2):
+    """The C host of the tests (tests/fmi_c_host.c, a host with no Python in the process)
+    making its calls in FMI version ``fmi`` (tests/fmi2_c_host.c, tests/fmi3_c_host.c),
+    compiled into ``program``."""
     if not shutil.which("cc"):
         pytest.skip("no C compiler")
-    program = tmp_path_factory.mktemp("host") / "fmi_c_host"
-    subprocess.run(["cc", "-O2", f"-I{FMI2_HEADERS}", "-o", str(program),
-                    str(TESTS / "fmi_c_host.c"), "-ldl"], check=True)
+    subprocess.run(["cc", "-O2", f"-I{HEADERS / f'fmi{fmi}'}", "-o", str(program),
+                    str(TESTS / "fmi_c_host.c"), str(TESTS / f"fmi{fmi}_c_host.c"), "-ldl"],
+                   check=True)
     return program
+
+
+@pytest.fixture(scope="module")
+def c_host(tmp_path_factory):
+    """The FMI 2.0 C host of the tests (:func:`compile_c_host`)."""
+    return compile_c_host(tmp_path_factory.mktemp("host") / "fmi_c_host")
 
 
 def c_host_instantiate(command, case, folder, identifier):

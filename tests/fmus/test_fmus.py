@@ -32,10 +32,28 @@ def test_fmu_passes_fmpy_validation(fmu_paths, name):
     assert validate_fmu(str(fmu_paths[name])) == []
 
 
+ELF_X86_64 = (2, 62)  # an ELF file's class (64-bit) and machine (x86-64)
+
+
+def assert_carries_one_platform(fmu_path, platform):
+    """The FMU's binaries/ holds the one folder ``platform`` (FMI 2.0's linux64 or FMI 3.0's
+    x86_64-linux), which fmpy lists as its only platform, and every binary it carries
+    anywhere is an x86-64 ELF: no library of another platform rides along."""
+    assert supported_platforms(str(fmu_path)) == ["linux64"]  # fmpy's name for both folders
+    with zipfile.ZipFile(fmu_path) as archive:
+        names = [n for n in archive.namelist() if not n.endswith("/")]
+        assert {n.split("/")[1] for n in names if n.startswith("binaries/")} == {platform}
+        assert not [n for n in names if n.endswith((".dll", ".dylib"))]
+        heads = {n: archive.open(n).read(20) for n in names}
+    elves = {n: (head[4], int.from_bytes(head[18:20], "little")) for n, head in heads.items()
+             if head.startswith(b"\x7fELF")}
+    assert elves and set(elves.values()) == {ELF_X86_64}
+
+
 @pytest.mark.parametrize("name", FMU_NAMES)
 def test_fmu_declares_only_the_platform_it_carries(fmu_paths, name):
-    """fmpy lists the platforms from binaries/: linux64, not pythonfmu's stock win64."""
-    assert supported_platforms(str(fmu_paths[name])) == ["linux64"]
+    """linux64 alone: not pythonfmu's stock win64 library."""
+    assert_carries_one_platform(fmu_paths[name], "linux64")
 
 
 @pytest.mark.parametrize("name", FMU_NAMES)

@@ -1,9 +1,10 @@
-"""Standalone FMUs (issue 22): each carries the Python its physics needs.
+"""Standalone FMUs (issue 22): each carries the Python its physics needs, in FMI 2.0 and FMI
+3.0 (issue 34).
 
 The proofs run the FMUs in a root file system the test makes: glibc, libgcc_s, libstdc++
 and the dynamic loader, no Python (``chroot``, which needs root; skipped with the reason
 elsewhere, failed in CI). The standalone FMUs are built once for the module, through the
-CLI (``build-fmus --standalone``).
+CLI (``build-fmus --standalone``, ``build-fmus --standalone --fmi 3``).
 """
 import contextlib
 import importlib.util
@@ -22,13 +23,15 @@ from fmpy import read_model_description, simulate_fmu
 from fmpy.util import read_csv
 
 from feedaxis.cli import main
-from feedaxis.fmu_build import FMU_NAMES, host_layer_missing
-from feedaxis.fmu_standalone import RUNTIME_ROOT, patchelf_program, standalone_missing
-from test_fmi_contract import c_host_instantiate, check_instantiate_answer, instantiate_cases
+from feedaxis.fmu_build import FMU_NAMES, binaries_platform, host_layer_missing
+from feedaxis.fmu_standalone import patchelf_program, runtime_root, standalone_missing
+from test_fmi3 import fmi3_instantiate_cases
+from test_fmi_contract import (c_host_instantiate, check_instantiate_answer, compile_c_host,
+                               instantiate_cases)
+from test_fmus import assert_carries_one_platform
 from test_fmi_hosts import (FMU_CHECK, FMU_SOURCES, OMS_DIR, assert_cross_check_passed,
                             cross_check_command, cross_check_options, require_tool)
 
-ROOT = Path(__file__).resolve().parents[2]
 GLIBC = ("libc.so.6", "libm.so.6", "libdl.so.2", "libpthread.so.0", "librt.so.1",
          "libutil.so.1", "libresolv.so.2", "libanl.so.1", "libmvec.so.1")
 GCC_RUNTIME = ("libgcc_s.so.1", "libstdc++.so.6")
@@ -50,16 +53,26 @@ def cli(*argv):
     return code, out.getvalue()
 
 
-@pytest.fixture(scope="module")
-def standalone(tmp_path_factory):
-    """Name -> path of each standalone FMU, built by ``build-fmus --standalone``."""
+def build_standalone(folder, *options):
+    """Name -> path of each standalone FMU built by ``build-fmus --standalone [options]``."""
     missing = standalone_missing() or host_layer_missing()
     if missing:
         skip_or_fail(f"cannot build standalone FMUs here: {missing}")
-    code, out = cli("build-fmus", "--standalone", "--out", str(tmp_path_factory.mktemp("sa")),
-                    "--json")
+    code, out = cli("build-fmus", "--standalone", *options, "--out", str(folder), "--json")
     assert code == 0, out
     return {Path(path).stem: Path(path) for path in json.loads(out)}
+
+
+@pytest.fixture(scope="module")
+def standalone(tmp_path_factory):
+    """Name -> path of each standalone FMU, built by ``build-fmus --standalone``."""
+    return build_standalone(tmp_path_factory.mktemp("sa"))
+
+
+@pytest.fixture(scope="module")
+def standalone3(tmp_path_factory):
+    """Name -> path of each standalone FMI 3.0 FMU (``build-fmus --standalone --fmi 3``)."""
+    return build_standalone(tmp_path_factory.mktemp("sa3"), "--fmi", "3")
 
 
 def library_path(soname):
@@ -113,18 +126,21 @@ def test_fmu_check_runs_each_standalone_fmu_in_a_root_without_python(standalone,
     assert_cross_check_passed(name, run, bare_root / f"{name}_out.csv")
 
 
-def test_omsimulator_runs_the_standalone_ssp_in_a_root_without_python(standalone, tmp_path):
+@pytest.mark.parametrize("fmi", (2, 3))
+def test_omsimulator_runs_the_standalone_ssp_in_a_root_without_python(request, tmp_path, fmi):
     """The program's own libraries (ldd) join the root, and /proc: OMSimulator reads
-    /proc/self/maps and ends with a segmentation fault without it."""
+    /proc/self/maps and ends with a segmentation fault without it. FMI 3.0: ``export-ssp
+    --fmi 3 --standalone`` of the standalone FMI 3.0 FMUs."""
     program = OMS_DIR / "bin" / "OMSimulator"
     require_tool(program)
+    standalone = request.getfixturevalue("standalone" if fmi == 2 else "standalone3")
     listing = subprocess.run(["ldd", str(program)], capture_output=True, text=True).stdout
     own = [line.split(" => ")[1].split()[0] for line in listing.splitlines() if " => /" in line
            and line.split()[0] not in GLIBC + GCC_RUNTIME]
     root = make_root(tmp_path / "root", own)
     shutil.copytree(OMS_DIR, root / "oms")
-    code, out = cli("export-ssp", str(root / "axis.ssp"), "--standalone", "--fmus",
-                    str(standalone["NpidServo"].parent), "--json")
+    code, out = cli("export-ssp", str(root / "axis.ssp"), "--standalone", "--fmi", str(fmi),
+                    "--fmus", str(standalone["NpidServo"].parent), "--json")
     assert code == 0 and json.loads(out)["open_inputs"][0]["input"] == "NpidServo.position_ref_mm"
     (root / "proc").mkdir()
     if subprocess.run(["mount", "-t", "proc", "proc", str(root / "proc")]).returncode != 0:
@@ -145,31 +161,41 @@ def test_omsimulator_runs_the_standalone_ssp_in_a_root_without_python(standalone
 
 
 @pytest.mark.parametrize("name", FMU_NAMES)
-def test_fmpy_gives_the_same_outputs_standalone_or_not(standalone, fmu_paths, name):
+@pytest.mark.parametrize("fmi", (2, 3))
+def test_fmpy_gives_the_same_outputs_standalone_or_not(request, name, fmi):
+    alone, not_alone = (request.getfixturevalue(fixture) for fixture in (
+        ("standalone", "fmu_paths") if fmi == 2 else ("standalone3", "fmi3_paths")))
     options = cross_check_options(name)
     inputs = read_csv(FMU_SOURCES / name / f"{name}_in.csv")
     runs = [simulate_fmu(str(path), stop_time=options["StopTime"], step_size=options["StepSize"],
-                         input=inputs) for path in (standalone[name], fmu_paths[name])]
+                         input=inputs) for path in (alone[name], not_alone[name])]
     for output in runs[1].dtype.names:
         np.testing.assert_array_equal(runs[0][output], runs[1][output])
 
 
 @pytest.fixture(scope="module")
 def c_host(bare_root):
-    """tests/fmi_c_host.c compiled into the root (it needs only glibc)."""
-    program = bare_root / "fmi_c_host"
-    subprocess.run(["cc", "-O2", f"-I{FMU_SOURCES / 'common' / 'fmi2'}", "-o", str(program),
-                    str(ROOT / "tests" / "fmi_c_host.c"), "-ldl"], check=True)
-    return program
+    """The FMI 2.0 C host of the tests compiled into the root (it needs only glibc)."""
+    return compile_c_host(bare_root / "fmi_c_host")
 
 
-def c_host_command(fmu_path, unpacked, outputs, n_instances=2, n_steps=300):
-    """Arguments of tests/fmi_c_host.c: ``n_steps`` of 1 ms with the first input at 1."""
+@pytest.fixture(scope="module")
+def c_host3(bare_root):
+    """The FMI 3.0 C host of the tests compiled into the root (it needs only glibc)."""
+    return compile_c_host(bare_root / "fmi3_c_host", fmi=3)
+
+
+def c_host_command(fmu_path, unpacked, outputs, n_instances=2, n_steps=300, inputs=None):
+    """Arguments of tests/fmi_c_host.c: ``n_steps`` of 1 ms with ``inputs`` ({name: value};
+    default: the first input at 1)."""
     description = read_model_description(str(fmu_path))
     variables = list(description.modelVariables)
-    first_input = next(v for v in variables if v.causality == "input")
+    if inputs is None:
+        inputs = {next(v.name for v in variables if v.causality == "input"): 1.0}
     return [str(unpacked), description.coSimulation.modelIdentifier, description.guid, "0.001",
-            str(n_steps), str(n_instances), f"{first_input.valueReference}=1.0",
+            str(n_steps), str(n_instances),
+            ",".join(f"{v.valueReference}={inputs[v.name]!r}" for v in variables
+                     if v.name in inputs),
             ",".join(str(v.valueReference) for v in variables if v.name in outputs)]
 
 
@@ -198,19 +224,58 @@ def test_two_instances_of_a_standalone_fmu_in_a_c_host_without_python(standalone
     assert alone == not_alone
 
 
+@pytest.mark.parametrize("fmi", (2, 3))
 def test_a_standalone_fmu_answers_every_instantiate_argument_in_a_root_without_python(
-        standalone, bare_root, c_host):
-    """The C host of the tests, in the root without Python, calls fmi2Instantiate of the
-    standalone NpidServo with every resource-URI form, a NULL name, a wrong GUID, a missing
-    folder (one process per case): an instance that steps, or NULL and an error saying why;
-    never a signal (a bad location used to be a segmentation fault)."""
-    inside = Path("/tmp") / "servo dé#"
-    with zipfile.ZipFile(standalone["NpidServo"]) as archive:
+        request, bare_root, fmi):
+    """The C host of the tests in FMI version ``fmi``, in the root without Python, instantiates
+    the standalone NpidServo (one process per case): FMI 2.0 with every resource-URI form, a
+    NULL name, a wrong GUID, a missing folder; FMI 3.0 with the resource path with and without
+    its final '/', missing, relative, a URI, NULL, a NULL or empty name, a wrong or NULL
+    instantiation token. An instance that steps, or NULL and an error saying why; never a
+    signal (a bad location used to be a segmentation fault)."""
+    fmu_path = request.getfixturevalue("standalone" if fmi == 2 else "standalone3")["NpidServo"]
+    host = request.getfixturevalue("c_host" if fmi == 2 else "c_host3")
+    cases, function = ((instantiate_cases, "fmi2Instantiate") if fmi == 2
+                       else (fmi3_instantiate_cases, "fmi3InstantiateCoSimulation"))
+    inside = Path("/tmp") / f"servo{fmi} dé#"
+    with zipfile.ZipFile(fmu_path) as archive:
         archive.extractall(bare_root / inside.relative_to("/"))
-    guid = read_model_description(str(standalone["NpidServo"])).guid
-    for case in instantiate_cases(inside, guid):
+    for case in cases(inside, read_model_description(str(fmu_path)).guid):
         check_instantiate_answer(case, *c_host_instantiate(
-            ["chroot", str(bare_root), "/fmi_c_host"], case, inside, "NpidServo"))
+            ["chroot", str(bare_root), f"/{host.name}"], case, inside, "NpidServo"),
+            function=function)
+
+
+# Inputs that move every FMU's outputs (a moving, heated screw; a commanded, loaded servo)
+MOVING = {"position_ref_mm": 1.0, "disturbance_N": 30.0, "position_mm": 5.0,
+          "velocity_mm_s": 50.0, "ambient_C": 25.0}
+
+
+def outputs_in_root(root, host, fmu_path, folder_name):
+    """[instance, value reference, value] of each output of ``fmu_path`` unpacked in the
+    root's /tmp/``folder_name``, stepped by the C host ``host`` (a program in the root) with
+    :func:`c_host_command`'s run, its inputs at :data:`MOVING`."""
+    with zipfile.ZipFile(fmu_path) as archive:
+        archive.extractall(root / "tmp" / folder_name)
+    variables = read_model_description(str(fmu_path)).modelVariables
+    outputs = [v.name for v in variables if v.causality == "output"]
+    inputs = {v.name: MOVING[v.name] for v in variables if v.causality == "input"}
+    return outputs_of(chroot(root, f"/{host.name}", *c_host_command(
+        fmu_path, f"/tmp/{folder_name}", outputs, inputs=inputs)))
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_each_standalone_fmi3_fmu_runs_in_an_fmi3_c_host_in_a_root_without_python(
+        standalone, standalone3, bare_root, c_host, c_host3, name):
+    """The FMI 3.0 C host of the tests (fmi3InstantiateCoSimulation, fmi3DoStep ...) steps two
+    instances of the standalone FMI 3.0 FMU in the root: every output the standalone FMI 2.0
+    FMU gives in the FMI 2.0 C host there, to 1e-12."""
+    three = outputs_in_root(bare_root, c_host3, standalone3[name], f"{name}-fmi3")
+    two = outputs_in_root(bare_root, c_host, standalone[name], f"{name}-fmi2")
+    assert [row[:2] for row in three] == [row[:2] for row in two] and len(two) >= 2
+    values = np.array([[float(row[2]) for row in run] for run in (three, two)])
+    np.testing.assert_allclose(values[0], values[1], rtol=0, atol=1e-12)
+    assert np.all(values[0] != 0.0)
 
 
 def test_a_standalone_fmu_ignores_the_pythons_of_the_machine_it_runs_on(standalone, c_host,
@@ -332,19 +397,30 @@ def test_a_python_host_lacking_a_module_the_fmu_needs_gets_its_name(standalone):
     assert "failed:" in run.stdout
 
 
-def test_a_standalone_fmu_holds_no_path_of_the_build_machine(standalone, tmp_path):
+@pytest.mark.parametrize("fmi", (2, 3))
+def test_each_standalone_fmu_declares_only_the_platform_it_carries(request, fmi):
+    """Its Python and every library that Python needs are x86-64 Linux files in the one
+    binaries folder of its FMI version."""
+    for path in request.getfixturevalue("standalone" if fmi == 2 else "standalone3").values():
+        assert_carries_one_platform(path, binaries_platform(fmi))
+
+
+@pytest.mark.parametrize("fmi", (2, 3))
+def test_a_standalone_fmu_holds_no_path_of_the_build_machine(request, tmp_path, fmi):
     """Every shared library searches only its own FMU folder ($ORIGIN); the host layer
     names no interpreter or library of this machine."""
-    with zipfile.ZipFile(standalone["NpidServo"]) as archive:
+    fmu_path = request.getfixturevalue("standalone" if fmi == 2 else "standalone3")["NpidServo"]
+    with zipfile.ZipFile(fmu_path) as archive:
         archive.extractall(tmp_path)
-    libraries = [p for p in (tmp_path / RUNTIME_ROOT).rglob("*.so*") if p.is_file()]
+    platform = binaries_platform(fmi)
+    libraries = [p for p in (tmp_path / runtime_root(platform)).rglob("*.so*") if p.is_file()]
     assert len(libraries) > 20
     for library in libraries:
         search = subprocess.run([patchelf_program(), "--print-rpath", str(library)],
                                 capture_output=True, text=True, check=True).stdout.strip()
         assert all(entry.startswith("$ORIGIN") for entry in search.split(":") if entry), (
             library, search)
-    layer = (tmp_path / "binaries" / "linux64" / "NpidServo.so").read_bytes()
+    layer = (tmp_path / "binaries" / platform / "NpidServo.so").read_bytes()
     for path in {sys.prefix, sys.base_prefix, sys.executable}:
         assert path.encode() not in layer
 

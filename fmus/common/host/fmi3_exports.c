@@ -84,9 +84,15 @@ static int file_uri(const char *path, char *uri, size_t size)
     return 0;
 }
 
+/* An error before there is an instance, to the host's logMessage (printf's ``format``). */
 static void log3(fmi3LogMessageCallback log, fmi3InstanceEnvironment environment,
-                 const char *message)
+                 const char *format, ...)
 {
+    char message[MAX_PATH_LENGTH + 200];
+    va_list args;
+    va_start(args, format);
+    vsnprintf(message, sizeof message, format, args);
+    va_end(args);
     if (log) log(environment, fmi3Error, "logStatusError", message);
 }
 
@@ -109,7 +115,7 @@ EXPORT3 fmi3Instance fmi3InstantiateCoSimulation(
     if (!resourcePath || resourcePath[0] != '/'
         || file_uri(resourcePath, uri, sizeof uri) != 0) {
         log3(logMessage, instanceEnvironment, "fmi3InstantiateCoSimulation: the resource path "
-                                              "is not an absolute path of a folder");
+             "%s is not an absolute path of a folder", resourcePath ? resourcePath : "NULL");
         return NULL;
     }
     Logger3 *logger = calloc(1, sizeof *logger);
@@ -126,9 +132,7 @@ EXPORT3 fmi3Instance fmi3InstantiateCoSimulation(
 static fmi3Instance other_interface(fmi3InstanceEnvironment environment,
                                     fmi3LogMessageCallback log, const char *function)
 {
-    char message[200];
-    snprintf(message, sizeof message, "%s: this FMU provides co-simulation only", function);
-    log3(log, environment, message);
+    log3(log, environment, "%s: this FMU provides co-simulation only", function);
     return NULL;
 }
 

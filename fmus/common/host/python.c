@@ -12,7 +12,8 @@
  * Build-time constants (-D): FEEDAXIS_PYTHON_VERSION (major.minor of the C API compiled
  * against); FEEDAXIS_PYTHON (the interpreter to start) and FEEDAXIS_LIBPYTHON (its shared
  * library), which the environment variables of the same names override on the host; or, for
- * a standalone FMU, FEEDAXIS_RUNTIME (its CPython's folder in binaries/linux64),
+ * a standalone FMU, FEEDAXIS_RUNTIME (its CPython's folder in the unpacked FMU:
+ * binaries/linux64/python, or binaries/x86_64-linux/python in an FMI 3.0 FMU),
  * FEEDAXIS_LIBPYTHON_NAME and FEEDAXIS_REQUIRED_MODULES (what a Python host must import).
  * Python is reached only through dlsym, so the library loads in a host without libpython. */
 #define _GNU_SOURCE
@@ -179,7 +180,7 @@ static int start_interpreter(int isolated, const char *path, const char *which)
 
 #ifdef FEEDAXIS_RUNTIME
 /* A standalone FMU: it carries its own CPython (libpython, the standard library and the
- * packages its step path imports) in <unpacked FMU>/binaries/linux64/FEEDAXIS_RUNTIME, found
+ * packages its step path imports) in <unpacked FMU>/FEEDAXIS_RUNTIME, found
  * from the resource location the host passes, never from a path of the build machine.
  * A C host: the layer starts that Python. A process where another standalone feedaxis FMU
  * started its own: this FMU's packages go behind that one's on sys.path. A Python host: its
@@ -196,8 +197,7 @@ static int find_runtime(const char *folder)
     snprintf(unpacked, sizeof unpacked, "%s", folder);
     char *slash = strrchr(unpacked, '/');
     if (slash) *slash = 0; /* the unpacked FMU */
-    int length = snprintf(runtime, sizeof runtime, "%s/binaries/linux64/%s", unpacked,
-                          FEEDAXIS_RUNTIME);
+    int length = snprintf(runtime, sizeof runtime, "%s/%s", unpacked, FEEDAXIS_RUNTIME);
     if (length < 0 || (size_t)length >= sizeof runtime)
         return fail("the resource folder %s is too long a path", folder);
     if (access(runtime, R_OK | X_OK) != 0)
