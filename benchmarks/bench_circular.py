@@ -12,8 +12,10 @@ In one run, with repeats interleaved, it times
   of Y, squareness, and a set-up (centring offset, radius, drift) with 0.1 µm noise.
 
 It prints medians (and ranges), the machine / one-axis ratio (target <= 2.2) and the
-diagnosis time (target <= 2 s), wall and CPU: the diagnosis runs on one thread, so on a
-shared machine its wall time grows with the load while its CPU time does not.
+diagnosis time (target <= 2 s), wall and CPU: the co-simulation and the diagnosis run on
+one thread, so on a shared machine their wall time grows with the load while their CPU time
+does not. Each finished repeat and trial prints a line on stderr (the results come at the
+end).
 
 Then false alarms and power of the diagnosis on circular cases written from the closed
 forms (720 samples per direction, both directions): ``--trials`` nulls of a random set-up
@@ -36,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from feedaxis.cosim.circular import run_circular
-from feedaxis.cosim.machine import CircleInterpolator, machine_system
+from feedaxis.cosim.machine import machine_system
 from feedaxis.cosim.master import Master
 from feedaxis.cosim.system import default_axis
 from feedaxis.diagnose import diagnose
@@ -45,6 +47,7 @@ from feedaxis.effects.circular import circular_effects
 from feedaxis.fmu_build import build_fmus
 from feedaxis.fmu_map import servo_to_fmu
 from feedaxis.physics import circle
+from feedaxis.physics.circle import CircleInterpolator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from circular_cases import CENTER_MM, RADIUS_MM, circle_columns, synthetic_case  # noqa: E402
@@ -57,26 +60,33 @@ SERVO = {"controller": "pid", "kp_V_per_mm": 0.8998, "ki_V_per_mm_s": 0.0006077,
 
 
 def time_machine(fmu_paths, radius_mm):
-    """(seconds end to end, macro steps) of one counter-clockwise circle on the machine."""
+    """(wall seconds end to end, CPU seconds of this process, macro steps) of one
+    counter-clockwise circle on the machine."""
     system = machine_system()
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     with Master(system, fmu_paths) as master:
         run_circular(master, radius_mm, FEED_MM_MIN, (radius_mm, radius_mm), directions=(1,),
                      samples_per_turn=360)
         steps = master.timing.macro_steps
-    return time.perf_counter() - started, steps
+    return time.perf_counter() - started, time.process_time() - cpu, steps
 
 
 def time_one_axis(fmu_paths, radius_mm, steps):
-    """Seconds end to end of one axis for ``steps`` macro steps of the circle's X reference."""
+    """(wall, CPU) seconds end to end of one axis for ``steps`` macro steps of the circle's X
+    reference."""
     system = default_axis()
     path = CircleInterpolator(radius_mm, FEED_MM_MIN, (radius_mm, radius_mm))
     h = system.macro_step_s
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     with Master(system, fmu_paths) as master:
         master.run(steps * h, {"position_ref_mm": lambda t: path.position_mm(t + h, 0)},
                    {"NpidServo": circle.MACHINE_PLANT})
-    return time.perf_counter() - started
+    return time.perf_counter() - started, time.process_time() - cpu
+
+
+def progress(label, done, total):
+    """One line on stderr per finished trial or repeat (the results come at the end)."""
+    print(f"{label}: {done}/{total}", file=sys.stderr, flush=True)
 
 
 def diagnosis_case(folder, samples):
@@ -138,6 +148,7 @@ def servo_rates(folder, trials):
                                   base_um + set_up_um(columns, rng, "white"), columns,
                                   servo=SERVO)
             _, _, result = time_diagnosis(case)
+            progress(label, trial + 1, trials)
             if friction_N:
                 hits += (bool(result.candidates)
                          and result.candidates[0].effect == "coulomb_friction@X")
@@ -163,6 +174,7 @@ def rates(folder, trials):
             case = synthetic_case(folder / f"{label[:4]}-{noise}-{backlash}-{trial}", deviation,
                                   columns)
             _, _, result = time_diagnosis(case)
+            progress(label, trial + 1, trials)
             if backlash:
                 hits += bool(result.candidates) and result.candidates[0].effect == "backlash@Y"
             else:
@@ -185,22 +197,30 @@ def main(argv=None):
         case = diagnosis_case(Path(folder) / "case", args.samples)
         time_machine(fmu_paths, min(args.radius_mm, 5.0))  # warm-up: first imports
         machine_s, axis_s, diagnose_s, diagnose_cpu_s = [], [], [], []
-        for _ in range(args.repeats):
-            seconds, steps = time_machine(fmu_paths, args.radius_mm)
+        machine_cpu_s, axis_cpu_s = [], []
+        for repeat in range(args.repeats):
+            seconds, cpu_s, steps = time_machine(fmu_paths, args.radius_mm)
             machine_s.append(seconds)
-            axis_s.append(time_one_axis(fmu_paths, args.radius_mm, steps))
+            machine_cpu_s.append(cpu_s)
+            seconds, cpu_s = time_one_axis(fmu_paths, args.radius_mm, steps)
+            axis_s.append(seconds)
+            axis_cpu_s.append(cpu_s)
             seconds, cpu_s, named = time_diagnosis(case)
             diagnose_s.append(seconds)
             diagnose_cpu_s.append(cpu_s)
+            progress("timing repeats", repeat + 1, args.repeats)
         found = {**rates(Path(folder), args.trials),
                  **servo_rates(Path(folder), args.servo_trials)}
     ratio = statistics.median(machine_s) / statistics.median(axis_s)
+    cpu_ratio = statistics.median(machine_cpu_s) / statistics.median(axis_cpu_s)
     print(f"one circle R {args.radius_mm:g} mm at {FEED_MM_MIN:g} mm/min (45° lead-in and "
           f"lead-out), macro step 1 ms = {steps} macro steps; {args.repeats} interleaved "
           "repeats")
-    print(f"  machine, two axes (8 FMUs), end to end : {describe(machine_s)}")
-    print(f"  one axis (4 FMUs), same steps          : {describe(axis_s)}")
-    print(f"  machine / one axis: {ratio:.2f} (target <= 2.2)")
+    print(f"  machine, two axes (8 FMUs), end to end : wall {describe(machine_s)}, CPU "
+          f"{describe(machine_cpu_s)}")
+    print(f"  one axis (4 FMUs), same steps          : wall {describe(axis_s)}, CPU "
+          f"{describe(axis_cpu_s)}")
+    print(f"  machine / one axis: wall {ratio:.2f}, CPU {cpu_ratio:.2f} (target <= 2.2)")
     print(f"diagnose on {case.circular.size} samples (backlash of Y, squareness, set-up, "
           f"0.1 µm noise): wall {describe(diagnose_s)} (target <= 2 s), CPU "
           f"{describe(diagnose_cpu_s)} (one thread: the wall time of an idle machine); named: "

@@ -51,7 +51,7 @@ from pathlib import Path
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from feedaxis.fmu_build import FMU_NAMES, build_fmus
+from feedaxis.fmu_build import AXIS_FMU_NAMES, build_fmus
 from feedaxis.toolchain import c_compiler
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -212,8 +212,8 @@ def one_repeat(paths, n_steps, servo_parameters):
     """{FMU name: CPU µs per macro step} of each FMU driven alone, and ``"axis"``: all four
     driven together."""
     run = {name: cpu_us_per_macro_step(paths, [name], n_steps, servo_parameters)
-           for name in FMU_NAMES}
-    run["axis"] = cpu_us_per_macro_step(paths, FMU_NAMES, n_steps, servo_parameters)
+           for name in AXIS_FMU_NAMES}
+    run["axis"] = cpu_us_per_macro_step(paths, AXIS_FMU_NAMES, n_steps, servo_parameters)
     return run
 
 
@@ -245,7 +245,7 @@ def print_floor_tables(runs, repeats, n_steps):
     for mode in MODES:
         print(f"\n{mode}: {'FMU':<16}{'native':>8}{'empty':>8}{'feedaxis':>10}"
               f"{'feedaxis/native':>22}{'feedaxis/empty':>22}")
-        for row in (*FMU_NAMES, "axis"):
+        for row in (*AXIS_FMU_NAMES, "axis"):
             cost = {kind: statistics.median(run[row] for run in runs[kind])
                     for kind in ("native", "empty", mode)}
             over_native = spread(f[row] / n[row] for f, n in zip(runs[mode], runs["native"]))
@@ -263,7 +263,7 @@ def print_standalone(runs):
     """The standalone FMUs against the feedaxis FMUs in the PID mode (same physics, same
     host): CPU µs per macro step and the per-repeat ratio."""
     print(f"\nstandalone: {'FMU':<16}{'µs':>8}{'standalone/feedaxis':>26}")
-    for row in (*FMU_NAMES, "axis"):
+    for row in (*AXIS_FMU_NAMES, "axis"):
         cost = statistics.median(run[row] for run in runs["standalone"])
         ratio = spread(a[row] / f[row] for a, f in zip(runs["standalone"], runs["PID"]))
         label = "full axis" if row == "axis" else row
@@ -274,7 +274,7 @@ def first_start_ms(fmu_paths, other, starts):
     """{label: [(wall ms, CPU ms), ...]} of the first instantiate + initialisation of each
     FMU (and the servo in NPID) in ``starts`` fresh processes each, after ``other`` was
     loaded."""
-    cases = [(name, fmu_paths[name], {}) for name in FMU_NAMES]
+    cases = [(name, fmu_paths[name], {}) for name in AXIS_FMU_NAMES]
     cases.append(("NpidServo NPID", fmu_paths["NpidServo"], MODES["NPID"]))
     times = {label: [] for label, _, _ in cases}
     for _, (label, path, parameters) in itertools.product(range(starts), cases):
@@ -332,18 +332,18 @@ def main(argv=None):
     args = arguments(parser, argv, repeats=2, steps=200, starts=1)
     if args.drive:
         paths, servo_parameters, n_steps = ast.literal_eval(args.drive)
-        cpu_us_per_macro_step({k: Path(v) for k, v in paths.items()}, FMU_NAMES, n_steps,
-                              servo_parameters)
+        cpu_us_per_macro_step({k: Path(v) for k, v in paths.items()}, AXIS_FMU_NAMES,
+                              n_steps, servo_parameters)
         return 0
     with tempfile.TemporaryDirectory() as folder:
-        full = ({name: args.fmus / f"{name}.fmu" for name in FMU_NAMES} if args.fmus else
-                {p.stem: p for p in build_fmus(Path(folder) / "full")})
+        full = ({name: args.fmus / f"{name}.fmu" for name in AXIS_FMU_NAMES} if args.fmus else
+                {p.stem: p for p in build_fmus(Path(folder) / "full", AXIS_FMU_NAMES)})
         sets = {"native": (build_native_fmus(full, folder), {}),
                 "empty": (build_empty_fmus(full, folder), {})}
         sets.update({mode: (full, parameters) for mode, parameters in MODES.items()})
         if args.standalone:
-            sets["standalone"] = ({p.stem: p for p in build_fmus(Path(folder) / "standalone",
-                                                                 standalone=True)}, MODES["PID"])
+            sets["standalone"] = ({p.stem: p for p in build_fmus(
+                Path(folder) / "standalone", AXIS_FMU_NAMES, standalone=True)}, MODES["PID"])
         runs = interleaved_runs(sets, args.repeats, args.steps)
         print_floor_tables(runs, args.repeats, args.steps)
         if "standalone" in runs:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from feedaxis.cosim.fmu_runner import LoadedFmu
-from feedaxis.fmu_build import build_fmus
+from feedaxis.fmu_build import AXIS_FMU_NAMES, build_fmus
 from feedaxis.physics import geometry, motor, mounting, servo, thermal
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -80,7 +80,7 @@ def main(argv=None):
     print(f"FMU call overhead: setReal+doStep+getReal through fmpy vs the bare physics call "
           f"(median of {repeats} x {N_CALLS} calls)")
     with tempfile.TemporaryDirectory() as folder:
-        loaded = {p.stem: LoadedFmu(p) for p in build_fmus(folder)}
+        loaded = {p.stem: LoadedFmu(p) for p in build_fmus(folder, AXIS_FMU_NAMES)}
         bare = bare_calls()
         for name, fmu in loaded.items():
             step, call = bare[name]

@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from fmpy import read_model_description  # noqa: E402
 
 from common import arguments  # noqa: E402
-from feedaxis.fmu_build import FMU_NAMES, build_fmus  # noqa: E402
+from feedaxis.fmu_build import AXIS_FMU_NAMES, build_fmus  # noqa: E402
 from feedaxis.fmu_standalone import runtime_sizes  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -94,7 +94,7 @@ def print_instructions(commands, n_steps):
         started = instructions(command[:5] + ["0"] + command[6:])
         stepping = instructions(command, STEP_FUNCTIONS)
         counted[(kind, name)] = (started / 1e6, stepping / steps / 1e6)
-    for name in FMU_NAMES:
+    for name in AXIS_FMU_NAMES:
         alone, plain = counted[("standalone", name)], counted[("not standalone", name)]
         print(f"{name:<16}standalone {alone[0]:8.1f} {alone[1]:8.4f}   not standalone "
               f"{plain[0]:8.1f} {plain[1]:8.4f}   per-step ratio {alone[1] / plain[1]:.3f}")
@@ -125,8 +125,9 @@ def main(argv=None):
     args = arguments(parser, argv, repeats=2, steps=40)
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
-        sets = {"standalone": build_fmus(folder / "standalone", standalone=True),
-                "not standalone": build_fmus(folder / "plain")}
+        sets = {"standalone": build_fmus(folder / "standalone", AXIS_FMU_NAMES,
+                                         standalone=True),
+                "not standalone": build_fmus(folder / "plain", AXIS_FMU_NAMES)}
         program = compile_host(folder)
         n_steps = args.steps // 4 if args.instructions else args.steps
         commands = {(kind, path.stem): host_command(program, path, folder / kind / path.stem,
@@ -142,7 +143,7 @@ def main(argv=None):
         print(f"C host, fresh process per run: median (quartiles) of {args.repeats} "
               "interleaved runs")
         print(f"{'FMU':<16}{'build':<16}{'first instantiate ms':>24}{'µs per step':>24}")
-        for name in FMU_NAMES:
+        for name in AXIS_FMU_NAMES:
             for kind in sets:
                 starts, steps = zip(*runs[(kind, name)])
                 print(f"{name:<16}{kind:<16}{summary(starts, 1e3, 0):>24}"

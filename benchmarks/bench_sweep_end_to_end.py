@@ -13,6 +13,11 @@ CPU time (the command and every process it started). In one run, interleaved:
 The machine's load average is printed with them: on a shared machine the wall times are
 only as good as it is idle; the CPU times say what the work itself cost.
 
+The commands run as on an installed feedaxis, whose modules pip compiled once: a
+``PYTHONDONTWRITEBYTECODE`` in the environment is dropped for them (with it, every command
+would compile feedaxis's hundred modules again, about 0.3 s); the warm-up run writes the
+bytecode.
+
 Run: ``python benchmarks/bench_sweep_end_to_end.py [--repeats 3] [--trials 96]``.
 """
 import argparse
@@ -59,6 +64,7 @@ def main(argv=None):
              f"{args.trials} trials, --workers 1": (args.trials, 1),
              f"{args.trials} trials, --workers 2": (args.trials, 2)}
     runs = {label: [] for label in cases}
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)  # as installed: see the docstring
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as folder:
         run_sweep(folder, 1, 0, args.duration_s)  # FMUs built and cached, numba compiled

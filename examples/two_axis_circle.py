@@ -14,7 +14,8 @@ from fmpy.fmi2 import FMU2Slave
 from feedaxis.case import Axis
 from feedaxis.circular_case import CircularTest, Machine
 from feedaxis.cosim.fmu_cache import cached_fmus
-from feedaxis.cosim.machine import CircleInterpolator, machine_from_case_axes
+from feedaxis.cosim.machine import machine_from_case_axes
+from feedaxis.physics.circle import CircleInterpolator
 
 H_S = 1e-3
 

@@ -83,8 +83,14 @@ class Calls:
         self.dll, self.c = dll, component
         variables = description.modelVariables
         self.real_out = next(v.valueReference for v in variables if v.causality == "output")
-        real_in = next(v for v in variables if v.causality == "input")
+        # an FMU without inputs (the circle interpolator): a Real parameter stands in
+        # where a value reference is needed, the set passes no values (the state table alone
+        # decides) and NaN for that parameter reaches the error state
+        inputs = [v for v in variables if v.causality == "input"]
+        real_in = (inputs or [v for v in variables
+                              if v.causality == "parameter" and v.type == "Real"])[0]
         self.real_in, self.start = real_in.valueReference, float(real_in.start or 0.0)
+        self.n_in = 1 if inputs else 0
         self.first = {kind: [v.valueReference for v in variables if v.type == kind][:1]
                       for kind in ("Integer", "Boolean", "String")}
         self.state = c_void_p()
@@ -123,7 +129,8 @@ class Calls:
             "fmi2GetInteger": lambda: self.get("fmi2GetInteger", "Integer", c_int),
             "fmi2GetBoolean": lambda: self.get("fmi2GetBoolean", "Boolean", c_int),
             "fmi2GetString": lambda: self.get("fmi2GetString", "String", c_char_p),
-            "fmi2SetReal": lambda: d.fmi2SetReal(c, vr_in, 1, (c_double * 1)(self.start)),
+            "fmi2SetReal": lambda: d.fmi2SetReal(c, vr_in, self.n_in,
+                                                (c_double * 1)(self.start)),
             "fmi2SetInteger": lambda: self.set("fmi2SetInteger", "Integer", c_int),
             "fmi2SetBoolean": lambda: self.set("fmi2SetBoolean", "Boolean", c_int),
             "fmi2SetString": lambda: self.set("fmi2SetString", "String", c_char_p),

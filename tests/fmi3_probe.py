@@ -41,8 +41,14 @@ class Calls:
         self.dll, self.i = dll, instance
         variables = description.modelVariables
         self.out = next(v.valueReference for v in variables if v.causality == "output")
-        real_in = next(v for v in variables if v.causality == "input")
+        # an FMU without inputs (the circle interpolator): a Float64 parameter stands in
+        # where a value reference is needed, the set passes no values (the state table alone
+        # decides) and NaN for that parameter reaches the error state
+        inputs = [v for v in variables if v.causality == "input"]
+        real_in = (inputs or [v for v in variables
+                              if v.causality == "parameter" and v.type == "Float64"])[0]
         self.inp, self.start = real_in.valueReference, float(real_in.start or 0.0)
+        self.n_in = 1 if inputs else 0
         self.first = {kind: [v.valueReference for v in variables if v.type == kind][:1]
                       for kind in ("Int32", "Boolean", "String")}
         self.state = c_void_p()
@@ -79,7 +85,8 @@ class Calls:
             "fmi3Terminate": lambda: d.fmi3Terminate(i),
             "fmi3Reset": lambda: d.fmi3Reset(i),
             "fmi3GetFloat64": lambda: d.fmi3GetFloat64(i, out, 1, (c_double * 1)(), 1),
-            "fmi3SetFloat64": lambda: d.fmi3SetFloat64(i, inp, 1, (c_double * 1)(self.start), 1),
+            "fmi3SetFloat64": lambda: d.fmi3SetFloat64(i, inp, self.n_in,
+                                                      (c_double * 1)(self.start), self.n_in),
             "fmi3GetInt32": lambda: self.get("Int32", c_int32),
             "fmi3SetInt32": lambda: self.set("Int32", c_int32),
             "fmi3GetBoolean": lambda: self.get("Boolean", c_bool),

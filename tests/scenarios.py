@@ -5,23 +5,30 @@ it) without any FMI code, so the FMUs can be checked against the physics they wr
 """
 import numpy as np
 
-from feedaxis.physics import geometry, motor, mounting, servo, thermal
+from feedaxis.physics import circle, geometry, motor, mounting, servo, thermal
 
 STEP_SIZE_S = {"NpidServo": 1e-3, "StepperError": 0.01, "GeometricError": 0.01,
-               "ThermalScrew": 1.0}
-N_STEPS = {"NpidServo": 1500, "StepperError": 600, "GeometricError": 600, "ThermalScrew": 900}
+               "ThermalScrew": 1.0, "CircleInterpolator": 0.01}
+N_STEPS = {"NpidServo": 1500, "StepperError": 600, "GeometricError": 600, "ThermalScrew": 900,
+           "CircleInterpolator": 500}
 OUTPUTS = {"NpidServo": ("position_mm", "velocity_mm_s", "tracking_error_mm"),
            "StepperError": ("error_um",), "GeometricError": ("error_um",),
-           "ThermalScrew": ("error_um", "elongation_um", "peak_rise_K")}
+           "ThermalScrew": ("error_um", "elongation_um", "peak_rise_K"),
+           "CircleInterpolator": ("first_position_ref_mm", "second_position_ref_mm")}
 PARAMETERS = {"NpidServo": {"nonlinear": True},
               "StepperError": {"harmonic2_cos_um": 0.03, "error_period_steps": 4},
               "GeometricError": {"backlash_um": 1.5, "support": "fixed-fixed"},
-              "ThermalScrew": {"fixed_end_mm": 120.0, "time_step_s": 0.25}}
+              "ThermalScrew": {"fixed_end_mm": 120.0, "time_step_s": 0.25},
+              "CircleInterpolator": {"direction": -1, "radius_mm": 25.0, "feed_mm_min": 2500.0,
+                                     "center_first_mm": 40.0, "ahead_s": 0.01}}
 
 
 def scripted_inputs(name):
-    """Input sequences exercising each FMU: motion back and forth, a force, ambient drift."""
+    """Input sequences exercising each FMU: motion back and forth, a force, ambient drift
+    (none for the circle interpolator, which has no inputs)."""
     t = np.arange(N_STEPS[name]) * STEP_SIZE_S[name]
+    if name == "CircleInterpolator":
+        return {}
     if name == "NpidServo":
         return {"position_ref_mm": 5.0 * np.sin(2 * np.pi * 0.7 * t) + 0.2 * (t > 0.8),
                 "disturbance_N": 40.0 * np.sin(2 * np.pi * 50 * t) * (t > 0.5)}
@@ -40,10 +47,12 @@ def direct(name, inputs, parameters, step_size_s=None):
 
     ``step_size_s`` defaults to ``STEP_SIZE_S[name]``.
     """
-    n = len(next(iter(inputs.values())))
+    n = len(next(iter(inputs.values()))) if inputs else N_STEPS[name]
     step_size_s = step_size_s or STEP_SIZE_S[name]
     rows = []
-    if name == "NpidServo":
+    if name == "CircleInterpolator":
+        rows = _circle(n, parameters, step_size_s)
+    elif name == "NpidServo":
         loop = servo.Servo(servo.ServoParams(**_only(servo.ServoParams, parameters)),
                            initial_reference_mm=inputs["position_ref_mm"][0])
         rows.append((loop.position_mm, loop.velocity_mm_s, loop.tracking_error_mm))
@@ -70,6 +79,21 @@ def direct(name, inputs, parameters, step_size_s=None):
 def _only(cls, parameters):
     names = set(cls.__dataclass_fields__)
     return {k: v for k, v in parameters.items() if k in names}
+
+
+def _circle(n_steps, parameters, step_size_s):
+    """The interpolator's outputs at t = 0 and after each step: the circle at the step's
+    end + ahead_s, each axis's value computed one time at a time."""
+    p = {"radius_mm": 10.0, "feed_mm_min": 1000.0, "center_first_mm": 10.0,
+         "center_second_mm": 10.0, "direction": 1, "start_deg": 0.0, "lead_in_deg": 45.0,
+         "lead_out_deg": 45.0, "ahead_s": 1e-3, **parameters}
+    path = circle.CircleInterpolator(p["radius_mm"], p["feed_mm_min"],
+                                     (p["center_first_mm"], p["center_second_mm"]),
+                                     p["direction"], p["start_deg"], p["lead_in_deg"],
+                                     p["lead_out_deg"])
+    ends_s = [0.0] + [k * step_size_s + step_size_s for k in range(n_steps)]
+    return [[float(path.position_mm(t + p["ahead_s"], axis)) for axis in (0, 1)]
+            for t in ends_s]
 
 
 def _geometric(inputs, parameters, step_size_s):

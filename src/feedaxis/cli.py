@@ -650,8 +650,9 @@ def _build_fmus_options(parser):
     parser.add_argument("--fmi", type=int, choices=(2, 3), default=2, help=FMI_HELP)
 
 
-@command("build-fmus", help="build the four FMUs",
-         description="Build NpidServo, StepperError, GeometricError and ThermalScrew into --out.",
+@command("build-fmus", help="build the five FMUs",
+         description="Build NpidServo, StepperError, GeometricError, ThermalScrew (the axis) "
+                     "and CircleInterpolator (a machine's circle) into --out.",
          options=_build_fmus_options)
 def _cmd_build_fmus(args):
     from . import fmu_build
@@ -796,30 +797,47 @@ def _checked_axis(args):
 
 
 def _machine_or_axis(args):
-    """The machine of ``--machine`` (two axes, :mod:`feedaxis.cosim.machine`), else the axis."""
-    machine = getattr(args, "machine", None)
-    if machine is None:
+    """The machine of ``--machine`` (two axes, :mod:`feedaxis.cosim.machine`) driven round
+    its circle by the CircleInterpolator FMU (:func:`_machine_path`), else the axis."""
+    if getattr(args, "machine", None) is None:
         return _axis_system(args)
-    from .cosim.machine import circular_machine
+    from .cosim.machine import with_interpolator
 
-    return circular_machine(machine or None, squareness_urad=args.squareness_urad,
-                            step_ms=args.step_ms, thermal_step_s=args.thermal_step_s,
-                            set_items=args.set, model_path=args.model)[0]
+    return with_interpolator(*_machine_path(args))
+
+
+def _machine_path(args):
+    """(the machine system of ``--machine``, the commanded circle of its direction)."""
+    from .cosim.circular import DIRECTIONS
+    from .cosim.machine import circular_machine
+    from .physics.circle import CircleInterpolator
+
+    system, circle = circular_machine(args.machine or None,
+                                      squareness_urad=args.squareness_urad,
+                                      step_ms=args.step_ms, thermal_step_s=args.thermal_step_s,
+                                      set_items=args.set, model_path=args.model)
+    return system, CircleInterpolator(circle["radius_mm"], circle["feed_mm_min"],
+                                      circle["center_mm"], DIRECTIONS[args.direction][0])
 
 
 def _export_ssp_options(parser):
     parser.add_argument("out", metavar="OUT.ssp", help="SSP file to write")
     parser.add_argument("--machine", nargs="?", const="", metavar="AXIS",
                         help="the machine of two axes instead of one axis (components "
-                             "X_NpidServo, ...): alone the default axes X and Y, or those of "
-                             "the axis.toml (or case folder) of a circular case")
+                             "X_NpidServo, ...), driven round its circle by the "
+                             "CircleInterpolator FMU: alone the default axes X and Y, or those "
+                             "of the axis.toml (or case folder) of a circular case")
     parser.add_argument("--squareness-urad", type=float, default=0.0,
                         help="with --machine: the second axis out of square with the first "
                              "(µrad), a term of the first axis's table position (printed)")
+    parser.add_argument("--direction", choices=("ccw", "cw"), default="ccw",
+                        help="with --machine: the direction the CircleInterpolator FMU "
+                             "commands the circle in (default ccw)")
     parser.add_argument("--standalone", action="store_true", help=STANDALONE_HELP)
     parser.add_argument("--fmi", type=int, choices=(2, 3), default=2, help=FMI_HELP)
-    parser.add_argument("--stop-time", type=float, default=1.0, metavar="S",
-                        help="DefaultExperiment stopTime in s (default 1)")
+    parser.add_argument("--stop-time", type=float, metavar="S",
+                        help="DefaultExperiment stopTime in s (default 1; with --machine the "
+                             "circle's lead-in, turn and lead-out)")
     parser.add_argument("--osp-step-hints", action="store_true",
                         help="add OSP's per-component step sizes (libcosim runs the thermal screw "
                              "at its own step); OMSimulator 3.0 refuses such a file")
@@ -828,7 +846,7 @@ def _export_ssp_options(parser):
 
 @command("export-ssp", help="the axis as an SSP file for other FMI system simulators",
          description="Write OUT.ssp: SystemStructure.ssd (components, connections, step "
-                     "sizes), resources/<Component>.ssv (parameter values) and the four FMUs. "
+                     "sizes), resources/<Component>.ssv (parameter values) and the FMUs. "
                      "Runs in fmpy.ssp.simulate_ssp, OSP libcosim (libcosimpy), OMSimulator and "
                      "ecos; see README.",
          options=_export_ssp_options)
@@ -837,24 +855,44 @@ def _cmd_export_ssp(args):
 
     check_writable_target(args.out)
     system, paths = _checked_axis(args)
-    path = export_ssp(args.out, system, paths, args.stop_time, args.osp_step_hints)
+    stop_time = args.stop_time
+    if stop_time is None:
+        stop_time = 1.0 if args.machine is None else _circle_stop_s(system)
+    path = export_ssp(args.out, system, paths, stop_time, args.osp_step_hints)
     unconnected = [{"input": connector, "unit": variable.unit, "start": variable.start,
                     "meaning": variable.description}
                    for connector, variable in open_inputs(system)]
     payload = {"ssp": str(path), "open_inputs": unconnected}
-    lines = (f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and the "
-             f"four {'standalone ' if args.standalone else ''}FMUs\n"
+    lines = (f"{path}: SystemStructure.ssd, a parameter-values file (.ssv) per component and its "
+             f"{len({c.fmu for c in system.components})} {'standalone ' if args.standalone else ''}"
+             "FMUs\n"
              "open inputs (unconnected: drive them from the importing tool, else they keep their "
              "start values; position_ref_mm at 0 is a standing axis):\n"
              + "\n".join(f"  {i['input']} = {i['start']:g} {i['unit']} ({i['meaning']})"
                          for i in unconnected))
     if args.machine is not None:
+        payload["interpolator"] = system.component("CircleInterpolator").parameters
+        lines += ("\nCircleInterpolator drives both servos' position_ref_mm, one macro step "
+                  "ahead (ahead_s) for hosts that step Jacobi: "
+                  + ", ".join(f"{k} = {v:g}" for k, v in payload["interpolator"].items()))
         payload["outputs"] = {o.variable.name: o.formula() for o in system.outputs}
         lines += ("\nthe machine's table positions (mm) from the component outputs:\n"
                   + "\n".join(f"  {name} = {formula}"
                               for name, formula in payload["outputs"].items()))
     _emit(args, payload, lines)
 
+
+
+def _circle_stop_s(system):
+    """The macro steps (s) that cover the machine's circle with its arcs."""
+    from .physics.circle import CircleInterpolator
+
+    values = system.component("CircleInterpolator").parameters
+    path = CircleInterpolator(values["radius_mm"], values["feed_mm_min"],
+                              (values["center_first_mm"], values["center_second_mm"]),
+                              values["direction"], values["start_deg"], values["lead_in_deg"],
+                              values["lead_out_deg"])
+    return math.ceil(path.duration_s / system.macro_step_s - 1e-9) * system.macro_step_s
 
 
 def _export_fmu_options(parser):

@@ -44,6 +44,10 @@ from .stats.judge import FAMILY_ALPHA, Test, accepts
 
 MAX_STRUCTURES = 5
 RESOLUTION_UM = 1e-3  # 1 nm: an effect or structure smaller is rounding, not a measurement
+# The level of the score screen before a fit (:func:`_tried`): 30 times the most liberal
+# level at which the policy names an effect (FAMILY_ALPHA over three stages), so an effect
+# the fit would name passes it; its rates are measured by benchmarks/bench_friction_screen.py
+SCREEN_ALPHA = 0.01
 
 
 @dataclass
@@ -286,16 +290,7 @@ def _select(measurement, left, pending, skipped, stages, notify):
                 del pending[effect.name]
                 continue
             notify(effect.name)
-            joined = _joined(left.model, effect, pending)
-            result = (_fit(joined, measurement)
-                      if effect.additive or not effect.screened else None)
-            after_um = (result.residual_um if result else
-                        _screened_residual(measurement, left, effect))
-            extra = sum(len(e.parameters) for e in (joined.effects if result else (effect,))
-                        if e.name not in left.model)
-            tested.append((float(after_um @ after_um), (measurement.noise.extra_ss_test(
-                left.residual_um, after_um, extra, left.statistics.n_free + extra), effect,
-                result)))
+            tested.append(_tried(measurement, left, effect, pending))
         # p-values alike (each underflows to 0 where effects explain thousands of noise
         # variances) keep the order of what the candidates leave, the least first
         tested = [item for _, item in sorted(tested, key=lambda pair: pair[0])]
@@ -310,6 +305,45 @@ def _select(measurement, left, pending, skipped, stages, notify):
             del pending[joined.name]
         left = result
     return candidates, left
+
+
+def _tried(measurement, left, effect, pending):
+    """(the residual sum of squares ``effect`` leaves on top of ``left``, (its test, it, its
+    fit or None)): fitted in full (with the effects it is fitted with, the test counting
+    them), or screened by one linearised step (:func:`_screened_residual`). An effect
+    always fitted that is ``score_screened`` is first screened by its score test, the step
+    from its neutral values with the exact sensitivities (:func:`_score_screens`), and
+    fitted only where that test passes at ``SCREEN_ALPHA``."""
+    joined = _joined(left.model, effect, pending)
+    if effect.additive or not effect.screened:
+        if _score_screens(measurement, left, effect, joined):
+            after_um = _screened_residual(measurement, left, effect, exact=True)
+            test = _extra_test(measurement, left, after_um, len(effect.parameters))
+            if test.p_value >= SCREEN_ALPHA:
+                return float(after_um @ after_um), (test, effect, None)
+        result = _fit(joined, measurement)
+        after_um = result.residual_um
+        extra = sum(len(e.parameters) for e in joined.effects if e.name not in left.model)
+    else:
+        result, after_um = None, _screened_residual(measurement, left, effect)
+        extra = len(effect.parameters)
+    return float(after_um @ after_um), (_extra_test(measurement, left, after_um, extra), effect,
+                                        result)
+
+
+def _extra_test(measurement, left, after_um, extra):
+    """The measurement's extra-sum-of-squares test of ``extra`` parameters leaving
+    ``after_um`` on top of ``left``."""
+    return measurement.noise.extra_ss_test(left.residual_um, after_um, extra,
+                                           left.statistics.n_free + extra)
+
+
+def _score_screens(measurement, left, effect, joined):
+    """Whether ``effect`` is screened by its score test before its fit: it says so
+    (``Effect.score_screened``), it joins ``left`` alone (no effect fitted beside it, whose
+    start would be far from its fit) and the measurement has its exact sensitivities."""
+    return (effect.score_screened and joined.names == (left.model + effect).names
+            and measurement.sensitivity(joined) is not None)
 
 
 def _without_idle_companions(measurement, left, effect, result, test, stages):
@@ -345,29 +379,42 @@ def _joined(model, effect, pending):
     return joined + effect
 
 
-def _screened_residual(measurement, left, effect):
+def _screened_residual(measurement, left, effect, exact=False):
     """The residual of ``left`` after one Gauss-Newton step with ``effect`` added at its
     neutral values (the score test's linearisation): the step over the model's Jacobian
     at its optimum and the effect's columns by differences (its ``probe`` steps, else
-    relative ones). An effect acting inside the system costs a simulation per parameter
-    so, not a fit (on a 500 s trace a fit of the loop took seconds); the effect the
-    screening ranks first is then fitted in full and tested again."""
+    relative ones), or with ``exact`` from the measurement's sensitivities (one pass). An
+    effect acting inside the system costs a simulation per parameter so, not a fit (on a
+    500 s trace a fit of the loop took seconds); the effect the screening ranks first is
+    then fitted in full and tested again."""
     model = left.model + effect
     start = {**left.model.values, effect.name: measurement.neutral(effect)}
     problem = Problem(model, [measurement])
-    base_um = problem.predicted_um(start)
-    columns = []
-    for parameter in effect.parameters:
-        value = start[effect.name][parameter.name]
-        step = effect.probe.get(parameter.name) or FD_STEP * max(1.0, abs(value))
-        shifted = {**start, effect.name: {**start[effect.name], parameter.name: value + step}}
-        columns.append((problem.predicted_um(shifted) - base_um) / step)
+    if exact:
+        slots = [(effect.name, parameter.name) for parameter in effect.parameters]
+        columns = list(measurement.sensitivity(model)(start, slots)[1].T)
+        base_um = problem.predicted_um(start)
+    else:
+        base_um = problem.predicted_um(start)
+        columns = _difference_columns(problem, effect, start, base_um)
     jacobian = left.jacobian if left.jacobian is not None else Problem(
         left.model, [measurement]).jacobian(ParameterLayout(left.model, measurement.case.axis))(
         ParameterLayout(left.model, measurement.case.axis).start())
     design = np.column_stack([-jacobian, *columns])
     residual = measurement.measured_um - base_um
     return residual - design @ np.linalg.lstsq(design, residual, rcond=None)[0]
+
+
+def _difference_columns(problem, effect, start, base_um):
+    """d prediction / d ``effect``'s parameters at ``start`` by forward differences (its
+    ``probe`` steps, else relative ones)."""
+    columns = []
+    for parameter in effect.parameters:
+        value = start[effect.name][parameter.name]
+        step = effect.probe.get(parameter.name) or FD_STEP * max(1.0, abs(value))
+        shifted = {**start, effect.name: {**start[effect.name], parameter.name: value + step}}
+        columns.append((problem.predicted_um(shifted) - base_um) / step)
+    return columns
 
 
 def _best_candidate(measurement, left, tested, pending, skipped, stages):

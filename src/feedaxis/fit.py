@@ -229,7 +229,7 @@ def fit(model, data, progress=None, kind=None):
                                                     solution.active_mask, layout, found)
     fitted = model.with_values(layout.values(solution.x))
     if found[0].loose_share is not None:
-        flag_loose(fitted, sigma, undetermined, found[0].loose_share, found[0].excitation())
+        flag_loose(fitted, sigma, undetermined, found[0].loose_share, found[0].excitation)
     if len(found) == 1:
         for key, reason in {**unresolved_terms(fitted, found[0]), **found[0].confounded(
                 fitted, layout.slots, solution.jac, solution.fun, sigma)}.items():
@@ -313,7 +313,8 @@ class Problem:
             self.progress()
         slots = [layout.slots[i] for i in layout.nonlinear_index]
         values = layout.values(x)
-        return np.vstack([sensitivity(values, slots)[1] for sensitivity in self.sensitivities])
+        parts = [sensitivity(values, slots)[1] for sensitivity in self.sensitivities]
+        return parts[0] if len(parts) == 1 else np.vstack(parts)
 
     def predicted_um(self, values):
         base_um, columns_um = self.split(values)
@@ -614,15 +615,18 @@ def _inseparable(vt, strong, keys):
 
 def flag_loose(model, sigma, undetermined, share, excitation):
     """Add to ``undetermined`` the parameters whose standard uncertainty exceeds ``share``
-    of their value: the data fix them only loosely; ``excitation`` says what the data are
-    (a single sine fixes only a loop's gain and phase at its frequency)."""
+    of their value: the data fix them only loosely; ``excitation()`` says what the data are
+    (a single sine fixes only a loop's gain and phase at its frequency), asked only where a
+    parameter is loose (on a long trace it costs a second)."""
+    words = None
     for name in model.names:
         for parameter, value in model.values[name].items():
             key, spread = f"{name}.{parameter}", sigma[name][parameter]
             if key not in undetermined and spread > share * abs(value):
+                words = excitation() if words is None else words
                 undetermined[key] = (
                     f"the data fix it only to ±{100 * spread / max(abs(value), 1e-300):.0f} %: "
-                    f"{excitation}")
+                    f"{words}")
 
 
 def _check_finite(result, found):

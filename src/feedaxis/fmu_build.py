@@ -1,4 +1,4 @@
-"""Build the four feedaxis FMUs with pythonfmu and make them loadable by any FMI host.
+"""Build the feedaxis FMUs (the axis's four and the circle interpolator) with pythonfmu and make them loadable by any FMI host.
 
 Sources: ``fmus/<Name>/<Name>.py`` (the slave script), ``fmus/common/feedaxis_slave.py``
 (the shared adapter), ``fmus/common/host/*.c`` (the host layer) and
@@ -23,6 +23,7 @@ import contextlib
 import importlib
 import math
 import os
+import py_compile
 import shutil
 import subprocess
 import sys
@@ -37,7 +38,9 @@ from .fmu_standalone import libpython_path
 from .output import write_atomically, writing
 from .toolchain import c_compiler, cache_root, compiler_missing
 
-FMU_NAMES = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
+AXIS_FMU_NAMES = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
+# the axis's four, and the circle interpolator that drives two axes in a machine's SSP
+FMU_NAMES = (*AXIS_FMU_NAMES, "CircleInterpolator")
 PHYSICS_PACKAGE = "feedaxis_fmu_physics"
 ADAPTER_MODULE = "feedaxis_slave"
 SOURCE_DIR = Path(__file__).resolve().parent
@@ -91,7 +94,7 @@ def fmu_sources():
 # unit -> (factor, SI base-unit exponents) with value_SI = factor * value (degC: offset)
 SI_UNITS = {
     "m": (1.0, {"m": 1}), "mm": (1e-3, {"m": 1}), "um": (1e-6, {"m": 1}),
-    "mm/s": (1e-3, {"m": 1, "s": -1}), "s": (1.0, {"s": 1}), "K": (1.0, {"K": 1}),
+    "mm/s": (1e-3, {"m": 1, "s": -1}), "mm/min": (1e-3 / 60.0, {"m": 1, "s": -1}), "s": (1.0, {"s": 1}), "K": (1.0, {"K": 1}),
     "degC": (1.0, {"K": 1}), "deg": (math.pi / 180.0, {"rad": 1}),
     "N": (1.0, {"kg": 1, "m": 1, "s": -2}), "Pa": (1.0, {"kg": 1, "m": -1, "s": -2}),
     "kg/m3": (1.0, {"kg": 1, "m": -3}), "um/mm": (1e-3, {}), "1/K": (1.0, {"K": -1}),
@@ -159,6 +162,7 @@ def build_fmu(name, out_dir, runtime=None, fmi=2):
         finally:
             _forget_modules(staging, (name, package))
         guid, variables = _complete_model_description(fmu_path, slave)
+        _add_bytecode(fmu_path)
         missing = host_layer_missing()
         if runtime is not None:
             _make_standalone(fmu_path, name, sources, (variables, guid), staging, runtime,
@@ -294,6 +298,31 @@ def _write_fmu(fmu_path, entries):
     with zipfile.ZipFile(fmu_path, "w", zipfile.ZIP_DEFLATED) as archive:
         for name, data in entries.items():
             archive.writestr(name, data)
+
+
+def _add_bytecode(fmu_path):
+    """Compiled bytecode beside every Python file of the FMU's resources (``__pycache__``).
+
+    A host unpacks the FMU afresh for every process (fmpy, the master), and an unpacked
+    file's time is the unpacking's, so a host's Python would compile the FMU's 44 modules
+    at every start (about 0.1 s). The bytecode is checked against its source's hash, not
+    its time (PEP 552): an edited source is compiled again, an unchanged one never. The
+    FMU runs on the Python minor version that built it (fmus/common/host/python.c), whose
+    bytecode this is.
+    """
+    entries = _read_fmu(fmu_path)
+    with tempfile.TemporaryDirectory() as folder:
+        source, compiled = Path(folder) / "module.py", Path(folder) / "module.pyc"
+        for name, data in list(entries.items()):
+            if not (name.startswith("resources/") and name.endswith(".py")):
+                continue
+            source.write_bytes(data)
+            py_compile.compile(str(source), cfile=str(compiled), dfile=name, doraise=True,
+                               invalidation_mode=py_compile.PycInvalidationMode.CHECKED_HASH)
+            folder_name, _, file_name = name.rpartition("/")
+            entries[f"{folder_name}/__pycache__/{file_name[:-3]}."
+                    f"{sys.implementation.cache_tag}.pyc"] = compiled.read_bytes()
+    _write_fmu(fmu_path, entries)
 
 
 def _forget_modules(staging, module_names):

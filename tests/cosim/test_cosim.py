@@ -1,5 +1,6 @@
 """The four FMUs co-simulated as one axis by the project's master (feedaxis.cosim)."""
 import signal
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -167,3 +168,32 @@ def test_the_master_loop_unpacks_its_plan_by_the_plan_entry_fields():
 
     unpacked = re.search(r"for \(([^)]*)\) in plan:", inspect.getsource(Master._loop)).group(1)
     assert tuple(n.strip() for n in unpacked.split(",")) == PlanEntry._fields
+
+
+def test_inputs_read_in_place_and_copied_give_the_same_run(master, fmu_paths, monkeypatch):
+    """A component whose inputs sit side by side in the signal array reads them there
+    (GeometricError: the servo's position and velocity); listed in the other order they
+    are copied into an input buffer first. Both runs give the same numbers."""
+    system = master.system
+    inputs = axis_inputs(system, 1.0)
+    in_place = master.run(1.0, inputs)
+    geometric = [c for c in system.connections if c.target.startswith("GeometricError.")]
+    others = [c for c in system.connections if c not in geometric]
+    swapped = replace(system, connections=tuple(others + geometric[::-1]))
+    plan = {}
+    instantiate = Master._instantiate
+
+    def recorded(self, *args):
+        entry = instantiate(self, *args)
+        plan[entry.name] = entry
+        return entry
+
+    monkeypatch.setattr(Master, "_instantiate", recorded)
+    with Master(swapped, fmu_paths) as copying:
+        copied = copying.run(1.0, inputs)
+    position, velocity = (copying.signal_names.index(f"NpidServo.{name}")
+                          for name in ("position_mm", "velocity_mm_s"))
+    assert plan["GeometricError"].copies == ((0, velocity), (1, position))
+    assert plan["StepperError"].copies == ()  # its one input read in place
+    for name in in_place.dtype.names:
+        np.testing.assert_array_equal(copied[name], in_place[name], err_msg=name)

@@ -272,3 +272,23 @@ def test_small_sweeps_run_here_and_say_so(fmu_dir, monkeypatch):
     switched = sweep("tracking", FRICTION, trials=3, seed=5, fmus=fmu_dir, echo=said.append,
                      **TRACKING)
     assert handed == [1, 2] and not said and switched.equals(here)
+
+
+def test_one_trial_has_no_spread_to_draw_and_imports_no_matplotlib(fmu_dir, tmp_path):
+    """A sweep of one trial writes its figures in the table and no figure (a histogram of
+    one value, a band of one curve): the command then never imports matplotlib."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "one"
+    script = (f"import sys; from feedaxis.cli import main; "
+              f"code = main(['sweep', 'tracking', {str(out)!r}, '--vary', {FRICTION[0]!r}, "
+              f"'--trials', '1', '--duration-s', '1.2', '--step-ms', '2', '--workers', '0', "
+              f"'--fmus', {fmu_dir!r}]); print('matplotlib' in sys.modules); sys.exit(code)")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-1] == "False"
+    page = (out / "report.html").read_text()
+    assert "<img" not in page
+    assert "1 finished trial: no spread to draw" in page
+    assert "max_tracking_error_mm" in page

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from conftest import unavailable
-from feedaxis.fmu_build import FMU_NAMES
+from feedaxis.fmu_build import AXIS_FMU_NAMES
 from feedaxis.toolchain import c_compiler
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -34,13 +34,13 @@ def fmi_floor_prints_every_ratio(out):
     bench = load_benchmark("bench_fmi_floor")
     for mode in bench.MODES:
         table = out.split(f"\n{mode}: ")[1]
-        for row in (*FMU_NAMES, "full axis"):
+        for row in (*AXIS_FMU_NAMES, "full axis"):
             cells = next(line for line in table.splitlines() if row in line).split()
             assert len(cells) >= 8, cells  # native, empty, feedaxis, two ratios and quartiles
     assert "NpidServo NPID / PID: " in out and "NpidServo friction / PID: " in out
     starts = out.split("first instantiate + initialisation")[1].splitlines()
     assert sum(any(label in line for line in starts)
-               for label in (*FMU_NAMES, "NpidServo NPID")) == len(FMU_NAMES) + 1
+               for label in (*AXIS_FMU_NAMES, "NpidServo NPID")) == len(AXIS_FMU_NAMES) + 1
 
 
 NEEDS = {"bench_fmi_floor.py": lambda: None if c_compiler() else

@@ -149,11 +149,12 @@ def test_fmi3_non_finite_input_and_parameter_are_errors_naming_the_variable(fmi3
         loaded.enter_initialisation(slave)
         slave.exitInitializationMode()
         state = slave.getFMUState()
-        source = next(v.name for v in loaded.description.modelVariables
-                      if v.causality == "input")
-        with pytest.raises(FMICallException):
-            loaded.set_values(slave, {source: float("nan")})
-        assert f"fmi3SetFloat64: input {source} must be finite, got nan" in capsys.readouterr().out
+        for source in [v.name for v in loaded.description.modelVariables
+                       if v.causality == "input"][:1]:  # none in the circle interpolator
+            with pytest.raises(FMICallException):
+                loaded.set_values(slave, {source: float("nan")})
+            assert (f"fmi3SetFloat64: input {source} must be finite, got nan"
+                    in capsys.readouterr().out)
         slave.setFMUState(state)  # a state saved while healthy takes it out of the error state
         slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=STEP_SIZE_S[name])
         assert all(np.isfinite(loaded.get_reals(slave, OUTPUTS[name])))

@@ -299,7 +299,7 @@ def test_a_backlash_engagement_outside_the_play_is_refused(loaded_fmus, capsys, 
         slave.freeInstance()
 
 
-@pytest.mark.parametrize("name", FMU_NAMES)
+@pytest.mark.parametrize("name", [n for n in FMU_NAMES if scripted_inputs(n)])
 def test_nan_input_gives_fmi_error_with_message(loaded_fmus, capsys, name):
     """A NaN input is refused where it is set (the host layer checks every Real it is given;
     a build without the layer refuses it at the next doStep, the slave's check)."""
@@ -432,3 +432,25 @@ def test_a_kernel_that_does_not_load_is_a_warning_and_the_python_loop(tmp_path, 
     expected, _ = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
     np.testing.assert_allclose(outputs["position_mm"], expected["position_mm"], rtol=0, atol=1e-12)
     assert len(log) == 1 and "the compiled servo loop does not load" in log[0]
+
+
+@pytest.mark.parametrize("name", FMU_NAMES)
+def test_every_python_file_of_an_fmu_carries_its_own_bytecode(fmu_paths, name):
+    """Beside each Python file of the resources the FMU carries that file's bytecode for
+    this Python, checked against the source's hash (PEP 552 flags 0b11): an unpacked FMU
+    is imported without compiling, and an edited file is compiled again."""
+    import importlib.util
+    import marshal
+
+    with zipfile.ZipFile(fmu_paths[name]) as archive:
+        entries = {n: archive.read(n) for n in archive.namelist()}
+    sources = [n for n in entries if n.startswith("resources/") and n.endswith(".py")]
+    assert len(sources) > 20
+    for source in sources:
+        folder, _, file_name = source.rpartition("/")
+        pyc = entries[f"{folder}/__pycache__/{file_name[:-3]}.{sys.implementation.cache_tag}.pyc"]
+        assert pyc[:4] == importlib.util.MAGIC_NUMBER
+        assert int.from_bytes(pyc[4:8], "little") == 0b11, source
+        assert pyc[8:16] == importlib.util.source_hash(entries[source]), source
+        assert marshal.loads(pyc[16:]) == compile(entries[source], source, "exec",
+                                                  dont_inherit=True), source

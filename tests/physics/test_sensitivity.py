@@ -147,6 +147,67 @@ def test_the_diagnosis_keeps_each_fit_once_and_finds_the_same(friction_case, mon
     assert kept == refitted
 
 
+def test_the_loops_kept_results_are_those_of_simulating_anew(friction_case, monkeypatch):
+    """The measurement keeps the loop's last results by parameters (a fit asks again where
+    it stands): a diagnosis with them kept finds what one simulating every time finds, to
+    the bit, in fewer simulations; what is kept cannot be written to."""
+    from feedaxis.measurement import tracking
+
+    model = Model((CATALOG["servo_plant"],))
+    calls = {"loop": 0}
+    simulate_once = tracking.simulate
+
+    def counted(*args, **kwargs):
+        calls["loop"] += 1
+        return simulate_once(*args, **kwargs)
+
+    monkeypatch.setattr(tracking, "simulate", counted)
+    kept = diagnose(friction_case, model)
+    kept_calls, calls["loop"] = calls["loop"], 0
+    monkeypatch.setattr(tracking, "RECENT_BYTES", 0)
+    anew = diagnose(friction_case, model)
+    assert kept.to_json() == anew.to_json()
+    np.testing.assert_array_equal(kept.final.residual_um, anew.final.residual_um)
+    assert kept_calls < calls["loop"]
+    monkeypatch.undo()
+    measurement = tracking.Tracking(friction_case)
+    params = measurement.params(model, {"servo_plant": PLANT})
+    positions = measurement.positions_mm(params)
+    assert measurement.positions_mm(params) is positions and not positions.flags.writeable
+    deviation, _ = measurement.deviation_sensitivity(params, ["delay_s"])
+    np.testing.assert_array_equal(deviation, measurement.deviation_um(params))
+
+
+@pytest.mark.parametrize("friction_N", (0.0, 1.5))
+def test_the_friction_screen_changes_no_finding(tmp_path, friction_N, monkeypatch):
+    """The friction laws screened by their score test before their fit (where the screen
+    passes they are fitted as before): the diagnosis finds what fitting them every time
+    finds, to the bit, on a null and with friction; on the null neither law is fitted."""
+    from feedaxis import diagnose as diagnosis
+    from feedaxis.effects.tracking import CoulombFriction, StribeckFriction
+
+    run = step_loop(two_sines, 2.0, plant=PLANT, friction_N=friction_N)
+    case = read_case(write_tracking_case(tmp_path / "case", run, 11))
+    model = Model((CATALOG["servo_plant"],))
+    fitted = []
+    fit_once = diagnosis._fit
+    monkeypatch.setattr(diagnosis, "_fit",
+                        lambda m, data: fitted.append(m.names[-1]) or fit_once(m, data))
+    screened = diagnose(case, model)
+    laws_fitted, fitted[:] = list(fitted), []
+    for law in (CoulombFriction, StribeckFriction):
+        monkeypatch.setattr(law, "score_screened", False)
+    always = diagnose(case, model)
+    assert screened.to_json() == always.to_json()
+    np.testing.assert_array_equal(screened.final.residual_um, always.final.residual_um)
+    assert {"coulomb_friction", "stribeck_friction"} <= set(fitted)
+    if friction_N == 0.0:
+        assert screened.verdict == "adequate" and not set(laws_fitted) & {
+            "coulomb_friction", "stribeck_friction"}
+    else:
+        assert [c.effect for c in screened.candidates] == ["coulomb_friction"]
+
+
 def test_a_loop_parameter_without_sensitivity_is_differenced(friction_case):
     """An effect on a loop parameter the sensitivities do not cover (here the force
     constant) leaves the measurement without them: the fit differences, as before."""
@@ -162,3 +223,21 @@ def test_a_loop_parameter_without_sensitivity_is_differenced(friction_case):
     measurement = Tracking(friction_case)
     assert measurement.sensitivity(Model((CATALOG["servo_plant"],))) is not None
     assert measurement.sensitivity(Model((CATALOG["servo_plant"], ForceConstant()))) is None
+
+
+@pytest.mark.parametrize("label", ("PID", "P-PI cascade with feed-forward"))
+def test_the_frictionless_pass_equals_the_full_friction_tangent_to_the_bit(label):
+    """Without friction and without a friction parameter the pass leaves the friction's
+    tangent out (its terms multiply zeros): the plant's columns are those of the pass that
+    evaluates it (a friction parameter among the names, at zero force), to the bit."""
+    params = {"PID": PID, "P-PI cascade with feed-forward":
+              replace(CASCADE, tn_s=0.02, velocity_feedforward=1.0,
+                      damping_N_s_per_mm=0.02)}[label]
+    plant = ("plant_gain_mm_per_Vs2", "plant_damping_per_s", "plant_stiffness_per_s2",
+             "delay_s")
+    counts = step_counts(TIME_S, params.time_step_s)
+    short = simulate_sensitivity(params, plant, TIME_S, REFERENCE_MM, None, counts)
+    full = simulate_sensitivity(params, (*plant, "friction_N"), TIME_S, REFERENCE_MM, None,
+                                counts)
+    np.testing.assert_array_equal(short[0], full[0])
+    np.testing.assert_array_equal(short[1], full[1][:, :len(plant)])

@@ -16,8 +16,8 @@ import numpy as np
 from ..errors import InputError, number_list
 from ..fmu_map import AXIS_KEYS, SERVO_KEYS, servo_from_fmu
 from ..iso230_4 import circular_figures
-from ..physics.circle import LEAD_IN_DEG
-from .machine import CircleInterpolator, circular_machine, component_name
+from ..physics.circle import LEAD_IN_DEG, CircleInterpolator
+from .machine import circular_machine, component_name
 from .master import SimulationInterrupted
 from .physics_check import start_value
 from .scenarios.base import (Scenario, ScenarioInterrupted, ScenarioRun, Series, axis_table,
@@ -60,7 +60,7 @@ def run_circular(master, radius_mm=100.0, feed_mm_min=1000.0, center_mm=(0.0, 0.
     for direction in directions:
         path = CircleInterpolator(radius_mm, feed_mm_min, tuple(center_mm), direction,
                                   start_deg, lead_in_deg, lead_out_deg)
-        rows, completed = _run_path(master, path, axes, parameters, progress)
+        rows, completed = run_path(master, path, axes, parameters, progress)
         parts.append(_samples(rows, path, axes, samples_per_turn, elapsed_s))
         elapsed_s += _stop_s(path, master.system.macro_step_s)
         if not completed:
@@ -88,7 +88,7 @@ def _stop_s(path, macro_step_s):
     return np.ceil(path.duration_s / macro_step_s - 1e-9) * macro_step_s
 
 
-def _run_path(master, path, axes, parameters, progress):
+def run_path(master, path, axes, parameters=None, progress=None):
     """Rows of every macro step along ``path`` (and whether it ran to the end)."""
     h = master.system.macro_step_s
     inputs = {f"{axis}_position_ref_mm": (lambda t, i=i: path.position_mm(t + h, i))

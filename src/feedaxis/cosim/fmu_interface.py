@@ -1,4 +1,4 @@
-"""What feedaxis needs of each of its four FMUs, checked before one is used: an FMU of
+"""What feedaxis needs of each of its FMUs, checked before one is used: an FMU of
 ``--fmus DIR`` or of the cache whose model description cannot be read, or that lacks a
 variable the axis connects, records or sets (a renamed one), is refused naming the FMU and
 the variable, never a failure half-way through a simulation.
@@ -17,7 +17,10 @@ from .fmu_runner import check_fmu_archive
 @lru_cache(maxsize=1)
 def expected_interface():
     """{FMU name: {variable: causality}}: the inputs and outputs the axis connects and
-    records, and the parameters the axis, the effects and axis.toml set."""
+    records, the parameters the axis, the effects and axis.toml set, and what a machine's
+    SSP connects and sets of the circle interpolator."""
+    from ..physics.circle import CircleInterpolator
+    from .machine import INTERPOLATOR, INTERPOLATOR_OUTPUTS, interpolator_parameters
     from .system import default_axis
 
     system = default_axis()
@@ -42,6 +45,9 @@ def expected_interface():
         for fmu, keys in table.items():
             needed[fmu].update(dict.fromkeys(keys, "parameter"))
     needed["NpidServo"].update(dict.fromkeys(SERVO_KEYS.values(), "parameter"))
+    needed[INTERPOLATOR] = {**dict.fromkeys(INTERPOLATOR_OUTPUTS, "output"),
+                            **dict.fromkeys(interpolator_parameters(
+                                CircleInterpolator(1.0, 1.0, (0.0, 0.0)), 0.0), "parameter")}
     return needed
 
 

@@ -20,18 +20,20 @@ lead-in arc before the measured turn and a lead-out arc after it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from ..fmu_map import AXIS_KEYS, neutral_fmu_parameters, servo_to_fmu
-from ..physics.circle import LEAD_IN_DEG, MACHINE_PLANT, axis_positions_mm
+from ..physics.circle import MACHINE_PLANT
 from ..errors import InputError
 from .system import (DEFAULT_THERMAL_STEP_S, AxisSystem, Component, Connection, Output,
                      Variable, axis_overrides, default_axis, option_steps)
 
 AXIS_PARTS = ("NpidServo", "StepperError", "GeometricError", "ThermalScrew")
+INTERPOLATOR = "CircleInterpolator"
+# the interpolator FMU's outputs, the first and the second axis's reference
+INTERPOLATOR_OUTPUTS = ("first_position_ref_mm", "second_position_ref_mm")
+REFERENCE_INPUT = "_position_ref_mm"
 ERROR_PARTS = ("StepperError", "GeometricError", "ThermalScrew")
 
 
@@ -197,55 +199,42 @@ def machine_parameters(machine, system):
     return overrides
 
 
-@dataclass(frozen=True)
-class CircleInterpolator:
-    """The commanded path of a circular test in one direction.
+def reference_axes(system):
+    """The axes whose servo references are system inputs (``X_position_ref_mm``), in order."""
+    return [v.name[:-len(REFERENCE_INPUT)] for v in system.inputs
+            if v.name.endswith(REFERENCE_INPUT)]
 
-    The axes stand at the start of the lead-in arc, ``lead_in_deg`` before ``start_deg``,
-    then travel the circle at the programmed feed through the lead-in arc, one measured
-    turn from ``start_deg`` and the lead-out arc. ``direction`` +1 is counter-clockwise.
+
+def interpolator_parameters(path, ahead_s):
+    """The CircleInterpolator FMU's parameter values commanding ``path``
+    (:class:`feedaxis.physics.circle.CircleInterpolator`) ``ahead_s`` ahead."""
+    return {"radius_mm": float(path.radius_mm), "feed_mm_min": float(path.feed_mm_min),
+            "center_first_mm": float(path.center_mm[0]),
+            "center_second_mm": float(path.center_mm[1]), "direction": int(path.direction),
+            "start_deg": float(path.start_deg), "lead_in_deg": float(path.lead_in_deg),
+            "lead_out_deg": float(path.lead_out_deg), "ahead_s": float(ahead_s)}
+
+
+def with_interpolator(system, path):
+    """The machine ``system`` driven round ``path`` by the CircleInterpolator FMU: its
+    outputs connected to the axes' servo references in place of the system inputs
+    ``X_position_ref_mm`` and ``Y_position_ref_mm``.
+
+    Its outputs after the step ending at t are the circle at t + h (h the macro step): a
+    host stepping Jacobi gives each servo over [t, t + h] the circle at t + h, the reference
+    feedaxis's master gives it (:func:`feedaxis.cosim.circular.run_circular`), and at
+    initialisation the circle at h, as the master does.
     """
-
-    radius_mm: float
-    feed_mm_min: float
-    center_mm: tuple
-    direction: int = 1
-    start_deg: float = 0.0
-    lead_in_deg: float = LEAD_IN_DEG
-    lead_out_deg: float = 45.0
-
-    def __post_init__(self):
-        for name in ("radius_mm", "feed_mm_min"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be > 0, got {value!r}")
-        for name in ("lead_in_deg", "lead_out_deg"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0 <= value <= 360):
-                raise ValueError(f"{name} must be 0 to 360, got {value!r}")
-
-    @property
-    def degrees_per_s(self):
-        """Angular speed (deg/s) at the programmed feed."""
-        return math.degrees(self.feed_mm_min / 60.0 / self.radius_mm)
-
-    @property
-    def measured_s(self):
-        """(start, end) time (s) of the measured turn."""
-        start = self.lead_in_deg / self.degrees_per_s
-        return start, start + 360.0 / self.degrees_per_s
-
-    @property
-    def duration_s(self):
-        return (self.lead_in_deg + 360.0 + self.lead_out_deg) / self.degrees_per_s
-
-    def angle_deg(self, time_s):
-        """Commanded angle (deg, unwrapped) at the times ``time_s``."""
-        travelled = np.clip(np.asarray(time_s, float), 0.0, self.duration_s) * self.degrees_per_s
-        return self.start_deg + self.direction * (travelled - self.lead_in_deg)
-
-    def position_mm(self, time_s, axis_index):
-        """Commanded position (mm) of the first (0) or second (1) axis."""
-        return axis_positions_mm(self.angle_deg(time_s), self.radius_mm, self.center_mm,
-                                 axis_index)
+    axes = reference_axes(system)
+    if len(axes) != 2:
+        raise ValueError(f"a machine of two axes has two servo references, got {axes}")
+    sources = {f"{axis}{REFERENCE_INPUT}": f"{INTERPOLATOR}.{output}"
+               for axis, output in zip(axes, INTERPOLATOR_OUTPUTS)}
+    interpolator = Component(INTERPOLATOR, INTERPOLATOR, system.macro_step_s,
+                             interpolator_parameters(path, system.macro_step_s),
+                             "circle interpolator: both axes' references, one macro step ahead")
+    return replace(system, inputs=tuple(v for v in system.inputs if v.name not in sources),
+                   components=(interpolator, *system.components),
+                   connections=tuple(replace(c, source=sources.get(c.source, c.source))
+                                     for c in system.connections))
 

@@ -72,6 +72,10 @@ class Effect:
     # an effect acting inside the system is screened by one linearised step before it is
     # fitted (diagnose._screened_residual); False: always fitted (a step from far away)
     screened: bool = True
+    # an effect always fitted (screened False) that the diagnosis first screens by its score
+    # test at its neutral values where the measurement has exact sensitivities
+    # (diagnose.SCREEN_ALPHA): fitted only where the screen passes
+    score_screened: bool = False
     # effects fitted beside it when the model lacks them (diagnose._joined): a friction
     # inside a loop whose plant was fitted without it shows only with the plant refitted
     fitted_with: tuple = ()

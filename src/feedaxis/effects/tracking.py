@@ -103,6 +103,7 @@ class CoulombFriction(TrackingEffect):
     probe = {"friction_N": 1.0}
     from_identified = ("friction_N",)
     screened = False  # the loop is nonlinear in it: a linear step from 0 understates it
+    score_screened = True  # but the exact step shows where it cannot matter
     fitted_with = ("servo_plant",)  # the starting plant, fitted alone, absorbed part of it
 
     def evidence(self, case, values, contribution_um):
@@ -144,6 +145,7 @@ class StribeckFriction(TrackingEffect):
     neutral = {"coulomb_N": 0.0, "static_N": 0.0, "stribeck_velocity_mm_s": 1.0}
     probe = {"coulomb_N": 1.0, "static_N": 1.0}
     screened = False
+    score_screened = True
     fitted_with = ("servo_plant",)
 
     def guess(self, case, residual_um):

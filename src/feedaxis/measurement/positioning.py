@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 import scipy
-from scipy.optimize import minimize_scalar
 
 from .. import kinds, standards
 from ..case import (DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, checked_run,
@@ -571,9 +570,10 @@ class Periodic(Shape):
             peak = 1.0 / spectrum.wavelength_mm[searched][int(np.argmax(
                 spectrum.amplitude_um[searched]))]
             width = 1.0 / (5 * np.ptp(measurement.clusters[0]))
-        best = minimize_scalar(lambda f: _weighted_misfit(measurement.clusters, residual_um, f),
-                               bounds=(max(peak - width, width / 2), peak + width),
-                               method="bounded", options={"xatol": width * 1e-4})
+        best = scipy.optimize.minimize_scalar(
+            lambda f: _weighted_misfit(measurement.clusters, residual_um, f),
+            bounds=(max(peak - width, width / 2), peak + width), method="bounded",
+            options={"xatol": width * 1e-4})
         return Trial(sinusoid(position_mm, best.x), float(1.0 / best.x), test)
 
     def describe(self, measurement, trial, fitted_um):

@@ -19,6 +19,7 @@ has died out by then, does not bend the plant.
 from __future__ import annotations
 
 import weakref
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -62,6 +63,9 @@ WHOLE_RECORD_SHARE = 0.75  # of the periodic test's level: the record's periodog
 # the short-time periodogram's
 ROUNDING_UM = 1e-3  # the diagnosis's resolution (diagnose.RESOLUTION_UM): below it, rounding
 TRACKING_FILE = "tracking.csv"
+# the loop's results kept per record (:class:`Recent`): a 500 s trace at 1 ms holds 4 MB of
+# positions, 16 MB of a plant's sensitivities
+RECENT_BYTES = 2**27
 
 TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
                     "disturbance_N": False, "control_V": False}
@@ -282,10 +286,13 @@ class Tracking(Measurement):
         self.counts = step_counts(trace.time_s, case.axis.servo["loop_step_s"])
         self.index = (np.arange(_first_settled(trace.time_s), trace.time_s.size)
                       if index is None else np.asarray(index, dtype=int))
+        self.compared = _selector(self.index)
         self.time_s = self.coordinate = trace.time_s[self.index]
         self.reference_mm = trace.reference_mm[self.index]
         self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
         self.start = loop_start_of(case)
+        self._reference_kind = None
+        self.recent = Recent()
 
     start_of = staticmethod(loop_start_of)  # the start the tracking effects guess from
 
@@ -328,7 +335,9 @@ class Tracking(Measurement):
         return spikes(residual_um, OUTLIER_ALPHA, floor=ROUNDING_UM)
 
     def subset(self, keep):
-        return Tracking(self.case, self.index[keep])
+        subset = Tracking(self.case, self.index[keep])
+        subset.recent = self.recent  # the same record: the same loop
+        return subset
 
     def unresolvable(self, effect):
         """A constant force the controller's integral action holds (``held_force``), where
@@ -440,11 +449,23 @@ class Tracking(Measurement):
         """Predicted deviation position - reference (µm) at the samples under ``params``,
         with ``disturbance_N`` (over the whole record; default the record's own) acting on
         the axis; the loop is simulated from rest at the record's first sample."""
-        force = self.disturbance_N if disturbance_N is None else disturbance_N
-        position_mm = simulate(params, self.record_time_s, self.record_reference_mm, force,
-                               self.counts)
+        position_mm = (self.positions_mm(params) if disturbance_N is None else
+                       simulate(params, self.record_time_s, self.record_reference_mm,
+                                disturbance_N, self.counts))
         with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
-            return (position_mm - self.record_reference_mm)[self.index] * 1e3
+            return (position_mm[self.compared] - self.record_reference_mm[self.compared]) * 1e3
+
+    def positions_mm(self, params):
+        """The loop's positions (mm) over the record under ``params`` with the record's own
+        force, kept for the next calls (:class:`Recent`): a fit asks again where it stands,
+        a diagnosis where the model it tests on top stands."""
+        key = ("positions", params)
+        kept = self.recent.get(key)
+        if kept is None:
+            kept = self.recent.put(key, simulate(params, self.record_time_s,
+                                                 self.record_reference_mm, self.disturbance_N,
+                                                 self.counts))
+        return kept
 
     def check_start(self, model, values):
         """The closed loop must not run away with ``values``
@@ -454,8 +475,7 @@ class Tracking(Measurement):
         if self.start.problem and "servo_plant" not in model:
             raise NoStart(self.start.problem)
         params = self.params(model, values)
-        check_runs(params, simulate(params, self.record_time_s, self.record_reference_mm,
-                                    self.disturbance_N, self.counts))
+        check_runs(params, self.positions_mm(params))
 
     def core(self, model):
         return lambda values: self.deviation_um(self.params(model, values))
@@ -474,13 +494,21 @@ class Tracking(Measurement):
 
     def deviation_sensitivity(self, params, names):
         """(:meth:`deviation_um` under ``params``, its derivatives in ``names``: samples x
-        len(names), µm per unit)."""
-        position_mm, d_position_mm = simulate_sensitivity(
-            params, names, self.record_time_s, self.record_reference_mm, self.disturbance_N,
-            self.counts)
+        len(names), µm per unit), kept for the next calls as :meth:`positions_mm` (the
+        positions too: the pass's are the loop's to the bit)."""
+        key = ("sensitivity", params, tuple(names))
+        d_position_mm = self.recent.get(key)
+        if d_position_mm is None:
+            position_mm, d_position_mm = simulate_sensitivity(
+                params, names, self.record_time_s, self.record_reference_mm,
+                self.disturbance_N, self.counts)
+            d_position_mm = self.recent.put(key, d_position_mm)
+            position_mm = self.recent.put(("positions", params), position_mm)
+        else:
+            position_mm = self.positions_mm(params)
         with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
-            return ((position_mm - self.record_reference_mm)[self.index] * 1e3,
-                    d_position_mm[self.index] * 1e3)
+            return ((position_mm[self.compared] - self.record_reference_mm[self.compared])
+                    * 1e3, d_position_mm[self.compared] * 1e3)
 
     def loop_response_um(self, model, disturbance_N):
         """Change of the predicted deviation (µm) at the samples when ``disturbance_N``
@@ -499,9 +527,10 @@ class Tracking(Measurement):
             self.disturbance_N
         kicked = known.copy()
         kicked[1] += 1.0
-        record_um = [(simulate(params, self.record_time_s, self.record_reference_mm, force,
-                               self.counts) - self.record_reference_mm) * 1e3
-                     for force in (known, kicked)]
+        record_um = [(position_mm - self.record_reference_mm) * 1e3 for position_mm in (
+            self.positions_mm(params),  # the record's own force: kept where the fit ran it
+            simulate(params, self.record_time_s, self.record_reference_mm, kicked,
+                     self.counts))]
         return (record_um[1] - record_um[0])[1:]
 
     def fit_window(self, model, residual_um, frequency_hz, first, last):
@@ -663,8 +692,11 @@ class Tracking(Measurement):
         return near
 
     def reference_kind(self):
-        """What the reference is, in words (:func:`_reference_kind`)."""
-        return _reference_kind(self.time_s, self.reference_mm)
+        """What the reference is, in words (:func:`_reference_kind`), found once: every fit
+        of the samples asks for it."""
+        if self._reference_kind is None:
+            self._reference_kind = _reference_kind(self.time_s, self.reference_mm)
+        return self._reference_kind
 
     def excitation(self):
         """What the reference is, and why it leaves a parameter loose: a single sine (its
@@ -694,6 +726,35 @@ class Tracking(Measurement):
         return self.record_time_s[grid], np.interp(grid, self.index, values)
 
 
+class Recent:
+    """The loop's last results over one record by key (its parameters, the sensitivities'
+    names), kept read-only within ``budget_bytes``, the oldest dropped first: a fit
+    evaluates where it stands more than once (its start's check and first residual, the
+    projection's optimum and the polish's start), a diagnosis the model it tests on top."""
+
+    def __init__(self, budget_bytes=None):
+        self.budget_bytes = RECENT_BYTES if budget_bytes is None else budget_bytes
+        self.items = OrderedDict()
+
+    def get(self, key):
+        """The result kept under ``key``, or None."""
+        value = self.items.get(key)
+        if value is not None:
+            self.items.move_to_end(key)
+        return value
+
+    def put(self, key, value):
+        """Keep ``value`` (an array, made read-only) under ``key`` while the budget allows;
+        returns it."""
+        value.setflags(write=False)
+        self.items[key] = value
+        self.items.move_to_end(key)
+        while self.items and sum(kept.nbytes for kept in self.items.values()) > \
+                self.budget_bytes:
+            self.items.popitem(last=False)
+        return value
+
+
 def _reference_kind(time_s, reference_mm):
     """What ``reference_mm`` is, in words: a single sine at its frequency (one sinusoid
     describes it to 1 % RMS), a point-to-point trajectory of its moves, or a record with its
@@ -704,9 +765,9 @@ def _reference_kind(time_s, reference_mm):
     if centred.size >= 8 and np.any(spectrum[1:]):
         bin_hz = 1.0 / (centred.size * step_s)
         peak_hz = (np.argmax(spectrum[1:]) + 1) * bin_hz
-        left, frequency_hz = min(
-            (_rms(centred - _regress(centred, _sinusoid(time_s, f))[1]), f)
-            for f in np.linspace(max(peak_hz - bin_hz, bin_hz / 2), peak_hz + bin_hz, 41))
+        frequencies_hz = np.linspace(max(peak_hz - bin_hz, bin_hz / 2), peak_hz + bin_hz, 41)
+        left, frequency_hz = min(zip(_sine_fits_rms(time_s, centred, frequencies_hz),
+                                     frequencies_hz))
         if left <= 0.01 * _rms(centred):
             return f"a single sine at {frequency_hz:.3g} Hz"
     speed = np.abs(np.gradient(reference_mm, time_s))
@@ -717,6 +778,38 @@ def _reference_kind(time_s, reference_mm):
     direction = np.sign(np.gradient(reference_mm, time_s))
     turns = int(np.count_nonzero(np.diff(direction[direction != 0]) != 0))
     return f"a record with {turns} velocity reversal{'s' if turns != 1 else ''}"
+
+
+def _sine_fits_rms(time_s, values, frequencies_hz):
+    """The RMS of ``values`` less its least-squares sinusoid (cosine, sine and a constant) at
+    each of the evenly spaced ``frequencies_hz``: each fit by its 3 x 3 normal equations (the
+    columns are near orthogonal over the record), the cosine and sine of the next frequency
+    by turning the phasor e^{iωt} by the spacing, not anew (a complex product per sample
+    where a cosine and a sine cost ten times that)."""
+    elapsed = time_s - time_s[0]
+    phasor = np.exp(2j * np.pi * frequencies_hz[0] * elapsed)
+    turn = np.exp(2j * np.pi * (frequencies_hz[1] - frequencies_hz[0]) * elapsed) \
+        if frequencies_hz.size > 1 else phasor
+    total = float(np.sum(values))
+    left = []
+    for _ in frequencies_hz:
+        cosine, sine = np.ascontiguousarray(phasor.real), np.ascontiguousarray(phasor.imag)
+        cross = float(cosine @ sine)
+        gram = np.array([[cosine @ cosine, cross, np.sum(cosine)],
+                         [cross, sine @ sine, np.sum(sine)],
+                         [np.sum(cosine), np.sum(sine), values.size]])
+        a, b, c = np.linalg.lstsq(gram, [cosine @ values, sine @ values, total], rcond=None)[0]
+        left.append(_rms(values - a * cosine - b * sine - c))
+        phasor *= turn
+    return left
+
+
+def _selector(index):
+    """``index`` (increasing record samples) as a slice where it is a run of consecutive
+    samples (no outlier left out): a view, not a copy, of what the loop gives."""
+    if index.size and index[-1] - index[0] + 1 == index.size:
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
 
 
 def _first_settled(time_s):

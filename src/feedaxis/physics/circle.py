@@ -10,6 +10,9 @@ co-simulated machine and the diagnosis fits them.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from .servo import ServoParams, simulate
@@ -48,6 +51,71 @@ def axis_positions_mm(angle_deg, radius_mm, center_mm, axis_index):
     theta = np.radians(angle_deg)
     along = np.cos(theta) if axis_index == 0 else np.sin(theta)
     return center_mm[axis_index] + radius_mm * along
+
+
+@dataclass(frozen=True)
+class CircleInterpolator:
+    """The commanded path of a circular test in one direction.
+
+    The axes stand at the start of the lead-in arc, ``lead_in_deg`` before ``start_deg``,
+    then travel the circle at the programmed feed through the lead-in arc, one measured
+    turn from ``start_deg`` and the lead-out arc, and stand at its end. ``direction`` +1 is
+    counter-clockwise, -1 clockwise. The one definition of the commanded circle: the
+    project's master calls it, and the CircleInterpolator FMU is an adapter over it.
+    """
+
+    radius_mm: float
+    feed_mm_min: float
+    center_mm: tuple
+    direction: int = 1
+    start_deg: float = 0.0
+    lead_in_deg: float = LEAD_IN_DEG
+    lead_out_deg: float = 45.0
+
+    def __post_init__(self):
+        for name in ("radius_mm", "feed_mm_min"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be > 0, got {value!r}")
+        for name in ("lead_in_deg", "lead_out_deg"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0 <= value <= 360):
+                raise ValueError(f"{name} must be 0 to 360, got {value!r}")
+        if not 0.0 < self.degrees_per_s < math.inf:
+            raise ValueError(f"feed_mm_min / radius_mm = {self.feed_mm_min!r} / "
+                             f"{self.radius_mm!r}: the angular speed must be finite and > 0")
+        if self.direction not in (1, -1):
+            raise ValueError(f"direction must be 1 (counter-clockwise) or -1 (clockwise), "
+                             f"got {self.direction!r}")
+        if not all(math.isfinite(value) for value in (*self.center_mm, self.start_deg)):
+            raise ValueError(f"the centre and start angle must be finite, got "
+                             f"{self.center_mm!r} and {self.start_deg!r}")
+
+    @property
+    def degrees_per_s(self):
+        """Angular speed (deg/s) at the programmed feed."""
+        return math.degrees(self.feed_mm_min / 60.0 / self.radius_mm)
+
+    @property
+    def measured_s(self):
+        """(start, end) time (s) of the measured turn."""
+        start = self.lead_in_deg / self.degrees_per_s
+        return start, start + 360.0 / self.degrees_per_s
+
+    @property
+    def duration_s(self):
+        """Time (s) from the start of the lead-in arc to the end of the lead-out arc."""
+        return (self.lead_in_deg + 360.0 + self.lead_out_deg) / self.degrees_per_s
+
+    def angle_deg(self, time_s):
+        """Commanded angle (deg, unwrapped) at the times ``time_s``."""
+        travelled = np.clip(np.asarray(time_s, float), 0.0, self.duration_s) * self.degrees_per_s
+        return self.start_deg + self.direction * (travelled - self.lead_in_deg)
+
+    def position_mm(self, time_s, axis_index):
+        """Commanded position (mm) of the first (0) or second (1) axis."""
+        return axis_positions_mm(self.angle_deg(time_s), self.radius_mm, self.center_mm,
+                                 axis_index)
 
 
 def axis_direction(angle_deg, direction, axis_index):

@@ -620,7 +620,8 @@ class Servo:
     # float64 vector in the propagator's order for the linear path (z, reference_mm,
     # force_V; delay line read from its head). Both keep position, velocity, integral,
     # previous error and reference at indices 0-4; self._loop is the form in use (the list,
-    # or a memoryview of the array or vector: all index to Python floats).
+    # or a memoryview of the array or vector: all index to Python floats; self._commands the
+    # delay line of run_loop's form, likewise).
 
     @property
     def position_mm(self):
@@ -652,7 +653,8 @@ class Servo:
         """The controller output of the last loop step (V)."""
         if self._vector is not None:  # the delay line read from its head: newest last
             return float(self._vector[4 + self.params.buffer_size])
-        return float(self._buffer[(int(self._state[5]) - 1) % len(self._buffer)])
+        commands = self._commands  # indexes to a Python float, as self._loop
+        return commands[(int(self._loop[5]) - 1) % len(commands)]
 
     def state(self):
         """All internal state as plain Python values (for FMU get/set state)."""
@@ -707,10 +709,10 @@ class Servo:
         """Hold ``state`` and ``buffer`` (lists) in run_loop's form."""
         if self._compiled is None:
             self._state, self._buffer = state, buffer
-            self._loop = self._state
+            self._loop, self._commands = self._state, self._buffer
         else:
             self._state, self._buffer = np.array(state), np.array(buffer)
-            self._loop = memoryview(self._state)
+            self._loop, self._commands = memoryview(self._state), memoryview(self._buffer)
             self._kernel_arguments = (self._coefficients, *self._samples, self._state,
                                       self._buffer, self._positions, self._controls)
         self._vector = None

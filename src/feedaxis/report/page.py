@@ -19,7 +19,6 @@ from ..kinds import part
 from ..output import write_atomically
 from ..stats.wording import p_text
 from ..text import micro, repeatability_text
-from . import plots
 
 STYLE = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;
@@ -102,6 +101,8 @@ def _diagnosis_html(analysis):
 
 def sample_contributions(analysis):
     """Each effect's contribution at the samples, against their coordinate."""
+    from . import plots  # matplotlib, imported where a figure is drawn
+
     measurement = analysis.measurement
     return plots.contributions(measurement.coordinate, analysis.components,
                                measurement.coordinate_label)
@@ -114,6 +115,8 @@ def _no_views(analysis):
 def _sections(analysis):
     """The page's sections for one analysis: the kind's views, figures and contributions
     plot (:func:`feedaxis.kinds.part` ``views``), each where the page places it."""
+    from . import plots  # matplotlib, imported where a figure is drawn
+
     views, figures, contributions = (part(type(analysis.measurement), "views")
                                      or (_no_views, _no_views, sample_contributions))
     measurement, result, model = analysis.measurement, analysis.result, analysis.model

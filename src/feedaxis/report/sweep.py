@@ -12,13 +12,17 @@ from ..output import write_atomically
 from ..stats.wording import p_text
 from ..text import micro
 from .page import STYLE, image, table as html_table
-from .plots import _png, plt
 
 MAX_SCATTERS = 4  # inputs shown against each figure, the most influential first
+# fewer finished trials than this have no spread to draw: the page has no figure then (a
+# histogram of one value, a band of one curve), and matplotlib is not imported (0.4 s)
+MIN_SPREAD_TRIALS = 2
 
 
 def histograms(figures):
     """One histogram per figure ({name: values}), the 2.5 / 50 / 97.5 % quantiles marked."""
+    from .plots import _png, plt  # matplotlib, imported where a figure is drawn
+
     count = len(figures)
     columns = min(3, count)
     rows = -(-count // columns)
@@ -39,6 +43,8 @@ def histograms(figures):
 
 def scatters(figure_name, y, inputs):
     """``y`` against each input ({name: values})."""
+    from .plots import _png, plt
+
     figure, axes = plt.subplots(1, len(inputs), figsize=(3.3 * len(inputs), 2.8), squeeze=False)
     for ax, (name, x) in zip(axes[0], inputs.items()):
         ax.plot(x, y, ".", ms=3, alpha=0.6)
@@ -51,6 +57,8 @@ def scatters(figure_name, y, inputs):
 
 def band_plot(band):
     """The 95 % prediction band and the median of the curve, one per group."""
+    from .plots import _png, plt
+
     figure, axes = plt.subplots(figsize=(9, 3.6))
     x = np.asarray(band["x"])
     group = np.asarray(band["group"])
@@ -113,15 +121,22 @@ def write_sweep_report(summary, table, out_path):
     if summary["held"]:
         sections.append(html_table(("held at the fitted value", "why undetermined"),
                                summary["held"].items()))
+    spread = ok.sum() >= MIN_SPREAD_TRIALS
     if summary["figures"] and any(d["n"] for d in summary["figures"].values()):
         sections += ["<h2>Figures</h2>",
                      html_table(("figure", "trials", "mean", "sd", "2.5 %", "50 %", "97.5 %", "min",
-                             "max"), _figure_rows(summary)),
-                     image(histograms({n: v for n, v in figures.items() if v.size}),
-                            "histograms of the figures")]
-    if summary["bands"]:
+                             "max"), _figure_rows(summary))]
+        if spread:
+            sections.append(image(histograms({n: v for n, v in figures.items() if v.size}),
+                                  "histograms of the figures"))
+    if summary["bands"] and spread:
         sections += ["<h2>Prediction band</h2>", image(band_plot(summary["bands"]),
                                                         "prediction band")]
+    if not spread:
+        finished = int(ok.sum())
+        sections.append(f"<p>{finished} finished trial{'' if finished == 1 else 's'}: no "
+                        "spread to draw (the figures are in the table; <code>feedaxis "
+                        "simulate</code> writes one run's curves)</p>")
     rows = _sensitivity_rows(summary)
     if rows:
         sections += ["<h2>Sensitivities</h2>",

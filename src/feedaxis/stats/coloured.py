@@ -50,9 +50,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy.linalg import solve_toeplitz
-from scipy.ndimage import median_filter
-from scipy.optimize import minimize_scalar
 
 SOKAL_WINDOW = 5.0
 MAX_AR_ORDER = 10
@@ -123,7 +120,7 @@ def _robust_noise_autocovariance(centred, max_order):
         level = level / factor
     else:
         level = power.mean(axis=0)
-    running = median_filter(level, size=SEGMENT_LINE_BINS, mode="nearest")
+    running = scipy.ndimage.median_filter(level, size=SEGMENT_LINE_BINS, mode="nearest")
     level = np.where(level > LINE_RATIO * running, running, level)
     lags = np.arange(max_order + 1)
     lag_window = np.array([taper[:length - k] @ taper[k:] for k in lags]) / (taper @ taper)
@@ -132,7 +129,7 @@ def _noise_autocovariance(centred, max_order):
     """Autocovariance at lags 0..max_order from the periodogram with its lines cut out."""
     n = centred.size
     power = np.abs(np.fft.rfft(centred, 2 * n)) ** 2 / n
-    level = median_filter(power, size=LINE_LEVEL_BINS, mode="nearest")
+    level = scipy.ndimage.median_filter(power, size=LINE_LEVEL_BINS, mode="nearest")
     cleaned = np.where(power > LINE_RATIO * level, level, power)
     return np.fft.irfft(cleaned)[:max_order + 1]
 
@@ -218,7 +215,8 @@ def autoregression(residual, max_order=MAX_AR_ORDER, penalty_per_parameter=None,
     best = Autoregression(np.zeros(0), float(autocovariance[0]), float(autocovariance[0]))
     best_score = residual.size * np.log(autocovariance[0]) if min_order == 0 else np.inf
     for order in range(max(min_order, 1), max_order + 1):
-        coefficients = solve_toeplitz(autocovariance[:order], autocovariance[1:order + 1])
+        coefficients = scipy.linalg.solve_toeplitz(autocovariance[:order],
+                                                   autocovariance[1:order + 1])
         variance = autocovariance[0] - coefficients @ autocovariance[1:order + 1]
         score = residual.size * np.log(max(variance, 1e-300)) + penalty * order
         if score < best_score:
@@ -474,7 +472,7 @@ def locate_sinusoid(residual, time_s, frequency_hz, bin_hz):
         min_samples = max(8, int(np.ceil(2.0 / (frequency_hz * step_s))))
         a, b, _ = _best_gate(white, times, frequency_hz, min(min_samples, white.size))
         gate = slice(a, b)
-        refined = minimize_scalar(
+        refined = scipy.optimize.minimize_scalar(
             lambda f: -_gated_fit(white[gate], *_phases(times[gate], f),
                                   (np.array([0]), np.array([b - a])))[0],
             bounds=(max(frequency_hz - bin_hz, 0.5 * bin_hz), frequency_hz + bin_hz),

@@ -240,7 +240,7 @@ class _dask_client:
         count = self.workers if self.workers is not None else (os.cpu_count() or 1)
         if not (isinstance(count, int) and count >= 1):
             raise InputError(f"must be a whole number >= 0, got {count}", parameter="--workers")
-        with _ctrl_c_left_to_this_process():
+        with _ctrl_c_left_to_this_process(), _forked_workers():
             cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
                                    dashboard_address=SCHEDULER_HTTP_PORT,
                                    silence_logs=logging.ERROR)
@@ -251,6 +251,25 @@ class _dask_client:
     def __exit__(self, *exc):
         for owned in self.owned:
             owned.close()
+
+
+@contextmanager
+def _forked_workers():
+    """Within: local workers are forked from one server process that imported Dask and
+    what a trial needs once (multiprocessing's forkserver), instead of each starting a
+    fresh Python that imports them again (spawn, Dask's default). A cluster of 2 came up
+    in 2.2-2.4 s against 3.3-3.6 s and closed in 0.05 s against 1 s (under a load of 11
+    on 2 cores). Where there is no forkserver (Windows), Dask's default."""
+    import multiprocessing
+
+    import dask
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        yield
+        return
+    multiprocessing.set_forkserver_preload(["distributed", __name__])
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        yield
 
 
 @contextmanager

@@ -1,0 +1,130 @@
+"""diagnose on a long servo trace: this version against the code it started from, side by side.
+
+The trace of bench_diagnose_scale.py: 500 s at 1 ms (500,000 samples, 5·10^6 loop steps per
+simulation) of Anang et al. 2017's PID on another plant, white + AR(1) noise, no friction and
+no force; model servo_plant at the truth (issue 35's target: ≤ 2 s). Each run is a fresh
+process importing either this checkout's ``src`` (copied when the run starts) or the
+baseline commit's (extracted by ``git archive``; default the commit before the speed work),
+alternating, so a change of the machine's load falls on both alike. A process first
+diagnoses a 3 s trace (numba's kernels compiled or loaded), then times one diagnosis of the
+long trace: CPU seconds (the machine is
+shared, so CPU, not wall time, is the figure) and wall seconds, medians with their ranges,
+and the ratio baseline / this version. Each run's verdict and the named effects and
+structures are printed beside it: the faster path must find the same.
+
+Where the speed went (the 500 s trace, under load; docs/tracking.md): the friction laws were
+fitted in full on top of the plant (28 simulations and 19 sensitivity passes, 19.3 of 28.7 s
+of CPU); they are now screened by their score test first (bench_friction_screen.py); the loop's
+results are kept by parameters (53 -> 15 simulations); the sensitivity pass without friction
+skips the friction's tangent (1.7x); the reference's description is found once (was 4 x 2 s).
+
+Run: ``python benchmarks/bench_tracking_diagnose.py [--repeats 3] [--long-s 500]
+[--baseline 45c6d7f]`` (``--smoke``: 3 s, one repeat).
+"""
+import argparse
+import io
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from common import arguments, describe, machine  # noqa: E402
+
+BASELINE = "45c6d7f"  # main before the tracking diagnosis's speed work (issue 35, item 4)
+
+CHILD = """
+import json, sys, time
+from threadpoolctl import threadpool_limits
+from bench_diagnose_scale import PLANT, tracking_trace
+from feedaxis.diagnose import diagnose
+from feedaxis.effects import CATALOG, Model
+
+with threadpool_limits(limits=1, user_api="blas"):
+    plant = Model([CATALOG["servo_plant"]], {"servo_plant": PLANT})
+    diagnose(tracking_trace(3.0), plant)
+    trace = tracking_trace(float(sys.argv[1]))
+    wall, cpu = time.perf_counter(), time.process_time()
+    found = diagnose(trace, plant)
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+print(json.dumps({"cpu_s": cpu, "wall_s": wall, "verdict": found.verdict,
+                  "named": [c.effect for c in found.candidates],
+                  "structures": [s.kind for s in found.unexplained],
+                  "rms_um": found.rms_um}))
+"""
+
+
+def baseline_source(commit, folder):
+    """The ``src`` folder of ``commit`` extracted into ``folder`` / baseline, or (None,
+    why)."""
+    done = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", commit, "src"],
+                          capture_output=True)
+    if done.returncode:
+        return None, done.stderr.decode(errors="replace").strip() or "git archive failed"
+    with tarfile.open(fileobj=io.BytesIO(done.stdout)) as archive:
+        archive.extractall(Path(folder) / "baseline", filter="data")
+    return Path(folder) / "baseline" / "src", None
+
+
+def one_run(source, long_s):
+    """{cpu_s, wall_s, verdict, named, structures, rms_um} of one process on ``source``."""
+    path = os.pathsep.join(str(p) for p in (source, HERE, ROOT / "tests"))
+    done = subprocess.run([sys.executable, "-c", CHILD, str(long_s)], capture_output=True,
+                          text=True, env={**os.environ, "PYTHONPATH": path}, cwd=ROOT)
+    if done.returncode:
+        raise RuntimeError(done.stderr[-2000:])
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--long-s", type=float, default=500.0)
+    parser.add_argument("--baseline", default=BASELINE,
+                        help=f"the commit timed beside this version (default {BASELINE})")
+    args = arguments(parser, argv, repeats=1, long_s=3.0)
+    print(machine())
+    with tempfile.TemporaryDirectory() as folder:
+        old, why = baseline_source(args.baseline, folder)
+        current = Path(folder) / "current"  # this version as it is now, whatever changes
+        shutil.copytree(ROOT / "src", current / "src",  # during the run
+                        ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+        sources = {"this version": current / "src"}
+        if old is None:
+            print(f"baseline {args.baseline} not available ({why}): this version alone")
+        else:
+            sources = {f"baseline {args.baseline}": old, **sources}
+        runs = {label: [] for label in sources}
+        for _ in range(args.repeats):
+            for label, source in sources.items():
+                runs[label].append(one_run(source, args.long_s))
+    print(f"diagnose on {args.long_s:g} s at 1 ms ({round(args.long_s * 1000)} samples, loop "
+          "0.1 ms), model servo_plant at the truth, BLAS on one thread:")
+    for label, found in runs.items():
+        print(f"  {label:26s} CPU {describe([r['cpu_s'] for r in found])}; wall "
+              f"{describe([r['wall_s'] for r in found])}")
+        for r in found:
+            print(f"    verdict {r['verdict']}, named {r['named'] or 'none'}, structures "
+                  f"{r['structures'] or 'none'}, residual RMS {r['rms_um']:.6g} µm")
+    if len(runs) == 2:
+        (_, old_runs), (_, new_runs) = runs.items()
+        cpu = [statistics.median(r["cpu_s"] for r in found) for found in (old_runs, new_runs)]
+        wall = [statistics.median(r["wall_s"] for r in found) for found in (old_runs, new_runs)]
+        print(f"  ratio baseline / this version: CPU {cpu[0] / cpu[1]:.2f}x, wall "
+              f"{wall[0] / wall[1]:.2f}x")
+    new_cpu = statistics.median(r["cpu_s"] for r in runs["this version"])
+    if args.long_s == 500.0:
+        print(f"  target <= 2 s: {'met' if new_cpu <= 2.0 else 'not met'} "
+              f"(this version {new_cpu:.2f} s CPU)")
+
+
+if __name__ == "__main__":
+    main()
