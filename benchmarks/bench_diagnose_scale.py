@@ -47,6 +47,11 @@ PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
 
 
 def iso_like(samples, seed=1, n_targets=1000):
+    return syn.in_memory_case(syn.ISO_AXIS, **iso_columns(samples, seed, n_targets))
+
+
+def iso_columns(samples, seed=1, n_targets=1000):
+    """{column: array} of ``samples`` rows: ``n_targets`` targets x bidirectional runs."""
     rng = np.random.default_rng(seed)
     runs = max(samples // (2 * n_targets), 1)
     targets = np.arange(n_targets) * 0.5 + rng.uniform(-0.1, 0.1, n_targets)
@@ -56,8 +61,7 @@ def iso_like(samples, seed=1, n_targets=1000):
     target_mm = target_mm + rng.uniform(-1e-6, 1e-6, target_mm.size)
     error_um = (1.5 - 0.012 * target_mm + 0.25 * direction
                 + rng.normal(0.0, 0.3, target_mm.size))
-    return syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=error_um,
-                              direction=direction, run=run)
+    return {"target_mm": target_mm, "error_um": error_um, "direction": direction, "run": run}
 
 
 def single_pass(samples, seed=2):

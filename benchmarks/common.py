@@ -62,11 +62,12 @@ class Command(NamedTuple):
     stderr: str
 
 
-def run_command(command):
-    """:class:`Command` of ``command`` (a list) run to its end; a failure raises."""
+def run_command(command, env=None):
+    """:class:`Command` of ``command`` (a list) run to its end (in the environment ``env``,
+    else this one's); a failure raises."""
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         start = time.perf_counter()
-        process = subprocess.Popen(command, stdout=out, stderr=err)
+        process = subprocess.Popen(command, stdout=out, stderr=err, env=env)
         _, status, usage = os.wait4(process.pid, 0)
         wall_s = time.perf_counter() - start
         out.seek(0)

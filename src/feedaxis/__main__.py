@@ -13,9 +13,31 @@ from . import stop
 from .console import fail
 
 
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
+KEPT_BLOCK_BYTES = 1 << 30  # freed blocks up to this size stay in the heap for reuse
+
+
+def keep_freed_memory():
+    """Let glibc's malloc keep freed blocks up to ``KEPT_BLOCK_BYTES`` for reuse instead of
+    unmapping them: the analysis allocates and frees sample-sized arrays (80 MB at 10^7
+    rows) hundreds of times, and every fresh mapping is faulted in page by page (diagnose
+    on 10^7 rows spent 48 of its 117 CPU seconds in the kernel). The peak memory stays
+    the same (the freed blocks are what is reused); nothing changes off glibc."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt(M_MMAP_THRESHOLD, KEPT_BLOCK_BYTES)
+    mallopt(M_TRIM_THRESHOLD, 2 * KEPT_BLOCK_BYTES)
+
+
 def run():
     """Run ``feedaxis`` with ``sys.argv`` and exit with its code."""
     stop.install()
+    keep_freed_memory()
     try:
         from .cli import main
 

@@ -370,18 +370,22 @@ def _read_csv(path, spec):
     """
     path = Path(path)
     check_fits_in_memory(path)
-    text = _read_text(path).replace("\r\n", "\n").replace("\r", "\n")
-    header = _first_record(text)
-    if header is None:
-        raise CaseError(path, "empty: a header row and at least one data row are needed")
-    header_line, header_text, body = header
+    plain = _plain_header(path)
+    if plain is None:
+        text = _read_text(path).replace("\r\n", "\n").replace("\r", "\n")
+        header = _first_record(text)
+        if header is None:
+            raise CaseError(path, "empty: a header row and at least one data row are needed")
+        header_line, header_text, body = header
+    else:
+        (header_line, header_text), body = plain, None
     names = _check_header(path, [cell.strip() for cell in header_text.split(",")], spec,
                           _row_label(1, header_line))
     table, rows = _table(path, body, header_line, names)
     if table.shape[1] != len(names):
         raise CaseError(path, f"{table.shape[1]} fields where the header has {len(names)}",
                         rows[0], names[min(table.shape[1], len(names) - 1)])
-    _check_finite(path, table, body, header_line, rows, names)
+    _check_finite(path, table, rows, names)
     values = {name: table[:, index] for index, name in enumerate(names)}
     for name, column in values.items():
         low, high = PHYSICAL_RANGE.get(name, (-math.inf, math.inf))
@@ -399,25 +403,48 @@ def _read_csv(path, spec):
 ANALYSIS_BYTES_PER_ROW = 500
 TEXT_COPIES = 3
 SAMPLE_BYTES = 1 << 16  # the file's start, from which its rows are counted
+MEMORY_LIMIT_VARIABLE = "FEEDAXIS_MEMORY_LIMIT_MB"  # a lower limit than the machine's
+READ_CHUNK_BYTES = 1 << 24  # a large CSV is checked in chunks of this many bytes
 
 
 def check_fits_in_memory(path, available_bytes=None):
     """Refuse (:class:`CaseError`) a CSV whose reading and analysis would not fit in the
-    memory the machine has available, before reading it: its rows estimated from its size
-    and the lines of its first 64 kB, each row costing ``ANALYSIS_BYTES_PER_ROW``."""
+    memory the machine has available (or the limit ``FEEDAXIS_MEMORY_LIMIT_MB`` sets),
+    before reading it: its rows estimated from its size and the lines of its first 64 kB,
+    each row costing ``ANALYSIS_BYTES_PER_ROW``, and its text ``TEXT_COPIES`` times where
+    that start shows it is read whole (comments, blank lines, CR line ends)."""
     size = path.stat().st_size if path.is_file() else 0
     if size <= SAMPLE_BYTES:
         return
     with open(path, "rb") as stream:
         start = stream.read(SAMPLE_BYTES)
     rows = size * max(start.count(b"\n"), 1) / len(start)
-    needed = TEXT_COPIES * size + rows * ANALYSIS_BYTES_PER_ROW
-    available = available_memory_bytes() if available_bytes is None else available_bytes
+    whole = any(mark in start for mark in (b"#", b"\r", b"\n\n"))
+    needed = (TEXT_COPIES * size if whole else 0) + rows * ANALYSIS_BYTES_PER_ROW
+    available, where = memory_limit()
+    available = available if available_bytes is None else available_bytes
     if available is not None and needed > available:
         raise CaseError(path, f"{size / 1e9:.3g} GB, about {rows:.3g} rows: reading and "
                               f"analysing it needs about {needed / 1e9:.3g} GB of memory "
-                              f"and this machine has {available / 1e9:.3g} GB available; "
-                              "split the measurement into several cases or thin it")
+                              f"and {where.format(f'{available / 1e9:.3g} GB')}; split the "
+                              "measurement into several cases or thin it")
+
+
+def memory_limit():
+    """(bytes a case may use, where that figure comes from as a phrase to format with it):
+    ``FEEDAXIS_MEMORY_LIMIT_MB`` (megabytes) when set, else
+    :func:`available_memory_bytes`."""
+    text = os.environ.get(MEMORY_LIMIT_VARIABLE)
+    if text is None:
+        return available_memory_bytes(), "this machine has {} available"
+    try:
+        limit_mb = finite_float(text.strip())
+    except ValueError:
+        limit_mb = None
+    if limit_mb is None or limit_mb <= 0:
+        raise InputError(f"{MEMORY_LIMIT_VARIABLE}={text!r}: expected a positive number of "
+                         "megabytes")
+    return limit_mb * 1e6, f"{MEMORY_LIMIT_VARIABLE} allows {{}}"
 
 
 def available_memory_bytes():
@@ -452,6 +479,59 @@ class RowLabels:
         return _row_label(int(index) + 2, int(self.lines[index]))
 
 
+def _plain(body):
+    """True when NumPy can read ``body`` (LF line ends) whole: data rows only, no comment
+    or blank line."""
+    return (bool(body) and not body.isspace() and not body.startswith("\n")
+            and "\n\n" not in body and "#" not in body)
+
+
+def _plain_header(path):
+    """(line number, text) of the header of a CSV whose body is :func:`_plain` UTF-8 with
+    LF line ends, found by reading the file in chunks of whole lines (never the whole text
+    at once: at 10^7 rows the text and its copies were three times the table); None for
+    any other file (comments, blank lines, CR line ends, another encoding) or path (a
+    folder, an unreadable file), which the whole-text reader reads or refuses."""
+    try:
+        with open(path, "rb") as stream:
+            return _plain_chunks(stream)
+    except OSError:
+        return None
+
+
+def _plain_chunks(stream):
+    """:func:`_plain_header` of the open binary ``stream``."""
+    first = stream.read(READ_CHUNK_BYTES) + stream.readline()
+    if first.startswith((b"\xff\xfe", b"\xfe\xff")) or not _plain_bytes(first):
+        return None
+    try:
+        header = _first_record(first.decode("utf-8-sig"))
+    except UnicodeDecodeError:
+        return None
+    if header is None or not _plain(header[2]):
+        return None
+    while chunk := stream.read(READ_CHUNK_BYTES) + stream.readline():
+        # each chunk starts a line: one starting with LF starts with a blank line
+        if (b"#" in chunk or b"\n\n" in chunk or chunk.startswith(b"\n")
+                or not _plain_bytes(chunk)):
+            return None
+    return header[:2]
+
+
+def _plain_bytes(chunk):
+    """True when the bytes ``chunk`` (whole lines) are UTF-8 text without CR line ends or
+    NUL characters (which the whole-text reader names)."""
+    if b"\r" in chunk or b"\x00" in chunk:
+        return False
+    if chunk.isascii():
+        return True
+    try:
+        chunk.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
 def _first_record(text):
     """(line number, text, the text after it) of the first line that is neither blank nor a
     '#' comment; None when there is none. ``text`` has LF line ends."""
@@ -469,19 +549,21 @@ def _first_record(text):
 def _table(path, body, header_line, names):
     """The data rows below the header as a float table, and their :class:`RowLabels`.
 
-    A body without comments or blank lines goes to NumPy whole, read from the file below
-    the header (NumPy's reader takes it in chunks: a copy of the text, 4 bytes a character
-    in a StringIO, would double the memory of a large case); otherwise its data lines
-    are picked out first. Where NumPy refuses, the first bad cell is named.
+    A body without comments or blank lines (``body`` None: :func:`_plain_header` found it
+    so without holding the text) goes to NumPy whole, read from the file below the header
+    (NumPy's reader takes it in chunks: a copy of the text, 4 bytes a character in a
+    StringIO, would double the memory of a large case); otherwise its data lines are
+    picked out first. Where NumPy refuses, the first bad cell is named.
     """
-    if (body and not body.isspace() and not body.startswith("\n") and "\n\n" not in body
-            and "#" not in body):
+    if body is None or _plain(body):
         try:
             table = np.loadtxt(path, delimiter=",", comments=None, dtype=float, ndmin=2,
                                encoding="utf-8", skiprows=header_line)
             return table, RowLabels(np.arange(header_line + 1, header_line + 1 + len(table)))
         except ValueError:
             pass  # whitespace-only lines or a bad cell: the line-by-line pass sorts it out
+    if body is None:
+        body = _first_record(_read_text(path).replace("\r\n", "\n").replace("\r", "\n"))[2]
     records = [(number, line) for number, line in enumerate(body.split("\n"), header_line + 1)
                if line.strip() and not line.strip().startswith("#")]
     if not records:
@@ -512,14 +594,18 @@ def _raise_first_bad_cell(path, records, rows, names):
             _number(path, cell.strip(), rows[index], name)
 
 
-def _check_finite(path, table, body, header_line, rows, names):
-    """Raise naming the first cell (in reading order) that is NaN or infinite."""
+def _check_finite(path, table, rows, names):
+    """Raise naming the first cell (in reading order) that is NaN or infinite (the file's
+    text read again only then)."""
+    if np.isfinite(table.sum()):  # a NaN or infinity anywhere makes the sum one
+        return
     finite = np.isfinite(table)
-    if finite.all():
+    if finite.all():  # the sum overflowed
         return
     index = int(np.flatnonzero(~finite.all(axis=1))[0])
     column = int(np.flatnonzero(~finite[index])[0])
-    line = body.split("\n")[rows.lines[index] - header_line - 1]
+    text = _read_text(path).replace("\r\n", "\n").replace("\r", "\n")
+    line = text.split("\n")[rows.lines[index] - 1]
     _number(path, line.split(",")[column].strip(), rows[index], names[column])
 
 

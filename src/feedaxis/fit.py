@@ -23,6 +23,7 @@ from .effects import BasisEffect, FitRecord, Model
 from .errors import InputError
 from .measurement import Measurement, kinds_for, measurement_of
 from .physics.threads import one_blas_thread
+from .stats.linear import normal_solve, unit_gram
 
 SINGULAR_RATIO = 1e-6
 # Residual degrees of freedom a fit must leave for the noise: with nu of them the noise
@@ -291,7 +292,8 @@ class Problem:
 
     def __init__(self, model, found, progress=None):
         self.model, self.found, self.progress = model, found, progress
-        self.measured_um = np.concatenate([m.measured_um for m in found])
+        self.measured_um = (found[0].measured_um if len(found) == 1   # no copy per fit
+                            else np.concatenate([m.measured_um for m in found]))
         self.separators = [m.separable(model) for m in found]
         self.sensitivities = [m.sensitivity(model) for m in found]
         self._last = (None, None)
@@ -341,6 +343,14 @@ class Problem:
             base_um, columns_um = self._split_at(layout, x)
             return self.measured_um - base_um - columns_um @ x[layout.linear_index]
         return residual
+
+    def linear_jacobian(self, layout, x):
+        """d residual / dx at ``x`` of a model whose parameters all enter linearly: its
+        columns negated in place (the split kept at ``x`` is dropped, so no second samples x
+        parameters array is made)."""
+        _, columns_um = self._split_at(layout, x)
+        self._last = (None, None)
+        return np.negative(columns_um, out=columns_um)
 
     def jacobian(self, layout):
         """``f(x) -> d residual / dx``: the linear parameters' columns exactly, the others
@@ -469,13 +479,12 @@ def bounded_linear_solve(columns, target, lower, upper):
     bounds: the normal equations of the unit-scaled columns (a k x k solve, minimum norm
     where the columns are dependent) when that solution is inside the bounds, else
     bounded-variable least squares (scipy's BVLS)."""
-    scale = np.linalg.norm(columns, axis=0)
-    scale[scale == 0.0] = 1.0
-    scaled = columns / scale
-    free = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ target, rcond=None)[0] / scale
+    free = normal_solve(columns, target)
     if np.all((free >= lower) & (free <= upper)):
         return free
-    solution = lsq_linear(scaled, target, method="bvls", bounds=(lower * scale, upper * scale))
+    scale = unit_gram(columns)[1]
+    solution = lsq_linear(columns / scale, target, method="bvls",
+                          bounds=(lower * scale, upper * scale))
     return np.clip(solution.x / scale, lower, upper)
 
 
@@ -487,7 +496,7 @@ def _linear_solution(problem, layout, x):
     margin = 2e-9 * (upper - lower)
     active = np.where(x <= lower + margin, -1, np.where(x >= upper - margin, 1, 0))
     return SimpleNamespace(x=x, fun=problem.residual(layout)(x),
-                           jac=problem.jacobian(layout)(x), active_mask=active)
+                           jac=problem.linear_jacobian(layout, x), active_mask=active)
 
 
 def starting_values(model, found):
@@ -582,10 +591,10 @@ def _unit_column_svd(jacobian):
     ``jacobian`` with unit columns, from the eigen-decomposition of its Gram matrix (a
     parameters x parameters problem, where an SVD of samples x parameters costs seconds at
     10^6 samples; SINGULAR_RATIO squared stays far above the Gram matrix's rounding), scaled
-    after the product (no scaled copy of the Jacobian)."""
-    scale = np.linalg.norm(jacobian, axis=0)
-    scale[scale == 0.0] = 1.0
-    eigenvalues, vectors = np.linalg.eigh((jacobian.T @ jacobian) / np.outer(scale, scale))
+    after the product and the norms from its diagonal (no scaled or squared copy of the
+    Jacobian)."""
+    gram, scale = unit_gram(jacobian)
+    eigenvalues, vectors = np.linalg.eigh(gram)
     order = np.argsort(eigenvalues)[::-1]
     singular, vt = np.sqrt(np.maximum(eigenvalues[order], 0.0)), vectors[:, order].T
     strong = singular > SINGULAR_RATIO * max(singular[0] if singular.size else 0.0, 1e-300)

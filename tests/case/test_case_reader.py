@@ -8,6 +8,7 @@ CRLF or CR only (a form feed or U+2028 in a comment no longer splits it, issue 2
 number is ASCII without Python's ``1_000`` (:func:`feedaxis.errors.finite_float`).
 """
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -135,6 +136,42 @@ def test_near_valid_tables_read_as_the_per_cell_reader_did(tmp_path_factory, dat
     assert_same(path, spec)
 
 
+@settings(FUZZ, max_examples=300)
+@given(data=near_valid_csv(), chunk=st.integers(1, 40))
+def test_tables_checked_in_small_chunks_read_as_the_per_cell_reader_did(tmp_path_factory,
+                                                                        data, chunk):
+    """A large file is checked chunk by chunk before NumPy reads it from the file: with
+    chunks of a few bytes, every blank line, comment, CR or NUL past the first chunk sends
+    the file to the whole-text reader, which refuses or reads it as before."""
+    import feedaxis.case as case_module
+
+    path = tmp_path_factory.mktemp("csv") / "data.csv"
+    path.write_bytes(data)
+    spec = {**TRACKING_COLUMNS, "target_mm": False, "error_um": False}
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(case_module, "READ_CHUNK_BYTES", chunk)
+        assert_same(path, spec)
+
+
+def test_a_plain_file_is_never_held_as_text(tmp_path, monkeypatch):
+    """A CSV of data rows only is read by NumPy from the file, its text never held whole;
+    a NaN in it is named by its row as before (the text read then)."""
+    import feedaxis.case as case_module
+
+    rows = "\n".join(f"{i},{i * 0.5}" for i in range(5000))
+    path = tmp_path / "positioning.csv"
+    path.write_text(f"target_mm,error_um\n{rows}\n")
+    monkeypatch.setattr(case_module, "READ_CHUNK_BYTES", 1000)
+    monkeypatch.setattr(case_module, "_read_text", lambda path: pytest.fail("text read"))
+    values, _ = _read_csv(path, POSITIONING_COLUMNS)
+    assert np.array_equal(values["error_um"], np.arange(5000) * 0.5)
+    monkeypatch.undo()
+    path.write_text(f"target_mm,error_um\n{rows}\n4,nan\n")
+    with pytest.raises(CaseError) as refused:
+        _read_csv(path, POSITIONING_COLUMNS)
+    assert (refused.value.row, refused.value.column) == ("5002", "error_um")
+
+
 def test_a_long_file_with_a_bad_cell_at_the_end_is_named_there(tmp_path):
     rows = "\n".join(f"{i},{i * 0.5}" for i in range(5000))
     path = tmp_path / "positioning.csv"
@@ -167,7 +204,7 @@ def test_a_case_beyond_the_memory_is_refused_before_it_is_read(tmp_path, monkeyp
     lines = [f"{0.5 * (i % 1000):.4f},{(i % 7) * 0.1:.4f}" for i in range(rows)]
     (folder / "positioning.csv").write_text("target_mm,error_um\n" + "\n".join(lines) + "\n")
     size = (folder / "positioning.csv").stat().st_size
-    needed = case_module.TEXT_COPIES * size + rows * case_module.ANALYSIS_BYTES_PER_ROW
+    needed = rows * case_module.ANALYSIS_BYTES_PER_ROW  # a plain file: its text never held
 
     def never(path):
         raise AssertionError("the file was read")
@@ -185,3 +222,29 @@ def test_a_case_beyond_the_memory_is_refused_before_it_is_read(tmp_path, monkeyp
     assert case_module.read_case(folder).positioning.size == rows
     monkeypatch.setattr(case_module, "available_memory_bytes", lambda: 0.9 * needed)
     assert main(["compare", str(folder), "--json"]) == 2
+
+
+def test_the_memory_limit_variable_refuses_a_case_by_its_size(tmp_path):
+    """``FEEDAXIS_MEMORY_LIMIT_MB`` stands for the machine's available memory: a case over
+    it is refused before it is read (exit 2, the file, its size and the limit named); a
+    value that is not a positive number is refused naming the variable."""
+    folder = tmp_path / "big"
+    folder.mkdir()
+    (folder / "axis.toml").write_text('name = "big"\n\n[screw]\nlead_mm = 10.0\n')
+    lines = [f"{0.5 * (i % 1000):.4f},{(i % 7) * 0.1:.4f}" for i in range(20_000)]
+    (folder / "positioning.csv").write_text("target_mm,error_um\n" + "\n".join(lines) + "\n")
+    size = (folder / "positioning.csv").stat().st_size
+
+    def compare(limit):
+        environment = {**os.environ, "FEEDAXIS_MEMORY_LIMIT_MB": limit}
+        return subprocess.run([sys.executable, "-m", "feedaxis", "compare", str(folder)],
+                              capture_output=True, text=True, env=environment, timeout=120)
+
+    refused = compare("1")
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert "positioning.csv" in refused.stderr and f"{size / 1e9:.3g} GB" in refused.stderr
+    assert "FEEDAXIS_MEMORY_LIMIT_MB allows 0.001 GB" in refused.stderr
+    assert compare("1000").returncode == 0
+    for bad in ("lots", "-5", "nan"):
+        wrong = compare(bad)
+        assert wrong.returncode == 2 and "FEEDAXIS_MEMORY_LIMIT_MB" in wrong.stderr

@@ -105,3 +105,64 @@ def test_the_autocovariance_by_fft_is_the_lagged_sum(size):
     direct = np.array([centred[:size - k] @ centred[k:] for k in lags]) / size
     fast = _autocovariance(values)[lags]
     np.testing.assert_allclose(fast, direct, rtol=1e-12, atol=1e-12 * abs(direct[0]))
+
+
+def scipy_robust_drift(layout, residual_um):
+    """The drift of :func:`feedaxis.stats.judge._robust_drift` by SciPy's trust region with
+    the soft-L1 loss (the path before Newton's method over blocks of rows)."""
+    from scipy.optimize import least_squares
+
+    from feedaxis.stats.judge import MAD_TO_SIGMA, drift_basis
+
+    within = drift_basis(layout.clock)
+    for column in within.T:
+        column -= layout.group_means(column)
+    target = residual_um - layout.group_means(residual_um)
+    scale = MAD_TO_SIGMA * np.median(np.abs(target))
+    solution = least_squares(lambda c: within @ c - target, np.zeros(2), loss="soft_l1",
+                             f_scale=scale)
+    return within @ solution.x, solution.x, (within, target, scale)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_the_robust_drift_is_scipys_soft_l1_optimum(seed, monkeypatch):
+    """Newton's method over blocks of rows lands on SciPy's soft-L1 optimum (within SciPy's
+    own tolerance: its gradient there is 1e-8 of the data's, Newton's at rounding), and the
+    outliers flagged are the same rows."""
+    import synthetic as syn
+    from feedaxis.measurement.positioning import Positioning
+    from feedaxis.stats import judge
+
+    rng = np.random.default_rng(seed)
+    case, spikes = syn.iso_trial(rng, drift_um_per_run=0.4, outliers=3)
+    measurement = Positioning(case)
+    layout, residual = measurement.layout, measurement.measured_um - measurement.measured_um.mean()
+    assert layout.clock_varies_within_groups
+    old_drift, old_coefficients, (within, target, scale) = scipy_robust_drift(layout, residual)
+    new = judge.soft_l1_line(within, target, scale, block=7)
+    np.testing.assert_allclose(new, old_coefficients, rtol=1e-6)
+    u = (within @ new - target) / scale
+    gradient = within.T @ (2 * scale * u / np.sqrt(1 + u * u))
+    assert np.abs(gradient).max() <= 1e-12 * np.abs(within.T @ target).max()
+    rows = judge.outlier_rows(layout, measurement.position_mm, residual)
+    assert set(spikes) <= set(rows)
+    monkeypatch.setattr(judge, "_robust_drift", lambda lay, res: scipy_robust_drift(lay, res)[0])
+    np.testing.assert_array_equal(rows, judge.outlier_rows(layout, measurement.position_mm,
+                                                           residual))
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_unit_column_svd_is_the_svd_of_the_unit_columns(seed):
+    """The norms from the Gram matrix's diagonal are the columns' norms; its eigenvectors
+    the right singular vectors of the unit-column Jacobian."""
+    from feedaxis.fit import _unit_column_svd
+
+    rng = np.random.default_rng(seed)
+    jacobian = rng.normal(size=(5000, 4)) * np.array([1e-3, 1.0, 1e3, 7.0])
+    scale, singular, vt, strong = _unit_column_svd(jacobian)
+    np.testing.assert_allclose(scale, np.linalg.norm(jacobian, axis=0), rtol=1e-12)
+    _, expected, expected_vt = np.linalg.svd(jacobian / np.linalg.norm(jacobian, axis=0),
+                                             full_matrices=False)
+    np.testing.assert_allclose(singular, expected, rtol=1e-12)
+    np.testing.assert_allclose(np.abs(vt), np.abs(expected_vt), atol=1e-10)
+    assert strong.all()

@@ -167,6 +167,11 @@ class BasisEffect(Effect):
     def prepare(self, case):
         return lambda v: self.basis @ np.array([v[p.name] for p in self.parameters])
 
+    def prepare_separable(self, case):
+        """The basis itself as the columns (no evaluation, no copy), a zero base."""
+        fixed = (np.zeros(self.basis.shape[0]), self.basis)
+        return lambda values: fixed
+
     def guess(self, case, residual_um):
         coefficients = np.linalg.lstsq(self.basis, residual_um, rcond=None)[0]
         return {p.name: float(c) for p, c in zip(self.parameters, coefficients)}

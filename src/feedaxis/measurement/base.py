@@ -196,7 +196,8 @@ class Measurement(ABC):
     def separable(self, model):
         """``f(values) -> (base_um, columns_um)``: the prediction is ``base_um + columns_um
         @ linear values``, columns in the order ``(effect, parameter) for effect in
-        model.effects for parameter in effect.linear``."""
+        model.effects for parameter in effect.linear``; each call returns new arrays (the
+        fit may overwrite them)."""
         core = self.core(model)
         additive = [(e, e.prepare_separable(self.case)) for e in model.effects if e.additive]
         size = self.size

@@ -33,6 +33,7 @@ from ..stats import judge
 from ..stats.aliasing import aliased
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
+from ..stats.linear import normal_solve
 from ..stats.noise import PureError, ResidualMeanSquare, Serial, SerialPairs
 from ..stats.spectrum import amplitude_spectrum, resolvable_band_per_mm
 from .base import Measurement, Shape, Trial
@@ -488,12 +489,8 @@ def resolved_share(position_mm, wavelength_mm):
 
 def least_squares_fit(residual_um, basis):
     """Projection of the residual on the few columns of ``basis`` (normal equations of the
-    unit-scaled columns: a k x k solve, where a QR of samples x k costs seconds at 10^6)."""
-    scale = np.linalg.norm(basis, axis=0)
-    scale[scale == 0.0] = 1.0
-    scaled = basis / scale
-    coefficients = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ residual_um, rcond=None)[0]
-    return scaled @ coefficients
+    unit-scaled columns, :func:`feedaxis.stats.linear.normal_solve`)."""
+    return basis @ normal_solve(basis, residual_um)
 
 
 def _weighted_misfit(clusters, residual_um, frequency_per_mm):
