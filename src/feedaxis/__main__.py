@@ -14,7 +14,7 @@ from .console import fail
 
 
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
-KEPT_BLOCK_BYTES = 1 << 30  # freed blocks up to this size stay in the heap for reuse
+KEPT_BLOCK_BYTES = 1 << 30  # freed blocks up to this size stay in the heap for reuse (a C int)
 
 
 def keep_freed_memory():
@@ -30,8 +30,9 @@ def keep_freed_memory():
         mallopt = libc.mallopt
     except (OSError, AttributeError):
         return
+    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt(M_MMAP_THRESHOLD, KEPT_BLOCK_BYTES)
-    mallopt(M_TRIM_THRESHOLD, 2 * KEPT_BLOCK_BYTES)
+    mallopt(M_TRIM_THRESHOLD, KEPT_BLOCK_BYTES)
 
 
 def run():
