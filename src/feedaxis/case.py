@@ -315,6 +315,11 @@ def _read_text(path):
         raise CaseError(path, error.message, error.row) from None
 
 
+def _lf_text(path):
+    """:func:`_read_text` with LF line ends (CR LF and lone CR turned to LF)."""
+    return _read_text(path).replace("\r\n", "\n").replace("\r", "\n")
+
+
 def check_table(path, text, table, values, prefix=""):
     """``[table]`` (under ``prefix``, ``axes.X`` in a machine) with every key known and
     every value within its rule and range."""
@@ -372,7 +377,7 @@ def _read_csv(path, spec):
     check_fits_in_memory(path)
     plain = _plain_header(path)
     if plain is None:
-        text = _read_text(path).replace("\r\n", "\n").replace("\r", "\n")
+        text = _lf_text(path)
         header = _first_record(text)
         if header is None:
             raise CaseError(path, "empty: a header row and at least one data row are needed")
@@ -563,7 +568,7 @@ def _table(path, body, header_line, names):
         except ValueError:
             pass  # whitespace-only lines or a bad cell: the line-by-line pass sorts it out
     if body is None:
-        body = _first_record(_read_text(path).replace("\r\n", "\n").replace("\r", "\n"))[2]
+        body = _first_record(_lf_text(path))[2]
     records = [(number, line) for number, line in enumerate(body.split("\n"), header_line + 1)
                if line.strip() and not line.strip().startswith("#")]
     if not records:
@@ -604,7 +609,7 @@ def _check_finite(path, table, rows, names):
         return
     index = int(np.flatnonzero(~finite.all(axis=1))[0])
     column = int(np.flatnonzero(~finite[index])[0])
-    text = _read_text(path).replace("\r\n", "\n").replace("\r", "\n")
+    text = _lf_text(path)
     line = text.split("\n")[rows.lines[index] - 1]
     _number(path, line.split(",")[column].strip(), rows[index], names[column])
 
