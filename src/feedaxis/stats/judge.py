@@ -193,7 +193,7 @@ def _robust_drift(layout, residual_um):
     target = residual_um - layout.group_means(residual_um)
     scale = MAD_TO_SIGMA * np.median(np.abs(target))
     if not scale > TINY_UM:  # the groups agree to rounding: any loss scale will do, and a
-        scale = 1.0          # tiny one would underflow (f_scale² = 0) inside least_squares
+        scale = 1.0          # tiny one would underflow (s² = 0) inside the loss
     return within @ soft_l1_line(within, target, scale)
 
 
