@@ -885,14 +885,10 @@ def _cmd_export_ssp(args):
 
 def _circle_stop_s(system):
     """The macro steps (s) that cover the machine's circle with its arcs."""
-    from .physics.circle import CircleInterpolator
+    from .cosim.machine import interpolator_path
 
-    values = system.component("CircleInterpolator").parameters
-    path = CircleInterpolator(values["radius_mm"], values["feed_mm_min"],
-                              (values["center_first_mm"], values["center_second_mm"]),
-                              values["direction"], values["start_deg"], values["lead_in_deg"],
-                              values["lead_out_deg"])
-    return math.ceil(path.duration_s / system.macro_step_s - 1e-9) * system.macro_step_s
+    steps = interpolator_path(system).duration_s / system.macro_step_s
+    return math.ceil(steps - 1e-9) * system.macro_step_s
 
 
 def _export_fmu_options(parser):

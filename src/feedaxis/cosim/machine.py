@@ -24,7 +24,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..fmu_map import AXIS_KEYS, neutral_fmu_parameters, servo_to_fmu
-from ..physics.circle import MACHINE_PLANT
+from ..physics.circle import MACHINE_PLANT, CircleInterpolator
 from ..errors import InputError
 from .system import (DEFAULT_THERMAL_STEP_S, AxisSystem, Component, Connection, Output,
                      Variable, axis_overrides, default_axis, option_steps)
@@ -213,6 +213,16 @@ def interpolator_parameters(path, ahead_s):
             "center_second_mm": float(path.center_mm[1]), "direction": int(path.direction),
             "start_deg": float(path.start_deg), "lead_in_deg": float(path.lead_in_deg),
             "lead_out_deg": float(path.lead_out_deg), "ahead_s": float(ahead_s)}
+
+
+def interpolator_path(system):
+    """The circle the CircleInterpolator component of ``system`` commands (the inverse of
+    :func:`interpolator_parameters`)."""
+    values = system.component(INTERPOLATOR).parameters
+    return CircleInterpolator(values["radius_mm"], values["feed_mm_min"],
+                              (values["center_first_mm"], values["center_second_mm"]),
+                              values["direction"], values["start_deg"], values["lead_in_deg"],
+                              values["lead_out_deg"])
 
 
 def with_interpolator(system, path):
