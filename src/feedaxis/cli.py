@@ -885,10 +885,10 @@ def _cmd_export_ssp(args):
 
 def _circle_stop_s(system):
     """The macro steps (s) that cover the machine's circle with its arcs."""
+    from .cosim.circular import path_stop_s
     from .cosim.machine import interpolator_path
 
-    steps = interpolator_path(system).duration_s / system.macro_step_s
-    return math.ceil(steps - 1e-9) * system.macro_step_s
+    return float(path_stop_s(interpolator_path(system), system.macro_step_s))
 
 
 def _export_fmu_options(parser):

@@ -62,7 +62,7 @@ def run_circular(master, radius_mm=100.0, feed_mm_min=1000.0, center_mm=(0.0, 0.
                                   start_deg, lead_in_deg, lead_out_deg)
         rows, completed = run_path(master, path, axes, parameters, progress)
         parts.append(_samples(rows, path, axes, samples_per_turn, elapsed_s))
-        elapsed_s += _stop_s(path, master.system.macro_step_s)
+        elapsed_s += path_stop_s(path, master.system.macro_step_s)
         if not completed:
             break
     columns = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
@@ -84,7 +84,8 @@ def run_circular(master, radius_mm=100.0, feed_mm_min=1000.0, center_mm=(0.0, 0.
                        {"circular": columns}, figures, series, summary, stopped)
 
 
-def _stop_s(path, macro_step_s):
+def path_stop_s(path, macro_step_s):
+    """The macro steps (s) that cover ``path`` with its lead-in and lead-out arcs."""
     return np.ceil(path.duration_s / macro_step_s - 1e-9) * macro_step_s
 
 
@@ -94,7 +95,7 @@ def run_path(master, path, axes, parameters=None, progress=None):
     inputs = {f"{axis}_position_ref_mm": (lambda t, i=i: path.position_mm(t + h, i))
               for i, axis in enumerate(axes)}
     try:
-        return master.run(float(_stop_s(path, h)), inputs, parameters,
+        return master.run(float(path_stop_s(path, h)), inputs, parameters,
                           progress=progress), True
     except SimulationInterrupted as stopped:
         return stopped.partial, False
