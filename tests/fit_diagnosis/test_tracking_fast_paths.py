@@ -98,3 +98,26 @@ def test_the_shapes_tried_are_counted_as_locating_every_search_counts_them():
                 assert fast[1] is slow[1] and fast[-1] == slow[-1]
             cases += 1
     assert cases == len(levels) ** 3 * 8
+
+
+def test_the_autocorrelation_time_is_kept_by_content(monkeypatch):
+    """A residual asked for again (equal content, another array) gets the τ computed for
+    it, to the bit; another residual its own; the oldest kept leaves first."""
+    from feedaxis.stats import coloured
+
+    monkeypatch.setattr(coloured, "_KEPT_TAUS", {})
+    computed = []
+    anew = coloured._autocorrelation_time
+    monkeypatch.setattr(coloured, "_autocorrelation_time",
+                        lambda values: computed.append(1) or anew(values))
+    rng = np.random.default_rng(8)
+    residuals = [np.convolve(rng.normal(size=5000), np.ones(k + 2), "same")
+                 for k in range(coloured.TAUS_KEPT + 1)]
+    first = coloured.autocorrelation_time(residuals[0])
+    assert first == anew(residuals[0]) and first > 1.5
+    assert coloured.autocorrelation_time(residuals[0].copy()) == first and len(computed) == 1
+    taus = [coloured.autocorrelation_time(r) for r in residuals[1:]]
+    assert [t == anew(r) for t, r in zip(taus, residuals[1:])] == [True] * len(taus)
+    assert len(computed) == len(residuals) and len(coloured._KEPT_TAUS) == coloured.TAUS_KEPT
+    assert coloured.autocorrelation_time(residuals[0]) == first
+    assert len(computed) == len(residuals) + 1  # the oldest had left
