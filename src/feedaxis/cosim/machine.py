@@ -15,7 +15,10 @@ second travels y (a term of the first axis's table position)::
 An axis has StepperError only where its motor is known and ThermalScrew only where the
 screw's thermal keys are (:func:`machine_from_case_axes`); the default machine has both on
 both axes. :class:`CircleInterpolator` commands the circle at the programmed feed, with a
-lead-in arc before the measured turn and a lead-out arc after it.
+lead-in arc before the measured turn and a lead-out arc after it; driven by its FMU
+(:func:`with_interpolator`, ``export-ssp --machine``) the machine counts its position
+connectors from the circle's first reference, each FMU rebuilding machine positions from its
+``position_offset_mm``.
 """
 from __future__ import annotations
 
@@ -270,13 +273,13 @@ def relative_to(system, origin_mm):
     ``origin_mm`` ({axis: machine position, mm}): every FMU of the axis gets it as
     ``position_offset_mm`` (its physics still sees machine positions), and each table
     position adds it back where a servo's position_mm enters (squareness included)."""
+    names = {c.name for c in system.components}
     offsets = {component_name(axis, part): {POSITION_OFFSET: float(value)}
                for axis, value in origin_mm.items() for part in AXIS_PARTS
-               if component_name(axis, part) in {c.name for c in system.components}}
+               if component_name(axis, part) in names}
     servo_mm = {f"{component_name(axis, 'NpidServo')}.position_mm": float(value)
                 for axis, value in origin_mm.items()}
     outputs = tuple(replace(output, constant=output.constant + sum(
         factor * servo_mm.get(term, 0.0) for term, factor in output.terms))
         for output in system.outputs)
     return replace(system.with_parameters(offsets), outputs=outputs)
-
