@@ -17,6 +17,11 @@ fitted in full on top of the plant (28 simulations and 19 sensitivity passes, 19
 of CPU); they are now screened by their score test first (bench_friction_screen.py); the loop's
 results are kept by parameters (53 -> 15 simulations); the sensitivity pass without friction
 skips the friction's tangent (1.7x); the reference's description is found once (was 4 x 2 s).
+Then, of the 5.2-5.4 s left: the periodic search is no longer located where its own test
+cannot pass (the window's least squares, 0.45 s, and two simulations), the loop without
+friction takes the known force as it is (a simulation 64 -> 42 ms), and the friction screens'
+pass evaluates the Stribeck decay once a step and only where it acts (the Coulomb screen's
+pass 257 -> 148 ms); every finding the same to the bit (tests).
 
 Run: ``python benchmarks/bench_tracking_diagnose.py [--repeats 3] [--long-s 500]
 [--baseline 45c6d7f]`` (``--smoke``: 3 s, one repeat).

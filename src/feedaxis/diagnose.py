@@ -541,7 +541,7 @@ def find_structures(measurement, left, shapes, stages, notify=None):
     """
     structures, current, shapes = [], left, list(shapes)
     for _ in range(MAX_STRUCTURES):
-        best = _best_shape(measurement, current, shapes)
+        best = _best_shape(measurement, current, shapes, stages)
         if best is None or not accepts(best[0].p_value, best[-1], stages):
             break
         test, shape, trial, fitted, amplitude_um, _ = best
@@ -570,13 +570,24 @@ def find_structures(measurement, left, shapes, stages, notify=None):
     return structures, current
 
 
-def _best_shape(measurement, current, shapes):
+def _best_shape(measurement, current, shapes, stages):
     """(test, shape, trial, fitted, amplitude, shapes tried) of the shape with the smallest
-    p-value at the residual of ``current``, or None."""
-    residual, options, tried = current.residual_um, [], 0
+    p-value at the residual of ``current``, or None.
+
+    A shape whose search test (``Shape.search_test``) fails the policy at ``stages`` even
+    counted alone cannot be the one accepted, so it is not located: it is left out of the
+    options, and only where the count of shapes tried then decides whether the best passes
+    is its trial made, to count it as the full search does (a trial may come to None)."""
+    residual, options, tried, deferred = current.residual_um, [], 0, []
     for shape in shapes:
         trials = shape.trials(measurement)
-        trial = shape.trial(measurement, current) if trials else None
+        if not trials:
+            continue
+        test = shape.search_test(measurement, current)
+        if test is not None and not accepts(test.p_value, trials, stages):
+            deferred.append((shape, trials))
+            continue
+        trial = shape.trial(measurement, current)
         if trial is None:
             continue
         tried += trials
@@ -589,4 +600,9 @@ def _best_shape(measurement, current, shapes):
         options.append((test, shape, trial, fitted, amplitude_um))
     if not options:
         return None
-    return (*min(options, key=lambda option: option[0].p_value), tried)
+    best = min(options, key=lambda option: option[0].p_value)
+    passes = accepts(best[0].p_value, tried, stages)
+    if passes != accepts(best[0].p_value, tried + sum(t for _, t in deferred), stages):
+        tried += sum(trials for shape, trials in deferred
+                     if shape.trial(measurement, current) is not None)
+    return (*best, tried)

@@ -241,3 +241,41 @@ def test_the_frictionless_pass_equals_the_full_friction_tangent_to_the_bit(label
                                 counts)
     np.testing.assert_array_equal(short[0], full[0])
     np.testing.assert_array_equal(short[1], full[1][:, :len(plant)])
+
+
+@pytest.mark.parametrize("label", ("PID", "P-PI cascade with feed-forward"))
+def test_the_loop_without_friction_skips_it_and_gives_the_friction_paths_numbers(label):
+    """Where no friction force acts the loop and the pass take the known force as it is
+    (servo.resists); a viscous friction of 1e-300 N.s/mm takes the friction's path and moves
+    nothing a double can hold: the positions and the plant's columns agree within 1e-12
+    relative (to the bit but for values under 1e-250)."""
+    params = {"PID": PID, "P-PI cascade with feed-forward":
+              replace(CASCADE, tn_s=0.02, velocity_feedforward=1.0)}[label]
+    resisted = replace(params, damping_N_s_per_mm=1e-300)
+    plant = ("plant_gain_mm_per_Vs2", "plant_damping_per_s", "plant_stiffness_per_s2",
+             "delay_s")
+    counts = step_counts(TIME_S, params.time_step_s)
+    for fast, slow in zip(
+            (simulate(params, TIME_S, REFERENCE_MM, None, counts),
+             *simulate_sensitivity(params, plant, TIME_S, REFERENCE_MM, None, counts)),
+            (simulate(resisted, TIME_S, REFERENCE_MM, None, counts),
+             *simulate_sensitivity(resisted, plant, TIME_S, REFERENCE_MM, None, counts))):
+        np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=1e-250)
+        assert np.abs(fast).max() > 1e-3
+
+
+@pytest.mark.parametrize("label", ("PID", "P-PI cascade with feed-forward"))
+def test_the_coulomb_column_without_the_rise_at_rest_is_the_one_beside_it_to_the_bit(label):
+    """The pass leaves the Stribeck decay (an exponential per step) out where no rise at rest
+    acts and none of its parameters moves; with them among the names it is evaluated, and
+    the Coulomb force's column and the positions are the same to the bit."""
+    params = {"PID": PID, "P-PI cascade with feed-forward":
+              replace(CASCADE, tn_s=0.02, velocity_feedforward=1.0, friction_N=2.0)}[label]
+    counts = step_counts(TIME_S, params.time_step_s)
+    alone = simulate_sensitivity(params, ("friction_N",), TIME_S, REFERENCE_MM, None, counts)
+    beside = simulate_sensitivity(params, ("friction_N", "coulomb_N", "static_N",
+                                           "stribeck_velocity_mm_s"), TIME_S, REFERENCE_MM,
+                                  None, counts)
+    np.testing.assert_array_equal(alone[0], beside[0])
+    np.testing.assert_array_equal(alone[1][:, 0], beside[1][:, 0])
+    assert np.abs(beside[1][:, 1:3]).max() > 0.0

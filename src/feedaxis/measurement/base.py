@@ -380,6 +380,12 @@ class Shape:
     def trial(self, measurement, current):
         raise NotImplementedError
 
+    def search_test(self, measurement, current):
+        """The family-wise test of the shape's search where it comes before its basis (a
+        search whose own statistic decides, such as a periodogram's maximum), so a search
+        that cannot pass is not located; None where the basis is needed for the test."""
+        return None
+
     def amplitude_um(self, measurement, fitted_um, location):
         """The size of the structure: half its peak to valley."""
         return float(np.ptp(fitted_um) / 2)

@@ -1109,10 +1109,26 @@ class PeriodicForce(Shape):
     kind = "periodic"
     extra = 3  # cosine, sine and the frequency
 
+    def __init__(self):
+        self._searched = (None, None)  # (the residual searched, what its search found)
+
     def trials(self, measurement):
         return 1 if measurement.uniform_step_s() and measurement.size >= 8 else 0
 
-    def trial(self, measurement, current):
+    def search_test(self, measurement, current):
+        """The two searches' weighted family-wise test (:meth:`trial`'s), before the
+        sinusoid is located."""
+        return self._search(measurement, current)[2]
+
+    def _search(self, measurement, current):
+        """(time_s, gridded residual, test, frequency_hz, bin_hz) of the stronger search on
+        the residual of ``current``, kept for the residual's next search."""
+        if self._searched[0] is not current.residual_um:
+            self._searched = (current.residual_um, self._searched_anew(measurement, current))
+        return self._searched[1]
+
+    @staticmethod
+    def _searched_anew(measurement, current):
         time_s, residual = measurement.gridded(current.residual_um)
         step_s = measurement.uniform_step_s()
         whole_hz, whole_p, whole_ratio = peak_p_value(residual, step_s, robust=True)
@@ -1131,6 +1147,10 @@ class PeriodicForce(Shape):
             test = Test(whole_ratio, (1, residual.size), whole_p,
                         "whitened periodogram maximum, family-wise over the frequencies "
                         "searched and the short-time windows", "ratio")
+        return time_s, residual, test, frequency_hz, bin_hz
+
+    def trial(self, measurement, current):
+        time_s, residual, test, frequency_hz, bin_hz = self._search(measurement, current)
         first, stop, frequency_hz, localised = locate_sinusoid(residual, time_s, frequency_hz,
                                                                bin_hz)
         record_s = measurement.record_time_s

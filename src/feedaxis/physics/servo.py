@@ -327,6 +327,7 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
     head = int(state[5])
     size = len(buffer)
     shift = int(delay)
+    resisted = resists(coulomb_V, damping_V_s_per_mm, rise_V, static_V)
     for i in range(len(steps)):
         n_steps = steps[i]
         end_mm = references_mm[i]
@@ -355,8 +356,10 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
             command_late = buffer[late]
             command_early = buffer[early]
             head = head + 1 if head + 1 < size else 0
-            force = force_V - friction_V(x2, coulomb_V, damping_V_s_per_mm, rise_V, static_V,
-                                         stribeck_mm_s, smoothing_mm_s)
+            force = force_V
+            if resisted:
+                force = force_V - friction_V(x2, coulomb_V, damping_V_s_per_mm, rise_V,
+                                             static_V, stribeck_mm_s, smoothing_mm_s)
             u_late = command_late + force
             u_early = command_early + force
             x1, x2 = (a11 * x1 + a12 * x2 + late1 * u_late + early1 * u_early,
@@ -366,6 +369,15 @@ def run_loop(coefficients, steps, references_mm, disturbances_V, state, buffer, 
         positions_mm[i] = x1
     state[0], state[1], state[2], state[3], state[4], state[5] = (
         x1, x2, integral, previous, start_mm, float(head))
+
+
+def resists(coulomb_V, damping_V_s_per_mm, rise_coulomb_V, static_V):
+    """Whether a friction force acts in :func:`run_loop` (Coulomb, viscous or Stribeck): where
+    none does (:func:`friction_V` would return 0), the force is the known one as it is and
+    the velocity leaves the step's chain of dependent operations (a third of its time).
+    Floats, as :func:`friction_V`'s."""
+    return (coulomb_V != 0.0 or damping_V_s_per_mm != 0.0 or rise_coulomb_V != 0.0
+            or static_V != 0.0)
 
 
 def is_linear(coefficients):
@@ -399,7 +411,7 @@ def numba_ready_loop(numba):
     """:func:`run_loop` with its calls of :func:`npid_gain` and :func:`friction_V` compiled
     (:func:`with_compiled_callees`): what numba's JIT (:func:`compiled_loop`) and its
     ahead-of-time compiler (feedaxis.kernel_build) take."""
-    return with_compiled_callees(numba, run_loop, npid_gain,
+    return with_compiled_callees(numba, run_loop, npid_gain, resists,
                                  with_compiled_callees(numba, friction_V, stribeck_V))
 
 

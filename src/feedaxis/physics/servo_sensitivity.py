@@ -27,7 +27,7 @@ from functools import lru_cache
 import numpy as np
 
 from .servo import (FRICTION_SMOOTHING_MM_S, discrete_plant, expm, forces_V, friction_V,
-                    loop_coefficients, npid_gain, step_counts, stribeck_V,
+                    loop_coefficients, npid_gain, resists, step_counts, stribeck_V,
                     with_compiled_callees)
 from .threads import one_blas_thread
 
@@ -134,20 +134,22 @@ def coefficient_jacobian(params, names):
 
 
 def friction_tangent(velocity_mm_s, coulomb_V, damping_V_s_per_mm, rise_coulomb_V, static_V,
-                     stribeck_velocity_mm_s, smoothing_mm_s):
+                     stribeck_velocity_mm_s, smoothing_mm_s, rising):
     """The partial derivatives of :func:`.servo.friction_V` with respect to its seven
     arguments, in their order (floats; the clipped sign differentiated on its side).
 
     Also where every friction force is 0 (a fit's start, where friction_V skips them): the
     friction is linear in each force there, so its column is the sign's (times the Stribeck
-    decay for the rise), not 0, or a fit started at 0 never moves them.
+    decay for the rise), not 0, or a fit started at 0 never moves them. ``rising`` false
+    (no rise at rest acts and none of its parameters moves) leaves the decay at 0: every
+    term it enters is then multiplied by zeros. The decay is evaluated once, for the
+    magnitude (:func:`.servo.stribeck_V`'s expression) and the derivatives alike.
     """
     ramp = velocity_mm_s / smoothing_mm_s
     sign = min(max(ramp, -1.0), 1.0)
     ratio = velocity_mm_s / stribeck_velocity_mm_s
-    decay = math.exp(-ratio * ratio)
-    magnitude = coulomb_V + stribeck_V(velocity_mm_s, rise_coulomb_V, static_V,
-                                       stribeck_velocity_mm_s)
+    decay = math.exp(-ratio * ratio) if rising else 0.0
+    magnitude = coulomb_V + (rise_coulomb_V + (static_V - rise_coulomb_V) * decay)
     slope = (static_V - rise_coulomb_V) * decay * -2.0 * ratio  # d stribeck_V / d ratio
     d_velocity = damping_V_s_per_mm + slope / stribeck_velocity_mm_s * sign
     d_stribeck = -slope * ratio / stribeck_velocity_mm_s * sign
@@ -191,10 +193,17 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
     rise_V, static_V, stribeck_mm_s, smoothing_mm_s = coefficients[23:27]
     dc = d_coefficients
     p = dc.shape[1]
+    resisted = resists(coulomb_V, damping_V_s_per_mm, rise_V, static_V)
     frictional = coulomb_V != 0.0 or rise_V != 0.0 or static_V != 0.0
+    rising = rise_V != 0.0 or static_V != 0.0
+    tuned = False  # a PID gain among the parameters (else their terms multiply zeros)
     for j in range(p):
+        for row in (KP, KI, KD):
+            tuned = tuned or dc[row, j] != 0.0
         for row in (FRICTION, DAMPING, COULOMB, STATIC, STRIBECK_VELOCITY, SMOOTHING):
             frictional = frictional or dc[row, j] != 0.0
+        for row in (COULOMB, STATIC, STRIBECK_VELOCITY):
+            rising = rising or dc[row, j] != 0.0
     f_v, f_c, f_d, f_r, f_s, f_vs, f_w = damping_V_s_per_mm, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     x1, x2, integral, previous, start_mm = state[0], state[1], state[2], state[3], state[4]
     head = int(state[5])
@@ -240,9 +249,11 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                     d_integral[j] += 0.5 * (d_error + d_previous[j]) * dt
                     d_derivative = (d_error - d_previous[j]) / dt
                     d_previous[j] = d_error
-                    d_command[j] = (dc[KP, j] * error + kp * d_error + dc[KI, j] * integral
-                                    + ki * d_integral[j] + dc[KD, j] * derivative
-                                    + kd * d_derivative)
+                    d_command[j] = kp * d_error + ki * d_integral[j] + kd * d_derivative
+                    if tuned:
+                        d_command[j] = (dc[KP, j] * error + kp * d_error + dc[KI, j] * integral
+                                        + ki * d_integral[j] + dc[KD, j] * derivative
+                                        + kd * d_derivative)
                 previous = error
                 command = kp * error + ki * integral + kd * derivative
             buffer[head] = command
@@ -252,13 +263,14 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
             early = late - 1 if late > 0 else size - 1
             command_late = buffer[late]
             command_early = buffer[early]
-            friction = friction_V(x2, coulomb_V, damping_V_s_per_mm, rise_V, static_V,
-                                  stribeck_mm_s, smoothing_mm_s)
+            force = force_V
+            if resisted:
+                force = force_V - friction_V(x2, coulomb_V, damping_V_s_per_mm, rise_V,
+                                             static_V, stribeck_mm_s, smoothing_mm_s)
             if frictional:
                 f_v, f_c, f_d, f_r, f_s, f_vs, f_w = friction_tangent(
                     x2, coulomb_V, damping_V_s_per_mm, rise_V, static_V, stribeck_mm_s,
-                    smoothing_mm_s)
-            force = force_V - friction
+                    smoothing_mm_s, rising)
             u_late = command_late + force
             u_early = command_early + force
             for j in range(p):
@@ -268,8 +280,10 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                         f_v * dx2[j] + f_c * dc[FRICTION, j] + f_d * dc[DAMPING, j]
                         + f_r * dc[COULOMB, j] + f_s * dc[STATIC, j]
                         + f_vs * dc[STRIBECK_VELOCITY, j] + f_w * dc[SMOOTHING, j])
-                else:
+                elif resisted:
                     d_force = d_disturbance_V[j] - f_v * dx2[j]
+                else:
+                    d_force = d_disturbance_V[j]
                 du_late = d_buffer[late, j] + d_force
                 du_early = d_buffer[early, j] + d_force
                 d1 = (dc[0, j] * x1 + a11 * dx1[j] + dc[1, j] * x2 + a12 * dx2[j]
@@ -300,9 +314,8 @@ def compiled_tangent():
     from .numba_cache import cached_njit
 
     return cached_njit(numba, with_compiled_callees(
-        numba, run_loop_tangent, npid_gain, npid_tangent,
-        with_compiled_callees(numba, friction_V, stribeck_V),
-        with_compiled_callees(numba, friction_tangent, stribeck_V)), nogil=True)
+        numba, run_loop_tangent, npid_gain, npid_tangent, resists,
+        with_compiled_callees(numba, friction_V, stribeck_V), friction_tangent), nogil=True)
 
 
 @one_blas_thread

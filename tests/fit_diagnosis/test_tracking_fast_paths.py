@@ -1,0 +1,123 @@
+"""The tracking diagnosis's fast paths find what the straightforward ones find, on seeded
+records and on every ordering of hand-set p-values (issue 35, item 4)."""
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from feedaxis import diagnose as diagnosis
+from feedaxis.case import read_case
+from feedaxis.diagnose import diagnose
+from feedaxis.effects import CATALOG, Model
+from feedaxis.measurement.base import Shape, Trial
+from feedaxis.stats import judge
+from tracking_synthetic import sine, step_loop, two_sines, write_tracking_case
+
+PLANT = {"plant_gain_mm_per_Vs2": 70000.0, "plant_damping_per_s": 150.0,
+         "plant_stiffness_per_s2": 250.0, "delay_s": 0.0015}
+SERVO_PLANT = Model((CATALOG["servo_plant"],))
+RECORDS = {
+    "null": dict(trajectory=two_sines, duration_s=2.0),
+    "friction": dict(trajectory=two_sines, duration_s=2.0, friction_N=1.5),
+    "periodic force": dict(trajectory=sine(10.0, 0.4), duration_s=3.0,
+                           force_N=lambda t: 3.0 * math.sin(2 * math.pi * 62.5 * t)),
+}
+
+
+@pytest.mark.parametrize("label", sorted(RECORDS))
+def test_a_search_that_cannot_pass_is_not_located_and_nothing_changes(label, tmp_path,
+                                                                      monkeypatch):
+    """The periodic search left unlocated where its own test fails (``search_test``): the
+    diagnosis equals the one locating it every time, to the bit, in fewer locations."""
+    from feedaxis.measurement import tracking
+
+    spec = dict(RECORDS[label])
+    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
+    case = read_case(write_tracking_case(tmp_path / "case", run, 7))
+    located = []
+    locate = tracking.locate_sinusoid
+    monkeypatch.setattr(tracking, "locate_sinusoid",
+                        lambda *args: located.append(1) or locate(*args))
+    fast = diagnose(case, SERVO_PLANT)
+    fast_located, located[:] = len(located), []
+    monkeypatch.setattr(tracking.PeriodicForce, "search_test", Shape.search_test)
+    slow = diagnose(case, SERVO_PLANT)
+    assert fast.to_json() == slow.to_json()
+    np.testing.assert_array_equal(fast.final.residual_um, slow.final.residual_um)
+    if label == "periodic force":
+        assert fast.unexplained[0].kind == "periodic"
+    else:
+        assert fast_located < len(located)
+
+
+class _Searched(Shape):
+    """A shape with a set p-value, its test known before its basis (or not), whose trial may
+    come to None."""
+
+    def __init__(self, p_value, early, counted, column):
+        self.p_value, self.early, self.counted, self.column = p_value, early, counted, column
+
+    def search_test(self, measurement, current):
+        return judge.Test(1.0, (1, 1), self.p_value, "set") if self.early else None
+
+    def trial(self, measurement, current):
+        if not self.counted:
+            return None
+        return Trial(self.column[:, None], None, judge.Test(1.0, (1, 1), self.p_value, "set"))
+
+    def amplitude_um(self, measurement, fitted_um, location):
+        return 1.0
+
+
+class _Current:
+    residual_um = np.linspace(-1.0, 1.0, 50)
+
+
+def test_the_shapes_tried_are_counted_as_locating_every_search_counts_them():
+    """Over p-values on both sides of each Bonferroni threshold, shapes with and without an
+    early test and trials that do or do not come to None: the best shape and whether it
+    passes are those of locating every search."""
+    stages = 3
+    thresholds = [0.01 / stages / tried for tried in (1, 2, 3)]
+    levels = sorted({t * f for t in thresholds for f in (0.9, 1.1)} | {0.5})
+    column = np.sin(np.linspace(0.0, 6.0, 50))
+    cases = 0
+    for p_values in itertools.product(levels, repeat=3):
+        for counted in itertools.product((True, False), repeat=3):
+            shapes = [_Searched(p_values[0], False, True, column),
+                      *(_Searched(p, True, c, column) for p, c in zip(p_values[1:], counted))]
+            fast = diagnosis._best_shape(None, _Current, shapes, stages)
+            for shape in shapes:
+                shape.early = False
+            slow = diagnosis._best_shape(None, _Current, shapes, stages)
+            passes = [best is not None and judge.accepts(best[0].p_value, best[-1], stages)
+                      for best in (fast, slow)]
+            assert passes[0] == passes[1]
+            if passes[1]:
+                assert fast[1] is slow[1] and fast[-1] == slow[-1]
+            cases += 1
+    assert cases == len(levels) ** 3 * 8
+
+
+def test_the_autocorrelation_time_is_kept_by_content(monkeypatch):
+    """A residual asked for again (equal content, another array) gets the τ computed for
+    it, to the bit; another residual its own; the oldest kept leaves first."""
+    from feedaxis.stats import coloured
+
+    monkeypatch.setattr(coloured, "_KEPT_TAUS", {})
+    computed = []
+    anew = coloured._autocorrelation_time
+    monkeypatch.setattr(coloured, "_autocorrelation_time",
+                        lambda values: computed.append(1) or anew(values))
+    rng = np.random.default_rng(8)
+    residuals = [np.convolve(rng.normal(size=5000), np.ones(k + 2), "same")
+                 for k in range(coloured.TAUS_KEPT + 1)]
+    first = coloured.autocorrelation_time(residuals[0])
+    assert first == anew(residuals[0]) and first > 1.5
+    assert coloured.autocorrelation_time(residuals[0].copy()) == first and len(computed) == 1
+    taus = [coloured.autocorrelation_time(r) for r in residuals[1:]]
+    assert [t == anew(r) for t, r in zip(taus, residuals[1:])] == [True] * len(taus)
+    assert len(computed) == len(residuals) and len(coloured._KEPT_TAUS) == coloured.TAUS_KEPT
+    assert coloured.autocorrelation_time(residuals[0]) == first
+    assert len(computed) == len(residuals) + 1  # the oldest had left
