@@ -113,9 +113,11 @@ class Effect:
         """Return ``f(values) -> (base_um, columns_um)`` splitting off the ``linear`` parameters.
 
         The error is ``base_um + columns_um @ [values[p] for p in linear]``; ``values`` of the
-        linear parameters are ignored. By default built from :meth:`prepare` (one evaluation
-        with the linear parameters at 0, one more per linear parameter at 1), once for all
-        when every parameter is linear (the split then depends on no value).
+        linear parameters are ignored; ``base_um`` None stands for zero. By default built
+        from :meth:`prepare` (one evaluation with the linear parameters at 0, one more per
+        linear parameter at 1) at every call: a split kept for all (every parameter linear)
+        would hold its columns beside the fit's copy of them all along the fit, and
+        :class:`feedaxis.fit.Problem` splits once per value of the nonlinear parameters.
         """
         evaluate = self.prepare(case)
 
@@ -125,10 +127,7 @@ class Effect:
             columns = [evaluate({**zero, name: 1.0}) - base_um for name in self.linear]
             return base_um, np.array(columns).reshape(len(self.linear), base_um.size).T
 
-        if set(self.linear) != set(self.parameter_names):
-            return separate
-        fixed = separate({})
-        return lambda values: fixed
+        return separate
 
     def bounds(self, axis):
         """{parameter: (lower, upper)} on this axis; by default the parameters' own bounds."""
@@ -168,8 +167,8 @@ class BasisEffect(Effect):
         return lambda v: self.basis @ np.array([v[p.name] for p in self.parameters])
 
     def prepare_separable(self, case):
-        """The basis itself as the columns (no evaluation, no copy), a zero base."""
-        fixed = (np.zeros(self.basis.shape[0]), self.basis)
+        """The basis itself as the columns (no evaluation, no copy), a zero base (None)."""
+        fixed = (None, self.basis)
         return lambda values: fixed
 
     def guess(self, case, residual_um):
