@@ -234,3 +234,26 @@ def test_the_split_kept_across_linear_values_is_a_fresh_one(seed):
     kept(start)
     fresh = Problem(model, [measurement]).residual(layout)(moved)
     assert np.array_equal(kept(moved), fresh)
+
+
+def test_clusters_kept_for_read_only_targets_are_the_computed_ones():
+    """The clusters kept for a read-only target array (as the case reader gives it) are
+    those computed anew from a writeable copy, read-only themselves, and forgotten with
+    the array."""
+    import gc
+
+    from feedaxis import iso230
+
+    rng = np.random.default_rng(5)
+    target_mm = np.repeat(np.arange(40) * 12.5, 6) + rng.uniform(-1e-6, 1e-6, 240)
+    rng.shuffle(target_mm)
+    computed = iso230.target_clusters(target_mm.copy())
+    target_mm.flags.writeable = False
+    kept = iso230.target_clusters(target_mm)
+    assert iso230.target_clusters(target_mm) is kept
+    for ours, theirs in zip(kept, computed):
+        assert np.array_equal(ours, theirs) and not ours.flags.writeable
+    key = id(target_mm)
+    del target_mm
+    gc.collect()
+    assert key not in iso230._KEPT_CLUSTERS
