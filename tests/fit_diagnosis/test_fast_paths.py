@@ -257,3 +257,22 @@ def test_clusters_kept_for_read_only_targets_are_the_computed_ones():
     del target_mm
     gc.collect()
     assert key not in iso230._KEPT_CLUSTERS
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_run_clock_is_each_runs_places_in_row_order(seed):
+    """The clock of run + place in the run, every run at once, against each run's samples
+    taken in turn (the runs shuffled, uneven, numbered with gaps)."""
+    from types import SimpleNamespace
+
+    from feedaxis.stats.judge import clock_of
+
+    rng = np.random.default_rng(seed)
+    run = rng.choice([1, 2, 5, 9, 40], size=500 + 17 * seed)
+    run_float = run.astype(float)
+    expected = np.empty(run.size)
+    for value in np.unique(run_float):
+        members = np.flatnonzero(run_float == value)
+        expected[members] = value + np.arange(members.size) / members.size
+    clock, unit = clock_of(SimpleNamespace(time_s=None, run=run))
+    assert unit == "run" and np.array_equal(clock, expected)
