@@ -33,6 +33,28 @@ Before all of them, on 10^7 rows (the same layout, the machine at load 16): comp
 CPU / 1,510 MB, fit 73.9 s / 3,261 MB, diagnose 116.8 s / 4,433 MB, report 183.5 s / 4,619 MB
 (system time 9-68 s of it).
 
+Then on 10^7 rows (each command once under ``/usr/bin/time -v``, load 8-12; CPU s / peak
+RSS MB), from compare 36.4 / 1,398, fit 57.3 / 2,191, diagnose 73.2 / 3,069, report
+121.1 / 3,174 (profiled with memray's high-water mark and cProfile first):
+
+- the fit's split written into one array as each effect is split (an effect whose
+  parameters are all linear no longer keeps its columns and a zero base beside the fit's
+  copy of them), and kept per value of the nonlinear parameters (a linear model splits
+  once per fit, not twice): fit 2,191 -> 1,944 MB, diagnose 3,069 -> 2,611 MB;
+- the target clusters (a stable sort of every sample, 1.9 s CPU at 10^7) kept for the
+  case's read-only targets instead of sorted again by a dozen figures and fits; fit keeps
+  only the RMS before it, not its residual; each effect writes its columns into the fit's
+  array: compare 34.1 -> 32.0 s, fit 1,944 -> 1,867 MB, report to 94.1 s / 2,430 MB;
+- the run clock of every run at once through one sort by run instead of a pass over the
+  samples per run (5,000 passes over 10^7 samples took 28 s): fit 56.3 -> 29.6 s, diagnose
+  70.8 -> 43.3 s, report 94.1 -> 68.3 s.
+
+Not met: the CPU of report (68.3 s) and the peak RSS of fit (1.80 GB), diagnose (2.26
+GB) and report (2.51 GB); what remains at the peak is the fit's columns (7 candidate
+columns at once in the diagnosis), the case's table, the drift basis, the residuals the
+selection keeps, and the serial-correlation test's sample-sized temporaries. The refusal's cost of a row (``feedaxis.case``) is measured
+from these runs.
+
 Run: ``python benchmarks/bench_positioning_scale.py [--rows 10000000] [--repeats 1]
 [--baseline-src PATH]``.
 """

@@ -401,11 +401,12 @@ def _read_csv(path, spec):
     return values, rows
 
 
-# Peak memory of the heaviest command per row of a case file: report on 10^6 positioning
-# rows (1,000 targets x 500 bidirectional runs) peaked at 615 MB resident, 465 bytes a
-# row above the interpreter's own; the text read is held up to three times more (line
-# ends normalised) while it is parsed.
-ANALYSIS_BYTES_PER_ROW = 500
+# Peak memory of the heaviest command per row of a case file: on 10^7 positioning rows
+# (1,000 targets x 5,000 bidirectional runs, benchmarks/bench_positioning_scale.py)
+# diagnose peaked at up to 2,555 MB resident and report at up to 2,507 MB, at most 240
+# bytes a row above the interpreter's own 150 MB (report on 10^6 rows: 234); the text read
+# is held up to three times more (line ends normalised) while it is parsed.
+ANALYSIS_BYTES_PER_ROW = 250
 TEXT_COPIES = 3
 SAMPLE_BYTES = 1 << 16  # the file's start, from which its rows are counted
 MEMORY_LIMIT_VARIABLE = "FEEDAXIS_MEMORY_LIMIT_MB"  # a lower limit than the machine's

@@ -332,7 +332,9 @@ class Problem:
                 np.vstack([columns for _, columns in parts]))
 
     def _split_at(self, layout, x):
-        key = x.tobytes()
+        """:meth:`split` at ``x``, kept for the next call at the same nonlinear parameters
+        (the split ignores the linear ones)."""
+        key = x[layout.nonlinear_index].tobytes()
         if self._last[0] != key:
             self._last = (key, self.split(layout.values(x)))
         return self._last[1]
@@ -431,7 +433,7 @@ def variable_projection(problem, layout):
 
     def project(x_nonlinear):
         x[nonlinear] = x_nonlinear
-        base_um, columns_um = problem.split(layout.values(x))
+        base_um, columns_um = problem._split_at(layout, x)
         target_um = problem.measured_um - base_um
         x[linear] = bounded_linear_solve(columns_um, target_um, lower[linear], upper[linear])
         last.update(columns_um=columns_um, free=(x[linear] > lower[linear])

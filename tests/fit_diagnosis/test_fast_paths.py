@@ -166,3 +166,113 @@ def test_unit_column_svd_is_the_svd_of_the_unit_columns(seed):
     np.testing.assert_allclose(singular, expected, rtol=1e-12)
     np.testing.assert_allclose(np.abs(vt), np.abs(expected_vt), atol=1e-10)
     assert strong.all()
+
+
+def _split_case(seed):
+    """A seeded bidirectional case with ambient air and three positioning effects in it."""
+    import synthetic as syn
+
+    rng = np.random.default_rng(seed)
+    run = np.repeat(np.arange(1, 4), 40)
+    target_mm = np.tile(np.concatenate((np.linspace(0, 480, 20), np.linspace(480, 0, 20))), 3)
+    target_mm = target_mm + rng.uniform(-20, 20, target_mm.size)
+    direction = np.tile(np.repeat([1.0, -1.0], 20), 3)
+    ambient_C = 20 + rng.uniform(-1, 1, target_mm.size)
+    error_um = rng.normal(0.0, 0.3, target_mm.size) + 0.2 * direction
+    return syn.in_memory_case(syn.ISO_AXIS, target_mm=target_mm, error_um=error_um,
+                              direction=direction, run=run, ambient_C=ambient_C)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_split_is_every_effect_evaluated_alone(seed):
+    """The fit's split (each effect's columns copied into one array as it is split, none
+    kept) against each effect's own prediction, evaluated alone at random values: base +
+    columns @ linear is the model's prediction, and each call gives arrays of its own."""
+    from feedaxis.effects import CATALOG, BasisEffect, Model
+    from feedaxis.measurement import measurement_of
+
+    rng = np.random.default_rng(seed)
+    case = _split_case(seed)
+    measurement = measurement_of(case, "positioning")
+    basis = np.column_stack((measurement.position_mm / 500.0, measurement.direction))
+    effects = [CATALOG[name] for name in ("lead_error", "backlash", "assembly_eccentricity",
+                                          "ambient_expansion")] + [BasisEffect("drift", basis)]
+    values = {e.name: {p.name: float(rng.uniform(-2, 2)) for p in e.parameters}
+              for e in effects}
+    model = Model(effects, values)
+    separate = measurement.separable(model)
+    base_um, columns_um = separate(values)
+    linear = np.array([values[e.name][p] for e in effects for p in e.linear])
+    alone_um = sum(e.prepare(case)(values[e.name]) for e in effects)
+    assert np.allclose(base_um + columns_um @ linear, alone_um, rtol=1e-12,
+                       atol=1e-12 * np.abs(alone_um).max())
+    columns_um[:] = np.nan
+    again_um, again_columns_um = separate(values)
+    assert np.allclose(again_um + again_columns_um @ linear, alone_um, rtol=1e-12,
+                       atol=1e-12 * np.abs(alone_um).max())
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_split_kept_across_linear_values_is_a_fresh_one(seed):
+    """The residual at a vector whose nonlinear parameters match the split kept (only the
+    linear ones moved) is the residual of a problem that never split before."""
+    from feedaxis.effects import CATALOG, Model
+    from feedaxis.fit import ParameterLayout, Problem
+    from feedaxis.measurement import measurement_of
+
+    case = _split_case(seed)
+    measurement = measurement_of(case, "positioning")
+    effects = [CATALOG["lead_error"], CATALOG["ambient_expansion"]]
+    model = Model(effects, {"lead_error": {"offset_um": 0.1, "slope_um_per_mm": 0.01},
+                            "ambient_expansion": {"reference_offset_mm": 3.0}})
+    layout = ParameterLayout(model, case.axis)
+    start = layout.start()
+    moved = start.copy()
+    moved[layout.linear_index] += np.random.default_rng(seed).uniform(-1, 1,
+                                                                      layout.linear_index.size)
+    kept = Problem(model, [measurement]).residual(layout)
+    kept(start)
+    fresh = Problem(model, [measurement]).residual(layout)(moved)
+    assert np.array_equal(kept(moved), fresh)
+
+
+def test_clusters_kept_for_read_only_targets_are_the_computed_ones():
+    """The clusters kept for a read-only target array (as the case reader gives it) are
+    those computed anew from a writeable copy, read-only themselves, and forgotten with
+    the array."""
+    import gc
+
+    from feedaxis import iso230
+
+    rng = np.random.default_rng(5)
+    target_mm = np.repeat(np.arange(40) * 12.5, 6) + rng.uniform(-1e-6, 1e-6, 240)
+    rng.shuffle(target_mm)
+    computed = iso230.target_clusters(target_mm.copy())
+    target_mm.flags.writeable = False
+    kept = iso230.target_clusters(target_mm)
+    assert iso230.target_clusters(target_mm) is kept
+    for ours, theirs in zip(kept, computed):
+        assert np.array_equal(ours, theirs) and not ours.flags.writeable
+    key = id(target_mm)
+    del target_mm
+    gc.collect()
+    assert key not in iso230._KEPT_CLUSTERS
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_run_clock_is_each_runs_places_in_row_order(seed):
+    """The clock of run + place in the run, every run at once, against each run's samples
+    taken in turn (the runs shuffled, uneven, numbered with gaps)."""
+    from types import SimpleNamespace
+
+    from feedaxis.stats.judge import clock_of
+
+    rng = np.random.default_rng(seed)
+    run = rng.choice([1, 2, 5, 9, 40], size=500 + 17 * seed)
+    run_float = run.astype(float)
+    expected = np.empty(run.size)
+    for value in np.unique(run_float):
+        members = np.flatnonzero(run_float == value)
+        expected[members] = value + np.arange(members.size) / members.size
+    clock, unit = clock_of(SimpleNamespace(time_s=None, run=run))
+    assert unit == "run" and np.array_equal(clock, expected)

@@ -118,13 +118,17 @@ def test_linear_columns_reproduce_prepare(name, tmp_path):
     evaluate, separate = effect.prepare(case), effect.prepare_separable(case)
     for _ in range(3):
         values = drawn_values(effect, case, rng)
-        base_um, columns_um = separate(values)
-        assert columns_um.shape == (case.positioning.size, len(effect.linear))
+        columns_um = np.full((case.positioning.size, len(effect.linear)), np.nan)
+        base_um = separate(values, columns_um)
+        base_um = np.zeros(case.positioning.size) if base_um is None else base_um
         linear = np.array([values[p] for p in effect.linear])
         np.testing.assert_allclose(base_um + columns_um @ linear, evaluate(values),
                                    rtol=1e-9, atol=1e-9)
         other = {**values, **{p: values[p] + 1.0 for p in effect.linear}}
-        np.testing.assert_allclose(separate(other)[0], base_um, rtol=1e-12, atol=1e-12)
+        other_base_um = separate(other, np.empty_like(columns_um))
+        other_base_um = (np.zeros(case.positioning.size) if other_base_um is None
+                         else other_base_um)
+        np.testing.assert_allclose(other_base_um, base_um, rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("name", TRACKING)

@@ -110,25 +110,26 @@ class Effect:
         raise NotImplementedError
 
     def prepare_separable(self, case):
-        """Return ``f(values) -> (base_um, columns_um)`` splitting off the ``linear`` parameters.
+        """Return ``f(values, columns_um) -> base_um`` splitting off the ``linear`` parameters.
 
-        The error is ``base_um + columns_um @ [values[p] for p in linear]``; ``values`` of the
-        linear parameters are ignored. By default built from :meth:`prepare` (one evaluation
-        with the linear parameters at 0, one more per linear parameter at 1), once for all
-        when every parameter is linear (the split then depends on no value).
+        The error is ``base_um + columns_um @ [values[p] for p in linear]``, the columns
+        written into ``columns_um`` (samples x linear parameters, the fit's own array: no
+        copy of them is made beside it); ``values`` of the linear parameters are ignored;
+        ``base_um`` None stands for zero. By default built from :meth:`prepare` (one
+        evaluation with the linear parameters at 0, one more per linear parameter at 1) at
+        every call: :class:`feedaxis.fit.Problem` splits once per value of the nonlinear
+        parameters.
         """
         evaluate = self.prepare(case)
 
-        def separate(values):
+        def separate(values, columns_um):
             zero = {**values, **{name: 0.0 for name in self.linear}}
             base_um = evaluate(zero)
-            columns = [evaluate({**zero, name: 1.0}) - base_um for name in self.linear]
-            return base_um, np.array(columns).reshape(len(self.linear), base_um.size).T
+            for index, name in enumerate(self.linear):
+                np.subtract(evaluate({**zero, name: 1.0}), base_um, out=columns_um[:, index])
+            return base_um
 
-        if set(self.linear) != set(self.parameter_names):
-            return separate
-        fixed = separate({})
-        return lambda values: fixed
+        return separate
 
     def bounds(self, axis):
         """{parameter: (lower, upper)} on this axis; by default the parameters' own bounds."""
@@ -168,9 +169,11 @@ class BasisEffect(Effect):
         return lambda v: self.basis @ np.array([v[p.name] for p in self.parameters])
 
     def prepare_separable(self, case):
-        """The basis itself as the columns (no evaluation, no copy), a zero base."""
-        fixed = (np.zeros(self.basis.shape[0]), self.basis)
-        return lambda values: fixed
+        """The basis itself as the columns (no evaluation), a zero base (None)."""
+        def separate(values, columns_um):
+            columns_um[:] = self.basis
+
+        return separate
 
     def guess(self, case, residual_um):
         coefficients = np.linalg.lstsq(self.basis, residual_um, rcond=None)[0]

@@ -213,23 +213,25 @@ class ThermalScrew(PositioningEffect):
         separate = self.prepare_separable(case)
 
         def evaluate(values):
-            base_um, columns_um = separate(values)
-            return base_um + columns_um @ [values[name] for name in self.linear]
+            columns_um = np.empty((case.positioning.size, len(self.linear)))
+            separate(values, columns_um)
+            return columns_um @ [values[name] for name in self.linear]
 
         return evaluate
 
     def prepare_separable(self, case):
-        """TE per unit k3 and per unit k4 from one closed-form pass (Eq. 10, 15-19)."""
+        """TE per unit k3 and per unit k4 into the columns from one closed-form pass (Eq. 10,
+        15-19); a zero base."""
         segments, time_s = case.duty.segments, case.positioning.time_s
         unique_s, sample_time = np.unique(time_s, return_inverse=True)
         position_mm = _targets(case)
 
-        def separate(values):
+        def separate(values, columns_um):
             params = self.screw_params(case.axis, values)
             unit_K = thermal.duty_unit_fields(params, segments, unique_s)
-            columns_um = [thermal.thermal_error_um(params, field[sample_time], position_mm)
-                          for field in unit_K]
-            return np.zeros(position_mm.size), np.column_stack(columns_um)
+            for index, field in enumerate(unit_K):
+                columns_um[:, index] = thermal.thermal_error_um(params, field[sample_time],
+                                                                position_mm)
 
         return separate
 

@@ -197,19 +197,21 @@ class Measurement(ABC):
         """``f(values) -> (base_um, columns_um)``: the prediction is ``base_um + columns_um
         @ linear values``, columns in the order ``(effect, parameter) for effect in
         model.effects for parameter in effect.linear``; each call returns new arrays (the
-        fit may overwrite them)."""
+        fit may overwrite them): each effect writes its columns into them as it is split
+        (no effect's columns are kept or copied beside them)."""
         core = self.core(model)
         additive = [(e, e.prepare_separable(self.case)) for e in model.effects if e.additive]
+        ends = np.cumsum([0] + [len(e.linear) for e, _ in additive])
         size = self.size
 
         def separate(values):
             base_um = core(values) if core else np.zeros(size)
-            columns = [np.zeros((size, 0))]
-            for effect, split in additive:
-                effect_base_um, effect_columns_um = split(values[effect.name])
-                base_um = base_um + effect_base_um
-                columns.append(effect_columns_um)
-            return base_um, np.hstack(columns)
+            columns_um = np.empty((size, ends[-1]))
+            for (effect, split), start, end in zip(additive, ends[:-1], ends[1:]):
+                effect_base_um = split(values[effect.name], columns_um[:, start:end])
+                if effect_base_um is not None:
+                    base_um = base_um + effect_base_um
+            return base_um, columns_um
 
         return separate
 

@@ -102,11 +102,18 @@ def read_positioning(path, duty_end_s=None, length_mm=None):
                                                      "start of duty.csv)")
     if duty_end_s is not None:
         _check_within_duty(path, time_s, rows, duty_end_s)
-    return PositioningSamples(values["target_mm"], values["error_um"],
+    return PositioningSamples(read_only(values["target_mm"]), values["error_um"],
                               direction if direction is not None else np.ones_like(values["target_mm"]),
                               run.astype(int) if run is not None else None, time_s,
                               values.get("ambient_C"), has_direction=direction is not None,
                               material_C=values.get("material_C"))
+
+
+def read_only(target_mm):
+    """``target_mm`` made read-only, so that :func:`feedaxis.iso230.target_clusters` keeps
+    its clusters (a sort of every sample) for all that asks for them."""
+    target_mm.flags.writeable = False
+    return target_mm
 
 
 def _check_within_duty(path, time_s, rows, duty_end_s):
@@ -312,6 +319,7 @@ class Positioning(Measurement):
     def subset(self, keep):
         kept = {name: None if getattr(self.samples, name) is None else
                 getattr(self.samples, name)[keep] for name in SAMPLE_COLUMNS}
+        kept["target_mm"] = read_only(kept["target_mm"])
         return Positioning(self.case.with_samples(self.kind, replace(self.samples, **kept)))
 
     def rival(self, effect, left, result):
