@@ -36,6 +36,29 @@ def test_spectral_gram_is_the_plain_formula(seed):
                                atol=1e-10 * np.abs(fast).max())
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_spectral_gram_in_blocks_is_the_gram_of_pairs(seed, monkeypatch):
+    """Blocks of 1 (two transforms held at a time: each row's against every later one's),
+    2, 3 and all 5 rows give the same matrix, to the last bit (the same products of the
+    same transforms), and the plain formula's."""
+    from feedaxis.stats import noise as noise_module
+
+    rng = np.random.default_rng(seed)
+    jacobian = rng.normal(size=(900 + 41 * seed, 5)) * np.array([1e-3, 1.0, 1e3, 7.0, 0.1])
+    noise = Autoregression(np.array([0.9, -0.3, 0.05])[:seed], 0.2, 0.7)
+    n_fft = 1 << int(np.ceil(np.log2(2 * jacobian.shape[0])))
+    grams = []
+    for held in (1, 2, 3, 5):
+        monkeypatch.setattr(noise_module, "SPECTRA_BYTES", 16 * (n_fft // 2 + 1) * (held + 1))
+        grams.append(spectral_gram(jacobian.T, noise.spectrum))
+    expected = plain_gram(jacobian, noise.spectrum)
+    for gram in grams:
+        np.testing.assert_array_equal(gram, grams[0])
+        np.testing.assert_array_equal(gram, gram.T)
+    np.testing.assert_allclose(grams[0], expected, rtol=1e-12,
+                               atol=1e-12 * np.abs(expected).max())
+
+
 def test_serial_gram_in_and_out_of_order():
     """The gram in the order taken: a permuted order reorders the rows, the identity not."""
     rng = np.random.default_rng(4)
