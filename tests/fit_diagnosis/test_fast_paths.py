@@ -189,3 +189,51 @@ def test_unit_column_svd_is_the_svd_of_the_unit_columns(seed):
     np.testing.assert_allclose(singular, expected, rtol=1e-12)
     np.testing.assert_allclose(np.abs(vt), np.abs(expected_vt), atol=1e-10)
     assert strong.all()
+
+
+def lstsq_autoregression(residual, max_order):
+    """Conditional least squares order by order: np.linalg.lstsq on the lagged columns
+    themselves (the path before one QR decomposition), the order by BIC."""
+    from feedaxis.stats.coloured import Autoregression
+
+    residual = np.asarray(residual, dtype=float) - np.mean(residual)
+    variance = float(np.mean(residual ** 2))
+    best, best_score, n = Autoregression(np.zeros(0), variance, variance), np.inf, residual.size
+    for order in range(1, min(max_order, n // 4) + 1):
+        lagged = np.column_stack([residual[order - lag:n - lag] for lag in range(1, order + 1)])
+        target = residual[order:]
+        coefficients = np.linalg.lstsq(lagged, target, rcond=None)[0]
+        innovation = float(np.mean((target - lagged @ coefficients) ** 2))
+        score = target.size * np.log(innovation) + np.log(n) * order
+        if score < best_score and np.all(np.abs(np.roots(np.r_[1.0, -coefficients])) < 1.0):
+            spread = innovation * np.sum(np.linalg.pinv(lagged.T @ lagged))
+            best = Autoregression(coefficients, innovation, variance, float(np.sqrt(spread)))
+            best_score = score
+    return best
+
+
+@pytest.mark.parametrize("coefficients, size", [
+    ((), 5000), ((0.5,), 21), ((0.95,), 210), ((0.999,), 3000), ((0.6, -0.3), 40),
+    ((1.2, -0.5, 0.1), 20_000), ((0.02,) * 5, 100_000)])
+def test_autoregression_by_one_qr_is_lstsq_order_by_order(coefficients, size, monkeypatch):
+    """Every order's regression from one QR decomposition (in blocks of 1,000 rows here)
+    gives lstsq's coefficients, innovation variance and persistence error on the lagged
+    columns themselves, the same order chosen."""
+    from feedaxis.stats import coloured
+
+    monkeypatch.setattr(coloured, "LAGGED_ROWS", 1000)
+    rng = np.random.default_rng(size)
+    series = np.zeros(size + 300)
+    for k, innovation in enumerate(rng.normal(size=series.size)):
+        series[k] = sum(c * series[k - j] for j, c in enumerate(coefficients, start=1)
+                        if k >= j) + innovation
+    series = series[300:]
+    for max_order in (1, 2, 5):
+        fast = coloured.least_squares_autoregression(series, max_order)
+        plain = lstsq_autoregression(series, max_order)
+        assert fast.order == plain.order
+        np.testing.assert_allclose(fast.coefficients, plain.coefficients, rtol=1e-12)
+        np.testing.assert_allclose([fast.innovation_variance, fast.variance,
+                                    fast.persistence_error],
+                                   [plain.innovation_variance, plain.variance,
+                                    plain.persistence_error], rtol=1e-12)
