@@ -56,6 +56,7 @@ from feedaxis.toolchain import c_compiler
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import arguments  # noqa: E402
+from plain_pythonfmu import free_instance  # noqa: E402
 
 MACRO_STEP_S = 1e-3
 EVERY = {"NpidServo": 1, "StepperError": 1, "GeometricError": 1, "ThermalScrew": 100}
@@ -95,6 +96,8 @@ import sys, time
 import numpy, pythonfmu  # the first import
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+sys.path.insert(0, sys.argv[4])
+from plain_pythonfmu import free_instance
 
 def start(path, parameters):
     description = read_model_description(path)
@@ -110,10 +113,14 @@ def start(path, parameters):
     slave.setupExperiment(startTime=0.0)
     slave.enterInitializationMode()
     slave.exitInitializationMode()
-    return time.perf_counter() - started[0], time.process_time() - started[1]
+    return slave, (time.perf_counter() - started[0], time.process_time() - started[1])
 
-start(sys.argv[1], {})
-print(*start(sys.argv[2], eval(sys.argv[3])))
+other, _ = start(sys.argv[1], {})
+slave, times = start(sys.argv[2], eval(sys.argv[3]))
+print(*times)
+for started_slave in (slave, other):
+    started_slave.terminate()
+    free_instance(started_slave)
 '''
 
 
@@ -187,8 +194,9 @@ class Driven:
 
     def free(self):
         self.slave.terminate()
-        self.slave.freeInstance()
+        free_instance(self.slave)
         shutil.rmtree(self.unzip_dir, ignore_errors=True)
+
 
 
 def cpu_us_per_macro_step(paths, names, n_steps, servo_parameters):
@@ -279,7 +287,8 @@ def first_start_ms(fmu_paths, other, starts):
     times = {label: [] for label, _, _ in cases}
     for _, (label, path, parameters) in itertools.product(range(starts), cases):
         run = subprocess.run([sys.executable, "-c", FIRST_START, str(other), str(path),
-                              repr(parameters)], capture_output=True, text=True, check=True)
+                              repr(parameters), str(Path(__file__).resolve().parent)],
+                             capture_output=True, text=True, check=True)
         times[label].append(tuple(1e3 * float(s) for s in run.stdout.split()[-2:]))
     return times
 

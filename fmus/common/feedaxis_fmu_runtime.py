@@ -1,5 +1,6 @@
 """The Python side of a standalone FMU's own runtime (binaries/linux64/python/, in FMI 3.0
-binaries/x86_64-linux/python/; see feedaxis.fmu_standalone): standalone FMUs in one process share one interpreter.
+binaries/x86_64-linux/python/; see feedaxis.fmu_standalone): standalone FMUs in one process
+share one interpreter.
 
 The first standalone FMU a host loads starts the Python it carries; the others find it
 running and :func:`join` it with their own runtimes. Each FMU carries only what its own step

@@ -689,7 +689,7 @@ def _fmu_paths(args):
     from .cosim.fmu_cache import fmu_paths
 
     with _standalone_errors():
-        return fmu_paths(args.fmus, getattr(args, "standalone", False), getattr(args, "fmi", 2))
+        return fmu_paths(args.fmus, getattr(args, "standalone", False), getattr(args, "fmi", None))
 
 
 @contextmanager

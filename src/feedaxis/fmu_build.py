@@ -1,4 +1,5 @@
-"""Build the feedaxis FMUs (the axis's four and the circle interpolator) with pythonfmu and make them loadable by any FMI host.
+"""Build the feedaxis FMUs (the axis's four and the circle interpolator) with pythonfmu and
+make them loadable by any FMI host.
 
 Sources: ``fmus/<Name>/<Name>.py`` (the slave script), ``fmus/common/feedaxis_slave.py``
 (the shared adapter), ``fmus/common/host/*.c`` (the host layer) and
@@ -94,7 +95,8 @@ def fmu_sources():
 # unit -> (factor, SI base-unit exponents) with value_SI = factor * value (degC: offset)
 SI_UNITS = {
     "m": (1.0, {"m": 1}), "mm": (1e-3, {"m": 1}), "um": (1e-6, {"m": 1}),
-    "mm/s": (1e-3, {"m": 1, "s": -1}), "mm/min": (1e-3 / 60.0, {"m": 1, "s": -1}), "s": (1.0, {"s": 1}), "K": (1.0, {"K": 1}),
+    "mm/s": (1e-3, {"m": 1, "s": -1}), "mm/min": (1e-3 / 60.0, {"m": 1, "s": -1}),
+    "s": (1.0, {"s": 1}), "K": (1.0, {"K": 1}),
     "degC": (1.0, {"K": 1}), "deg": (math.pi / 180.0, {"rad": 1}),
     "N": (1.0, {"kg": 1, "m": 1, "s": -2}), "Pa": (1.0, {"kg": 1, "m": -1, "s": -2}),
     "kg/m3": (1.0, {"kg": 1, "m": -3}), "um/mm": (1e-3, {}), "1/K": (1.0, {"K": -1}),

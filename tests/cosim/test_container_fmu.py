@@ -126,5 +126,16 @@ def test_fmus_of_two_fmi_versions_are_refused_before_writing(fmu_paths, fmi3_pat
     for name, path in fmu_paths.items():
         shutil.copy2(fmi3_paths[name] if name == "ThermalScrew" else path, folder)
     assert main(["export-fmu", str(tmp_path / "axis.fmu"), "--fmus", str(folder)]) == 2
-    assert "ThermalScrew.fmu 3.0" in capsys.readouterr().err
+    assert "ThermalScrew.fmu: an FMI 3.0 FMU, and --fmi 2" in capsys.readouterr().err
+    assert not (tmp_path / "axis.fmu").exists()
+
+
+@pytest.mark.parametrize("fmi", ["2", "3"])
+def test_fmus_of_another_fmi_version_than_asked_are_refused_before_writing(
+        fmu_paths, fmi3_paths, tmp_path, capsys, fmi):
+    given = fmi3_paths if fmi == "2" else fmu_paths
+    folder = str(next(iter(given.values())).parent)
+    assert main(["export-fmu", str(tmp_path / "axis.fmu"), "--fmus", folder, "--fmi", fmi]) == 2
+    other = "3.0" if fmi == "2" else "2.0"
+    assert f"an FMI {other} FMU, and --fmi {fmi} asks for FMI {fmi}.0" in capsys.readouterr().err
     assert not (tmp_path / "axis.fmu").exists()

@@ -64,18 +64,22 @@ def _complete(folder):
     return intact({name: folder / f"{name}.fmu" for name in FMU_NAMES})
 
 
-def fmu_paths(folder=None, standalone=False, fmi=2):
+def fmu_paths(folder=None, standalone=False, fmi=None):
     """{FMU name: path} of the four FMUs in ``folder`` (``--fmus``: each checked to be a safe
-    FMU archive with the interface the axis needs), else of the cache; ``standalone``: FMUs that carry their Python (those in
-    ``folder`` must be)."""
+    FMU archive with the interface the axis needs), else of the cache; ``standalone``: FMUs
+    that carry their Python (those in ``folder`` must be); ``fmi``: the FMI major version
+    asked for (``--fmi``: those in ``folder`` must be of it; the cache's default is 2)."""
     if folder is None:
-        return cached_fmus(standalone=standalone, fmi=fmi)
+        return cached_fmus(standalone=standalone, fmi=fmi or 2)
     paths = {name: Path(folder) / f"{name}.fmu" for name in FMU_NAMES}
     missing = [str(p) for p in paths.values() if not p.exists()]
     if missing:
         raise InputError(f"missing {', '.join(missing)}", parameter=f"--fmus {folder}")
     for name, path in paths.items():
-        check_fmu(path, name)
+        version = check_fmu(path, name).fmiVersion
+        if fmi is not None and not version.startswith(f"{fmi}."):
+            raise InputError(f"an FMI {version} FMU, and --fmi {fmi} asks for FMI {fmi}.0 "
+                             f"(build them with build-fmus --fmi {fmi})", path=path)
     if standalone:
         from ..fmu_standalone import is_standalone
 

@@ -52,9 +52,9 @@ def expected_interface():
 
 
 def check_fmu(path, name):
-    """Raise :class:`InputError` naming ``path`` unless it is a safe FMU archive whose
-    model description reads and declares every variable :func:`expected_interface` gives
-    FMU ``name``, with its causality."""
+    """The fmpy model description of ``path``; :class:`InputError` naming ``path`` unless it
+    is a safe FMU archive whose model description reads and declares every variable
+    :func:`expected_interface` gives FMU ``name``, with its causality."""
     from fmpy import read_model_description
 
     check_fmu_archive(path)
@@ -70,6 +70,7 @@ def check_fmu(path, name):
                      else "does not declare it")
             raise InputError(f"not a {name} FMU of feedaxis: the axis needs the {causality} "
                              f"{variable}, and the FMU {found}", path=path)
+    return description
 
 
 def intact(paths):
