@@ -310,14 +310,15 @@ def spectral_gram(columns, spectrum):
     root = np.sqrt(weights)
     size, width = columns.shape[0], n_fft // 2 + 1
     held = max(SPECTRA_BYTES // (16 * width) - 1, 1)
-    other = np.empty(width, dtype=complex)
+    block = np.empty((min(held, size), width), dtype=complex)
+    other = np.empty(width, dtype=complex) if held < size else None  # a later row's
     gram = np.empty((size, size))
     for start in range(0, size, held):
         stop = min(start + held, size)
-        block = np.empty((stop - start, width), dtype=complex)
         for row, column in zip(block, columns[start:stop]):
             _weighted_transform(column, root, row)
-        pairs = block.view(np.float64)  # (re, im) interleaved: one real product sums both
+        # (re, im) interleaved: one real product sums both
+        pairs = block[:stop - start].view(np.float64)
         for j in range(start, size):
             later = (pairs[j - start] if j < stop else
                      _weighted_transform(columns[j], root, other).view(np.float64))
