@@ -19,7 +19,7 @@ medians of 3, on the loaded 2-core machine; before them 5.1-5.2 s, 254 MB):
 - the sandwich covariance's J'ΣJ (``feedaxis.stats.noise.spectral_gram``) transforms each
   Jacobian column once, holding up to 128 MB of transforms, instead of once per pair of
   columns (10 FFTs of 2^21 points instead of 31; the same products, so the same bits):
-  5.1 -> 4.1 s, peak allocations 254 -> 298 MB;
+  5.1 -> 4.1 s, peak allocations 254 -> 282 MB;
 - the serial-noise AR model by conditional least squares solves every order from one QR
   decomposition of the lagged samples, in blocks of 65,536 rows, instead of an SVD least
   squares per order on its own lagged copy (``least_squares_autoregression``; the same
