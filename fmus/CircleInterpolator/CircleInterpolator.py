@@ -8,6 +8,11 @@ Jacobi (fmpy's simulate_ssp, OMSimulator, libcosim) hand the servos these output
 next step, [t, t + h], and with ``ahead_s`` = h each servo steps towards the circle at
 t + h, as the master commands it. A host that steps this FMU before the servos within a
 macro step (Gauss-Seidel) needs ``ahead_s`` = 0.
+
+The outputs count from (``origin_first_mm``, ``origin_second_mm``), by default the machine's
+origin: set to the circle at ``ahead_s`` (the first reference), with each axis's FMUs'
+``position_offset_mm`` the same, they are 0 at initialisation, what a host that passes
+nothing on before its first step (fmpy's simulate_ssp) hands the servos.
 """
 from pythonfmu import DefaultExperiment
 
@@ -47,6 +52,10 @@ class CircleInterpolator(AxisSlave):
                        "one macro step for hosts that step Jacobi (the servos then step towards "
                        "the circle at the end of their step), 0 for one stepping this FMU "
                        "before the servos", "s", (0, None))
+        for axis in ("first", "second"):
+            self.parameter(f"origin_{axis}_mm", 0.0, f"Machine position of the {axis} axis "
+                           f"that {axis}_position_ref_mm = 0 stands for (its FMUs' "
+                           "position_offset_mm)", "mm")
 
     def setup_experiment(self, start_time, stop_time, tolerance):
         self.communication_point_s = start_time
@@ -71,8 +80,10 @@ class CircleInterpolator(AxisSlave):
 
     def step(self, step_size_s):
         at_s = self.communication_point_s + step_size_s + self.ahead_s
-        self.first_position_ref_mm = float(self.model.position_mm(at_s, 0))
-        self.second_position_ref_mm = float(self.model.position_mm(at_s, 1))
+        self.first_position_ref_mm = (float(self.model.position_mm(at_s, 0))
+                                      - self.origin_first_mm)
+        self.second_position_ref_mm = (float(self.model.position_mm(at_s, 1))
+                                       - self.origin_second_mm)
 
     def do_step(self, current_time, step_size):
         self.communication_point_s = current_time

@@ -34,6 +34,7 @@ class GeometricError(AxisSlave):
         self.parameter("youngs_modulus_Pa", 2.1e11, "Screw Young's modulus", "Pa", (0, None))
         self.parameter("support", "fixed-free", "How the screw is held: fixed-free, fixed-fixed or supported-supported")
         self.parameter("fixed_end_mm", -141.0, "Axis coordinate P_f of the fixed end (Rong et al. 2023 Eq. 15-16)", "mm")
+        self.position_offset_parameter("the error is that at position_offset_mm + position_mm")
         self.engagement = 1.0  # in the backlash play: -1 to +1 (geometry.play_engagement)
 
     def build(self):
@@ -45,12 +46,13 @@ class GeometricError(AxisSlave):
     def step(self, step_size_s):
         self.engagement = geometry.play_engagement(
             self.engagement, self.velocity_mm_s * step_size_s, self.backlash_um)
+        position_mm = self.position_offset_mm + self.position_mm
         sag_um = 0.0
         if self.sag_enabled:
-            screw_m = mounting.screw_coordinate_m(self.position_mm, self.fixed_end_mm)
+            screw_m = mounting.screw_coordinate_m(position_mm, self.fixed_end_mm)
             sag_um = geometry.gravity_sag_error_um(screw_m, self.model)
         self.error_um = float(geometry.transmission_error_um(
-            self.position_mm, self.engagement, self.lead_mm, self.offset_um, self.slope_um_per_mm,
+            position_mm, self.engagement, self.lead_mm, self.offset_um, self.slope_um_per_mm,
             self.eccentricity_cos_um, self.eccentricity_sin_um, self.backlash_um, sag_um))
 
     def model_state(self):

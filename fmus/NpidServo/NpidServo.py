@@ -71,6 +71,8 @@ class NpidServo(AxisSlave):
                       {"time_step_s": (0, MAX_TIME_STEP_S)}.get(field.name, (0, None)))
             self.parameter(field.name, field.default, DESCRIPTIONS[field.name], UNITS[field.name],
                            limits)
+        self.position_offset_parameter("the loop runs to position_offset_mm + position_ref_mm "
+                                       "and position_mm is its position less it")
 
     def build(self):
         if not self.time_step_s <= MAX_TIME_STEP_S:
@@ -81,7 +83,8 @@ class NpidServo(AxisSlave):
         if failure:
             self.log(f"the compiled servo loop does not load ({failure}): stepping the Python "
                      f"loop, same results, slower", Fmi2Status.warning, "logStatusWarning")
-        return servo.Servo(params, initial_reference_mm=self.position_ref_mm)
+        return servo.Servo(params,
+                           initial_reference_mm=self.position_offset_mm + self.position_ref_mm)
 
     def step(self, step_size_s):
         internal_steps = step_size_s / self.time_step_s
@@ -89,9 +92,11 @@ class NpidServo(AxisSlave):
             raise ValueError(f"a communication step of {step_size_s} s needs {internal_steps:.3g} "
                              f"internal steps of time_step_s = {self.time_step_s} s; at most "
                              f"{MAX_INTERNAL_STEPS} are taken in one doStep (split the step)")
-        self.model.advance(step_size_s, self.position_ref_mm, self.disturbance_N)
-        (self.position_mm, self.velocity_mm_s, self.tracking_error_mm,
+        self.model.advance(step_size_s, self.position_offset_mm + self.position_ref_mm,
+                           self.disturbance_N)
+        (position_mm, self.velocity_mm_s, self.tracking_error_mm,
          self.control_V) = self.model.outputs()
+        self.position_mm = position_mm - self.position_offset_mm
 
     def model_state(self):
         return self.model.state()

@@ -27,11 +27,12 @@ class StepperError(AxisSlave):
         self.parameter("harmonic1_sin_um", 0.06, "First harmonic, sine amplitude", "um", tunable=True)
         self.parameter("harmonic2_cos_um", 0.0, "Second harmonic, cosine amplitude", "um", tunable=True)
         self.parameter("harmonic2_sin_um", 0.0, "Second harmonic, sine amplitude", "um", tunable=True)
+        self.position_offset_parameter("the error is that at position_offset_mm + position_mm")
 
     def build(self):
         return motor.motor_error_period_mm(self.lead_mm, self.step_angle_deg, self.error_period_steps)
 
     def step(self, step_size_s):
         self.error_um = float(motor.motor_error_um(
-            self.position_mm, self.model, (self.harmonic1_cos_um, self.harmonic2_cos_um),
+            self.position_offset_mm + self.position_mm, self.model, (self.harmonic1_cos_um, self.harmonic2_cos_um),
             (self.harmonic1_sin_um, self.harmonic2_sin_um)))

@@ -53,6 +53,7 @@ class ThermalScrew(AxisSlave):
             limits = None if field.name.endswith("_mm") else (0, None)
             self.parameter(field.name, float(field.default), DESCRIPTIONS[field.name],
                            UNITS[field.name], limits)
+        self.position_offset_parameter("the nut is at position_offset_mm + position_mm")
         self.rise_K = None
 
     def build(self):
@@ -62,10 +63,11 @@ class ThermalScrew(AxisSlave):
         return params
 
     def step(self, step_size_s):
-        self.rise_K = thermal.advance(self.model, self.rise_K, step_size_s, self.position_mm,
+        position_mm = self.position_offset_mm + self.position_mm
+        self.rise_K = thermal.advance(self.model, self.rise_K, step_size_s, position_mm,
                                       self.velocity_mm_s * 60.0)
         ambient_delta_K = self.ambient_C - self.reference_ambient_C
-        self.error_um = float(thermal.thermal_error_um(self.model, self.rise_K, self.position_mm,
+        self.error_um = float(thermal.thermal_error_um(self.model, self.rise_K, position_mm,
                                                        ambient_delta_K))
         self.elongation_um = float(thermal.screw_elongation_um(self.model, self.rise_K,
                                                                self.model.length_m))

@@ -115,6 +115,16 @@ class AxisSlave(Fmi2Slave):
         self._declare(name, value, description, unit, limits,
                       causality=Fmi2Causality.parameter, variability=variability)
 
+    def position_offset_parameter(self, use):
+        """Declare ``position_offset_mm`` (default 0), the machine position that 0 mm on the
+        FMU's position connectors stands for; ``use`` says how the FMU applies it. A system
+        whose connectors count from the start of a motion (0 there, whatever a host passes
+        before its first step) hands the start position here; the physics sees machine
+        positions."""
+        self.parameter("position_offset_mm", 0.0, "Machine position that 0 mm on the "
+                       f"position connectors stands for: {use} (0: the connectors carry "
+                       "machine positions)", "mm")
+
     def input(self, name, value, description, unit=None):
         """Declare a Real input with its start ``value``; NaN or infinity is refused."""
         self._input_names.append(name)

@@ -874,7 +874,10 @@ def _cmd_export_ssp(args):
         payload["interpolator"] = system.component("CircleInterpolator").parameters
         lines += ("\nCircleInterpolator drives both servos' position_ref_mm, one macro step "
                   "ahead (ahead_s) for hosts that step Jacobi: "
-                  + ", ".join(f"{k} = {v:g}" for k, v in payload["interpolator"].items()))
+                  + ", ".join(f"{k} = {v:g}" for k, v in payload["interpolator"].items())
+                  + "\nposition connectors count from the first reference (origin_first_mm, "
+                    "origin_second_mm; each axis FMU's position_offset_mm): 0 at the start in "
+                    "every host")
         payload["outputs"] = {o.variable.name: o.formula() for o in system.outputs}
         lines += ("\nthe machine's table positions (mm) from the component outputs:\n"
                   + "\n".join(f"  {name} = {formula}"

@@ -18,9 +18,11 @@ from .fmu_runner import check_fmu_archive
 def expected_interface():
     """{FMU name: {variable: causality}}: the inputs and outputs the axis connects and
     records, the parameters the axis, the effects and axis.toml set, and what a machine's
-    SSP connects and sets of the circle interpolator."""
+    SSP connects and sets of the circle interpolator and of each axis FMU (its
+    ``position_offset_mm``)."""
     from ..physics.circle import CircleInterpolator
-    from .machine import INTERPOLATOR, INTERPOLATOR_OUTPUTS, interpolator_parameters
+    from .machine import (AXIS_PARTS, INTERPOLATOR, INTERPOLATOR_OUTPUTS, POSITION_OFFSET,
+                          interpolator_parameters)
     from .system import default_axis
 
     system = default_axis()
@@ -45,6 +47,8 @@ def expected_interface():
         for fmu, keys in table.items():
             needed[fmu].update(dict.fromkeys(keys, "parameter"))
     needed["NpidServo"].update(dict.fromkeys(SERVO_KEYS.values(), "parameter"))
+    for part in AXIS_PARTS:
+        needed[part][POSITION_OFFSET] = "parameter"
     needed[INTERPOLATOR] = {**dict.fromkeys(INTERPOLATOR_OUTPUTS, "output"),
                             **dict.fromkeys(interpolator_parameters(
                                 CircleInterpolator(1.0, 1.0, (0.0, 0.0)), 0.0), "parameter")}

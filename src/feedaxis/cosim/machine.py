@@ -15,7 +15,10 @@ second travels y (a term of the first axis's table position)::
 An axis has StepperError only where its motor is known and ThermalScrew only where the
 screw's thermal keys are (:func:`machine_from_case_axes`); the default machine has both on
 both axes. :class:`CircleInterpolator` commands the circle at the programmed feed, with a
-lead-in arc before the measured turn and a lead-out arc after it.
+lead-in arc before the measured turn and a lead-out arc after it; driven by its FMU
+(:func:`with_interpolator`, ``export-ssp --machine``) the machine counts its position
+connectors from the circle's first reference, each FMU rebuilding machine positions from its
+``position_offset_mm``.
 """
 from __future__ import annotations
 
@@ -35,6 +38,8 @@ INTERPOLATOR = "CircleInterpolator"
 INTERPOLATOR_OUTPUTS = ("first_position_ref_mm", "second_position_ref_mm")
 REFERENCE_INPUT = "_position_ref_mm"
 ERROR_PARTS = ("StepperError", "GeometricError", "ThermalScrew")
+# each axis FMU's machine position of 0 mm on its position connectors
+POSITION_OFFSET = "position_offset_mm"
 
 
 def component_name(axis, part):
@@ -205,14 +210,22 @@ def reference_axes(system):
             if v.name.endswith(REFERENCE_INPUT)]
 
 
-def interpolator_parameters(path, ahead_s):
+def interpolator_parameters(path, ahead_s, origin_mm=(0.0, 0.0)):
     """The CircleInterpolator FMU's parameter values commanding ``path``
-    (:class:`feedaxis.physics.circle.CircleInterpolator`) ``ahead_s`` ahead."""
+    (:class:`feedaxis.physics.circle.CircleInterpolator`) ``ahead_s`` ahead, its outputs
+    counted from the machine position ``origin_mm`` (first, second axis)."""
     return {"radius_mm": float(path.radius_mm), "feed_mm_min": float(path.feed_mm_min),
             "center_first_mm": float(path.center_mm[0]),
             "center_second_mm": float(path.center_mm[1]), "direction": int(path.direction),
             "start_deg": float(path.start_deg), "lead_in_deg": float(path.lead_in_deg),
-            "lead_out_deg": float(path.lead_out_deg), "ahead_s": float(ahead_s)}
+            "lead_out_deg": float(path.lead_out_deg), "ahead_s": float(ahead_s),
+            "origin_first_mm": float(origin_mm[0]), "origin_second_mm": float(origin_mm[1])}
+
+
+def first_reference_mm(path, ahead_s):
+    """(first, second axis) position (mm) the CircleInterpolator FMU commanding ``path``
+    ``ahead_s`` ahead outputs at initialisation: the circle at ``ahead_s``."""
+    return tuple(float(path.position_mm(ahead_s, index)) for index in (0, 1))
 
 
 def interpolator_path(system):
@@ -234,17 +247,39 @@ def with_interpolator(system, path):
     host stepping Jacobi gives each servo over [t, t + h] the circle at t + h, the reference
     feedaxis's master gives it (:func:`feedaxis.cosim.circular.run_circular`), and at
     initialisation the circle at h, as the master does.
+
+    The position connectors count from that first reference (:func:`relative_to`): every
+    one is 0 at the start, so a host that passes nothing on before the first step (fmpy's
+    simulate_ssp sets every connector to 0) runs the same system as one that does.
     """
     axes = reference_axes(system)
     if len(axes) != 2:
         raise ValueError(f"a machine of two axes has two servo references, got {axes}")
     sources = {f"{axis}{REFERENCE_INPUT}": f"{INTERPOLATOR}.{output}"
                for axis, output in zip(axes, INTERPOLATOR_OUTPUTS)}
+    origin_mm = first_reference_mm(path, system.macro_step_s)
     interpolator = Component(INTERPOLATOR, INTERPOLATOR, system.macro_step_s,
-                             interpolator_parameters(path, system.macro_step_s),
+                             interpolator_parameters(path, system.macro_step_s, origin_mm),
                              "circle interpolator: both axes' references, one macro step ahead")
+    system = relative_to(system, dict(zip(axes, origin_mm)))
     return replace(system, inputs=tuple(v for v in system.inputs if v.name not in sources),
                    components=(interpolator, *system.components),
                    connections=tuple(replace(c, source=sources.get(c.source, c.source))
                                      for c in system.connections))
 
+
+def relative_to(system, origin_mm):
+    """The machine ``system`` with each axis's position connectors counted from its
+    ``origin_mm`` ({axis: machine position, mm}): every FMU of the axis gets it as
+    ``position_offset_mm`` (its physics still sees machine positions), and each table
+    position adds it back where a servo's position_mm enters (squareness included)."""
+    names = {c.name for c in system.components}
+    offsets = {component_name(axis, part): {POSITION_OFFSET: float(value)}
+               for axis, value in origin_mm.items() for part in AXIS_PARTS
+               if component_name(axis, part) in names}
+    servo_mm = {f"{component_name(axis, 'NpidServo')}.position_mm": float(value)
+                for axis, value in origin_mm.items()}
+    outputs = tuple(replace(output, constant=output.constant + sum(
+        factor * servo_mm.get(term, 0.0) for term, factor in output.terms))
+        for output in system.outputs)
+    return replace(system.with_parameters(offsets), outputs=outputs)

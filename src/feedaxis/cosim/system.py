@@ -67,15 +67,17 @@ class Connection:
 
 @dataclass(frozen=True)
 class Output:
-    """A system output: a linear combination of component outputs, sum(factor x term)."""
+    """A system output: a linear combination of component outputs plus a constant,
+    constant + sum(factor x term)."""
 
     variable: Variable
     terms: tuple
+    constant: float = 0.0
 
     def formula(self):
-        """The combination as text, e.g. ``A.x + 0.001 B.y``."""
+        """The combination as text, e.g. ``A.x + 0.001 B.y`` (``61.5 + A.x`` with a constant)."""
         parts = [(f"{factor:g} " if factor != 1.0 else "") + term for term, factor in self.terms]
-        return " + ".join(parts)
+        return " + ".join(([repr(self.constant)] if self.constant else []) + parts)
 
 
 @dataclass(frozen=True)
@@ -113,7 +115,8 @@ class AxisSystem:
     def output_values(self, columns):
         """{system output: values} from ``columns`` ({"Component.variable": values}), each
         output the linear combination of its terms."""
-        return {output.variable.name: sum(factor * columns[term] for term, factor in output.terms)
+        return {output.variable.name: output.constant + sum(factor * columns[term]
+                                                            for term, factor in output.terms)
                 for output in self.outputs}
 
     def component(self, name):
