@@ -36,6 +36,29 @@ def test_spectral_gram_is_the_plain_formula(seed):
                                atol=1e-10 * np.abs(fast).max())
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_spectral_gram_in_blocks_is_the_gram_of_pairs(seed, monkeypatch):
+    """Blocks of 1 (two transforms held at a time: each row's against every later one's),
+    2, 3 and all 5 rows give the same matrix, to the last bit (the same products of the
+    same transforms), and the plain formula's."""
+    from feedaxis.stats import noise as noise_module
+
+    rng = np.random.default_rng(seed)
+    jacobian = rng.normal(size=(900 + 41 * seed, 5)) * np.array([1e-3, 1.0, 1e3, 7.0, 0.1])
+    noise = Autoregression(np.array([0.9, -0.3, 0.05])[:seed], 0.2, 0.7)
+    n_fft = 1 << int(np.ceil(np.log2(2 * jacobian.shape[0])))
+    grams = []
+    for held in (1, 2, 3, 5):
+        monkeypatch.setattr(noise_module, "SPECTRA_BYTES", 16 * (n_fft // 2 + 1) * (held + 1))
+        grams.append(spectral_gram(jacobian.T, noise.spectrum))
+    expected = plain_gram(jacobian, noise.spectrum)
+    for gram in grams:
+        np.testing.assert_array_equal(gram, grams[0])
+        np.testing.assert_array_equal(gram, gram.T)
+    np.testing.assert_allclose(grams[0], expected, rtol=1e-12,
+                               atol=1e-12 * np.abs(expected).max())
+
+
 def test_serial_gram_in_and_out_of_order():
     """The gram in the order taken: a permuted order reorders the rows, the identity not."""
     rng = np.random.default_rng(4)
@@ -276,3 +299,51 @@ def test_the_run_clock_is_each_runs_places_in_row_order(seed):
         expected[members] = value + np.arange(members.size) / members.size
     clock, unit = clock_of(SimpleNamespace(time_s=None, run=run))
     assert unit == "run" and np.array_equal(clock, expected)
+
+
+def lstsq_autoregression(residual, max_order):
+    """Conditional least squares order by order: np.linalg.lstsq on the lagged columns
+    themselves (the path before one QR decomposition), the order by BIC."""
+    from feedaxis.stats.coloured import Autoregression
+
+    residual = np.asarray(residual, dtype=float) - np.mean(residual)
+    variance = float(np.mean(residual ** 2))
+    best, best_score, n = Autoregression(np.zeros(0), variance, variance), np.inf, residual.size
+    for order in range(1, min(max_order, n // 4) + 1):
+        lagged = np.column_stack([residual[order - lag:n - lag] for lag in range(1, order + 1)])
+        target = residual[order:]
+        coefficients = np.linalg.lstsq(lagged, target, rcond=None)[0]
+        innovation = float(np.mean((target - lagged @ coefficients) ** 2))
+        score = target.size * np.log(innovation) + np.log(n) * order
+        if score < best_score and np.all(np.abs(np.roots(np.r_[1.0, -coefficients])) < 1.0):
+            spread = innovation * np.sum(np.linalg.pinv(lagged.T @ lagged))
+            best = Autoregression(coefficients, innovation, variance, float(np.sqrt(spread)))
+            best_score = score
+    return best
+
+
+@pytest.mark.parametrize("coefficients, size", [
+    ((), 5000), ((0.5,), 21), ((0.95,), 210), ((0.999,), 3000), ((0.6, -0.3), 40),
+    ((1.2, -0.5, 0.1), 20_000), ((0.02,) * 5, 100_000)])
+def test_autoregression_by_one_qr_is_lstsq_order_by_order(coefficients, size, monkeypatch):
+    """Every order's regression from one QR decomposition (in blocks of 1,000 rows here)
+    gives lstsq's coefficients, innovation variance and persistence error on the lagged
+    columns themselves, the same order chosen."""
+    from feedaxis.stats import coloured
+
+    monkeypatch.setattr(coloured, "LAGGED_ROWS", 1000)
+    rng = np.random.default_rng(size)
+    series = np.zeros(size + 300)
+    for k, innovation in enumerate(rng.normal(size=series.size)):
+        series[k] = sum(c * series[k - j] for j, c in enumerate(coefficients, start=1)
+                        if k >= j) + innovation
+    series = series[300:]
+    for max_order in (1, 2, 5):
+        fast = coloured.least_squares_autoregression(series, max_order)
+        plain = lstsq_autoregression(series, max_order)
+        assert fast.order == plain.order
+        np.testing.assert_allclose(fast.coefficients, plain.coefficients, rtol=1e-12)
+        np.testing.assert_allclose([fast.innovation_variance, fast.variance,
+                                    fast.persistence_error],
+                                   [plain.innovation_variance, plain.variance,
+                                    plain.persistence_error], rtol=1e-12)

@@ -248,23 +248,49 @@ def least_squares_autoregression(residual, max_order, min_order=1):
     predecessors), the order from ``min_order`` to ``max_order`` by BIC. Less biased than
     Yule-Walker for noise correlated close to 1 over a few hundred samples (Yule-Walker's
     bias in the AR(1) coefficient is about -(1 + 3ρ)/n, which at ρ = 0.95 and n = 210
-    understates the long-run variance by a third)."""
+    understates the long-run variance by a third). Every order's regression is solved
+    from the triangle of one QR decomposition (:func:`_lagged_triangle`)."""
     residual = np.asarray(residual, dtype=float) - np.mean(residual)
     variance = float(np.mean(residual ** 2))
     best, best_score = Autoregression(np.zeros(0), variance, variance), np.inf
     n = residual.size
-    for order in range(max(min_order, 1), min(max_order, n // 4) + 1):
-        lagged = np.column_stack([residual[order - lag:n - lag] for lag in range(1, order + 1)])
-        target = residual[order:]
-        coefficients = np.linalg.lstsq(lagged, target, rcond=None)[0]
-        innovation = float(np.mean((target - lagged @ coefficients) ** 2))
-        score = target.size * np.log(max(innovation, 1e-300)) + np.log(n) * order
+    top = min(max_order, n // 4)
+    if top < max(min_order, 1):
+        return best
+    body = _lagged_triangle(residual, top)
+    for order in range(max(min_order, 1), top + 1):
+        triangle = _lagged_triangle(residual[:top], order,
+                                    np.column_stack((body[:, :order], body[:, -1])))
+        lagged, target = triangle[:, :order], triangle[:, order]
+        # the cut-off of lstsq on the n - p rows themselves: the same singular values
+        coefficients = np.linalg.lstsq(lagged, target, rcond=np.finfo(float).eps * (n - order))[0]
+        innovation = float(np.sum((target - lagged @ coefficients) ** 2)) / (n - order)
+        score = (n - order) * np.log(max(innovation, 1e-300)) + np.log(n) * order
         if score < best_score and np.all(np.abs(np.roots(np.r_[1.0, -coefficients])) < 1.0):
             spread = innovation * np.sum(np.linalg.pinv(lagged.T @ lagged))
             best = Autoregression(coefficients, innovation, variance,
                                   float(np.sqrt(max(spread, 0.0))))
             best_score = score
     return best
+
+
+LAGGED_ROWS = 1 << 16  # rows of the lagged matrix decomposed at a time (3 MB at order 5)
+
+
+def _lagged_triangle(series, order, above=None):
+    """R (``order`` + 1 square) of the QR decomposition of the rows [x_{k-1} .. x_{k-p},
+    x_k] of ``series``, k from p = ``order`` to its end, under the rows ``above`` (of the
+    same columns): the regression of x_k on its p predecessors, its Gram matrix RᵀR.
+    Householder QR over ``LAGGED_ROWS`` rows at a time, each block stacked under the
+    triangle so far (as stable as one decomposition of the whole, in the memory of one
+    block)."""
+    triangle = np.zeros((0, order + 1)) if above is None else above
+    windows = (sliding_window_view(series, order + 1)[:, ::-1] if series.size > order
+               else np.zeros((0, order + 1)))  # x_k, x_{k-1}, .., x_{k-p}
+    for first in range(0, max(len(windows), 1), LAGGED_ROWS):
+        rows = np.roll(windows[first:first + LAGGED_ROWS], -1, axis=1)
+        triangle = np.linalg.qr(np.vstack((triangle, rows)), mode="r")
+    return triangle
 
 
 def ljung_box_p_value(residual, lags, groups=None):

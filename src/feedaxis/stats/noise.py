@@ -49,6 +49,7 @@ SERIAL_MAX_ORDER = 5
 SERIAL_KEPT = 8  # AR models kept by residual (Serial.autoregression)
 SERIAL_ALPHA = 0.01  # the Ljung-Box test over SERIAL_MAX_ORDER lags: white noise taken for
 #                      correlated in 1 % of tests, and only then an AR model of order >= 1
+SPECTRA_BYTES = 2 ** 27  # the FFTs spectral_gram holds at a time (128 MB)
 
 
 def _rss(values):
@@ -298,25 +299,40 @@ def spectral_gram(columns, spectrum):
     """Σ_f S(f)|C(f)|²-weighted Gram matrix of ``columns`` (one row per column, in sample
     order): Re(C W Cᴴ) over the one-sided FFT C of each row zero-padded to the next power
     of two ≥ 2n, W the spectrum ``spectrum(n_fft) / n_fft`` with the inner frequencies
-    doubled (a circulant Σ: J'ΣJ without forming Σ). Two rows' transforms, weighted by √W,
-    are held at a time (each row's against every later one's: k(k+1)/2 transforms of k rows,
-    in the memory of two; at 10^7 samples one is 270 MB)."""
+    doubled (a circulant Σ: J'ΣJ without forming Σ). The rows are transformed in blocks of
+    as many as ``SPECTRA_BYTES`` holds, each transform weighted by √W, and each block's
+    rows are multiplied by their own and every later row's transform: k transforms of k
+    rows where the block holds them all (every fit's at 10^6 samples), k(k+1)/2 in the
+    memory of two where it holds one (at 10^7 samples one transform is 270 MB)."""
     n_fft = 1 << int(np.ceil(np.log2(2 * columns.shape[1])))
     weights = spectrum(n_fft) / n_fft
     weights[1:-1] *= 2.0
     root = np.sqrt(weights)
-    first, other = (np.empty(n_fft // 2 + 1, dtype=complex) for _ in range(2))
-    gram = np.empty((columns.shape[0],) * 2)
-    for i, column in enumerate(columns):
-        np.fft.rfft(column, n_fft, out=first)
-        first *= root
-        pairs = first.view(np.float64)  # (re, im) interleaved: one real product sums both
-        gram[i, i] = pairs @ pairs
-        for j in range(i + 1, columns.shape[0]):
-            np.fft.rfft(columns[j], n_fft, out=other)
-            other *= root
-            gram[i, j] = gram[j, i] = pairs @ other.view(np.float64)
+    size, width = columns.shape[0], n_fft // 2 + 1
+    held = max(SPECTRA_BYTES // (16 * width) - 1, 1)
+    block = np.empty((min(held, size), width), dtype=complex)
+    other = np.empty(width, dtype=complex) if held < size else None  # a later row's
+    gram = np.empty((size, size))
+    for start in range(0, size, held):
+        stop = min(start + held, size)
+        for row, column in zip(block, columns[start:stop]):
+            _weighted_transform(column, root, row)
+        # (re, im) interleaved: one real product sums both
+        pairs = block[:stop - start].view(np.float64)
+        for j in range(start, size):
+            later = (pairs[j - start] if j < stop else
+                     _weighted_transform(columns[j], root, other).view(np.float64))
+            for i in range(start, min(j + 1, stop)):
+                gram[i, j] = gram[j, i] = pairs[i - start] @ later
     return gram
+
+
+def _weighted_transform(column, root, out):
+    """The one-sided FFT of ``column`` zero-padded to ``2 * (out.size - 1)``, times
+    ``root``, into ``out``."""
+    np.fft.rfft(column, 2 * (out.size - 1), out=out)
+    out *= root
+    return out
 
 
 SLOW_SHARE = 1.5  # the residual's RMS over its floor above which its slow part is named
