@@ -105,7 +105,7 @@ def test_the_autocorrelation_time_is_kept_by_content(monkeypatch):
     it, to the bit; another residual its own; the oldest kept leaves first."""
     from feedaxis.stats import coloured
 
-    monkeypatch.setattr(coloured, "_KEPT_TAUS", {})
+    monkeypatch.setattr(coloured, "_KEPT_TAUS", coloured.KeptByContent(coloured.TAUS_KEPT))
     computed = []
     anew = coloured._autocorrelation_time
     monkeypatch.setattr(coloured, "_autocorrelation_time",

@@ -65,7 +65,32 @@ MIN_WINDOW = 64  # the shortest window of the short-time periodogram
 CLIP_SIGMA = 5.0  # a Gaussian sample beyond it: 6e-7 (0.3 % of 5,000-sample records)
 GATE_GRID = 400  # coarse grid of a burst's edges (points over the record)
 TAUS_KEPT = 8
-_KEPT_TAUS = {}  # (shape, content digest) -> autocorrelation time, the oldest first
+
+
+class KeptByContent:
+    """The last ``size`` results of a function of one array, kept by the array's content
+    (its shape and a BLAKE2b digest: milliseconds at 10^6 samples, against the FFTs or
+    regressions a residual asked for again would cost); the oldest leaves first."""
+
+    def __init__(self, size):
+        self.size, self._kept = size, {}
+
+    def __len__(self):
+        return len(self._kept)
+
+    def get(self, values, compute):
+        """``compute(values)`` as kept for an array of the same content, else computed and
+        kept (``values`` as contiguous floats)."""
+        values = np.ascontiguousarray(values, dtype=float)
+        key = (values.shape, hashlib.blake2b(values.data, digest_size=16).digest())
+        if key not in self._kept:
+            while len(self._kept) >= self.size:
+                self._kept.pop(next(iter(self._kept)))
+            self._kept[key] = compute(values)
+        return self._kept[key]
+
+
+_KEPT_TAUS = KeptByContent(TAUS_KEPT)
 
 
 def _autocovariance(residual):
@@ -84,17 +109,10 @@ def _autocovariance(residual):
 def autocorrelation_time(residual):
     """Integrated autocorrelation time τ = 1 + 2 Σ ρ(k), summed up to the first lag
     k >= 5 τ(k) (Sokal's adaptive window); 1 for white noise. The last ``TAUS_KEPT`` are
-    kept by the residual's content (a SHA-256 digest, 2 ms for 10^6 samples against two
-    FFTs of twice their length): a fit's residual is asked for by its uncertainties, its
-    check for a measurement delay, the diagnosis's tests and its noise estimate."""
-    values = np.ascontiguousarray(residual, dtype=float)
-    key = (values.shape, hashlib.sha256(values.data).digest())
-    tau = _KEPT_TAUS.get(key)
-    if tau is None:
-        while len(_KEPT_TAUS) >= TAUS_KEPT:
-            _KEPT_TAUS.pop(next(iter(_KEPT_TAUS)), None)
-        tau = _KEPT_TAUS[key] = _autocorrelation_time(values)
-    return tau
+    kept by the residual's content (:class:`KeptByContent`; two FFTs of twice its length
+    saved each time): a fit's residual is asked for by its uncertainties, its check for a
+    measurement delay, the diagnosis's tests and its noise estimate."""
+    return _KEPT_TAUS.get(residual, _autocorrelation_time)
 
 
 def _autocorrelation_time(residual):

@@ -34,15 +34,14 @@ decided by always name the same model.
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import replace
 
 import numpy as np
 import scipy
 
 from . import judge
-from .coloured import (Autoregression, autocorrelation_time, least_squares_autoregression,
-                       ljung_box_p_value, noise_floor_um)
+from .coloured import (Autoregression, KeptByContent, autocorrelation_time,
+                       least_squares_autoregression, ljung_box_p_value, noise_floor_um)
 from .judge import Test
 
 SERIAL_MAX_ORDER = 5
@@ -217,7 +216,7 @@ class Serial(_WhiteUnlessCorrelated):
     def __init__(self, order, white):
         self.order, self.white, self.label = order, white, white.label
         self.reordered = bool(np.any(np.diff(order) != 1))  # not the samples' own order
-        self._fitted = {}
+        self._fitted = KeptByContent(SERIAL_KEPT)
         self.name = (f"{white.name}; where the residual is serially correlated, against the "
                      "noise power at the term's frequencies (AR noise model, order by BIC)")
 
@@ -229,13 +228,7 @@ class Serial(_WhiteUnlessCorrelated):
         squares and BIC. The last few are kept by the residual's content: a fit's
         residual is tested and then weighs its uncertainties (a third of a second each
         at 10^6 samples)."""
-        key = hashlib.blake2b(np.ascontiguousarray(residual_um, dtype=float).data,
-                              digest_size=16).digest()
-        if key not in self._fitted:
-            if len(self._fitted) >= SERIAL_KEPT:
-                self._fitted.pop(next(iter(self._fitted)))
-            self._fitted[key] = self._autoregression(residual_um)
-        return self._fitted[key]
+        return self._fitted.get(residual_um, self._autoregression)
 
     def _autoregression(self, residual_um):
         ordered = self.white.noise_part(residual_um)[self.order]
