@@ -249,11 +249,12 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                     d_integral[j] += 0.5 * (d_error + d_previous[j]) * dt
                     d_derivative = (d_error - d_previous[j]) / dt
                     d_previous[j] = d_error
-                    d_command[j] = kp * d_error + ki * d_integral[j] + kd * d_derivative
                     if tuned:
                         d_command[j] = (dc[KP, j] * error + kp * d_error + dc[KI, j] * integral
                                         + ki * d_integral[j] + dc[KD, j] * derivative
                                         + kd * d_derivative)
+                    else:
+                        d_command[j] = kp * d_error + ki * d_integral[j] + kd * d_derivative
                 previous = error
                 command = kp * error + ki * integral + kd * derivative
             buffer[head] = command
