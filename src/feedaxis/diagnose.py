@@ -224,8 +224,11 @@ class Refitter:
         return self.fit(model)
 
     def fit(self, model):
-        """``fit(model, measurement)``, once per model: a hook refits what the selection
-        fitted already (the same effects, the same start: the same fit)."""
+        """``fit(model, measurement)``, once per model where the measurement's hooks refit
+        what the selection fitted already (the same effects, the same start: the same
+        fit; ``Measurement.refits_selection``)."""
+        if not self.measurement.refits_selection:
+            return fit(model, self.measurement)
         key = (tuple(id(e) for e in model.effects),
                repr([sorted(model.values[name].items()) for name in model.names]))
         if key not in self._fits:

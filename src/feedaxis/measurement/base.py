@@ -236,6 +236,10 @@ class Measurement(ABC):
     # set by the diagnosis (feedaxis.diagnose.Refitter): refits of these samples with
     # catalog effects added, for hooks that judge a rival with the model refitted
     refitter = None
+    # whether those hooks refit what the selection fitted, so the refitter keeps every fit
+    # (a fit of a servo loop costs seconds; one of 10^7 positioning samples, whose hooks
+    # refit nothing, holds an 80 MB residual)
+    refits_selection = False
 
     def neutral(self, effect):
         """``effect``'s values that switch it off on these samples (its ``neutral``)."""

@@ -231,10 +231,12 @@ class Serial(_WhiteUnlessCorrelated):
         return self._fitted.get(residual_um, self._autoregression)
 
     def _autoregression(self, residual_um):
-        ordered = self.white.noise_part(residual_um)[self.order]
-        groups = getattr(self.white, "groups", None)
-        if ljung_box_p_value(ordered, SERIAL_MAX_ORDER,
-                             None if groups is None else groups[self.order]) >= SERIAL_ALPHA:
+        """:meth:`autoregression`, computed; the noise part and its groups put in the order
+        taken only where that is not the samples' own (two sample-sized copies saved)."""
+        ordered, groups = self.white.noise_part(residual_um), getattr(self.white, "groups", None)
+        if self.reordered:
+            ordered, groups = ordered[self.order], None if groups is None else groups[self.order]
+        if ljung_box_p_value(ordered, SERIAL_MAX_ORDER, groups) >= SERIAL_ALPHA:
             variance = float(np.var(ordered))
             return Autoregression(np.zeros(0), variance, variance)
         return least_squares_autoregression(ordered, SERIAL_MAX_ORDER)
