@@ -306,6 +306,7 @@ def _select(measurement, left, pending, skipped, stages, notify):
         for joined in [e for e in result.model.effects if e.name in pending]:
             candidates.append(_candidate(measurement, left, joined, result, test))
             del pending[joined.name]
+        left.plain = None  # the nuisances' test refits once the model moves on: let it go
         left = result
     return candidates, left
 

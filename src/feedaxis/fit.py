@@ -343,7 +343,8 @@ class Problem:
         """``f(x) -> measured - predicted`` over the layout's parameter vector."""
         def residual(x):
             base_um, columns_um = self._split_at(layout, x)
-            return self.measured_um - base_um - columns_um @ x[layout.linear_index]
+            residual_um = self.measured_um - base_um
+            return np.subtract(residual_um, columns_um @ x[layout.linear_index], out=residual_um)
         return residual
 
     def linear_jacobian(self, layout, x):
@@ -438,7 +439,7 @@ def variable_projection(problem, layout):
         x[linear] = bounded_linear_solve(columns_um, target_um, lower[linear], upper[linear])
         last.update(columns_um=columns_um, free=(x[linear] > lower[linear])
                     & (x[linear] < upper[linear]))
-        return target_um - columns_um @ x[linear]
+        return np.subtract(target_um, columns_um @ x[linear], out=target_um)
 
     def projected_jacobian(x_nonlinear):
         """d project / d x_nonlinear with the columns fixed (they are where

@@ -102,11 +102,16 @@ def test_autoregression_kept_by_content():
                                   serial._autoregression(other).coefficients)
 
 
+@pytest.mark.parametrize("key_limit", [None, 64])
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_row_groups_are_numpys_unique_rows(seed):
-    """The groups of distinct rows through integer keys: NumPy's structured unique rows."""
+def test_row_groups_are_numpys_unique_rows(seed, key_limit, monkeypatch):
+    """The groups of distinct rows through integer keys: NumPy's structured unique rows,
+    also where the key is ranked before a digit would take it past its limit."""
+    from feedaxis import iso230
     from feedaxis.iso230 import row_groups
 
+    if key_limit:
+        monkeypatch.setattr(iso230, "KEY_LIMIT", key_limit)
     rng = np.random.default_rng(seed)
     n = 5000
     columns = (np.round(rng.uniform(-50.0, 50.0, n), 1), rng.choice([-1.0, 1.0], n),

@@ -115,6 +115,16 @@ class AssemblyEccentricity(_PeriodicEffect):
         return lambda v: geometry.eccentricity_error_um(position_mm, lead_mm, v["cos_um"],
                                                         v["sin_um"])
 
+    def prepare_separable(self, case):
+        """The cosine and sine at the lead written into the columns, a zero base (three
+        evaluations of the error held five sample-sized arrays)."""
+        position_mm, lead_mm = _targets(case), case.axis.lead_mm
+
+        def separate(values, columns_um):
+            geometry.eccentricity_columns(position_mm, lead_mm, columns_um)
+
+        return separate
+
     def fmu_parameters(self, axis, values):
         return {self.fmu: {"eccentricity_cos_um": values["cos_um"],
                            "eccentricity_sin_um": values["sin_um"]}}

@@ -17,7 +17,7 @@ residual.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +26,7 @@ import scipy
 from .. import kinds, standards
 from ..case import (DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, checked_run,
                     length_mm)
+from ..effects.base import Columns
 from ..iso230 import SAME_TARGET_MM, iso230_figures, sampling_notes, target_clusters
 from ..standards import DEFAULT
 from ..plausibility import positioning_problems, warn_implausible
@@ -379,7 +380,7 @@ class Positioning(Measurement):
         drift = Drift()
         if not drift.trials(self):
             return []
-        return [("drift", drift, drift.trial(self, None).basis)]
+        return [("drift", drift, Columns(drift.extra, partial(drift_basis, self.layout.clock)))]
 
     def shapes(self, effects):
         self.marks = marked_wavelengths(self.case.axis, effects)

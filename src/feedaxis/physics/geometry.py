@@ -51,6 +51,18 @@ def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
     return cos_um * xp.cos(phase_rad) + sin_um * xp.sin(phase_rad)
 
 
+def eccentricity_columns(position_mm, lead_mm, out):
+    """cos(ωy) and sin(ωy), ω = 2π/lead, written into the two columns of ``out`` (samples x
+    2): :func:`eccentricity_error_um` per unit a2 and per unit b2 (Liu 2022 Eq. 1-2), the
+    same phase, with no sample-sized temporary."""
+    require_positive("lead_mm", lead_mm)
+    cosine, sine = out[:, 0], out[:, 1]
+    np.divide(np.multiply(2.0 * np.pi, position_mm, out=cosine), lead_mm, out=cosine)
+    np.sin(cosine, out=sine)
+    np.cos(cosine, out=cosine)
+    return out
+
+
 def screw_line_load_N_per_m(diameter_m, density_kg_m3):
     """Weight per unit length q = ρ·g·πD²/4 of a solid screw (Liu 2022 Eq. 3)."""
     require_positive("diameter_m", diameter_m)
