@@ -41,6 +41,7 @@ from .measurement import kinds_for, measurement_of
 from .measurement.base import NoStart
 from .physics.threads import one_blas_thread
 from .stats.judge import FAMILY_ALPHA, Test, accepts
+from .stats.linear import projection
 
 MAX_STRUCTURES = 5
 RESOLUTION_UM = 1e-3  # 1 nm: an effect or structure smaller is rounding, not a measurement
@@ -527,11 +528,6 @@ def _nuisance_findings(measurement, left, stages, notify):
     return found
 
 
-def _least_squares_fit(residual_um, basis):
-    coefficients = np.linalg.lstsq(basis, residual_um, rcond=None)[0]
-    return basis @ coefficients
-
-
 def find_structures(measurement, left, shapes, stages, notify=None):
     """(structures, final fit): structure in the residual of ``left`` that no effect
     explains, strongest first.
@@ -595,7 +591,7 @@ def _best_shape(measurement, current, shapes, stages):
         if trial is None:
             continue
         tried += trials
-        fitted = _least_squares_fit(residual, trial.basis)
+        fitted = projection(trial.basis, residual)
         amplitude_um = shape.amplitude_um(measurement, fitted, trial.location)
         if amplitude_um < RESOLUTION_UM:
             continue
