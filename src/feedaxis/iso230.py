@@ -51,9 +51,21 @@ def _clusters(target_mm, tolerance_mm):
     target_mm = np.asarray(target_mm, dtype=float)
     order = np.argsort(target_mm, kind="stable")
     starts = np.concatenate(([True], np.diff(target_mm[order]) > tolerance_mm))
-    index = np.empty(target_mm.size, dtype=int)
+    index = np.empty(target_mm.size, dtype=index_type(target_mm.size))
     index[order] = np.cumsum(starts) - 1
     return np.bincount(index, target_mm) / np.bincount(index), index
+
+
+def index_type(size):
+    """The integer type of whole numbers from 0 to ``size`` (an index into ``size``
+    samples): 32 bits where they fit (half the memory of a sample-sized index of 64, 40 MB
+    at 10^7 samples)."""
+    return np.int32 if size <= np.iinfo(np.int32).max else np.intp
+
+
+def compact_index(index):
+    """``index`` (integers from 0 to its size) in :func:`index_type`: the same values."""
+    return index.astype(index_type(index.size), copy=False)
 
 
 KEY_LIMIT = 1 << 62  # the largest mixed-radix row key row_groups builds before compacting
@@ -223,4 +235,4 @@ def target_groups(positioning, clusters=None):
     from :func:`target_clusters` (``clusters``, when already computed)."""
     _, cluster = clusters or target_clusters(positioning.target_mm)
     keys = cluster * 2 + (positioning.direction > 0)
-    return np.unique(keys, return_inverse=True)[1].ravel()
+    return compact_index(np.unique(keys, return_inverse=True)[1].ravel())

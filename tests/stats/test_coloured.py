@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy
 
-from feedaxis.stats.coloured import (LAGGED_ROWS, autocorrelation_time,
+from feedaxis.stats.coloured import (LAGGED_ROWS, autocorrelation_time, block_variance,
                                      least_squares_autoregression, ljung_box_p_value)
 
 
@@ -67,3 +67,8 @@ def test_ljung_box_in_blocks_matches_the_whole_array_sums(grouped):
     expected = _ljung_box_whole(x, 5, groups)
     assert 1e-6 < expected < 0.999
     assert ljung_box_p_value(x, 5, groups) == pytest.approx(expected, rel=1e-12)
+
+
+def test_the_variance_in_blocks_is_numpys():
+    x = ar1(0.3, 2 * LAGGED_ROWS + 99, 8) * 1e-3 + 7.0
+    assert block_variance(x) == pytest.approx(float(np.var(x)), rel=1e-12)

@@ -27,7 +27,8 @@ from .. import kinds, standards
 from ..case import (DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, checked_run,
                     length_mm)
 from ..effects.base import Columns
-from ..iso230 import SAME_TARGET_MM, iso230_figures, sampling_notes, target_clusters
+from ..iso230 import (SAME_TARGET_MM, compact_index, index_type, iso230_figures, sampling_notes,
+                      target_clusters)
 from ..standards import DEFAULT
 from ..plausibility import positioning_problems, warn_implausible
 from ..stats import judge
@@ -103,7 +104,7 @@ def read_positioning(path, duty_end_s=None, length_mm=None):
                                                      "start of duty.csv)")
     if duty_end_s is not None:
         _check_within_duty(path, time_s, rows, duty_end_s)
-    run = run.astype(int) if run is not None else None
+    run = run.astype(index_type(np.max(run))) if run is not None else None
     values = own_columns(values, "run")
     return PositioningSamples(read_only(values["target_mm"]), values["error_um"],
                               values["direction"] if direction is not None
@@ -255,7 +256,8 @@ class Positioning(Measurement):
     def order(self):
         """Sample indices in the order taken: by the test's clock, else as the rows."""
         clock = self.layout.clock
-        return np.arange(self.size) if clock is None else np.argsort(clock, kind="stable")
+        return compact_index(np.arange(self.size) if clock is None
+                             else np.argsort(clock, kind="stable"))
 
     @cached_property
     def replicates(self):

@@ -322,17 +322,23 @@ def ljung_box_p_value(residual, lags, groups=None):
     residual = np.asarray(residual, dtype=float)
     n = residual.size
     mean = 0.0 if groups is not None else float(np.mean(residual))
-    variance = _block_sum(residual, mean, 0)[0] / n if n else 0.0
-    if n <= lags + 1 or variance <= 0.0:
+    spread = _block_sum(residual, mean, 0)[0] / n if n else 0.0
+    if n <= lags + 1 or spread <= 0.0:
         return 1.0
     statistic = 0.0
     for lag in range(1, lags + 1):
         total, count = _block_sum(residual, mean, lag, groups)
         if count < 2:
             continue
-        rho = total / count / variance
+        rho = total / count / spread
         statistic += (n * (n + 2) / (n - lag) if groups is None else count) * rho ** 2
     return float(scipy.stats.chi2.sf(statistic, lags))
+
+
+def block_variance(values):
+    """``np.var(values)`` summed ``LAGGED_ROWS`` samples at a time (no sample-sized
+    temporary; the same up to the order of the sums)."""
+    return _block_sum(values, float(np.mean(values)), 0)[0] / values.size
 
 
 def _block_sum(residual, mean, lag, groups=None):

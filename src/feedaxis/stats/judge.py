@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy
 
-from ..iso230 import target_groups
+from ..iso230 import compact_index, target_groups
 from .wording import p_text
 
 
@@ -76,7 +76,8 @@ class Layout:
         """The layout of the samples ``keep`` (boolean mask), groups renumbered."""
         _, groups = np.unique(self.groups[keep], return_inverse=True)
         clock = None if self.clock is None else self.clock[keep]
-        return Layout(groups.ravel(), int(groups.max()) + 1, clock, self.clock_unit)
+        return Layout(compact_index(groups.ravel()), int(groups.max()) + 1, clock,
+                      self.clock_unit)
 
     @property
     def clock_varies_within_groups(self):

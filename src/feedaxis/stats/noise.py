@@ -40,7 +40,7 @@ import numpy as np
 import scipy
 
 from . import judge
-from .coloured import (Autoregression, KeptByContent, autocorrelation_time,
+from .coloured import (Autoregression, KeptByContent, autocorrelation_time, block_variance,
                        least_squares_autoregression, ljung_box_p_value, noise_floor_um)
 from .judge import Test
 
@@ -237,8 +237,8 @@ class Serial(_WhiteUnlessCorrelated):
         if self.reordered:
             ordered, groups = ordered[self.order], None if groups is None else groups[self.order]
         if ljung_box_p_value(ordered, SERIAL_MAX_ORDER, groups) >= SERIAL_ALPHA:
-            variance = float(np.var(ordered))
-            return Autoregression(np.zeros(0), variance, variance)
+            spread = block_variance(ordered)
+            return Autoregression(np.zeros(0), spread, spread)
         return least_squares_autoregression(ordered, SERIAL_MAX_ORDER)
 
     def extra_ss_test(self, before_um, after_um, extra, n_free_after):
