@@ -91,7 +91,8 @@ class PureError:
 
     def _centred(self, values):
         if values.ndim == 1:
-            return values - self.group_means(values)
+            means = self.group_means(values)
+            return np.subtract(values, means, out=means)  # no second sample-sized array
         return np.column_stack([self._centred(column) for column in values.T])
 
     def noise_part(self, residual_um):
