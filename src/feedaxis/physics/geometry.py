@@ -30,6 +30,14 @@ def lead_error_um(position_mm, offset_um, slope_um_per_mm):
     return offset_um + slope_um_per_mm * values(position_mm)
 
 
+def lead_error_columns(position_mm, out):
+    """1 and y written into the two columns of ``out`` (samples x 2): :func:`lead_error_um`
+    per unit b1 and per unit a1, with no sample-sized temporary."""
+    out[:, 0] = 1.0
+    out[:, 1] = position_mm
+    return out
+
+
 def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
     """Assembly eccentricity f2(y) = a2·cos(ωy) + b2·sin(ωy), ω = 2π/lead (Liu 2022 Eq. 1-2).
 
@@ -168,6 +176,14 @@ def backlash_error_um(direction, backlash_um):
         Reversal value B (µm).
     """
     return 0.5 * backlash_um * clip(direction, -1.0, 1.0)
+
+
+def backlash_columns(direction, out):
+    """±1/2 by approach direction written into the one column of ``out`` (samples x 1):
+    :func:`backlash_error_um` per unit B, with no sample-sized temporary."""
+    column = np.clip(values(direction), -1.0, 1.0, out=out[:, 0])
+    np.multiply(0.5, column, out=column)
+    return out
 
 
 def play_engagement(engagement, travel_mm, backlash_um):
