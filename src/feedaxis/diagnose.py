@@ -186,6 +186,8 @@ def diagnose(case, model, effects=None, progress=None, kind=None, measurement=No
     except NoStart as missing:
         return _unstarted(measurement, model, missing.message)
     measurement = base.measurements[0]
+    if measurement.refitter is None:  # the samples without the outliers: refits of their own
+        measurement.refitter = Refitter(measurement, effects)
     stages = len(measurement.stages)
     pending, skipped = _available(measurement, model, effects)
     candidates, left = _select(measurement, base, pending, skipped, stages, notify)
