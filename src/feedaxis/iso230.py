@@ -96,7 +96,8 @@ def row_key(*columns):
         if radix * values.size > KEY_LIMIT:
             key = ranks(key)[1]
             radix = int(key.max()) + 1
-        key = key * values.size + index
+        key *= values.size  # in place: one sample-sized key, not three
+        key += index
         radix *= values.size
     return key
 
