@@ -9,13 +9,13 @@ case's samples is the measurement's business (:mod:`feedaxis.measurement`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, NamedTuple
 
 import numpy as np
 import tomli_w
 
 from ..errors import InputError, finite_value
 from ..fmu_map import neutral_fmu_parameters
+from ..stats.linear import Columns
 
 FIT_TABLE = "fit"  # the model file's table holding its FitRecord: no effect may take the name
 
@@ -151,14 +151,6 @@ class Effect:
     def evidence(self, case, values, contribution_um):
         """One line on what in the data points to this effect."""
         return f"explains {np.std(contribution_um):.3g} µm RMS of the residual"
-
-
-class Columns(NamedTuple):
-    """Linear columns computed where they are used, not kept: ``count`` of them;
-    ``write(out=None)`` fills ``out`` (samples x count; a new array when None), returns it."""
-
-    count: int
-    write: Callable
 
 
 class BasisEffect(Effect):

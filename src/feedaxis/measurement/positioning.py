@@ -26,7 +26,6 @@ import scipy
 from .. import kinds, standards
 from ..case import (DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, checked_run,
                     length_mm)
-from ..effects.base import Columns
 from ..iso230 import (SAME_TARGET_MM, compact_index, index_type, iso230_figures, sampling_notes,
                       target_clusters)
 from ..standards import DEFAULT
@@ -35,7 +34,7 @@ from ..stats import judge
 from ..stats.aliasing import aliased
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
-from ..stats.linear import normal_solve
+from ..stats.linear import Columns, normal_solve
 from ..stats.noise import PureError, ResidualMeanSquare, Serial, SerialPairs
 from ..stats.spectrum import amplitude_spectrum, resolvable_band_per_mm
 from .base import Measurement, Shape, Trial

@@ -5,7 +5,17 @@ of the whole, through a QR decomposition taken a block of rows at a time
 (:func:`projection`)."""
 from __future__ import annotations
 
+from typing import Callable, NamedTuple
+
 import numpy as np
+
+
+class Columns(NamedTuple):
+    """Linear columns computed where they are used, not kept: ``count`` of them;
+    ``write(out=None)`` fills ``out`` (samples x count; a new array when None), returns it."""
+
+    count: int
+    write: Callable
 
 
 def unit_gram(columns):
