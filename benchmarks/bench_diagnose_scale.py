@@ -30,8 +30,13 @@ and after.
 
 The peak resident memory (RSS) against 500 MB is that of ``feedaxis diagnose`` run as the
 user runs it, in a process of its own on the case read from disk (the kernel's ru_maxrss of
-the child: the interpreter and its imports, 110 MB, included), for the two 10^6-sample
-layouts; the in-process figures above hold every case at once.
+the child, measured before this process holds the cases: a child's starts from its
+parent's), for the two 10^6-sample layouts; the in-process figures above hold every case at
+once. Under ``/usr/bin/time`` (load 9): the dense scan 421 -> 380 MB, the 1,000-target
+layout 321 -> 312 MB, before and after issue 35's bounded memory. What holds the dense
+scan's: the interpreter with NumPy and SciPy (105 MB), the case's columns, indices and
+residuals (about 100 MB), and at the peak the sandwich's J'ΣJ: its transforms (up to
+``SPECTRA_BYTES``, 128 MB: six of 16 MB) and NumPy's padded copy in each FFT (32 MB).
 
 Run: ``python benchmarks/bench_diagnose_scale.py [--repeats 3]``.
 """

@@ -71,7 +71,7 @@ command's ``--json`` and the report byte-identical at 10^6 before and after):
   (``feedaxis.stats.linear.projection``: lstsq held a copy of the cubic's columns and its
   workspace, 380 MB), the fit's residual subtracted a block at a time, sample-sized
   indices in 32 bits where they fit (four of 40 MB each saved), a residual's centring into
-  its gathered group means: diagnose 1,698 -> 1,429 MB, report 1,776 -> 1,535 MB;
+  its gathered group means: diagnose 1,658 -> 1,429 MB, report 1,734 -> 1,535 MB;
 - the sampling notes' and plausibility check's row groups through a mixed-radix key ranked
   once, a column of few values ranked by searching its sorted values, and the notes
   counting the distinct rows without numbering them: those two 10.5 -> about 5 s CPU,
