@@ -77,13 +77,16 @@ command's ``--json`` and the report byte-identical at 10^6 before and after):
   counting the distinct rows without numbering them: those two 10.5 -> about 5 s CPU,
   report 1,535 -> 1,458 MB.
 
-Not met: the CPU of report (68-83 s under load 6-9, of which 15 s the kernel's for the
-mapped blocks; on the same machine the old code took 68 s at load 2: run with
-``--baseline-src`` for the ratio); the peak RSS of report sits 40-60 MB under 1.5 GB
-(diagnose 70 MB): the fit of 7 columns (534 MB: lead error, drift, backlash,
-eccentricity) beside the case's columns, its indices and three residuals; a fit that
-evaluates its columns a block of rows at a time would take the rest. The refusal's cost
-of a row (``feedaxis.case``) is measured from these runs.
+Side by side with the old code (below, one run each at load 8-10): peak RSS old / new
+1.29 (compare), 1.46 (fit), 1.68 (diagnose), 1.62 (report), every command under 1.5 GB.
+Not met: CPU. The mapped blocks cost the kernel 10 ms each (system time 3-5 -> 8-16 s a
+command), more than the user time saved (report 63 -> 52 s user): old / new CPU 0.88-0.89
+for fit, diagnose and report, report 74 s against 60 (the old 66 s). What remains at the
+peak of diagnose and report, 70 and 40 MB under 1.5 GB: the fit of 7 columns (534 MB: lead
+error, drift, backlash, eccentricity) beside the case's columns, its indices and three
+residuals; a fit that evaluates its columns a block of rows at a time would take it, and
+with it most of the mapped blocks. The refusal's cost of a row (``feedaxis.case``) is
+measured from these runs.
 
 Run: ``python benchmarks/bench_positioning_scale.py [--rows 10000000] [--repeats 1]
 [--baseline-src PATH]``.
