@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from feedaxis.physics import fmu_steps
+from feedaxis.physics.kernel import shipped_kernel
 
 # One run of an FMU in a fresh process (an FMU's package is imported once per process, so
 # the two builds of one FMU cannot share one): parameters set before initialisation, the
@@ -159,6 +160,13 @@ def test_compiled_step_equals_the_python_step_through_fmpy(fmu_paths, tmp_path, 
 
 def run_untuned(fmu_path, plan):
     return np.array(run(fmu_path, {**plan, "tuned": {}})["rows"])
+
+
+def test_feedaxis_own_physics_has_no_compiled_module():
+    """Only an FMU's copy of the physics carries the module: feedaxis's own reports none
+    (absent, not failed), so the fit and the CLI never depend on it."""
+    assert shipped_kernel() == (None, None)
+    assert fmu_steps.native_step("NpidServo") == (None, None)
 
 
 def test_every_compiled_step_is_in_the_fmus_module(fmu_paths):

@@ -6,7 +6,7 @@
  *   states.c       the FMI 2.0 state machine, as one table, checked before every call
  *   arguments.c    fmi2Instantiate's arguments (name, GUID, resource URI per RFC 3986)
  *   references.c   value references, and the values a set may take (finite, in range, UTF-8)
- *   mirror.c       the Real inputs and outputs kept here while stepping
+ *   mirror.c       the Real inputs and outputs kept here while stepping, the compiled steps
  *   exports.c      the fmi2 functions
  *   saved_states.c fmi2GetFMUstate and the other state functions
  *   unloading.c    the pool of freed instances, and unloading
