@@ -158,6 +158,25 @@ def test_compiled_step_equals_the_python_step_through_fmpy(fmu_paths, tmp_path, 
     assert "must be finite" in compiled["log"][-1]
 
 
+@pytest.mark.parametrize("name", ["StepperError", "GeometricError"])
+def test_a_module_that_does_not_load_is_a_warning_and_the_python_step(fmu_paths, tmp_path,
+                                                                       name):
+    """An FMU moved to a Python whose ABI its compiled module does not fit: the import
+    fails, the FMU says so once (logStatusWarning) and steps in Python, same results."""
+    broken = tmp_path / f"{name}.fmu"
+    with zipfile.ZipFile(fmu_paths[name]) as source, zipfile.ZipFile(broken, "w") as fmu:
+        for entry in source.infolist():
+            data = source.read(entry)
+            fmu.writestr(entry, b"not a library" if "step_kernel" in entry.filename else data)
+    plan = {"parameters": {}, "outputs": OUTPUTS[name], "step_size_s": 1e-3, "tune_at": -1,
+            "tuned": {}, "inputs": {k: v.tolist() for k, v in seeded_inputs(name, 100).items()}}
+    python, compiled = run(broken, plan), run(fmu_paths[name], plan)
+    assert python["exchanges"] == len(python["rows"]) and compiled["exchanges"] == 0
+    np.testing.assert_allclose(python["rows"], compiled["rows"], rtol=1e-12, atol=1e-15)
+    warnings = [line for line in python["log"] if "the compiled step does not load" in line]
+    assert len(warnings) == 1 and warnings[0].startswith("[WARNING]")
+
+
 def run_untuned(fmu_path, plan):
     return np.array(run(fmu_path, {**plan, "tuned": {}})["rows"])
 
