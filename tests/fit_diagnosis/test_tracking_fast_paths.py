@@ -121,3 +121,79 @@ def test_the_autocorrelation_time_is_kept_by_content(monkeypatch):
     assert len(computed) == len(residuals) and len(coloured._KEPT_TAUS) == coloured.TAUS_KEPT
     assert coloured.autocorrelation_time(residuals[0]) == first
     assert len(computed) == len(residuals) + 1  # the oldest had left
+
+
+@pytest.mark.parametrize("label", ("null", "friction"))
+def test_the_friction_screens_from_one_pass_find_what_their_own_passes_find(label, tmp_path,
+                                                                           monkeypatch):
+    """The score screens of Coulomb and Stribeck friction take their columns from one
+    sensitivity pass in all their parameters (``_screen_together``): the diagnosis equals
+    the one running a pass per screen, to the bit, in one pass fewer."""
+    from feedaxis.measurement import tracking
+
+    spec = dict(RECORDS[label])
+    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
+    case = read_case(write_tracking_case(tmp_path / "case", run, 3))
+    passes = []
+    one_pass = tracking.simulate_sensitivity
+    monkeypatch.setattr(tracking, "simulate_sensitivity",
+                        lambda *args: passes.append(tuple(args[1])) or one_pass(*args))
+    together = diagnose(case, SERVO_PLANT)
+    together_passes, passes[:] = list(passes), []
+    monkeypatch.setattr(diagnosis, "_screen_together", lambda *args: None)
+    apart = diagnose(case, SERVO_PLANT)
+    assert together.to_json() == apart.to_json()
+    np.testing.assert_array_equal(together.final.residual_um, apart.final.residual_um)
+    # the first round screens both laws; after a law is named the other is screened alone
+    assert ("friction_N",) in passes and ("friction_N",) not in together_passes
+    assert ("friction_N", "coulomb_N", "static_N", "stribeck_velocity_mm_s") in together_passes
+    assert len(together_passes) == len(passes) - 1
+
+
+def test_each_friction_laws_neutral_values_are_the_loops_own():
+    """The premise of one pass for the screens: each tracking effect at its neutral values
+    sets the loop's parameters as the loop without it does, so the loop of the plant with
+    every friction law at its neutral values is that of the plant with any one of them."""
+    from feedaxis.physics.servo import ServoParams
+
+    defaults = ServoParams()
+    for effect in CATALOG.values():
+        if effect.measurement == "tracking" and effect.name != "servo_plant":
+            for name, value in effect.neutral.items():
+                assert getattr(defaults, name) == value, (effect.name, name)
+
+
+def test_the_start_s_simulation_is_the_held_force_s(tmp_path, monkeypatch):
+    """The loop the start's search ran under the paper's plant is the one a held constant
+    force is measured against (the record's own force, none here, as zeros): the same
+    positions to the bit, and the same finding in one simulation fewer."""
+    from feedaxis.fmu_map import servo_to_fmu
+    from feedaxis.measurement import tracking
+    from feedaxis.physics.servo import ServoParams, simulate
+
+    run = step_loop(two_sines, 2.0, plant=PLANT)
+    case = read_case(write_tracking_case(tmp_path / "case", run, 3))
+    measurement = tracking.Tracking(case)
+    assert measurement.start.plant == {} and measurement.start.positions_mm is not None
+    params = ServoParams(**servo_to_fmu(case.axis.servo))
+    np.testing.assert_array_equal(measurement.start.positions_mm, simulate(
+        params, measurement.record_time_s, measurement.record_reference_mm,
+        np.zeros(measurement.record_time_s.size), measurement.counts))
+    calls = []
+    simulate_once = tracking.simulate
+    monkeypatch.setattr(tracking, "simulate",
+                        lambda *args: calls.append(1) or simulate_once(*args))
+    kept, kept_calls = measurement.held_force(), len(calls)
+    monkeypatch.setattr(measurement.start, "positions_mm", None)
+    assert measurement.held_force() == kept
+    assert (kept_calls, len(calls)) == (1, 3)
+
+
+def test_the_stops_are_found_once_and_are_those_found_anew(tmp_path):
+    from feedaxis.measurement import tracking
+
+    run = step_loop(two_sines, 2.0, plant=PLANT)
+    measurement = tracking.Tracking(read_case(write_tracking_case(tmp_path / "case", run, 3)))
+    stops = measurement.stops_s()
+    assert measurement.stops_s() is stops and not stops.flags.writeable and stops.size > 2
+    np.testing.assert_array_equal(stops, measurement._found_stops_s())

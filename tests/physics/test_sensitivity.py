@@ -279,3 +279,21 @@ def test_the_coulomb_column_without_the_rise_at_rest_is_the_one_beside_it_to_the
     np.testing.assert_array_equal(alone[0], beside[0])
     np.testing.assert_array_equal(alone[1][:, 0], beside[1][:, 0])
     assert np.abs(beside[1][:, 1:3]).max() > 0.0
+
+
+def test_the_stribeck_decay_skips_only_what_underflows_to_zero():
+    """The decay exp(−(v/v_s)²) is taken as 0 beyond (v/v_s)² = DECAY_UNDERFLOW without the
+    exponential: there the exponential is 0 itself, so the friction and its tangent are the
+    same to the bit on both sides of the threshold."""
+    import math
+
+    from feedaxis.physics.servo import DECAY_UNDERFLOW, stribeck_V
+    from feedaxis.physics.servo_sensitivity import friction_tangent
+
+    assert math.exp(-DECAY_UNDERFLOW) == 0.0
+    for ratio in np.concatenate([np.linspace(-40.0, 40.0, 8001), [-math.inf, math.inf]]):
+        plain = 1.0 + (3.0 - 1.0) * math.exp(-ratio * ratio)
+        assert stribeck_V(2.0 * ratio, 1.0, 3.0, 2.0) == plain
+        tangent = friction_tangent(2.0 * ratio, 0.5, 0.01, 1.0, 3.0, 2.0, 0.1, True)
+        assert tangent[4] == math.exp(-ratio * ratio) * tangent[1]
+    assert math.isnan(stribeck_V(math.nan, 1.0, 3.0, 2.0))

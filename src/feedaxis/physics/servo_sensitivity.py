@@ -26,9 +26,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from .servo import (FRICTION_SMOOTHING_MM_S, discrete_plant, expm, forces_V, friction_V,
-                    loop_coefficients, npid_gain, resists, step_counts, stribeck_V,
-                    with_compiled_callees)
+from .servo import (DECAY_UNDERFLOW, FRICTION_SMOOTHING_MM_S, discrete_plant, expm,
+                    forces_V, friction_V, loop_coefficients, npid_gain, resists, step_counts,
+                    stribeck_V, with_compiled_callees)
 from .threads import one_blas_thread
 
 COEFFICIENTS = 27  # the length of loop_coefficients' vector
@@ -143,12 +143,14 @@ def friction_tangent(velocity_mm_s, coulomb_V, damping_V_s_per_mm, rise_coulomb_
     decay for the rise), not 0, or a fit started at 0 never moves them. ``rising`` false
     (no rise at rest acts and none of its parameters moves) leaves the decay at 0: every
     term it enters is then multiplied by zeros. The decay is evaluated once, for the
-    magnitude (:func:`.servo.stribeck_V`'s expression) and the derivatives alike.
+    magnitude (:func:`.servo.stribeck_V`'s expression, 0 where it underflows) and the
+    derivatives alike.
     """
     ramp = velocity_mm_s / smoothing_mm_s
     sign = min(max(ramp, -1.0), 1.0)
     ratio = velocity_mm_s / stribeck_velocity_mm_s
-    decay = math.exp(-ratio * ratio) if rising else 0.0
+    square = ratio * ratio
+    decay = 0.0 if not rising or square > DECAY_UNDERFLOW else math.exp(-square)
     magnitude = coulomb_V + (rise_coulomb_V + (static_V - rise_coulomb_V) * decay)
     slope = (static_V - rise_coulomb_V) * decay * -2.0 * ratio  # d stribeck_V / d ratio
     d_velocity = damping_V_s_per_mm + slope / stribeck_velocity_mm_s * sign
