@@ -197,3 +197,41 @@ def test_the_stops_are_found_once_and_are_those_found_anew(tmp_path):
     stops = measurement.stops_s()
     assert measurement.stops_s() is stops and not stops.flags.writeable and stops.size > 2
     np.testing.assert_array_equal(stops, measurement._found_stops_s())
+
+
+class _Anew:
+    """A keep-by-content that keeps nothing: every result computed anew."""
+
+    @staticmethod
+    def get(values, compute):
+        return compute(np.ascontiguousarray(values, dtype=float))
+
+
+@pytest.mark.parametrize("label", ("null", "periodic force"))
+def test_the_robust_noise_model_is_kept_by_the_residual_s_content(label, tmp_path,
+                                                                 monkeypatch):
+    """The structure searches whiten the same residual by its robust AR model: kept by
+    content, it is fitted once per residual, and the diagnosis equals the one fitting it
+    anew every time, to the bit; what is kept cannot be written to."""
+    from feedaxis.stats import coloured
+
+    spec = dict(RECORDS[label])
+    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
+    case = read_case(write_tracking_case(tmp_path / "case", run, 5))
+    monkeypatch.setattr(coloured, "_KEPT_ROBUST", coloured.KeptByContent(coloured.TAUS_KEPT))
+    fitted = []
+    anew = coloured._autoregression
+    monkeypatch.setattr(coloured, "_autoregression",
+                        lambda *args: fitted.append(args[-1]) or anew(*args))
+    kept = diagnose(case, SERVO_PLANT)
+    kept_fits, fitted[:] = fitted.count(True), []
+    monkeypatch.setattr(coloured, "_KEPT_ROBUST", _Anew())
+    every = diagnose(case, SERVO_PLANT)
+    assert kept.to_json() == every.to_json()
+    np.testing.assert_array_equal(kept.final.residual_um, every.final.residual_um)
+    assert 0 < kept_fits < fitted.count(True)
+    monkeypatch.undo()
+    residual = np.sin(np.arange(4000.0)) + np.random.default_rng(1).normal(size=4000)
+    model = coloured.autoregression(residual, robust=True)
+    assert model is coloured.autoregression(residual.copy(), robust=True)
+    assert not model.coefficients.flags.writeable
