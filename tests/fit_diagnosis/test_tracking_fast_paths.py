@@ -2,6 +2,7 @@
 records and on every ordering of hand-set p-values (issue 35, item 4)."""
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -235,3 +236,32 @@ def test_the_robust_noise_model_is_kept_by_the_residual_s_content(label, tmp_pat
     model = coloured.autoregression(residual, robust=True)
     assert model is coloured.autoregression(residual.copy(), robust=True)
     assert not model.coefficients.flags.writeable
+
+
+@pytest.mark.parametrize("recorded", (False, True))
+def test_a_steady_force_s_response_is_the_constant_force_s_loop(recorded, tmp_path,
+                                                               monkeypatch):
+    """The loop's response to a steady force is simulated as the model's constant force
+    (kept by parameters, where the constant force's screen ran it): the same response to
+    the bit as adding it to the record's force, with and without a recorded force; a
+    force that varies takes the record's path."""
+    from feedaxis.measurement import tracking
+
+    force = (lambda t: 0.5 * np.sin(3.0 * t)) if recorded else None
+    run = step_loop(two_sines, 2.0, plant=PLANT, force_N=force)
+    case = read_case(write_tracking_case(tmp_path / "case", run, 3,
+                                         force_N=force(run[0]) if recorded else None))
+    measurement = tracking.Tracking(case)
+    model = Model((CATALOG["servo_plant"],), {"servo_plant": PLANT})
+    ones = np.ones(measurement.record_time_s.size)
+    fast = measurement.loop_response_um(model, 2.0 * ones)
+    params = measurement.params(model)
+    known = 0.0 if measurement.disturbance_N is None else measurement.disturbance_N
+    slow = measurement.deviation_um(params, known + 2.0 * ones) - measurement.deviation_um(params)
+    np.testing.assert_array_equal(fast, slow)
+    assert np.abs(fast).max() > 1e-3
+    assert ("positions", replace(params, force_N=2.0)) in measurement.recent.items
+    varying = np.linspace(0.0, 1.0, ones.size)
+    np.testing.assert_array_equal(
+        measurement.loop_response_um(model, varying),
+        measurement.deviation_um(params, known + varying) - measurement.deviation_um(params))

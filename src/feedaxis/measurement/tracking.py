@@ -524,10 +524,18 @@ class Tracking(Measurement):
 
     def loop_response_um(self, model, disturbance_N):
         """Change of the predicted deviation (µm) at the samples when ``disturbance_N``
-        (over the whole record) is added to the record's own force."""
+        (over the whole record) is added to the record's own force. A steady force on a
+        model without one is the model's constant force: the same forces to the bit, so the
+        loop is the one kept where a constant force's screen ran it (:meth:`positions_mm`)."""
         known = self.disturbance_N if self.disturbance_N is not None else 0.0
         params = self.params(model)
-        return self.deviation_um(params, known + disturbance_N) - self.deviation_um(params)
+        disturbance_N = np.asarray(disturbance_N, dtype=float)
+        if params.force_N == 0.0 and disturbance_N.size and np.all(
+                disturbance_N == disturbance_N[0]):
+            moved_um = self.deviation_um(replace(params, force_N=float(disturbance_N[0])))
+        else:
+            moved_um = self.deviation_um(params, known + disturbance_N)
+        return moved_um - self.deviation_um(params)
 
     def impulse_response_um(self, model):
         """The deviation (µm) over the record after a 1 N force held over one sample
