@@ -26,6 +26,13 @@ RECORDS = {
 }
 
 
+def _record_case(label, tmp_path, seed):
+    """The case of the seeded record ``label`` of :data:`RECORDS`."""
+    spec = dict(RECORDS[label])
+    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
+    return read_case(write_tracking_case(tmp_path / "case", run, seed))
+
+
 @pytest.mark.parametrize("label", sorted(RECORDS))
 def test_a_search_that_cannot_pass_is_not_located_and_nothing_changes(label, tmp_path,
                                                                       monkeypatch):
@@ -33,9 +40,7 @@ def test_a_search_that_cannot_pass_is_not_located_and_nothing_changes(label, tmp
     diagnosis equals the one locating it every time, to the bit, in fewer locations."""
     from feedaxis.measurement import tracking
 
-    spec = dict(RECORDS[label])
-    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
-    case = read_case(write_tracking_case(tmp_path / "case", run, 7))
+    case = _record_case(label, tmp_path, 7)
     located = []
     locate = tracking.locate_sinusoid
     monkeypatch.setattr(tracking, "locate_sinusoid",
@@ -132,9 +137,7 @@ def test_the_friction_screens_from_one_pass_find_what_their_own_passes_find(labe
     the one running a pass per screen, to the bit, in one pass fewer."""
     from feedaxis.measurement import tracking
 
-    spec = dict(RECORDS[label])
-    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
-    case = read_case(write_tracking_case(tmp_path / "case", run, 3))
+    case = _record_case(label, tmp_path, 3)
     passes = []
     one_pass = tracking.simulate_sensitivity
     monkeypatch.setattr(tracking, "simulate_sensitivity",
@@ -172,8 +175,7 @@ def test_the_start_s_simulation_is_the_held_force_s(tmp_path, monkeypatch):
     from feedaxis.measurement import tracking
     from feedaxis.physics.servo import ServoParams, simulate
 
-    run = step_loop(two_sines, 2.0, plant=PLANT)
-    case = read_case(write_tracking_case(tmp_path / "case", run, 3))
+    case = _record_case("null", tmp_path, 3)
     measurement = tracking.Tracking(case)
     assert measurement.start.plant == {} and measurement.start.positions_mm is not None
     params = ServoParams(**servo_to_fmu(case.axis.servo))
@@ -193,8 +195,7 @@ def test_the_start_s_simulation_is_the_held_force_s(tmp_path, monkeypatch):
 def test_the_stops_are_found_once_and_are_those_found_anew(tmp_path):
     from feedaxis.measurement import tracking
 
-    run = step_loop(two_sines, 2.0, plant=PLANT)
-    measurement = tracking.Tracking(read_case(write_tracking_case(tmp_path / "case", run, 3)))
+    measurement = tracking.Tracking(_record_case("null", tmp_path, 3))
     stops = measurement.stops_s()
     assert measurement.stops_s() is stops and not stops.flags.writeable and stops.size > 2
     np.testing.assert_array_equal(stops, measurement._found_stops_s())
@@ -216,9 +217,7 @@ def test_the_robust_noise_model_is_kept_by_the_residual_s_content(label, tmp_pat
     anew every time, to the bit; what is kept cannot be written to."""
     from feedaxis.stats import coloured
 
-    spec = dict(RECORDS[label])
-    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
-    case = read_case(write_tracking_case(tmp_path / "case", run, 5))
+    case = _record_case(label, tmp_path, 5)
     monkeypatch.setattr(coloured, "_KEPT_ROBUST", coloured.KeptByContent(coloured.TAUS_KEPT))
     fitted = []
     anew = coloured._autoregression
