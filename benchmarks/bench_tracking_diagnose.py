@@ -22,8 +22,8 @@ cannot pass (the window's least squares, 0.45 s, and two simulations), the loop 
 friction takes the known force as it is (a simulation 64 -> 42 ms), and the friction screens'
 pass evaluates the Stribeck decay once a step and only where it acts (the Coulomb screen's
 pass 257 -> 148 ms); every finding the same to the bit (tests). A third round (side by side
-against the code before it, ``--baseline e914964``: 4.63 -> 4.21 s CPU, 1.10x, three runs
-each at load 6-8; 4.27 -> 4.05 s, 1.05x, five each at load 10):
+against the code before it, ``--baseline e914964``, three such runs at load 6-10: 1.05x to
+1.13x in CPU, e.g. 4.63 -> 4.21 s):
 the Coulomb and Stribeck screens take their columns from one sensitivity pass (0.55 ->
 0.42 s), the plant's pass of a PID loop without friction runs its own branch-free kernel
 (205 -> 148 ms, four passes), the Stribeck decay is not evaluated where it underflows to 0,
