@@ -115,8 +115,9 @@ def noise_um(size, seed):
 
 def _drift_um(rng, size):
     """Encoder noise plus a slow drift (thermal growth): 0.5-2 µm over the record, bent,
-    about a zero mean: a steady offset of the position against the reference is a steady
-    force for the loop (a P loop holds one so), named as ``constant_force``, not a null."""
+    about a zero mean over the whole record, so a steady offset of up to about 0.2 µm is
+    left over the samples compared after the start-up: the measurement's own offset, which
+    a drifting measurement cannot tell from a constant force (not to be named)."""
     phase = np.linspace(-1.0, 1.0, size)
     return (_encoder_um(rng, size) + rng.uniform(0.5, 2.0) * rng.choice((-1, 1)) * phase
             + rng.uniform(-0.5, 0.5) * (phase**2 - np.mean(phase**2)))

@@ -186,12 +186,17 @@ def diagnose(case, model, effects=None, progress=None, kind=None, measurement=No
     except NoStart as missing:
         return _unstarted(measurement, model, missing.message)
     measurement = base.measurements[0]
+    if measurement.refitter is None:  # the samples without the outliers: refits of their own
+        measurement.refitter = Refitter(measurement, effects)
     stages = len(measurement.stages)
     pending, skipped = _available(measurement, model, effects)
     candidates, left = _select(measurement, base, pending, skipped, stages, notify)
+    candidates, left = _withdraw(measurement, candidates, left, pending, skipped)
     candidates = [_final_sizes(measurement, c, left) for c in candidates]
     recorded, left = _recorded(measurement, left, pending, stages)
     candidates += recorded
+    for candidate in recorded:
+        skipped.pop(candidate.effect, None)
     unexplained = _nuisance_findings(measurement, left, stages, notify)
     structures, final = find_structures(measurement, left, measurement.shapes(effects), stages,
                                         notify)
@@ -231,6 +236,10 @@ class Refitter:
         if key not in self._fits:
             self._fits[key] = fit(model, self.measurement)
         return self._fits[key]
+
+    def nuisance_test(self, left, name, extra):
+        """:func:`nuisance_test` of these samples."""
+        return nuisance_test(self.measurement, left, name, extra)
 
     def with_basis(self, model, basis):
         columns = BasisEffect("columns", basis)
@@ -468,6 +477,24 @@ def _best_candidate(measurement, left, tested, pending, skipped, stages):
     return None
 
 
+def _withdraw(measurement, candidates, left, pending, skipped):
+    """(candidates, fit) without the effects the selection's final fit ``left`` shows not
+    to be what the data show (:meth:`~feedaxis.measurement.Measurement.withdrawn`), passed
+    over with the reason and pending again (a record beside the deviation may still show
+    them); the fit refitted with the nuisance columns given in their place."""
+    withdrawn = measurement.withdrawn(left)
+    if not withdrawn:
+        return candidates, left
+    model = Model([e for e in left.model.effects if e.name not in withdrawn], left.model.values)
+    for name, (reason, columns) in withdrawn.items():
+        skipped[name] = reason
+        pending[name] = left.model.effects[left.model.names.index(name)]
+        if columns is not None:
+            model = model + BasisEffect(f"in_place_of_{name}", columns)
+    left = _fit(model, measurement)
+    return [c for c in candidates if c.effect not in withdrawn], left
+
+
 def _candidate(measurement, left, effect, result, test):
     """The named effect, its result's model without nuisances (so it can be used as is)."""
     scale = measurement.noise.error_scale(result)
@@ -526,14 +553,10 @@ def _nuisance_findings(measurement, left, stages, notify):
         if name not in left.model:
             continue
         notify(name)
-        nuisance = left.model.effects[left.model.names.index(name)]
-        others = Model([e for e in left.model.effects if e is not nuisance], left.model.values)
-        without = (left.plain if left.plain is not None and left.plain.model.names == others.names
-                   else fit(others, measurement))
-        test = measurement.noise.extra_ss_test(without.residual_um, left.residual_um,
-                                               shape.extra, left.statistics.n_free)
+        test = nuisance_test(measurement, left, name, shape.extra)
         if not accepts(test.p_value, 1, stages):
             continue
+        nuisance = left.model.effects[left.model.names.index(name)]
         fitted = nuisance.prepare(measurement.case)(left.model.values[name])
         trial = shape.trial(measurement, left)
         found.append(Structure(shape.kind, measurement.location_key, None,
@@ -541,6 +564,18 @@ def _nuisance_findings(measurement, left, stages, notify):
                                f"{shape.describe(measurement, trial, fitted)} "
                                f"({test.describe()})", fitted, nuisance.basis))
     return found
+
+
+def nuisance_test(measurement, left, name, extra):
+    """The extra-sum-of-squares test of the nuisance ``name`` (``extra`` columns) in the
+    fit ``left`` against the same model refitted without it (the fit before the nuisances
+    were added, where that is the one)."""
+    nuisance = left.model.effects[left.model.names.index(name)]
+    others = Model([e for e in left.model.effects if e is not nuisance], left.model.values)
+    without = (left.plain if left.plain is not None and left.plain.model.names == others.names
+               else _fit(others, measurement))
+    return measurement.noise.extra_ss_test(without.residual_um, left.residual_um, extra,
+                                           left.statistics.n_free)
 
 
 def _least_squares_fit(residual_um, basis):

@@ -211,6 +211,29 @@ def test_a_constant_force_under_an_integral_action_without_control_v_is_undeterm
     assert "constant_force" not in found.skipped
 
 
+@pytest.mark.parametrize("control", (False, True), ids=("position only", "with control_V"))
+def test_a_constant_force_under_a_drifting_measurement_needs_control_v(tmp_path, control):
+    """P-P with a constant force, the position measured with a drift of 3 µm over the
+    record (an encoder on a growing screw): from the position alone the force and the
+    measurement's unknown offset are one steady deviation, so constant_force is passed over
+    as undetermined (the drift reported); the recorded controller output holds the force
+    and not the offset, and with it the force is named with its size."""
+    time_s, reference_mm, position_mm, control_V = cascade_loop(exciting, DURATION_S, "P-P",
+                                                                force_N=lambda t: -3.0)
+    drifting_mm = position_mm + 3e-3 * time_s / time_s[-1]
+    case = read_case(write_cascade_case(tmp_path / "case", (time_s, reference_mm, drifting_mm,
+                                                             control_V), "P-P", 3, control))
+    found = diagnose(case, Model())
+    named = [c.effect for c in found.candidates]
+    if control:
+        assert "constant_force" in named
+        _assert_within(found, "constant_force", {"force_N": -3.0})
+    else:
+        assert "constant_force" not in named
+        assert "drift" in [s.kind for s in found.unexplained]
+        assert "drifts" in found.skipped["constant_force"]
+
+
 def test_a_1_hz_train_of_force_steps_is_reported_as_events_with_their_times(tmp_path):
     """2 N on during the second half of every second, 5 s, diagnosed on top of the plant
     (``fit --add servo_plant`` first, as a commissioning engineer would): the steps found as

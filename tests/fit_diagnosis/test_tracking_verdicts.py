@@ -107,6 +107,26 @@ def test_nulls_of_every_noise_family_name_nothing(tmp_path, null_run, family):
             assert set(found.outlier_rows) <= set((spikes + 2).tolist())
 
 
+@pytest.mark.parametrize("spike_um", (0.0, 15.0), ids=("", "with a spike left out"))
+def test_a_drifting_measurements_offset_is_not_named_a_force(tmp_path, null_run, spike_um):
+    """A drifting null whose drift, zero on average over the whole record, keeps a steady
+    offset over the samples after the start-up (the benchmark's drifting family, seed 105,
+    first trial: named a constant force before): the measurement drifts, so its offset is
+    unknown and a constant force cannot be told from it; passed over with that reason. The
+    same where a spike is left out as an outlier (the diagnosis then judges the samples
+    without it, with their own refits)."""
+    time_s, reference_mm, position_mm = null_run
+    spiked_mm = position_mm + spike_um * 1e-3 * (np.arange(time_s.size) == 1000)
+    case = read_case(write_tracking_case(tmp_path / "d", (time_s, reference_mm, spiked_mm),
+                                         105 * 100_000, family="drifting"))
+    found = diagnose(case, Model((CATALOG["servo_plant"],), {"servo_plant": PLANT}))
+    assert found.outlier_rows == ([1002] if spike_um else [])
+    assert not found.candidates
+    assert [s.kind for s in found.unexplained] == ["drift"]
+    reason = found.skipped["constant_force"]
+    assert reason.startswith("undetermined") and "drifts" in reason and "control_V" in reason
+
+
 def test_the_drift_is_tested_against_the_fit_without_it(tmp_path, null_run):
     """The drift's test takes the model's fit before the drift was added (the diagnosis
     reuses it, a simulation per plant parameter each saved): the same test as a refit of

@@ -324,6 +324,12 @@ class Measurement(ABC):
         show (None when it is): it would only stand in for a structure of another shape."""
         return None
 
+    def withdrawn(self, final):
+        """{name: (why, columns)} of effects named in the selection's ``final`` fit that it
+        shows are not what the data show after all, each with the nuisance columns (samples
+        x k, or None) fitted in its place (none by default)."""
+        return {}
+
     def artefacts(self, result):
         """What the measurement fitted of its own set-up beside ``result``'s model (a dict
         for ``artefacts`` of ``fit --json``; none by default)."""

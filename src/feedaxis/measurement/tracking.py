@@ -415,6 +415,37 @@ class Tracking(Measurement):
                     "error nothing lasting")
         return [(effect, {"force_N": force_N}, {"force_N": sigma_N}, test, evidence)]
 
+    def offset_unknown(self, current):
+        """Why a steady offset of the deviation in the fit ``current`` cannot be told from a
+        constant force, or None. A measured position that drifts (the drift nuisance
+        significant in ``current``, its own test at the policy's level) is not the loop's
+        own feedback (the loop would hold that at the reference), so its offset at the
+        first sample, the drift since the axis was referenced, is unknown; a constant force
+        gives the same steady deviation. The recorded controller output tells them apart:
+        it holds the force, not the measurement's offset."""
+        if self.refitter is None or "drift" not in current.model:
+            return None
+        test = self.refitter.nuisance_test(current, "drift", TimeDrift.extra)
+        if not accepts(test.p_value, 1, len(self.stages)):
+            return None
+        remedy = ("the recorded controller output (control_V) does not show one" if
+                  self.case.tracking.control_V is not None else
+                  "record the controller output (control_V) to tell them apart")
+        return ("undetermined: the measured position drifts, so it is not the loop's own "
+                "feedback and its offset at the first sample (the drift since the axis was "
+                "referenced) is unknown; a constant force gives the same steady deviation, "
+                f"and {remedy} ({test.describe()})")
+
+    def withdrawn(self, final):
+        """{name: (why, columns in its place)} of a constant force named where the final
+        fit's measured position drifts (:meth:`offset_unknown`), judged on the final fit
+        (where the other effects named no longer hide the drift's test behind their
+        misfit): a constant column, the measurement's unknown offset, takes its place, and
+        a recorded controller output may still show the force
+        (:meth:`recorded_findings`)."""
+        reason = "constant_force" in final.model and self.offset_unknown(final)
+        return {"constant_force": (reason, np.ones((self.size, 1)))} if reason else {}
+
     def rival(self, effect, left, result):
         """Why a friction law is not what the data show, each judged with the plant
         refitted (the start's plant was fitted beside a friction, so a friction tested on
@@ -1285,6 +1316,9 @@ class ConstantForce(Shape):
     kind = "constant_force"
 
     def trial(self, measurement, current):
+        """None where the measured position drifts (:meth:`Tracking.offset_unknown`)."""
+        if measurement.offset_unknown(current):
+            return None
         response = measurement.loop_response_um(current.model,
                                                np.ones(measurement.record_time_s.size))
         return Trial(response[:, None])
