@@ -4,7 +4,7 @@ Thin adapter over feedaxis.physics.geometry; defaults are the Liu 2023 case-stud
 """
 from pythonfmu import DefaultExperiment
 
-from feedaxis_fmu_physics import geometry, mounting
+from feedaxis_fmu_physics import fmu_steps, geometry, mounting
 from feedaxis_slave import AxisSlave
 
 
@@ -54,6 +54,18 @@ class GeometricError(AxisSlave):
         self.error_um = float(geometry.transmission_error_um(
             position_mm, self.engagement, self.lead_mm, self.offset_um, self.slope_um_per_mm,
             self.eccentricity_cos_um, self.eccentricity_sin_um, self.backlash_um, sag_um))
+
+    def native_step(self):
+        return fmu_steps.native_step("GeometricError")
+
+    def native_block(self):
+        return fmu_steps.geometric_error_block(
+            self.engagement, self.position_offset_mm, self.lead_mm, self.offset_um,
+            self.slope_um_per_mm, self.eccentricity_cos_um, self.eccentricity_sin_um,
+            self.backlash_um, self.sag_enabled, self.fixed_end_mm, self.model)
+
+    def restore_native(self, block):
+        self.engagement = block[0]
 
     def model_state(self):
         return {"engagement": self.engagement}

@@ -6,9 +6,8 @@ Thin adapter over feedaxis.physics.servo; defaults are the Googol XY table x axi
 from dataclasses import fields
 
 from pythonfmu import DefaultExperiment
-from pythonfmu.enums import Fmi2Status
 
-from feedaxis_fmu_physics import servo
+from feedaxis_fmu_physics import fmu_steps, servo
 from feedaxis_slave import AxisSlave
 
 # doStep's cost grows with h / time_step_s (one loop iteration per internal step, about
@@ -79,10 +78,6 @@ class NpidServo(AxisSlave):
             raise ValueError(f"time_step_s must be <= {MAX_TIME_STEP_S} s, got {self.time_step_s!r}")
         params = servo.ServoParams(
             **{field.name: getattr(self, field.name) for field in fields(servo.ServoParams)})
-        failure = servo.shipped_loop()[1]
-        if failure:
-            self.log(f"the compiled servo loop does not load ({failure}): stepping the Python "
-                     f"loop, same results, slower", Fmi2Status.warning, "logStatusWarning")
         return servo.Servo(params,
                            initial_reference_mm=self.position_offset_mm + self.position_ref_mm)
 
@@ -97,6 +92,17 @@ class NpidServo(AxisSlave):
         (position_mm, self.velocity_mm_s, self.tracking_error_mm,
          self.control_V) = self.model.outputs()
         self.position_mm = position_mm - self.position_offset_mm
+
+    def native_step(self):
+        return fmu_steps.native_step("NpidServo")
+
+    def native_block(self):
+        return fmu_steps.npid_servo_block(self.position_offset_mm, self.model.params,
+                                          MAX_INTERNAL_STEPS, self.model.coefficients,
+                                          self.model.state())
+
+    def restore_native(self, block):
+        self.model.restore(fmu_steps.npid_servo_state(block))
 
     def model_state(self):
         return self.model.state()

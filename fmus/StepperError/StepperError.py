@@ -5,7 +5,7 @@ the default first harmonic (0.1 µm amplitude) is illustrative.
 """
 from pythonfmu import DefaultExperiment
 
-from feedaxis_fmu_physics import motor
+from feedaxis_fmu_physics import fmu_steps, motor
 from feedaxis_slave import AxisSlave
 
 
@@ -36,3 +36,11 @@ class StepperError(AxisSlave):
         self.error_um = float(motor.motor_error_um(
             self.position_offset_mm + self.position_mm, self.model, (self.harmonic1_cos_um, self.harmonic2_cos_um),
             (self.harmonic1_sin_um, self.harmonic2_sin_um)))
+
+    def native_step(self):
+        return fmu_steps.native_step("StepperError")
+
+    def native_block(self):
+        return fmu_steps.stepper_error_block(
+            self.position_offset_mm, self.model, (self.harmonic1_cos_um, self.harmonic2_cos_um),
+            (self.harmonic1_sin_um, self.harmonic2_sin_um))

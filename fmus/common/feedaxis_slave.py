@@ -13,11 +13,20 @@ While stepping, the host layer keeps the Real inputs and outputs itself and make
 per doStep, to the function :func:`claim` returns (:meth:`AxisSlave.exchanger`), instead of
 pythonfmu's three (set_real, do_step, get_real, each building Python lists).
 
+Where the FMU's compiled module is there (physics/step_kernel, feedaxis.kernel_build), the
+host layer steps NpidServo, StepperError and GeometricError without Python: it calls the C
+function :meth:`AxisSlave.native_step` names on a block of numbers the slave fills
+(:meth:`AxisSlave.native_block`, packed again after any call that may change the slave)
+and hands the outputs and state back (:meth:`AxisSlave.restore_native`) before any other
+call reaches the slave. A step the compiled function declines (a bad input) goes through
+the exchange function, which says what is wrong.
+
 A saved state is restored only if it is one this FMU could have saved (its variables with
 their types, the fixed parameters of an initialised instance unchanged, the model's state
 restorable); anything else is refused with an error naming what is wrong, the instance as
 it was. The host layer asks :meth:`AxisSlave.state_error` before a buffer reaches pythonfmu.
 """
+import array
 import json
 import math
 import sys
@@ -97,6 +106,7 @@ class AxisSlave(Fmi2Slave):
         self.model = None
         self._input_names = []
         self._output_names = []
+        self._block = None  # the compiled step's numbers (_native_pack)
         _handoff().constructed[threading.get_ident()] = weakref.ref(self)
 
     def _declare(self, name, value, description, unit, limits, **kind):
@@ -144,6 +154,19 @@ class AxisSlave(Fmi2Slave):
         """Advance ``self.model`` by ``step_size_s`` and update the outputs."""
         raise NotImplementedError
 
+    def native_step(self):
+        """(this FMU's compiled step: (library path, C symbol) or None; why the compiled
+        module did not load, or None): physics.fmu_steps.native_step. None, None here."""
+        return None, None
+
+    def native_block(self):
+        """The numbers the compiled step reads and updates (physics.fmu_steps'
+        ``*_block``), from the parameters and the model's state."""
+        raise NotImplementedError
+
+    def restore_native(self, block):
+        """Take the model's state back from ``block`` after compiled steps."""
+
     def model_state(self):
         """Internal state beyond the FMI variables, as JSON-compatible values (called once
         the model is built)."""
@@ -158,6 +181,10 @@ class AxisSlave(Fmi2Slave):
             self.model = self.build()
             self.step(0.0)
             self._check_outputs()
+            failure = self.native_step()[1]
+            if failure:
+                self.log(f"the compiled step does not load ({failure}): stepping in Python, "
+                         f"same results, slower", Fmi2Status.warning, "logStatusWarning")
         except Exception as error:  # noqa: BLE001 -- nothing may raise into pythonfmu
             self.model = None
             self._report("initialisation", error)
@@ -213,6 +240,7 @@ class AxisSlave(Fmi2Slave):
         per step (5,800 of 21,800 instructions for StepperError, callgrind).
         """
         inputs, outputs = tuple(input_names), tuple(output_names)
+        self._exchange_outputs = outputs
         declared = {variable.name for variable in self.vars.values()}
         for name in (*inputs, *outputs):
             if not (name.isidentifier() and name in declared):
@@ -232,7 +260,28 @@ class AxisSlave(Fmi2Slave):
         exchange = namespace["exchange"]
         exchange.state_error = self.state_error  # the host layer's check of a state buffer
         exchange.initialised = self.initialised  # which FMI state a restored state is in
+        if self.native_step()[0] is not None:  # the compiled step, for the host layer
+            exchange.native_pack, exchange.native_unpack = self._native_pack, self._native_unpack
         return exchange
+
+    def _native_pack(self):
+        """(library path, C symbol, block address) of the compiled step over a block filled
+        now (:meth:`native_block`), or None before the model is built."""
+        if self.model is None:
+            return None
+        values = self.native_block()
+        if self._block is None or len(self._block) != len(values):
+            self._block = array.array("d", values)  # its address stays while its size does
+        else:
+            self._block[:] = array.array("d", values)
+        return (*self.native_step()[0], self._block.buffer_info()[0])
+
+    def _native_unpack(self, *outputs):
+        """After compiled steps: set the outputs (in the exchange's order) and take the
+        model's state back from the block."""
+        for name, value in zip(self._exchange_outputs, outputs):
+            setattr(self, name, value)
+        self.restore_native(self._block)
 
     def _drained(self, outputs):
         """``[outputs, [(status, category, message), ...]]`` of the log queue, emptied."""

@@ -186,7 +186,9 @@ def _stage_package(sources, name, package_dir):
     """``feedaxis_fmu_<name>``: the slave, the adapter and the physics, imported relatively."""
     shutil.copytree(SOURCE_DIR / "physics", package_dir / "physics",
                     ignore=shutil.ignore_patterns("__pycache__", "*.so"))
-    if name == "NpidServo":
+    from .physics.fmu_steps import STEPS
+
+    if name in STEPS:  # the FMUs whose steps are compiled (the servo's loop with them)
         from .kernel_build import install_kernel
 
         install_kernel(package_dir / "physics", cache_root())

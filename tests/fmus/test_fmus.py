@@ -391,7 +391,7 @@ def npid_scenario_in_fresh_process(fmu_path):
 
 def kernels_in(fmu_path):
     with zipfile.ZipFile(fmu_path) as archive:
-        return [name for name in archive.namelist() if "/physics/servo_kernel" in name]
+        return [name for name in archive.namelist() if "/physics/step_kernel" in name]
 
 
 def test_servo_fmu_steps_the_compiled_loop(fmu_paths, compiled_servo_loop):
@@ -411,7 +411,7 @@ def test_without_the_servo_kernel_the_fmu_steps_python_with_the_same_results(
     from feedaxis import kernel_build
 
     path = build_without(monkeypatch, tmp_path, "NpidServo", kernel_build, "kernel_missing",
-                         kernel_build.KernelUnavailable, "steps NPID and friction in Python")
+                         kernel_build.KernelUnavailable, "the FMUs step in Python")
     assert kernels_in(path) == []
     python_loop, log = npid_scenario_in_fresh_process(path)
     compiled, _ = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
@@ -427,11 +427,11 @@ def test_a_kernel_that_does_not_load_is_a_warning_and_the_python_loop(tmp_path, 
     with zipfile.ZipFile(fmu_paths["NpidServo"]) as source, zipfile.ZipFile(broken, "w") as fmu:
         for entry in source.infolist():
             data = source.read(entry)
-            fmu.writestr(entry, b"not a library" if "servo_kernel" in entry.filename else data)
+            fmu.writestr(entry, b"not a library" if "step_kernel" in entry.filename else data)
     outputs, log = npid_scenario_in_fresh_process(broken)
     expected, _ = npid_scenario_in_fresh_process(fmu_paths["NpidServo"])
     np.testing.assert_allclose(outputs["position_mm"], expected["position_mm"], rtol=0, atol=1e-12)
-    assert len(log) == 1 and "the compiled servo loop does not load" in log[0]
+    assert len(log) == 1 and "the compiled step does not load" in log[0]
 
 
 @pytest.mark.parametrize("name", FMU_NAMES)

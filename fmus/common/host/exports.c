@@ -11,7 +11,7 @@
 #define FORWARD(function, ...)                                                                  \
     static function##TYPE *call_; /* resolved once: dlsym costs a microsecond */              \
     if (!call_) call_ = (function##TYPE *)real(#function);                                    \
-    hand_over_inputs(g);                                                                       \
+    hand_over(g);                                                                       \
     begin(g);                                                                                  \
     fmi2Status status = conclude(g, F_##function, call_(g->real, ##__VA_ARGS__))
 

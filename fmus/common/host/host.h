@@ -6,7 +6,7 @@
  *   states.c       the FMI 2.0 state machine, as one table, checked before every call
  *   arguments.c    fmi2Instantiate's arguments (name, GUID, resource URI per RFC 3986)
  *   references.c   value references, and the values a set may take (finite, in range, UTF-8)
- *   mirror.c       the Real inputs and outputs kept here while stepping
+ *   mirror.c       the Real inputs and outputs kept here while stepping, the compiled steps
  *   exports.c      the fmi2 functions
  *   saved_states.c fmi2GetFMUstate and the other state functions
  *   unloading.c    the pool of freed instances, and unloading
@@ -40,6 +40,10 @@
 enum mode { INSTANTIATED, INITIALISATION, STEP_COMPLETE, STEP_FAILED, TERMINATED, ERROR, FATAL,
             N_MODES };
 
+/* A compiled step (physics/fmu_steps.py): 1 done, 0 declined (the block as it was). */
+typedef int (*native_step)(double *block, double step_size, const double *inputs,
+                           double *outputs);
+
 typedef struct {
     void *real;                        /* pythonfmu's component */
     fmi2CallbackFunctions host;        /* the host's callbacks */
@@ -51,6 +55,11 @@ typedef struct {
     int host_logging;
     fmi2Status worst_logged;           /* worst status logged during the current call */
     PyObject *exchange;                /* the slave's exchange function, or NULL */
+    native_step native;                /* the slave's compiled step, or NULL (mirror.c) */
+    double *block;                     /* its numbers, held by the slave */
+    int native_offered;                /* the slave has a compiled step */
+    int native_ready;                  /* block packed from the slave as it is now */
+    int native_ahead;                  /* compiled steps the slave has not been told of */
     double inputs[MAX_MIRRORED];       /* the Real inputs, in the order of input_vr */
     double outputs[MAX_MIRRORED];      /* the Real outputs, in the order of output_vr */
     int inputs_current;                /* inputs[] hold the slave's inputs or newer ones */
@@ -147,8 +156,9 @@ void prepare_mirror(void);
 void drop_exchange(Guard *g);
 void expect_slave(void);
 void claim_exchange(Guard *g);
+PyObject *ask_slave(Guard *g, const char *method, PyObject *args);
 int load_mirror(Guard *g);
-void hand_over_inputs(Guard *g);
+void hand_over(Guard *g);
 void slave_changed(Guard *g);
 int fast(Guard *g);
 fmi2Status exchange_step(Guard *g, fmi2Real t, fmi2Real h);

@@ -2,10 +2,17 @@
  * and fmi2GetReal into a Python call that builds lists (about 6 of the 7.5 us an empty
  * pythonfmu FMU costs per step with set, step and get); in step complete the layer answers
  * them here and makes fmi2DoStep one Python call, to the slave's exchange function
- * (feedaxis_slave.claim: inputs in, outputs out, messages passed on). Any other call first
- * hands pending inputs to the slave through pythonfmu, and is followed by a fresh read. */
+ * (feedaxis_slave.claim: inputs in, outputs out, messages passed on), or none: where the
+ * slave has a compiled step (physics/fmu_steps.py, in the FMU's compiled module), the layer
+ * calls that C function on a block of numbers the slave packed (parameters and state),
+ * without the GIL. A step it declines (a bad input) goes to the exchange function, which
+ * says what is wrong. Any other call first hands pending inputs, and the outputs and state
+ * of compiled steps, to the slave, and is followed by a fresh read (and a fresh pack). */
+#define _GNU_SOURCE
 #include "host.h"
 
+#include <dlfcn.h>
+#include <stdint.h>
 #include <stdio.h>
 
 static fmi2ValueReference input_vr[MAX_MIRRORED], output_vr[MAX_MIRRORED];
@@ -55,6 +62,9 @@ static PyObject *names_of(const fmi2ValueReference vrs[], size_t n)
 
 void drop_exchange(Guard *g)
 {
+    g->native = NULL;
+    g->block = NULL;
+    g->native_offered = g->native_ready = g->native_ahead = 0;
     if (!g->exchange) return;
     if (py.is_initialized()) {
         PyGILState_STATE gil = py.gil_ensure();
@@ -104,7 +114,70 @@ void claim_exchange(Guard *g)
     PyObject *exchange = call_handoff("claim", args);
     if (exchange && exchange != py.none) g->exchange = exchange;
     else if (exchange) py.decref(exchange);
+    if (g->exchange) {
+        PyObject *pack = py.get_attr(g->exchange, "native_pack");
+        g->native_offered = pack != NULL;
+        if (pack) py.decref(pack);
+        if (py.err_occurred()) py.err_clear();
+    }
     py.gil_release(gil);
+}
+
+/* The slave's answer to ``method`` of its exchange function, called with ``args`` (stolen);
+ * a new reference or NULL. Holds the GIL. */
+PyObject *ask_slave(Guard *g, const char *method, PyObject *args)
+{
+    PyObject *callable = py.get_attr(g->exchange, method);
+    PyObject *answer = callable && args ? py.call(callable, args) : NULL;
+    if (args) py.decref(args);
+    if (callable) py.decref(callable);
+    if (py.err_occurred()) py.err_clear();
+    return answer;
+}
+
+/* The C function ``symbol`` of the library at ``path`` that Python has loaded, or NULL. */
+static native_step find_step(const char *path, const char *symbol)
+{
+    void *library = path && symbol ? dlopen(path, RTLD_LAZY | RTLD_NOLOAD) : NULL;
+    if (!library) return NULL;
+    native_step step = (native_step)dlsym(library, symbol);
+    dlclose(library); /* Python's import keeps it loaded */
+    return step;
+}
+
+/* Have the slave fill the compiled step's block from its parameters and state
+ * (AxisSlave._native_pack); g->native stays NULL without one. Holds the GIL. */
+static void pack_native(Guard *g)
+{
+    g->native = NULL;
+    g->native_ready = 1;
+    PyObject *answer = ask_slave(g, "native_pack", py.tuple_new(0));
+    if (answer && PyTuple_Check(answer) && py.tuple_size(answer) == 3) {
+        const char *path = py.as_utf8(py.tuple_get(answer, 0));
+        const char *symbol = py.as_utf8(py.tuple_get(answer, 1));
+        long address = py.as_long(py.tuple_get(answer, 2));
+        g->native = find_step(path, symbol);
+        g->block = (double *)(uintptr_t)address;
+        if (py.err_occurred()) {
+            py.err_clear();
+            g->native = NULL;
+        }
+        g->native_offered = g->native != NULL; /* a module without the step: Python steps */
+    }
+    if (answer) py.decref(answer);
+}
+
+/* Give the slave the outputs and state of the compiled steps taken since it was last told
+ * (AxisSlave._native_unpack). Holds the GIL. */
+static void unpack_native(Guard *g)
+{
+    if (!g->native_ahead) return;
+    g->native_ahead = 0;
+    PyObject *args = py.tuple_new((Py_ssize_t)n_outputs);
+    for (size_t i = 0; args && i < n_outputs; ++i)
+        py.tuple_set(args, (Py_ssize_t)i, py.from_double(g->outputs[i]));
+    PyObject *answer = ask_slave(g, "native_unpack", args);
+    if (answer) py.decref(answer);
 }
 
 static fmi2GetRealTYPE *real_get_real;
@@ -122,19 +195,27 @@ int load_mirror(Guard *g)
     return 1;
 }
 
-/* Give the slave the inputs set here since its last step (through pythonfmu). */
-void hand_over_inputs(Guard *g)
+/* Give the slave the outputs and state of compiled steps and the inputs set here since its
+ * last step (through pythonfmu), before a call that reaches it. */
+void hand_over(Guard *g)
 {
+    if (g->native_ahead && py.is_initialized()) {
+        PyGILState_STATE gil = py.gil_ensure();
+        unpack_native(g);
+        py.gil_release(gil);
+    }
     if (!g->inputs_pending) return;
     if (!real_set_real) real_set_real = real("fmi2SetReal");
     if (real_set_real) real_set_real(g->real, input_vr, n_inputs, g->inputs);
     g->inputs_pending = 0;
 }
 
-/* After a call that may change the slave, the mirror is read again before it is used. */
+/* After a call that may change the slave, the mirror is read again before it is used, and
+ * the compiled step's block packed again. */
 void slave_changed(Guard *g)
 {
     g->inputs_current = g->outputs_current = 0;
+    g->native_ready = 0;
 }
 
 int fast(Guard *g)
@@ -179,12 +260,25 @@ static fmi2Status exchange_failed(Guard *g)
     return fmi2Fatal;
 }
 
-/* fmi2DoStep as one Python call: inputs in, outputs out (pythonfmu: fmi2Discard on a
- * failed step, which finish() turns into the error the slave logged). */
+/* fmi2DoStep by the compiled step where it takes it, without Python; else as one Python
+ * call: inputs in, outputs out (pythonfmu: fmi2Discard on a failed step, which finish()
+ * turns into the error the slave logged). */
 fmi2Status exchange_step(Guard *g, fmi2Real t, fmi2Real h)
 {
+    if (g->native_offered && !g->native_ready) {
+        PyGILState_STATE gil = py.gil_ensure();
+        pack_native(g);
+        py.gil_release(gil);
+    }
+    if (g->native && g->native(g->block, h, g->inputs, g->outputs)) {
+        g->native_ahead = 1; /* the inputs stay pending: the slave has not seen them */
+        g->outputs_current = 1;
+        return fmi2OK;
+    }
     fmi2Status status = fmi2Discard;
     PyGILState_STATE gil = py.gil_ensure();
+    unpack_native(g);
+    g->native_ready = 0; /* the slave steps: its state moves past the block's */
     PyObject *args = py.tuple_new((Py_ssize_t)(2 + n_inputs));
     if (args) {
         py.tuple_set(args, 0, py.from_double(t));

@@ -17,18 +17,6 @@ typedef struct {
     enum mode mode;    /* the state it was saved in, or FROM_SLAVE */
 } Saved;
 
-/* The slave's answer to ``method`` of its exchange function, called with ``args`` (stolen);
- * a new reference or NULL. Holds the GIL. */
-static PyObject *ask_slave(Guard *g, const char *method, PyObject *args)
-{
-    PyObject *callable = py.get_attr(g->exchange, method);
-    PyObject *answer = callable && args ? py.call(callable, args) : NULL;
-    if (args) py.decref(args);
-    if (callable) py.decref(callable);
-    if (py.err_occurred()) py.err_clear();
-    return answer;
-}
-
 /* Whether the slave's model is built (it was initialised); 1 without an adapter to ask. */
 static int slave_initialised(Guard *g)
 {
@@ -79,7 +67,7 @@ EXPORT fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state)
     if (!saved) return refuse(g, "fmi2GetFMUstate: out of memory");
     PYTHONFMU(fmi2GetFMUstate);
     enum mode mode = g->mode;
-    hand_over_inputs(g);
+    hand_over(g);
     begin(g);
     fmi2Status status = conclude(g, F_fmi2GetFMUstate, call_(g->real, &saved->real));
     if (status > fmi2Warning) {
@@ -98,7 +86,7 @@ EXPORT fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
     if (!state) return refuse(g, "fmi2SetFMUstate: NULL state");
     Saved *saved = state;
     PYTHONFMU(fmi2SetFMUstate);
-    hand_over_inputs(g);
+    hand_over(g);
     begin(g);
     fmi2Status status = conclude(g, F_fmi2SetFMUstate, call_(g->real, saved->real));
     slave_changed(g);

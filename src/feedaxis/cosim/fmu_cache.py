@@ -4,7 +4,7 @@ Building takes seconds per FMU (pythonfmu), so ``feedaxis simulate`` and ``expor
 reuse ``<cache>/feedaxis/fmus-<version>-<hash>/``, where the hash covers every file that
 goes into an FMU (the slave scripts, the adapter, the host layer, the physics package, the
 build scripts): a changed source builds a new folder, never a stale FMU. FMUs built
-without the C host layer (no compiler here) or the compiled servo loop go to a folder of
+without the C host layer (no compiler here) or the compiled steps go to a folder of
 their own, so installing a compiler rebuilds; standalone FMUs (``export-ssp --standalone``)
 too. The folder is built in a staging folder and renamed into place, so a crash or Ctrl-C
 never leaves half a cache.
@@ -41,7 +41,7 @@ def source_hash():
 def cache_folder(root=None, standalone=False, fmi=2):
     """The cache folder of this version's FMUs (``root`` defaults to :func:`cache_root`);
     standalone FMUs (:mod:`feedaxis.fmu_standalone`) have their own, and so have FMI 3.0
-    FMUs and FMUs without the C host layer or the compiled servo loop."""
+    FMUs and FMUs without the C host layer or the compiled steps."""
     kind = "-standalone" if standalone else "-python-hosts" if host_layer_missing() else ""
     version = "-fmi3" if fmi == 3 else ""
     python_loop = "-python-loop" if kernel_missing() else ""

@@ -49,8 +49,14 @@ def clip(value, lower, upper):
     stays NaN. A scalar is compared, not passed through min and max (half the cost: this
     runs in every FMU step)."""
     if isinstance(value, SCALAR_TYPES):
-        return upper if value > upper else lower if value < lower else float(value)
+        return clip_float(value, lower, upper)
     return np.clip(values(value), lower, upper)
+
+
+def clip_float(value, lower, upper):
+    """:func:`clip` of one float (what numba compiles for an FMU's step: feedaxis.physics.
+    fmu_steps)."""
+    return upper if value > upper else lower if value < lower else float(value)
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,7 +84,13 @@ def interp(value, samples):
     formula, slope·(x - x_j) + y_j, so it equals ``np.interp`` bit for bit."""
     if not isinstance(value, SCALAR_TYPES):
         return np.interp(value, samples.x, samples.y)
-    x, y = samples.x_list, samples.y_list
+    return interp_float(value, samples.x_list, samples.y_list, samples.slope_list)
+
+
+def interp_float(value, x, y, slope):
+    """:func:`interp` of one float over the samples ``x``, ``y`` and the slope of each
+    interval (lists here; arrays where numba compiles it for an FMU's step:
+    feedaxis.physics.fmu_steps)."""
     if value >= x[-1]:
         return y[-1]
     if value < x[0]:
@@ -86,4 +98,4 @@ def interp(value, samples):
     if value != value:  # NaN, as np.interp returns it
         return value
     j = bisect.bisect_right(x, value) - 1
-    return samples.slope_list[j] * (value - x[j]) + y[j]
+    return slope[j] * (value - x[j]) + y[j]

@@ -46,6 +46,7 @@ import numpy as np
 
 from .checks import (ParameterError, require_finite, require_non_negative, require_positive,
                      require_representable)
+from .kernel import shipped_kernel
 from .threads import one_blas_thread
 
 FRICTION_SMOOTHING_MM_S = 0.1
@@ -448,23 +449,25 @@ def compiled_loop():
     return cached_njit(numba, numba_ready_loop(numba), nogil=True)
 
 
-@lru_cache(maxsize=1)
 def shipped_loop():
     """(:func:`run_loop` compiled ahead of time, or None; why it did not load, or None).
 
-    The NpidServo FMU carries the compiled module beside this file (feedaxis.kernel_build);
-    feedaxis's own copy of the physics has none (None, None). A module that is there but
-    does not load (another Python or numpy than the one that built it) gives its reason.
+    The FMUs carry the compiled module beside this file (:mod:`.kernel`,
+    feedaxis.kernel_build); feedaxis's own copy of the physics has none (None, None).
     """
-    try:
-        from .servo_kernel import run_loop as compiled
-    except ModuleNotFoundError as error:
-        if error.name == f"{__package__}.servo_kernel":
-            return None, None
-        return None, str(error)
-    except ImportError as error:
-        return None, str(error)
-    return compiled, None
+    module, failure = shipped_kernel()
+    return (module.run_loop if module is not None else None), failure
+
+
+def force_command_V(disturbance_N, force_N, force_constant_N_per_V):
+    """The known axial force (disturbance and constant force, N) as a command (V)."""
+    return (disturbance_N + force_N) / force_constant_N_per_V
+
+
+def newest_command_V(commands_V, head):
+    """The controller output of the last loop step: the delay line's entry before ``head``
+    (run_loop's state[5])."""
+    return commands_V[(int(head) - 1) % len(commands_V)]
 
 
 def whole_steps(pending_s, duration_s, time_step_s):
@@ -671,8 +674,12 @@ class Servo:
         """The controller output of the last loop step (V)."""
         if self._vector is not None:  # the delay line read from its head: newest last
             return float(self._vector[4 + self.params.buffer_size])
-        commands = self._commands  # indexes to a Python float, as self._loop
-        return commands[(int(self._loop[5]) - 1) % len(commands)]
+        return newest_command_V(self._commands, self._loop[5])  # Python floats, as self._loop
+
+    @property
+    def coefficients(self):
+        """:func:`loop_coefficients` as the loop in use reads them."""
+        return self._coefficients
 
     def state(self):
         """All internal state as plain Python values (for FMU get/set state)."""
@@ -710,7 +717,8 @@ class Servo:
         n_steps, self.pending_s = whole_steps(self.pending_s, duration_s, self.params.time_step_s)
         if n_steps == 0:  # run_loop leaves the state as it is
             return self._loop[0]
-        force_V = (disturbance_N + self.params.force_N) / self.params.force_constant_N_per_V
+        force_V = force_command_V(disturbance_N, self.params.force_N,
+                                  self.params.force_constant_N_per_V)
         if self._compiled is not None:
             steps, references, forces = self._inputs
             steps[0], references[0], forces[0] = n_steps, reference_mm, force_V
