@@ -21,7 +21,17 @@ Then, of the 5.2-5.4 s left: the periodic search is no longer located where its 
 cannot pass (the window's least squares, 0.45 s, and two simulations), the loop without
 friction takes the known force as it is (a simulation 64 -> 42 ms), and the friction screens'
 pass evaluates the Stribeck decay once a step and only where it acts (the Coulomb screen's
-pass 257 -> 148 ms); every finding the same to the bit (tests).
+pass 257 -> 148 ms); every finding the same to the bit (tests). A third round (side by side
+against the code before it, ``--baseline e914964``, three such runs at load 6-10: 1.05x to
+1.13x in CPU, e.g. 4.63 -> 4.21 s):
+the Coulomb and Stribeck screens take their columns from one sensitivity pass (0.55 ->
+0.42 s), the plant's pass of a PID loop without friction runs its own branch-free kernel
+(205 -> 148 ms, four passes), the Stribeck decay is not evaluated where it underflows to 0,
+a held constant force is measured against the loop the start's search ran (one simulation
+fewer), the robust AR noise model is kept by the residual's content (four fits -> one).
+Still not met: what is left is the four plant passes and the screens' pass (about 0.95 s),
+eleven simulations (0.45 s), 0.7-0.9 s of system time (page faults of fresh 4 MB
+temporaries) and about 1.8 s of analysis, no one part over a tenth (docs/tracking.md).
 
 Run: ``python benchmarks/bench_tracking_diagnose.py [--repeats 3] [--long-s 500]
 [--baseline 45c6d7f]`` (``--smoke``: 3 s, one repeat).

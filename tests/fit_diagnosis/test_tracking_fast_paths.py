@@ -2,6 +2,7 @@
 records and on every ordering of hand-set p-values (issue 35, item 4)."""
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,6 +26,13 @@ RECORDS = {
 }
 
 
+def _record_case(label, tmp_path, seed):
+    """The case of the seeded record ``label`` of :data:`RECORDS`."""
+    spec = dict(RECORDS[label])
+    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
+    return read_case(write_tracking_case(tmp_path / "case", run, seed))
+
+
 @pytest.mark.parametrize("label", sorted(RECORDS))
 def test_a_search_that_cannot_pass_is_not_located_and_nothing_changes(label, tmp_path,
                                                                       monkeypatch):
@@ -32,9 +40,7 @@ def test_a_search_that_cannot_pass_is_not_located_and_nothing_changes(label, tmp
     diagnosis equals the one locating it every time, to the bit, in fewer locations."""
     from feedaxis.measurement import tracking
 
-    spec = dict(RECORDS[label])
-    run = step_loop(spec.pop("trajectory"), spec.pop("duration_s"), plant=PLANT, **spec)
-    case = read_case(write_tracking_case(tmp_path / "case", run, 7))
+    case = _record_case(label, tmp_path, 7)
     located = []
     locate = tracking.locate_sinusoid
     monkeypatch.setattr(tracking, "locate_sinusoid",
@@ -121,3 +127,140 @@ def test_the_autocorrelation_time_is_kept_by_content(monkeypatch):
     assert len(computed) == len(residuals) and len(coloured._KEPT_TAUS) == coloured.TAUS_KEPT
     assert coloured.autocorrelation_time(residuals[0]) == first
     assert len(computed) == len(residuals) + 1  # the oldest had left
+
+
+@pytest.mark.parametrize("label", ("null", "friction"))
+def test_the_friction_screens_from_one_pass_find_what_their_own_passes_find(label, tmp_path,
+                                                                           monkeypatch):
+    """The score screens of Coulomb and Stribeck friction take their columns from one
+    sensitivity pass in all their parameters (``_screen_together``): the diagnosis equals
+    the one running a pass per screen, to the bit, in one pass fewer."""
+    from feedaxis.measurement import tracking
+
+    case = _record_case(label, tmp_path, 3)
+    passes = []
+    one_pass = tracking.simulate_sensitivity
+    monkeypatch.setattr(tracking, "simulate_sensitivity",
+                        lambda *args: passes.append(tuple(args[1])) or one_pass(*args))
+    together = diagnose(case, SERVO_PLANT)
+    together_passes, passes[:] = list(passes), []
+    monkeypatch.setattr(diagnosis, "_screen_together", lambda *args: None)
+    apart = diagnose(case, SERVO_PLANT)
+    assert together.to_json() == apart.to_json()
+    np.testing.assert_array_equal(together.final.residual_um, apart.final.residual_um)
+    # the first round screens both laws; after a law is named the other is screened alone
+    assert ("friction_N",) in passes and ("friction_N",) not in together_passes
+    assert ("friction_N", "coulomb_N", "static_N", "stribeck_velocity_mm_s") in together_passes
+    assert len(together_passes) == len(passes) - 1
+
+
+def test_each_friction_laws_neutral_values_are_the_loops_own():
+    """The premise of one pass for the screens: each tracking effect at its neutral values
+    sets the loop's parameters as the loop without it does, so the loop of the plant with
+    every friction law at its neutral values is that of the plant with any one of them."""
+    from feedaxis.physics.servo import ServoParams
+
+    defaults = ServoParams()
+    for effect in CATALOG.values():
+        if effect.measurement == "tracking" and effect.name != "servo_plant":
+            for name, value in effect.neutral.items():
+                assert getattr(defaults, name) == value, (effect.name, name)
+
+
+def test_the_start_s_simulation_is_the_held_force_s(tmp_path, monkeypatch):
+    """The loop the start's search ran under the paper's plant is the one a held constant
+    force is measured against (the record's own force, none here, as zeros): the same
+    positions to the bit, and the same finding in one simulation fewer."""
+    from feedaxis.fmu_map import servo_to_fmu
+    from feedaxis.measurement import tracking
+    from feedaxis.physics.servo import ServoParams, simulate
+
+    case = _record_case("null", tmp_path, 3)
+    measurement = tracking.Tracking(case)
+    assert measurement.start.plant == {} and measurement.start.positions_mm is not None
+    params = ServoParams(**servo_to_fmu(case.axis.servo))
+    np.testing.assert_array_equal(measurement.start.positions_mm, simulate(
+        params, measurement.record_time_s, measurement.record_reference_mm,
+        np.zeros(measurement.record_time_s.size), measurement.counts))
+    calls = []
+    simulate_once = tracking.simulate
+    monkeypatch.setattr(tracking, "simulate",
+                        lambda *args: calls.append(1) or simulate_once(*args))
+    kept, kept_calls = measurement.held_force(), len(calls)
+    monkeypatch.setattr(measurement.start, "positions_mm", None)
+    assert measurement.held_force() == kept
+    assert (kept_calls, len(calls)) == (1, 3)
+
+
+def test_the_stops_are_found_once_and_are_those_found_anew(tmp_path):
+    from feedaxis.measurement import tracking
+
+    measurement = tracking.Tracking(_record_case("null", tmp_path, 3))
+    stops = measurement.stops_s()
+    assert measurement.stops_s() is stops and not stops.flags.writeable and stops.size > 2
+    np.testing.assert_array_equal(stops, measurement._found_stops_s())
+
+
+class _Anew:
+    """A keep-by-content that keeps nothing: every result computed anew."""
+
+    @staticmethod
+    def get(values, compute):
+        return compute(np.ascontiguousarray(values, dtype=float))
+
+
+@pytest.mark.parametrize("label", ("null", "periodic force"))
+def test_the_robust_noise_model_is_kept_by_the_residual_s_content(label, tmp_path,
+                                                                 monkeypatch):
+    """The structure searches whiten the same residual by its robust AR model: kept by
+    content, it is fitted once per residual, and the diagnosis equals the one fitting it
+    anew every time, to the bit; what is kept cannot be written to."""
+    from feedaxis.stats import coloured
+
+    case = _record_case(label, tmp_path, 5)
+    monkeypatch.setattr(coloured, "_KEPT_ROBUST", coloured.KeptByContent(coloured.TAUS_KEPT))
+    fitted = []
+    anew = coloured._autoregression
+    monkeypatch.setattr(coloured, "_autoregression",
+                        lambda *args: fitted.append(args[-1]) or anew(*args))
+    kept = diagnose(case, SERVO_PLANT)
+    kept_fits, fitted[:] = fitted.count(True), []
+    monkeypatch.setattr(coloured, "_KEPT_ROBUST", _Anew())
+    every = diagnose(case, SERVO_PLANT)
+    assert kept.to_json() == every.to_json()
+    np.testing.assert_array_equal(kept.final.residual_um, every.final.residual_um)
+    assert 0 < kept_fits < fitted.count(True)
+    monkeypatch.undo()
+    residual = np.sin(np.arange(4000.0)) + np.random.default_rng(1).normal(size=4000)
+    model = coloured.autoregression(residual, robust=True)
+    assert model is coloured.autoregression(residual.copy(), robust=True)
+    assert not model.coefficients.flags.writeable
+
+
+@pytest.mark.parametrize("recorded", (False, True))
+def test_a_steady_force_s_response_is_the_constant_force_s_loop(recorded, tmp_path,
+                                                               monkeypatch):
+    """The loop's response to a steady force is simulated as the model's constant force
+    (kept by parameters, where the constant force's screen ran it): the same response to
+    the bit as adding it to the record's force, with and without a recorded force; a
+    force that varies takes the record's path."""
+    from feedaxis.measurement import tracking
+
+    force = (lambda t: 0.5 * np.sin(3.0 * t)) if recorded else None
+    run = step_loop(two_sines, 2.0, plant=PLANT, force_N=force)
+    case = read_case(write_tracking_case(tmp_path / "case", run, 3,
+                                         force_N=force(run[0]) if recorded else None))
+    measurement = tracking.Tracking(case)
+    model = Model((CATALOG["servo_plant"],), {"servo_plant": PLANT})
+    ones = np.ones(measurement.record_time_s.size)
+    fast = measurement.loop_response_um(model, 2.0 * ones)
+    params = measurement.params(model)
+    known = 0.0 if measurement.disturbance_N is None else measurement.disturbance_N
+    slow = measurement.deviation_um(params, known + 2.0 * ones) - measurement.deviation_um(params)
+    np.testing.assert_array_equal(fast, slow)
+    assert np.abs(fast).max() > 1e-3
+    assert ("positions", replace(params, force_N=2.0)) in measurement.recent.items
+    varying = np.linspace(0.0, 1.0, ones.size)
+    np.testing.assert_array_equal(
+        measurement.loop_response_um(model, varying),
+        measurement.deviation_um(params, known + varying) - measurement.deviation_um(params))

@@ -279,3 +279,59 @@ def test_the_coulomb_column_without_the_rise_at_rest_is_the_one_beside_it_to_the
     np.testing.assert_array_equal(alone[0], beside[0])
     np.testing.assert_array_equal(alone[1][:, 0], beside[1][:, 0])
     assert np.abs(beside[1][:, 1:3]).max() > 0.0
+
+
+def test_the_stribeck_decay_skips_only_what_underflows_to_zero():
+    """The decay exp(−(v/v_s)²) is taken as 0 beyond (v/v_s)² = DECAY_UNDERFLOW without the
+    exponential: there the exponential is 0 itself, so the friction and its tangent are the
+    same to the bit on both sides of the threshold."""
+    import math
+
+    from feedaxis.physics.servo import DECAY_UNDERFLOW, stribeck_V
+    from feedaxis.physics.servo_sensitivity import friction_tangent
+
+    assert math.exp(-DECAY_UNDERFLOW) == 0.0
+    for ratio in np.concatenate([np.linspace(-40.0, 40.0, 8001), [-math.inf, math.inf]]):
+        plain = 1.0 + (3.0 - 1.0) * math.exp(-ratio * ratio)
+        assert stribeck_V(2.0 * ratio, 1.0, 3.0, 2.0) == plain
+        tangent = friction_tangent(2.0 * ratio, 0.5, 0.01, 1.0, 3.0, 2.0, 0.1, True)
+        assert tangent[4] == math.exp(-ratio * ratio) * tangent[1]
+    assert math.isnan(stribeck_V(math.nan, 1.0, 3.0, 2.0))
+
+
+@pytest.mark.parametrize("delay_s", (0.00123, 0.0015, 0.0))
+def test_the_plain_pid_pass_is_the_general_one_to_the_bit(delay_s):
+    """The plant's pass of a PID loop without friction runs its own kernel (no branch in its
+    inner loops): positions, columns and final state those of the general pass, to the
+    bit, with a known and a constant force; a friction, a gain or another controller
+    takes the general pass."""
+    from feedaxis.physics.servo import forces_V, loop_coefficients
+    from feedaxis.physics.servo_sensitivity import (PLANT as PLANT_NAMES,
+                                                    compiled_pid_tangent, compiled_tangent,
+                                                    plain_pid)
+
+    params = replace(PID, delay_s=delay_s, force_N=0.7)
+    names = (*PLANT_NAMES, "force_N")
+    counts = step_counts(TIME_S, params.time_step_s)
+    force_N = 0.3 * np.sin(40.0 * TIME_S)
+    coefficients = loop_coefficients(params)
+    assert plain_pid(coefficients, names)
+    d_coefficients, d_force = coefficient_jacobian(params, names)
+    runs = []
+    for kernel in (compiled_pid_tangent(), compiled_tangent()):
+        state = np.array([REFERENCE_MM[0], 0.0, 0.0, 0.0, REFERENCE_MM[0], 0.0])
+        d_state = np.zeros((4, len(names)))
+        positions, columns = np.empty(TIME_S.size), np.zeros((TIME_S.size, len(names)))
+        kernel(coefficients, np.ascontiguousarray(d_coefficients.T), counts, REFERENCE_MM,
+               forces_V(params, force_N, TIME_S.size), d_force, state,
+               np.zeros(params.buffer_size), d_state, np.zeros((params.buffer_size, len(names))),
+               positions, columns)
+        runs.append((positions, columns, state, d_state))
+    for plain, general in zip(*runs):
+        np.testing.assert_array_equal(plain, general)
+    assert np.abs(runs[0][1]).max(axis=0).min() > 0.0  # every column moves
+    for other, other_names in ((replace(params, friction_N=1.0), names),
+                               (replace(params, damping_N_s_per_mm=0.01), names),
+                               (replace(params, controller="npid"), names),
+                               (CASCADE, PLANT_NAMES), (params, (*names, "kp_V_per_mm"))):
+        assert not plain_pid(loop_coefficients(other), other_names)

@@ -133,10 +133,14 @@ class Start:
     shows, and an effect named on top is judged against it.
     """
 
-    def __init__(self, plant, source, identified=None, problem=None, refine=True):
+    def __init__(self, plant, source, identified=None, problem=None, refine=True,
+                 positions_mm=None):
         self.plant, self.source, self.identified, self.problem = (plant, source, identified,
                                                                   problem)
         self.refine = refine
+        # the loop's positions (mm) over the record under this start's plant with the
+        # record's own force, where finding the start simulated them (the paper's plant)
+        self.positions_mm = positions_mm
         self.basin = plant  # where a fit of servo_plant starts (:func:`_refined`)
         # the Coulomb friction (N) fitted beside the basin's plant: where a friction law
         # starts (None where the start was not refined)
@@ -204,11 +208,12 @@ def _fitted_plant(measurement, plant, nuisances):
 
 
 def _runs(params, trace, counts):
-    """Whether ``params`` make a loop that stays on any axis over the record."""
+    """The loop's positions (mm) over the record under ``params`` where they make a loop
+    that stays on any axis, else None."""
     with np.errstate(all="ignore"):
         position_mm = simulate(params, trace.time_s, trace.reference_mm, trace.disturbance_N,
                                counts)
-    return bool(np.all(np.abs(position_mm) <= MAX_POSITION_MM))
+    return position_mm if np.all(np.abs(position_mm) <= MAX_POSITION_MM) else None
 
 
 def _find_start(case):
@@ -222,11 +227,13 @@ def _find_start(case):
         if identified is not None:
             plant = {key: float(np.clip(identified.values[key], *PLANT_BOUNDS[key]))
                      for key in PLANT_KEYS}
-            if _runs(replace(base, **plant), trace, counts):
+            if _runs(replace(base, **plant), trace, counts) is not None:
                 return Start(plant, "identified from the recorded controller output "
                                     "(inverse dynamics)", identified)
-    if base.controller != "cascade" and _runs(base, trace, counts):
-        return Start({}, "the plant of Anang et al. 2017, Eq. 1", refine=False)
+    position_mm = _runs(base, trace, counts) if base.controller != "cascade" else None
+    if position_mm is not None:
+        return Start({}, "the plant of Anang et al. 2017, Eq. 1", refine=False,
+                     positions_mm=position_mm)
     plant = loop_start(base, trace.time_s, trace.reference_mm, trace.actual_mm,
                        trace.disturbance_N, START_WINDOW_S)
     if plant is None:
@@ -292,7 +299,7 @@ class Tracking(Measurement):
         self.reference_mm = trace.reference_mm[self.index]
         self.measured_um = (trace.actual_mm - trace.reference_mm)[self.index] * 1e3
         self.start = loop_start_of(case)
-        self._reference_kind = None
+        self._reference_kind = self._stops_s = None
         self.recent = Recent()
 
     start_of = staticmethod(loop_start_of)  # the start the tracking effects guess from
@@ -358,10 +365,11 @@ class Tracking(Measurement):
         ones = np.ones(self.record_time_s.size)
         known = np.zeros_like(ones) if self.disturbance_N is None else self.disturbance_N
         with np.errstate(all="ignore"):
+            unmoved_mm = (self.start.positions_mm if self.start.positions_mm is not None else
+                          simulate(params, self.record_time_s, self.record_reference_mm, known,
+                                   self.counts))
             moved_um = (simulate(params, self.record_time_s, self.record_reference_mm,
-                                 known + ones, self.counts)
-                        - simulate(params, self.record_time_s, self.record_reference_mm, known,
-                                   self.counts)) * 1e3
+                                 known + ones, self.counts) - unmoved_mm) * 1e3
         largest = float(np.max(np.abs(moved_um)))
         lasting = float(np.max(np.abs(moved_um[self.index])))
         if not np.isfinite(largest) or largest == 0.0 or lasting >= HELD_SHARE * largest:
@@ -527,9 +535,13 @@ class Tracking(Measurement):
     def deviation_sensitivity(self, params, names):
         """(:meth:`deviation_um` under ``params``, its derivatives in ``names``: samples x
         len(names), µm per unit), kept for the next calls as :meth:`positions_mm` (the
-        positions too: the pass's are the loop's to the bit)."""
+        positions too: the pass's are the loop's to the bit); columns kept from a pass in
+        more names at the same parameters are taken from it (a column is the same to the bit
+        beside other names: tests/physics/test_sensitivity.py)."""
         key = ("sensitivity", params, tuple(names))
         d_position_mm = self.recent.get(key)
+        if d_position_mm is None:
+            d_position_mm = self.recent.columns(params, names)
         if d_position_mm is None:
             position_mm, d_position_mm = simulate_sensitivity(
                 params, names, self.record_time_s, self.record_reference_mm,
@@ -544,10 +556,18 @@ class Tracking(Measurement):
 
     def loop_response_um(self, model, disturbance_N):
         """Change of the predicted deviation (µm) at the samples when ``disturbance_N``
-        (over the whole record) is added to the record's own force."""
+        (over the whole record) is added to the record's own force. A steady force on a
+        model without one is the model's constant force: the same forces to the bit, so the
+        loop is the one kept where a constant force's screen ran it (:meth:`positions_mm`)."""
         known = self.disturbance_N if self.disturbance_N is not None else 0.0
         params = self.params(model)
-        return self.deviation_um(params, known + disturbance_N) - self.deviation_um(params)
+        disturbance_N = np.asarray(disturbance_N, dtype=float)
+        if params.force_N == 0.0 and disturbance_N.size and np.all(
+                disturbance_N == disturbance_N[0]):
+            moved_um = self.deviation_um(replace(params, force_N=float(disturbance_N[0])))
+        else:
+            moved_um = self.deviation_um(params, known + disturbance_N)
+        return moved_um - self.deviation_um(params)
 
     def impulse_response_um(self, model):
         """The deviation (µm) over the record after a 1 N force held over one sample
@@ -694,7 +714,14 @@ class Tracking(Measurement):
     def stops_s(self):
         """Times (s) at which the reference velocity changes sign or falls to a near-stop (a
         local minimum of its magnitude under ``NEAR_STOP_SHARE`` of its largest, more than
-        two samples from a reversal): where friction at rest acts."""
+        two samples from a reversal): where friction at rest acts. Found once (read-only):
+        the reversal shape and its spikes' test ask for them."""
+        if self._stops_s is None:
+            self._stops_s = self._found_stops_s()
+            self._stops_s.setflags(write=False)
+        return self._stops_s
+
+    def _found_stops_s(self):
         velocity = np.abs(np.gradient(self.reference_mm, self.time_s))
         inner = np.flatnonzero((velocity[1:-1] <= velocity[:-2])
                                & (velocity[1:-1] < velocity[2:])) + 1
@@ -774,6 +801,15 @@ class Recent:
         if value is not None:
             self.items.move_to_end(key)
         return value
+
+    def columns(self, params, names):
+        """The columns of ``names`` (samples x len(names)) of a sensitivity pass kept at
+        ``params`` in more names, or None."""
+        for key, value in reversed(self.items.items()):
+            if key[0] == "sensitivity" and key[1] == params and set(names) <= set(key[2]):
+                self.items.move_to_end(key)
+                return value[:, [key[2].index(name) for name in names]]
+        return None
 
     def put(self, key, value):
         """Keep ``value`` (an array, made read-only) under ``key`` while the budget allows;

@@ -232,6 +232,9 @@ def _lag_one_of(coefficients):
     return float(np.linalg.solve(matrix, rhs)[0])
 
 
+_KEPT_ROBUST = KeptByContent(TAUS_KEPT)
+
+
 def autoregression(residual, max_order=MAX_AR_ORDER, penalty_per_parameter=None, min_order=0,
                    robust=False):
     """The AR noise model of ``residual`` by Yule-Walker on the autocovariance with the
@@ -239,7 +242,21 @@ def autoregression(residual, max_order=MAX_AR_ORDER, penalty_per_parameter=None,
     (from ``min_order``) chosen by an information criterion: AIC (penalty 2 per parameter,
     the default for whitening) or BIC (penalty ln n). ``robust``: the autocovariance from
     the lower quartile over segments (:func:`_robust_noise_autocovariance`), so a burst is
-    not taken for noise either."""
+    not taken for noise either; the robust model with the other defaults is kept by the
+    residual's content (:class:`KeptByContent`, its coefficients read-only): a tracking
+    diagnosis's structure searches each whiten the same residual by it."""
+    if robust and (max_order, penalty_per_parameter, min_order) == (MAX_AR_ORDER, None, 0):
+        return _KEPT_ROBUST.get(residual, _kept_robust_autoregression)
+    return _autoregression(residual, max_order, penalty_per_parameter, min_order, robust)
+
+
+def _kept_robust_autoregression(residual):
+    model = _autoregression(residual, MAX_AR_ORDER, None, 0, True)
+    model.coefficients.setflags(write=False)
+    return model
+
+
+def _autoregression(residual, max_order, penalty_per_parameter, min_order, robust):
     residual = np.asarray(residual, dtype=float) - np.mean(residual)
     max_order = min(max_order, max(residual.size // 4, 0))
     estimate = _robust_noise_autocovariance if robust else _noise_autocovariance
