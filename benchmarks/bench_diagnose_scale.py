@@ -28,6 +28,16 @@ medians of 3, on the loaded 2-core machine; before them 5.1-5.2 s, 254 MB):
 The 1,000 x 500 layout takes neither path (its residuals are white): 2.4-2.5 s before
 and after.
 
+The peak resident memory (RSS) against 500 MB is that of ``feedaxis diagnose`` run as the
+user runs it, in a process of its own on the case read from disk (the kernel's ru_maxrss of
+the child, measured before this process holds the cases: a child's starts from its
+parent's), for the two 10^6-sample layouts; the in-process figures above hold every case at
+once. Under ``/usr/bin/time`` (load 9): the dense scan 421 -> 380 MB, the 1,000-target
+layout 321 -> 312 MB, before and after issue 35's bounded memory. What holds the dense
+scan's: the interpreter with NumPy and SciPy (105 MB), the case's columns, indices and
+residuals (about 100 MB), and at the peak the sandwich's J'ΣJ: its transforms (up to
+``SPECTRA_BYTES``, 128 MB: six of 16 MB) and NumPy's padded copy in each FFT (32 MB).
+
 Run: ``python benchmarks/bench_diagnose_scale.py [--repeats 3]``.
 """
 import argparse
@@ -44,6 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import synthetic as syn  # noqa: E402
+from bench_positioning_scale import run, write_case_folder  # noqa: E402
 from common import arguments  # noqa: E402
 from feedaxis.analysis import analyse  # noqa: E402
 from feedaxis.case import Axis, Case  # noqa: E402
@@ -136,6 +147,19 @@ def jobs(args, folder):
     }
 
 
+def child_peaks(samples, repeats, folder):
+    """{layout: (median CPU s, largest peak RSS MB)} of ``feedaxis diagnose`` in a process
+    of its own on each 10^6-sample layout written to disk, its model fitted first."""
+    peaks = {}
+    for label, targets in (("positioning", 1000), ("dense scan", samples // 10)):
+        case, model = Path(folder) / label / "case", str(Path(folder) / label / "model.toml")
+        write_case_folder(case, samples, targets)
+        run(["fit", str(case), "--add", "lead_error", "--out", model])
+        done = [run(["diagnose", str(case), "--model", model]) for _ in range(repeats)]
+        peaks[label] = (statistics.median(c.cpu_s for c in done), max(c.peak_mb for c in done))
+    return peaks
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per job (default 3)")
@@ -144,6 +168,8 @@ def main(argv=None):
     parser.add_argument("--tracking-s", type=float, default=500.0)
     args = arguments(parser, argv, repeats=1, samples=4_000, single_pass=2_000, tracking_s=3.0)
     with tempfile.TemporaryDirectory() as folder:
+        # first, while this process is small: a child's ru_maxrss starts from its parent's
+        peaks = child_peaks(args.samples, args.repeats, folder)
         work = jobs(args, folder)
         print(f"{'case':36s} {'job':9s} {'time (s)':>9s} {'(min-max)':>13s} {'/ 5 s':>6s} "
               f"{'CPU (s)':>8s} {'peak MB':>8s} {'/ 500 MB':>8s}")
@@ -158,6 +184,11 @@ def main(argv=None):
         print(f"dense scan / the 1,000-target layout of the same samples: time "
               f"{dense[0] / regular[0]:.2f}, CPU {dense[3] / regular[3]:.2f}, memory "
               f"{dense[4] / regular[4]:.2f}")
+        print(f"feedaxis diagnose in a process of its own, {args.samples:,} samples read from "
+              f"disk (median CPU of {args.repeats}, largest peak RSS):")
+        for label, (cpu_s, peak_mb) in peaks.items():
+            print(f"  {label:12s} CPU {cpu_s:6.2f} s  peak RSS {peak_mb:5.0f} MB "
+                  f"({peak_mb / MEMORY_TARGET_MB:.2f} of {MEMORY_TARGET_MB:.0f} MB)")
 
 
 if __name__ == "__main__":

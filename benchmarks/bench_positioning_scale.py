@@ -49,11 +49,44 @@ RSS MB), from compare 36.4 / 1,398, fit 57.3 / 2,191, diagnose 73.2 / 3,069, rep
   samples per run (5,000 passes over 10^7 samples took 28 s): fit 56.3 -> 29.6 s, diagnose
   70.8 -> 43.3 s, report 94.1 -> 68.3 s.
 
-Not met: the CPU of report (68.3 s) and the peak RSS of fit (1.80 GB), diagnose (2.26
-GB) and report (2.51 GB); what remains at the peak is the fit's columns (7 candidate
-columns at once in the diagnosis), the case's table, the drift basis, the residuals the
-selection keeps, and the serial-correlation test's sample-sized temporaries. The refusal's cost of a row (``feedaxis.case``) is measured
-from these runs.
+Then (issue 35 items 1-2, bounded memory), from fit 27.3 s CPU / 1,804 MB, compare 29.6 /
+1,398, diagnose 42.4 / 2,259, report 68.3 / 2,364 (each once under ``/usr/bin/time``, load
+2; memray's high-water mark and a CPU-time cProfile first, at 10^6 and 10^7 rows; every
+command's ``--json`` and the report byte-identical at 10^6 before and after):
+
+- the Ljung-Box sums over 65,536 samples at a time, the noise part left in place where the
+  samples are already in the order taken, the columns of the case kept as arrays of their
+  own (the 4-column table let go), and the diagnosis's refits kept only where the
+  measurement's hooks refit (tracking): diagnose's allocations at their peak 2,228 ->
+  2,065 MB;
+- the eccentricity's, lead error's and backlash's columns written into the fit's array,
+  the drift's computed where used (not kept by every model), the projection's residual
+  in place, the fit without nuisances let go once the selection moves on: 2,065 -> 1,608
+  MB; yet peak RSS stayed at 2.2-2.3 GB: the heap reused sample-sized blocks and the holes
+  between them held 0.3-0.5 GB more than the live arrays;
+- blocks of 32 MB and more mapped on their own again (``feedaxis.__main__``; below that,
+  as at 10^6 rows, freed blocks stay for reuse): RSS within 0.1 GB of the allocations,
+  at 10 ms of the kernel's per mapped block (diagnose's system time 4 -> 9-13 s);
+- the structure search's least squares through a QR taken 65,536 rows at a time
+  (``feedaxis.stats.linear.projection``: lstsq held a copy of the cubic's columns and its
+  workspace, 380 MB), the fit's residual subtracted a block at a time, sample-sized
+  indices in 32 bits where they fit (four of 40 MB each saved), a residual's centring into
+  its gathered group means: diagnose 1,658 -> 1,429 MB, report 1,734 -> 1,535 MB;
+- the sampling notes' and plausibility check's row groups through a mixed-radix key ranked
+  once, a column of few values ranked by searching its sorted values, and the notes
+  counting the distinct rows without numbering them: those two 10.5 -> about 5 s CPU,
+  report 1,535 -> 1,458 MB.
+
+Side by side with the old code (below, one run each at load 8-10): peak RSS old / new
+1.29 (compare), 1.46 (fit), 1.68 (diagnose), 1.62 (report), every command under 1.5 GB.
+Not met: CPU. The mapped blocks cost the kernel 10 ms each (system time 3-5 -> 8-16 s a
+command), more than the user time saved (report 63 -> 52 s user): old / new CPU 0.88-0.89
+for fit, diagnose and report, report 74 s against 60 (the old 66 s). What remains at the
+peak of diagnose and report, 70 and 40 MB under 1.5 GB: the fit of 7 columns (534 MB: lead
+error, drift, backlash, eccentricity) beside the case's columns, its indices and three
+residuals; a fit that evaluates its columns a block of rows at a time would take it, and
+with it most of the mapped blocks. The refusal's cost of a row (``feedaxis.case``) is
+measured from these runs.
 
 Run: ``python benchmarks/bench_positioning_scale.py [--rows 10000000] [--repeats 1]
 [--baseline-src PATH]``.

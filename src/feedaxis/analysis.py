@@ -118,9 +118,9 @@ def analyse(case, model, effects=None, diagnosis=None, ladder=None, kind=None, p
     notify = progress or (lambda label: None)
     measurement = measurement_for(case, model, kind)
     notify("model")
-    result = evaluate(model, measurement)
     if diagnosis is None:
         diagnosis = diagnose(case, model, effects, notify, measurement=measurement)
+    result = evaluate(model, measurement)  # after the diagnosis: its residual not held by it
     if ladder is None:
         notify("error ladder")
         ladder = ladder_of(measurement, model)

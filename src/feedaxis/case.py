@@ -404,8 +404,10 @@ def _read_csv(path, spec):
 # Peak memory of the heaviest command per row of a case file: on 10^7 positioning rows
 # (1,000 targets x 5,000 bidirectional runs, benchmarks/bench_positioning_scale.py)
 # diagnose peaked at up to 2,555 MB resident and report at up to 2,507 MB, at most 240
-# bytes a row above the interpreter's own 150 MB (report on 10^6 rows: 234); the text read
-# is held up to three times more (line ends normalised) while it is parsed.
+# bytes a row above the interpreter's own 150 MB (report on 10^6 rows: 234); since issue
+# 35's bounded memory 1,429 and 1,458 MB (about 140 bytes a row), the figure kept for the
+# kinds whose analysis was not measured so; the text read is held up to three times more
+# (line ends normalised) while it is parsed.
 ANALYSIS_BYTES_PER_ROW = 250
 TEXT_COPIES = 3
 SAMPLE_BYTES = 1 << 16  # the file's start, from which its rows are counted

@@ -41,6 +41,7 @@ from .measurement import kinds_for, measurement_of
 from .measurement.base import NoStart
 from .physics.threads import one_blas_thread
 from .stats.judge import FAMILY_ALPHA, Test, accepts
+from .stats.linear import projection
 
 MAX_STRUCTURES = 5
 RESOLUTION_UM = 1e-3  # 1 nm: an effect or structure smaller is rounding, not a measurement
@@ -229,8 +230,11 @@ class Refitter:
         return self.fit(model)
 
     def fit(self, model):
-        """``fit(model, measurement)``, once per model: a hook refits what the selection
-        fitted already (the same effects, the same start: the same fit)."""
+        """``fit(model, measurement)``, once per model where the measurement's hooks refit
+        what the selection fitted already (the same effects, the same start: the same
+        fit; ``Measurement.refits_selection``)."""
+        if not self.measurement.refits_selection:
+            return fit(model, self.measurement)
         key = (tuple(id(e) for e in model.effects),
                repr([sorted(model.values[name].items()) for name in model.names]))
         if key not in self._fits:
@@ -313,6 +317,7 @@ def _select(measurement, left, pending, skipped, stages, notify):
         for joined in [e for e in result.model.effects if e.name in pending]:
             candidates.append(_candidate(measurement, left, joined, result, test))
             del pending[joined.name]
+        left.plain = None  # the nuisances' test refits once the model moves on: let it go
         left = result
     return candidates, left
 
@@ -578,11 +583,6 @@ def nuisance_test(measurement, left, name, extra):
                                            left.statistics.n_free)
 
 
-def _least_squares_fit(residual_um, basis):
-    coefficients = np.linalg.lstsq(basis, residual_um, rcond=None)[0]
-    return basis @ coefficients
-
-
 def find_structures(measurement, left, shapes, stages, notify=None):
     """(structures, final fit): structure in the residual of ``left`` that no effect
     explains, strongest first.
@@ -646,7 +646,7 @@ def _best_shape(measurement, current, shapes, stages):
         if trial is None:
             continue
         tried += trials
-        fitted = _least_squares_fit(residual, trial.basis)
+        fitted = projection(trial.basis, residual)
         amplitude_um = shape.amplitude_um(measurement, fitted, trial.location)
         if amplitude_um < RESOLUTION_UM:
             continue

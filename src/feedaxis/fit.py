@@ -23,7 +23,7 @@ from .effects import BasisEffect, FitRecord, Model
 from .errors import InputError
 from .measurement import Measurement, kinds_for, measurement_of
 from .physics.threads import one_blas_thread
-from .stats.linear import normal_solve, unit_gram
+from .stats.linear import normal_solve, subtract_product, unit_gram
 
 SINGULAR_RATIO = 1e-6
 # Residual degrees of freedom a fit must leave for the noise: with nu of them the noise
@@ -343,7 +343,8 @@ class Problem:
         """``f(x) -> measured - predicted`` over the layout's parameter vector."""
         def residual(x):
             base_um, columns_um = self._split_at(layout, x)
-            return self.measured_um - base_um - columns_um @ x[layout.linear_index]
+            return subtract_product(self.measured_um - base_um, columns_um,
+                                    x[layout.linear_index])
         return residual
 
     def linear_jacobian(self, layout, x):
@@ -438,7 +439,7 @@ def variable_projection(problem, layout):
         x[linear] = bounded_linear_solve(columns_um, target_um, lower[linear], upper[linear])
         last.update(columns_um=columns_um, free=(x[linear] > lower[linear])
                     & (x[linear] < upper[linear]))
-        return target_um - columns_um @ x[linear]
+        return subtract_product(target_um, columns_um, x[linear])
 
     def projected_jacobian(x_nonlinear):
         """d project / d x_nonlinear with the columns fixed (they are where

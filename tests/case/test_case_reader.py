@@ -248,3 +248,20 @@ def test_the_memory_limit_variable_refuses_a_case_by_its_size(tmp_path):
     for bad in ("lots", "-5", "nan"):
         wrong = compare(bad)
         assert wrong.returncode == 2 and "FEEDAXIS_MEMORY_LIMIT_MB" in wrong.stderr
+
+
+def test_the_positioning_columns_are_copies_of_their_own_with_the_values_read(tmp_path):
+    """read_positioning keeps each column as an array of its own (the table as read, all
+    its columns in one array, is let go), with the values the per-cell reader reads."""
+    from feedaxis.measurement.positioning import read_positioning
+
+    path = tmp_path / "positioning.csv"
+    path.write_text("target_mm,error_um,direction,run,time_s\n"
+                    + "".join(f"{t * 0.5},{0.1 * t - 1},{1 - 2 * (t % 2)},{1 + t // 4},{t}\n"
+                              for t in range(12)), encoding="utf-8")
+    samples = read_positioning(path)
+    expected, _ = reference_read_csv(path, POSITIONING_COLUMNS)
+    for name in ("target_mm", "error_um", "direction", "run", "time_s"):
+        column = getattr(samples, name)
+        assert column.base is None and column.flags.c_contiguous, name
+        np.testing.assert_array_equal(column, expected[name], err_msg=name)

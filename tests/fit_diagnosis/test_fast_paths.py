@@ -102,11 +102,16 @@ def test_autoregression_kept_by_content():
                                   serial._autoregression(other).coefficients)
 
 
+@pytest.mark.parametrize("key_limit", [None, 64])
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_row_groups_are_numpys_unique_rows(seed):
-    """The groups of distinct rows through integer keys: NumPy's structured unique rows."""
+def test_row_groups_are_numpys_unique_rows(seed, key_limit, monkeypatch):
+    """The groups of distinct rows through integer keys: NumPy's structured unique rows,
+    also where the key is ranked before a digit would take it past its limit."""
+    from feedaxis import iso230
     from feedaxis.iso230 import row_groups
 
+    if key_limit:
+        monkeypatch.setattr(iso230, "KEY_LIMIT", key_limit)
     rng = np.random.default_rng(seed)
     n = 5000
     columns = (np.round(rng.uniform(-50.0, 50.0, n), 1), rng.choice([-1.0, 1.0], n),
@@ -347,3 +352,21 @@ def test_autoregression_by_one_qr_is_lstsq_order_by_order(coefficients, size, mo
                                     fast.persistence_error],
                                    [plain.innovation_variance, plain.variance,
                                     plain.persistence_error], rtol=1e-12)
+
+
+@pytest.mark.parametrize("distinct", [3, 5000, 70_000])
+def test_ranks_are_numpys_unique_inverse_and_distinct_rows_its_count(distinct):
+    """A column of few values (searched) and of many (sorted by index), beyond the first
+    samples' hint too: NumPy's unique values and inverse; the rows' count that of
+    row_groups."""
+    from feedaxis.iso230 import FEW_VALUES, distinct_rows, ranks, row_groups
+
+    rng = np.random.default_rng(distinct)
+    column = np.concatenate((np.zeros(FEW_VALUES), rng.integers(0, distinct, 3 * FEW_VALUES)
+                             * 0.25))
+    values, index = ranks(column)
+    expected = np.unique(column, return_inverse=True)
+    np.testing.assert_array_equal(values, expected[0])
+    np.testing.assert_array_equal(index, expected[1].ravel())
+    other = rng.choice([-1.0, 1.0], column.size)
+    assert distinct_rows(column, other) == row_groups(column, other).max() + 1

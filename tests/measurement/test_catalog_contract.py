@@ -224,3 +224,21 @@ def test_modules_import_first_without_a_cycle(module):
                           text=True)
     assert done.returncode == 0, done.stderr
 
+
+
+@pytest.mark.parametrize("name", ["lead_error", "backlash", "assembly_eccentricity"])
+def test_columns_written_in_place_are_those_of_evaluating_the_error(name, tmp_path):
+    """An effect that writes its columns itself (no sample-sized temporaries) gives, to
+    the bit, the columns the default split takes from evaluating its error (at 0 and at 1
+    of each linear parameter), and a zero base."""
+    from feedaxis.effects.base import Effect
+
+    effect, rng = CATALOG[name], np.random.default_rng(15)
+    case = effect_case(name, tmp_path)
+    values = drawn_values(effect, case, rng)
+    shape = (case.positioning.size, len(effect.linear))
+    own, evaluated = np.full(shape, np.nan), np.full(shape, np.nan)
+    assert effect.prepare_separable(case)(values, own) is None
+    base_um = Effect.prepare_separable(effect, case)(values, evaluated)
+    np.testing.assert_array_equal(own, evaluated)
+    np.testing.assert_array_equal(base_um, 0.0)

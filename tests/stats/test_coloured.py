@@ -1,11 +1,13 @@
 """stats/coloured.py on series of known structure: the coefficient and innovation variance
 of a seeded AR(1) process, its integrated autocorrelation time (1 + ρ)/(1 - ρ), and the
-Ljung-Box test's false-alarm rate on white noise."""
+Ljung-Box test's false-alarm rate on white noise and its blocked sums against whole-array
+ones."""
 import numpy as np
 import pytest
+import scipy
 
-from feedaxis.stats.coloured import (autocorrelation_time, least_squares_autoregression,
-                                     ljung_box_p_value)
+from feedaxis.stats.coloured import (LAGGED_ROWS, autocorrelation_time, block_variance,
+                                     least_squares_autoregression, ljung_box_p_value)
 
 
 def ar1(rho, n, seed):
@@ -40,3 +42,33 @@ def test_ljung_box_on_white_noise_alarms_at_its_level():
                          for _ in range(400)])
     band = 3.29 * np.sqrt(0.05 * 0.95 / p_values.size)
     assert abs(np.mean(p_values < 0.05) - 0.05) <= band
+
+
+def _ljung_box_whole(residual, lags, groups=None):
+    """The Ljung-Box p-value over whole sample-sized arrays (the form before the sums ran
+    in blocks), the reference the blocked one must match."""
+    residual = residual - (0.0 if groups is not None else np.mean(residual))
+    n, variance = residual.size, float(np.mean(residual ** 2))
+    statistic = 0.0
+    for lag in range(1, lags + 1):
+        pairs = np.ones(n - lag, dtype=bool) if groups is None else groups[lag:] != groups[:-lag]
+        rho = float(np.mean((residual[lag:] * residual[:-lag])[pairs])) / variance
+        statistic += (n * (n + 2) / (n - lag) if groups is None else int(pairs.sum())) * rho ** 2
+    return float(scipy.stats.chi2.sf(statistic, lags))
+
+
+@pytest.mark.parametrize("grouped", [False, True])
+def test_ljung_box_in_blocks_matches_the_whole_array_sums(grouped):
+    """Over several blocks of samples, weakly correlated (p between 0 and 1), with and
+    without groups (the series then off zero, as the mean is taken out only without them):
+    the p-value of the whole-array sums within 1e-12."""
+    x = ar1(0.004, 3 * LAGGED_ROWS + 123, 5) + (0.0 if grouped else 0.5)
+    groups = np.repeat(np.arange(x.size // 3 + 1), 3)[:x.size] if grouped else None
+    expected = _ljung_box_whole(x, 5, groups)
+    assert 1e-6 < expected < 0.999
+    assert ljung_box_p_value(x, 5, groups) == pytest.approx(expected, rel=1e-12)
+
+
+def test_the_variance_in_blocks_is_numpys():
+    x = ar1(0.3, 2 * LAGGED_ROWS + 99, 8) * 1e-3 + 7.0
+    assert block_variance(x) == pytest.approx(float(np.var(x)), rel=1e-12)

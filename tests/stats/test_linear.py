@@ -1,10 +1,13 @@
 """Least squares through the unit-scaled Gram matrix: the numbers of the scaled copy of
 the columns it replaced (1e-12 relative), and NumPy's QR-based solve (to the normal
-equations' squared condition)."""
+equations' squared condition); the projection through a QR taken in blocks of rows against
+NumPy's lstsq of the whole (1e-12), and the product subtracted in blocks against the whole
+product (to the bit)."""
 import numpy as np
 import pytest
 
-from feedaxis.stats.linear import normal_solve, unit_gram
+from feedaxis.stats.linear import (QR_ROWS, normal_solve, projection, subtract_product,
+                                   unit_gram)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -29,3 +32,25 @@ def test_unit_gram_norms_and_a_zero_column():
                                        np.linalg.norm(columns[:, 2])], rtol=1e-12)
     np.testing.assert_allclose(np.diag(gram), [1.0, 0.0, 1.0], rtol=1e-12)
     assert normal_solve(columns, columns[:, 0])[1] == 0.0  # minimum norm: the zero column
+
+
+@pytest.mark.parametrize("dependent", [False, True])
+def test_the_projection_in_blocks_is_numpys_least_squares_of_the_whole(dependent):
+    """A cubic's columns over several blocks of rows (with a column repeated: the minimum
+    norm solution's fit): the fitted values of lstsq over the whole array within 1e-12."""
+    rng = np.random.default_rng(5)
+    x = np.sort(rng.uniform(-1.0, 1.0, 2 * QR_ROWS + 321))
+    columns = np.vander(x, 4)
+    if dependent:
+        columns = np.column_stack((columns, columns[:, 1]))
+    target = 0.3 - x + 2 * x ** 3 + rng.normal(0.0, 0.1, x.size)
+    whole = columns @ np.linalg.lstsq(columns, target, rcond=None)[0]
+    np.testing.assert_allclose(projection(columns, target), whole, rtol=1e-12, atol=1e-12)
+
+
+def test_the_product_subtracted_in_blocks_is_the_whole_products_to_the_bit():
+    rng = np.random.default_rng(6)
+    columns, coefficients = rng.normal(size=(QR_ROWS + 77, 7)), rng.normal(size=7)
+    target = rng.normal(size=QR_ROWS + 77)
+    expected = target - columns @ coefficients
+    np.testing.assert_array_equal(subtract_product(target, columns, coefficients), expected)

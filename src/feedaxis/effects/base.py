@@ -15,6 +15,7 @@ import tomli_w
 
 from ..errors import InputError, finite_value
 from ..fmu_map import neutral_fmu_parameters
+from ..stats.linear import Columns
 
 FIT_TABLE = "fit"  # the model file's table holding its FitRecord: no effect may take the name
 
@@ -154,13 +155,20 @@ class Effect:
 
 class BasisEffect(Effect):
     """Fixed linear columns (samples x k) added to any measurement's prediction: a
-    structure found in the residual or a nuisance (a drift), refitted with the model."""
+    structure found in the residual or a nuisance (a drift), refitted with the model.
+    ``basis`` is the array, or :class:`Columns` that compute it at each use (a drift's two
+    columns at 10^7 samples are 160 MB, kept by every fit's model otherwise)."""
 
     def __init__(self, name, basis):
-        self.name, self.basis = name, basis
-        self.parameters = tuple(Parameter(f"c{i}_um", "um", -1e6, 1e6)
-                                for i in range(basis.shape[1]))
+        self.name, self._basis = name, basis
+        count = basis.count if isinstance(basis, Columns) else basis.shape[1]
+        self.parameters = tuple(Parameter(f"c{i}_um", "um", -1e6, 1e6) for i in range(count))
         self.linear = self.parameter_names
+
+    @property
+    def basis(self):
+        """The columns (samples x k)."""
+        return self._basis.write() if isinstance(self._basis, Columns) else self._basis
 
     def unavailable(self, case):
         return None
@@ -171,7 +179,10 @@ class BasisEffect(Effect):
     def prepare_separable(self, case):
         """The basis itself as the columns (no evaluation), a zero base (None)."""
         def separate(values, columns_um):
-            columns_um[:] = self.basis
+            if isinstance(self._basis, Columns):
+                self._basis.write(columns_um)
+            else:
+                columns_um[:] = self._basis
 
         return separate
 

@@ -54,6 +54,16 @@ class LeadError(PositioningEffect):
         position_mm = _targets(case)
         return lambda v: geometry.lead_error_um(position_mm, v["offset_um"], v["slope_um_per_mm"])
 
+    def prepare_separable(self, case):
+        """1 and the position written into the columns, a zero base (three evaluations of
+        the error held three sample-sized arrays)."""
+        position_mm = _targets(case)
+
+        def separate(values, columns_um):
+            geometry.lead_error_columns(position_mm, columns_um)
+
+        return separate
+
     def guess(self, case, residual_um):
         slope, offset = np.polyfit(_targets(case), residual_um, 1)
         return {"offset_um": offset, "slope_um_per_mm": slope}
@@ -115,6 +125,16 @@ class AssemblyEccentricity(_PeriodicEffect):
         return lambda v: geometry.eccentricity_error_um(position_mm, lead_mm, v["cos_um"],
                                                         v["sin_um"])
 
+    def prepare_separable(self, case):
+        """The cosine and sine at the lead written into the columns, a zero base (three
+        evaluations of the error held five sample-sized arrays)."""
+        position_mm, lead_mm = _targets(case), case.axis.lead_mm
+
+        def separate(values, columns_um):
+            geometry.eccentricity_columns(position_mm, lead_mm, columns_um)
+
+        return separate
+
     def fmu_parameters(self, axis, values):
         return {self.fmu: {"eccentricity_cos_um": values["cos_um"],
                            "eccentricity_sin_um": values["sin_um"]}}
@@ -170,6 +190,15 @@ class Backlash(PositioningEffect):
     def prepare(self, case):
         direction = case.positioning.direction
         return lambda v: geometry.backlash_error_um(direction, v["backlash_um"])
+
+    def prepare_separable(self, case):
+        """±1/2 by direction written into the column, a zero base."""
+        direction = case.positioning.direction
+
+        def separate(values, columns_um):
+            geometry.backlash_columns(direction, columns_um)
+
+        return separate
 
     def guess(self, case, residual_um):
         direction = case.positioning.direction

@@ -206,11 +206,14 @@ class Measurement(ABC):
 
         def separate(values):
             base_um = core(values) if core else np.zeros(size)
+            owned = core is None  # the core's may be kept by it: added to in a copy
             columns_um = np.empty((size, ends[-1]))
             for (effect, split), start, end in zip(additive, ends[:-1], ends[1:]):
                 effect_base_um = split(values[effect.name], columns_um[:, start:end])
-                if effect_base_um is not None:
-                    base_um = base_um + effect_base_um
+                if effect_base_um is not None and owned:
+                    base_um += effect_base_um
+                elif effect_base_um is not None:
+                    base_um, owned = base_um + effect_base_um, True
             return base_um, columns_um
 
         return separate
@@ -236,6 +239,10 @@ class Measurement(ABC):
     # set by the diagnosis (feedaxis.diagnose.Refitter): refits of these samples with
     # catalog effects added, for hooks that judge a rival with the model refitted
     refitter = None
+    # whether those hooks refit what the selection fitted, so the refitter keeps every fit
+    # (a fit of a servo loop costs seconds; one of 10^7 positioning samples, whose hooks
+    # refit nothing, holds an 80 MB residual)
+    refits_selection = False
 
     def neutral(self, effect):
         """``effect``'s values that switch it off on these samples (its ``neutral``)."""

@@ -17,7 +17,7 @@ residual.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
@@ -26,14 +26,15 @@ import scipy
 from .. import kinds, standards
 from ..case import (DUTY_FILE, CaseError, _check_travel, _first_bad, _read_csv, checked_run,
                     length_mm)
-from ..iso230 import SAME_TARGET_MM, iso230_figures, sampling_notes, target_clusters
+from ..iso230 import (SAME_TARGET_MM, compact_index, index_type, iso230_figures, sampling_notes,
+                      target_clusters)
 from ..standards import DEFAULT
 from ..plausibility import positioning_problems, warn_implausible
 from ..stats import judge
 from ..stats.aliasing import aliased
 from ..stats.coloured import peak_p_value
 from ..stats.judge import Layout, Test, drift_basis
-from ..stats.linear import normal_solve
+from ..stats.linear import Columns, normal_solve
 from ..stats.noise import PureError, ResidualMeanSquare, Serial, SerialPairs
 from ..stats.spectrum import amplitude_spectrum, resolvable_band_per_mm
 from .base import Measurement, Shape, Trial
@@ -102,11 +103,22 @@ def read_positioning(path, duty_end_s=None, length_mm=None):
                                                      "start of duty.csv)")
     if duty_end_s is not None:
         _check_within_duty(path, time_s, rows, duty_end_s)
+    run = run.astype(index_type(np.max(run))) if run is not None else None
+    values = own_columns(values, "run")
     return PositioningSamples(read_only(values["target_mm"]), values["error_um"],
-                              direction if direction is not None else np.ones_like(values["target_mm"]),
-                              run.astype(int) if run is not None else None, time_s,
-                              values.get("ambient_C"), has_direction=direction is not None,
+                              values["direction"] if direction is not None
+                              else np.ones_like(values["target_mm"]),
+                              run, values.get("time_s"), values.get("ambient_C"),
+                              has_direction=direction is not None,
                               material_C=values.get("material_C"))
+
+
+def own_columns(values, *dropped):
+    """{column: a contiguous copy} of the table's columns (views into one rows x columns
+    array as read) but ``dropped``: the table is let go (at 10^7 rows it held 80 MB a
+    column beside the copies kept)."""
+    return {name: np.ascontiguousarray(column) for name, column in values.items()
+            if name not in dropped}
 
 
 def read_only(target_mm):
@@ -243,7 +255,8 @@ class Positioning(Measurement):
     def order(self):
         """Sample indices in the order taken: by the test's clock, else as the rows."""
         clock = self.layout.clock
-        return np.arange(self.size) if clock is None else np.argsort(clock, kind="stable")
+        return compact_index(np.arange(self.size) if clock is None
+                             else np.argsort(clock, kind="stable"))
 
     @cached_property
     def replicates(self):
@@ -368,7 +381,7 @@ class Positioning(Measurement):
         drift = Drift()
         if not drift.trials(self):
             return []
-        return [("drift", drift, drift.trial(self, None).basis)]
+        return [("drift", drift, Columns(drift.extra, partial(drift_basis, self.layout.clock)))]
 
     def shapes(self, effects):
         self.marks = marked_wavelengths(self.case.axis, effects)

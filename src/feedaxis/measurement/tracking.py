@@ -270,6 +270,7 @@ class Tracking(Measurement):
     kind = "tracking"
     file = TRACKING_FILE
     capabilities = ("outliers", "nuisances", "shapes", "core", "correlated", "resolution")
+    refits_selection = True
     measured_column = ("actual_mm", 1e-3)
     details = "feedaxis.tracking_details:tracking_details"
     views = "feedaxis.report.tracking:VIEWS"

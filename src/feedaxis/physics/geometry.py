@@ -30,6 +30,14 @@ def lead_error_um(position_mm, offset_um, slope_um_per_mm):
     return offset_um + slope_um_per_mm * values(position_mm)
 
 
+def lead_error_columns(position_mm, out):
+    """1 and y written into the two columns of ``out`` (samples x 2): :func:`lead_error_um`
+    per unit b1 and per unit a1, with no sample-sized temporary."""
+    out[:, 0] = 1.0
+    out[:, 1] = position_mm
+    return out
+
+
 def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
     """Assembly eccentricity f2(y) = a2·cos(ωy) + b2·sin(ωy), ω = 2π/lead (Liu 2022 Eq. 1-2).
 
@@ -49,6 +57,18 @@ def eccentricity_error_um(position_mm, lead_mm, cos_um, sin_um):
     position_mm, xp = values_and_module(position_mm)
     phase_rad = 2.0 * xp.pi * position_mm / lead_mm
     return cos_um * xp.cos(phase_rad) + sin_um * xp.sin(phase_rad)
+
+
+def eccentricity_columns(position_mm, lead_mm, out):
+    """cos(ωy) and sin(ωy), ω = 2π/lead, written into the two columns of ``out`` (samples x
+    2): :func:`eccentricity_error_um` per unit a2 and per unit b2 (Liu 2022 Eq. 1-2), the
+    same phase, with no sample-sized temporary."""
+    require_positive("lead_mm", lead_mm)
+    cosine, sine = out[:, 0], out[:, 1]
+    np.divide(np.multiply(2.0 * np.pi, position_mm, out=cosine), lead_mm, out=cosine)
+    np.sin(cosine, out=sine)
+    np.cos(cosine, out=cosine)
+    return out
 
 
 def screw_line_load_N_per_m(diameter_m, density_kg_m3):
@@ -156,6 +176,14 @@ def backlash_error_um(direction, backlash_um):
         Reversal value B (µm).
     """
     return 0.5 * backlash_um * clip(direction, -1.0, 1.0)
+
+
+def backlash_columns(direction, out):
+    """±1/2 by approach direction written into the one column of ``out`` (samples x 1):
+    :func:`backlash_error_um` per unit B, with no sample-sized temporary."""
+    column = np.clip(values(direction), -1.0, 1.0, out=out[:, 0])
+    np.multiply(0.5, column, out=column)
+    return out
 
 
 def play_engagement(engagement, travel_mm, backlash_um):

@@ -334,22 +334,42 @@ def ljung_box_p_value(residual, lags, groups=None):
     Biometrika 65:297). With ``groups`` (a group index per sample) only pairs of samples in
     different groups count, each lag's term weighted by its n_k pairs (the Box-Pierce form):
     deviations from their group means are correlated within a group by construction, not
-    across groups."""
-    residual = np.asarray(residual, dtype=float) - (0.0 if groups is not None
-                                                    else np.mean(residual))
+    across groups. The sums run over ``LAGGED_ROWS`` samples at a time (no sample-sized
+    temporary: at 10^7 samples the products and their selection held 240 MB)."""
+    residual = np.asarray(residual, dtype=float)
     n = residual.size
-    variance = float(np.mean(residual ** 2))
-    if n <= lags + 1 or variance <= 0.0:
+    mean = 0.0 if groups is not None else float(np.mean(residual))
+    spread = _block_sum(residual, mean, 0)[0] / n if n else 0.0
+    if n <= lags + 1 or spread <= 0.0:
         return 1.0
     statistic = 0.0
     for lag in range(1, lags + 1):
-        pairs = np.ones(n - lag, dtype=bool) if groups is None else groups[lag:] != groups[:-lag]
-        count = int(pairs.sum())
+        total, count = _block_sum(residual, mean, lag, groups)
         if count < 2:
             continue
-        rho = float(np.mean((residual[lag:] * residual[:-lag])[pairs])) / variance
+        rho = total / count / spread
         statistic += (n * (n + 2) / (n - lag) if groups is None else count) * rho ** 2
     return float(scipy.stats.chi2.sf(statistic, lags))
+
+
+def block_variance(values):
+    """``np.var(values)`` summed ``LAGGED_ROWS`` samples at a time (no sample-sized
+    temporary; the same up to the order of the sums)."""
+    return _block_sum(values, float(np.mean(values)), 0)[0] / values.size
+
+
+def _block_sum(residual, mean, lag, groups=None):
+    """(Σ (r_k - mean)(r_{k-lag} - mean), the count of pairs) over k >= ``lag``, only pairs
+    in different ``groups`` where given; ``LAGGED_ROWS`` products at a time."""
+    total, count = 0.0, 0
+    for first in range(lag, residual.size, LAGGED_ROWS):
+        stop = min(first + LAGGED_ROWS, residual.size)
+        products = (residual[first:stop] - mean) * (residual[first - lag:stop - lag] - mean)
+        if groups is not None and lag:
+            products = products[groups[first:stop] != groups[first - lag:stop - lag]]
+        total += float(np.sum(products))
+        count += products.size
+    return total, count
 
 
 def whitened(residual, robust=False):

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy
 
-from ..iso230 import target_groups
+from ..iso230 import compact_index, target_groups
 from .wording import p_text
 
 
@@ -76,7 +76,8 @@ class Layout:
         """The layout of the samples ``keep`` (boolean mask), groups renumbered."""
         _, groups = np.unique(self.groups[keep], return_inverse=True)
         clock = None if self.clock is None else self.clock[keep]
-        return Layout(groups.ravel(), int(groups.max()) + 1, clock, self.clock_unit)
+        return Layout(compact_index(groups.ravel()), int(groups.max()) + 1, clock,
+                      self.clock_unit)
 
     @property
     def clock_varies_within_groups(self):
@@ -259,8 +260,15 @@ def _against_neighbours(position_mm, residual_um, valid):
     return deviation / np.sqrt(1.25)
 
 
-def drift_basis(clock):
-    """Linear and quadratic drift along the clock (columns centred and scaled to ±1)."""
+def drift_basis(clock, out=None):
+    """Linear and quadratic drift along the clock (columns centred and scaled to ±1),
+    written into ``out`` (samples x 2) where given, without a sample-sized temporary."""
     span = np.ptp(clock) or 1.0
-    scaled = 2.0 * (clock - clock.min()) / span - 1.0
-    return np.column_stack((scaled, scaled**2 - np.mean(scaled**2)))
+    out = np.empty((clock.size, 2)) if out is None else out
+    scaled, square = out[:, 0], out[:, 1]
+    np.subtract(clock, clock.min(), out=scaled)
+    np.subtract(np.divide(np.multiply(2.0, scaled, out=scaled), span, out=scaled), 1.0,
+                out=scaled)
+    np.square(scaled, out=square)
+    np.subtract(square, np.mean(square), out=square)
+    return out

@@ -1,9 +1,21 @@
 """Least squares of a few columns over many samples, through their Gram matrix: a k x k
 problem where a QR or SVD of samples x k costs seconds at 10^6 samples, and no scaled copy
-of the columns (one samples x k array fewer at the peak of a fit)."""
+of the columns (one samples x k array fewer at the peak of a fit); or, as stable as an SVD
+of the whole, through a QR decomposition taken a block of rows at a time
+(:func:`projection`)."""
 from __future__ import annotations
 
+from typing import Callable, NamedTuple
+
 import numpy as np
+
+
+class Columns(NamedTuple):
+    """Linear columns computed where they are used, not kept: ``count`` of them;
+    ``write(out=None)`` fills ``out`` (samples x count; a new array when None), returns it."""
+
+    count: int
+    write: Callable
 
 
 def unit_gram(columns):
@@ -20,3 +32,34 @@ def normal_solve(columns, target):
     equations of the unit-scaled columns (minimum norm where the columns are dependent)."""
     gram, scale = unit_gram(columns)
     return np.linalg.lstsq(gram, (columns.T @ target) / scale, rcond=None)[0] / scale
+
+
+QR_ROWS = 1 << 16  # rows decomposed at a time by projection (3 MB at five columns)
+
+
+def projection(columns, target):
+    """``columns`` (samples x k) times the least-squares coefficients for ``target``, as
+    ``np.linalg.lstsq`` finds them (minimum norm where the columns are dependent, its
+    cut-off of the singular values) in the memory of a block of rows: R of the Householder
+    QR of [columns | target] over ``QR_ROWS`` rows at a time, each block stacked under the
+    triangle so far; the coefficients from the triangle (the same singular values). The
+    whole-array lstsq held a copy of the columns and its workspace: 380 MB at 10^7
+    samples of a cubic's four."""
+    count = columns.shape[1]
+    triangle = np.zeros((0, count + 1))
+    for first in range(0, max(target.size, 1), QR_ROWS):
+        rows = np.column_stack((columns[first:first + QR_ROWS], target[first:first + QR_ROWS]))
+        triangle = np.linalg.qr(np.vstack((triangle, rows)), mode="r")
+    cut_off = np.finfo(float).eps * max(columns.shape)
+    coefficients = np.linalg.lstsq(triangle[:count, :count], triangle[:count, count],
+                                   rcond=cut_off)[0]
+    return columns @ coefficients
+
+
+def subtract_product(target, columns, coefficients):
+    """``target - columns @ coefficients`` written into ``target`` (a sample-sized array of
+    its caller's), ``QR_ROWS`` rows of the product at a time: each row's the same dot
+    product, without a sample-sized product beside it."""
+    for first in range(0, target.size, QR_ROWS):
+        target[first:first + QR_ROWS] -= columns[first:first + QR_ROWS] @ coefficients
+    return target

@@ -40,7 +40,7 @@ import numpy as np
 import scipy
 
 from . import judge
-from .coloured import (Autoregression, KeptByContent, autocorrelation_time,
+from .coloured import (Autoregression, KeptByContent, autocorrelation_time, block_variance,
                        least_squares_autoregression, ljung_box_p_value, noise_floor_um)
 from .judge import Test
 
@@ -91,7 +91,8 @@ class PureError:
 
     def _centred(self, values):
         if values.ndim == 1:
-            return values - self.group_means(values)
+            means = self.group_means(values)
+            return np.subtract(values, means, out=means)  # no second sample-sized array
         return np.column_stack([self._centred(column) for column in values.T])
 
     def noise_part(self, residual_um):
@@ -231,12 +232,14 @@ class Serial(_WhiteUnlessCorrelated):
         return self._fitted.get(residual_um, self._autoregression)
 
     def _autoregression(self, residual_um):
-        ordered = self.white.noise_part(residual_um)[self.order]
-        groups = getattr(self.white, "groups", None)
-        if ljung_box_p_value(ordered, SERIAL_MAX_ORDER,
-                             None if groups is None else groups[self.order]) >= SERIAL_ALPHA:
-            variance = float(np.var(ordered))
-            return Autoregression(np.zeros(0), variance, variance)
+        """:meth:`autoregression`, computed; the noise part and its groups put in the order
+        taken only where that is not the samples' own (two sample-sized copies saved)."""
+        ordered, groups = self.white.noise_part(residual_um), getattr(self.white, "groups", None)
+        if self.reordered:
+            ordered, groups = ordered[self.order], None if groups is None else groups[self.order]
+        if ljung_box_p_value(ordered, SERIAL_MAX_ORDER, groups) >= SERIAL_ALPHA:
+            spread = block_variance(ordered)
+            return Autoregression(np.zeros(0), spread, spread)
         return least_squares_autoregression(ordered, SERIAL_MAX_ORDER)
 
     def extra_ss_test(self, before_um, after_um, extra, n_free_after):
