@@ -43,15 +43,15 @@ fmi2SetReal and fmi2GetReal of the inputs and outputs in C. What is left above t
 the physics itself (the servo's 10 loop steps of 0.1 ms per 1 ms step, the geometric
 error's sines and table look-up) and the host layer's checks of each call. ThermalScrew,
 stepped every hundredth macro step, stays in Python: its 27 µs of NumPy per step (80 cells)
-are 0.3-0.4 µs of the axis's macro step, most of what keeps the axis above 1.2 times the
-floor (target: 1.2). Before the compiled steps each of the three entered Python once per
+are 0.3-0.4 µs of the axis's macro step, most of what is left between the axis and the
+floor (target: 1.2 times it). Before the compiled steps each of the three entered Python once per
 step (the slave's exchange function, 1-2 µs per FMU): the full axis cost 1.88, 1.91 and
 1.91 times the floor in PID, NPID and friction mode (the same command with ``--repeats 9``
 on main at e914964, 2026-11-26 21:33 UTC, load average 1.0-2.0). Counted with callgrind
 (``--instructions --steps 1000``, a figure the load does not move), the axis executes 1.14,
 1.11 and 1.06 times the native floor's instructions per macro step in PID, NPID and
-friction mode, against 1.48, 1.60 and 1.57 before; in CPU time the shared machine's caches
-make it 1.23-1.25 (below).
+friction mode, against 1.48, 1.60 and 1.57 before; in CPU time 1.17, 1.19 and 1.20 on a
+quiet machine (below), 1.23-1.25 at load 6.8 (the shared caches).
 """
 import argparse
 import ast
