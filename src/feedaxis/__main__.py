@@ -47,11 +47,20 @@ def run():
         from .cli import main
 
         code = main()
+    except Exception as error:  # an interrupt an extension's import turned into an error
+        if stop.interrupt_behind(error) is None:
+            raise
+        code = _interrupted()
     except KeyboardInterrupt:
-        stop.ignore_all()  # a second signal cannot cut the line
-        code = fail("--json" in sys.argv[1:], stop.described("interrupted"), stop.exit_code())
+        code = _interrupted()
     stop.ignore_all()  # nor the exit
     stop.leave(code)
+
+
+def _interrupted():
+    """The stop's exit code, after its one line."""
+    stop.ignore_all()  # a second signal cannot cut the line
+    return fail("--json" in sys.argv[1:], stop.described("interrupted"), stop.exit_code())
 
 
 if __name__ == "__main__":

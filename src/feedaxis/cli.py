@@ -1148,9 +1148,7 @@ def main(argv=None):
         with _one_line_warnings():
             args.handler(args)
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once
-        message = str(stopped)
-        return fail(wants_json, stop.described(message if message.startswith("interrupted")
-                                               else "interrupted"), stop.exit_code())
+        return _interrupted(wants_json, stopped)
     except BrokenPipeError:
         sys.stderr.close()
         return 0
@@ -1162,8 +1160,19 @@ def main(argv=None):
             return _internal_error(wants_json, debug, error)
         return fail(wants_json, str(refused), 2, refused.as_json())
     except Exception as error:  # a bug: one line, the traceback with --debug
+        stopped = stop.interrupt_behind(error)
+        if stopped is not None:
+            return _interrupted(wants_json, stopped)
         return _internal_error(wants_json, debug, error)
     return 0
+
+
+def _interrupted(wants_json, stopped):
+    """Exit 128 + the stop signal's number with one line (the interrupt's own message where
+    it says what was kept)."""
+    message = str(stopped)
+    return fail(wants_json, stop.described(message if message.startswith("interrupted")
+                                           else "interrupted"), stop.exit_code())
 
 
 def _internal_error(wants_json, debug, error):

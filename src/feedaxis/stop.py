@@ -41,6 +41,19 @@ def exit_code():
     return 128 + int(_received[0])
 
 
+def interrupt_behind(error):
+    """The stop (:class:`KeyboardInterrupt`) that ``error`` was raised from, or None: a C
+    extension's module initialisation turns an interrupt into ``ImportError("initialization
+    failed")`` raised from it (pybind11's modules in SciPy and Matplotlib)."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return error
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return None
+
+
 def leave(code):
     """Exit with ``code``: a stop's code without Python's finalisation. The interrupt may
     have been raised inside code a C extension ran (an import, an FMU's Python), which

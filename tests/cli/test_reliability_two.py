@@ -448,3 +448,35 @@ def test_every_file_written_is_read_by_the_commands_that_read_it(tmp_path, capsy
         assert code == 0, (name, err)
         table = controller.read(out.read_text(encoding="utf-8"), str(out))
         assert table.size >= 2
+
+
+def _raises(error):
+    def raising(*args, **kwargs):
+        raise error
+    return raising
+
+
+def _import_error_from_an_interrupt():
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt as stopped:
+        try:
+            raise ImportError("initialization failed") from stopped
+        except ImportError as error:
+            return error
+
+
+def test_an_interrupt_an_extensions_import_turned_into_an_import_error_is_a_stop(
+        monkeypatch, capsys):
+    """A stop signal inside a C extension's module initialisation reaches the command as
+    ImportError("initialization failed") raised from the KeyboardInterrupt (pybind11's
+    modules): the stop's exit and line, not an internal error; an ImportError of its own
+    stays one."""
+    from feedaxis import cli, stop
+
+    monkeypatch.setattr(cli, "available_effects", _raises(_import_error_from_an_interrupt()))
+    assert cli.main(["compare", "case"]) == stop.exit_code()
+    assert capsys.readouterr().err.strip().splitlines()[-1].startswith("feedaxis: interrupted")
+    monkeypatch.setattr(cli, "available_effects", _raises(ImportError("no module")))
+    assert cli.main(["compare", "case"]) == 1
+    assert "internal error" in capsys.readouterr().err
