@@ -13,8 +13,6 @@ NOT_IMPORTED = {
     "feedaxis.__main__": "the console script: tests/cli runs it as a program",
     "feedaxis.console": "how the command line reports a failure: through feedaxis.cli.main "
                         "in tests/cli/test_bad_input.py (every error, with and without --json)",
-    "feedaxis.stop": "SIGTERM and SIGHUP as Ctrl-C: signals sent to the command line in "
-                     "tests/cli/test_reliability_two.py",
     "feedaxis.fmu_trace": "a script run by hand to list what an FMU's step path loads; the "
                           "standalone build it informed is tested in tests/fmus/test_standalone.py",
     "feedaxis.cosim.physics_check": "the FMUs' parameter checks before a run: refusals of "
