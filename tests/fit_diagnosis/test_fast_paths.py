@@ -358,7 +358,7 @@ def test_autoregression_by_one_qr_is_lstsq_order_by_order(coefficients, size, mo
 def test_ranks_are_numpys_unique_inverse_and_distinct_rows_its_count(distinct):
     """A column of few values (searched) and of many (sorted by index), beyond the first
     samples' hint too: NumPy's unique values and inverse; the rows' count that of
-    row_groups."""
+    row_groups and of NumPy's unique rows (none and one row too)."""
     from feedaxis.iso230 import FEW_VALUES, distinct_rows, ranks, row_groups
 
     rng = np.random.default_rng(distinct)
@@ -369,4 +369,7 @@ def test_ranks_are_numpys_unique_inverse_and_distinct_rows_its_count(distinct):
     np.testing.assert_array_equal(values, expected[0])
     np.testing.assert_array_equal(index, expected[1].ravel())
     other = rng.choice([-1.0, 1.0], column.size)
-    assert distinct_rows(column, other) == row_groups(column, other).max() + 1
+    rows = np.unique(np.column_stack((column, other)), axis=0).shape[0]
+    assert distinct_rows(column, other) == row_groups(column, other).max() + 1 == rows
+    assert distinct_rows(column[:1], other[:1]) == 1
+    assert distinct_rows(column[:0], other[:0]) == 0
