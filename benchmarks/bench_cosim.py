@@ -19,13 +19,21 @@ repeats interleaved, it times
   clock reads each, about as much as the master's own work per call; the compiled loop:
   two clock reads): the master calibrates that cost per timed call in the same process
   (``Timing.timer_s``) and takes it out of the loop; the share with the timers left in is
-  printed too (an upper bound).
+  printed too (an upper bound);
+- a cross-check without timers: each loop stepping null FMUs (the same four instances, whose
+  fmi2SetReal, fmi2DoStep and fmi2GetReal are replaced by compiled C functions that do
+  nothing and return fmi2OK: the same plan, copies, ratio tests and recorded rows). Its
+  stepping loop over the real one's, per repeat, is an upper bound of the master's own
+  share (it includes the calls themselves: for the Python loop, fmpy's ctypes calls,
+  which the timed share counts as the FMUs').
 
 It prints medians (and ranges) and the ratios: of the medians, or the median of the
 per-repeat ratios where said.
 """
 import argparse
+import ctypes
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -33,10 +41,12 @@ from pathlib import Path
 
 import numpy as np
 
+from feedaxis.cosim.fmu_runner import LoadedFmu
 from feedaxis.cosim.master import Master
 from feedaxis.cosim.ssp import export_ssp
 from feedaxis.cosim.system import default_axis
 from feedaxis.fmu_build import build_fmus
+from feedaxis.toolchain import c_compiler
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from libcosim_driver import simulate_ssp_with_libcosim  # noqa: E402
@@ -63,6 +73,37 @@ def time_master(system, fmu_paths, stop_s, profile=False, compiled=True):
     assert np.isfinite(result["table_position_mm"]).all()
     assert master.timing.loop == "compiled" or not compiled, master.timing.loop
     return elapsed, cpu_s, master.timing
+
+
+NULL_FMU = """
+int null_values(void *c, const unsigned *vr, unsigned long n, double *values) { return 0; }
+int null_step(void *c, double t, double h, int no_prior) { return 0; }
+"""
+
+
+def null_functions(folder):
+    """(FMI 3.0?, set, step, get): compiled functions that do nothing and return fmi2OK, in
+    the signatures of fmi2SetReal, fmi2DoStep and fmi2GetReal."""
+    source, library = Path(folder) / "null_fmu.c", Path(folder) / "null_fmu.so"
+    source.write_text(NULL_FMU, encoding="utf-8")
+    subprocess.run([c_compiler(), "-shared", "-fPIC", "-O2", "-o", str(library), str(source)],
+                   check=True)
+    loaded = ctypes.CDLL(str(library))
+    values, step = loaded.null_values, loaded.null_step
+    values.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
+    step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
+    return False, values, step, values
+
+
+def null_loop_s(system, fmu_paths, stop_s, compiled, nulls):
+    """The stepping loop's wall seconds with every FMU's stepping calls replaced by ``nulls``
+    (instantiation and initialisation are the FMUs' own)."""
+    native = LoadedFmu.native_stepping_functions
+    LoadedFmu.native_stepping_functions = lambda self, slave: nulls
+    try:
+        return time_master(system, fmu_paths, stop_s, compiled=compiled)[2].loop_s
+    finally:
+        LoadedFmu.native_stepping_functions = native
 
 
 def time_libcosim(ssp_path, system, stop_s):
@@ -114,10 +155,11 @@ def main(argv=None):
     args = arguments(parser, argv, repeats=1, stop_s=0.05)
     system = default_axis()
     runs = {(compiled, profile): [] for compiled in (True, False) for profile in (False, True)}
-    libcosim_s, engine_s = [], []
+    libcosim_s, engine_s, null_s = [], [], {True: [], False: []}
     with tempfile.TemporaryDirectory() as folder:
         fmu_paths = {p.stem: p for p in build_fmus(Path(folder) / "fmus")}
         ssp_path = export_ssp(Path(folder) / "axis.ssp", system, fmu_paths)
+        nulls = null_functions(folder)
         for compiled in (True, False):  # warm-up: first imports inside the FMUs, the library
             time_master(system, fmu_paths, 1.0, compiled=compiled)
         for repeat in range(args.repeats):
@@ -125,6 +167,9 @@ def main(argv=None):
                 for compiled in (True, False)[::1 if repeat % 2 else -1]:
                     runs[compiled, profile].append(
                         time_master(system, fmu_paths, args.stop_s, profile, compiled))
+            for compiled in (True, False):
+                null_s[compiled].append(null_loop_s(system, fmu_paths, args.stop_s, compiled,
+                                                    nulls))
             libcosim_s.append(time_libcosim(ssp_path, system, args.stop_s))
             engine_s.append(time_libcosim_engine(ssp_path, args.stop_s))
     steps = int(round(args.stop_s / system.macro_step_s))
@@ -151,6 +196,13 @@ def main(argv=None):
           "(target <= 10 %):")
     for compiled, label in ((True, "compiled loop"), (False, "Python loop  ")):
         print(share_line(label, [t for _, _, t in runs[compiled, True]], steps))
+    print("  cross-check without timers: the stepping loop over null FMUs / over the FMUs, "
+          "per repeat (an upper bound of the master's own share):")
+    for compiled, label in ((True, "compiled loop"), (False, "Python loop  ")):
+        bound = [n / t.loop_s for n, (_, _, t) in zip(null_s[compiled], plain[compiled])]
+        print(f"  {label}: median {100 * statistics.median(bound):.1f} % (range "
+              f"{100 * min(bound):.1f}-{100 * max(bound):.1f} %), null FMUs "
+              f"{1e6 * statistics.median(null_s[compiled]) / steps:.2f} µs per macro step")
 
 
 if __name__ == "__main__":

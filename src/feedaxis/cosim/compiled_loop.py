@@ -1,11 +1,14 @@
 """The master's macro steps compiled: ``master_loop.c`` built once per machine, kept in the
 user cache, loaded with ctypes.
 
-Per macro step the master's Python loop spends about 4.6 µs of its own (the plan's ratio
-tests, the input copies, three ctypes calls per component and their status checks), a
-fifth of the stepping loop of the full axis whose FMUs step in compiled code. The C loop
-makes the same calls through the function pointers fmpy loaded, on the same plan, signal
-array and record grid (:class:`CompiledSteps`), one ctypes call per chunk of macro steps.
+The FMUs of the full axis step in compiled code, about 1 µs per macro step in all; the
+master's Python loop adds 2-4 µs of its own per macro step (the plan's ratio tests, the
+input copies, the status checks, the rows) and about ten ctypes calls, each costing more
+than the FMU function it calls: over FMUs that do nothing it still takes about 13 µs per
+macro step. The C loop makes the same calls through the function pointers fmpy loaded, on
+the same plan, signal array and record grid (:class:`CompiledSteps`), one ctypes call per
+chunk of macro steps: its own share of the stepping loop is about 4 % (0.1 µs per macro
+step; benchmarks/bench_cosim.py, docs/speed.md).
 
 Where it cannot be built (no C compiler, not Linux, a failed compile, a cache folder that
 cannot be written) the master keeps its Python loop (:class:`~feedaxis.cosim.master.

@@ -15,7 +15,7 @@ functions ``fmi2SetReal``/``fmi2DoStep``/``fmi2GetReal`` and checks their status
 per-step dict lookup or allocation (FMI 3.0 FMUs: ``fmi3SetFloat64``/``fmi3DoStep``/
 ``fmi3GetFloat64`` behind the same signatures,
 :meth:`~feedaxis.cosim.fmu_runner.LoadedFmu.stepping_functions`); it gives the same numbers,
-about 1.3 times slower for the full axis.
+its stepping loop about 13 times as long for the full axis (benchmarks/bench_cosim.py).
 """
 from __future__ import annotations
 
@@ -331,8 +331,9 @@ class PythonSteps:
     """The macro steps of a chunk in Python, as ``master_loop.c`` makes them compiled.
 
     The fallback where that loop cannot be built (no C compiler, not Linux): the same
-    calls on the same plan, so the same numbers, about a fifth of the stepping loop more
-    of the master's own time. ``steps(k_start, k_end, values)`` (``values``: one row per
+    calls on the same plan, so the same numbers, its stepping loop about 13 times as long
+    for the full axis (each of fmpy's ctypes calls costs more than the FMU function it
+    calls). ``steps(k_start, k_end, values)`` (``values``: one row per
     varying input, one column per step) appends the recorded rows to ``recorded`` and
     returns None, or (name, k + 1) of the component that failed in macro step k.
     A row is recorded as the signal array's bytes appended to one buffer (a twentieth of a
