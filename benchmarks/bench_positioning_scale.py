@@ -113,9 +113,10 @@ corpus and near-valid tables as the per-cell reader did) in 2.3 s CPU where NumP
 9.4 (report 46.7 s CPU), but its library and pool took the peak 38 MB higher (report
 1,523-1,528 MB, diagnose 1,482): over 1.5 GB. Every sample-sized block still mapped on its
 own (``feedaxis.__main__``; with none mapped, system time 3.5 s but 2.0 GB resident): the
-kernel's time (diagnose 10-14 s, report 17-22 s) is now the largest share left, the fit of 7 columns (560 MB)
-the largest block at the peak; the ISO figures' 16 sorts by target take 1.8 s and
-``direction`` in 8 bits would save 70 MB (60 uses): neither worth the memory or the risk.
+kernel's time (diagnose 10-14 s, report 17-22 s) is now the largest share left, the fit
+of 7 columns (560 MB) the largest block at the peak; the ISO figures' 16 sorts by target
+take 1.8 s and ``direction`` in 8 bits would save 70 MB (60 uses): neither worth the
+memory or the risk.
 
 Run: ``python benchmarks/bench_positioning_scale.py [--rows 10000000] [--repeats 1]
 [--baseline-src PATH]``.
