@@ -42,6 +42,14 @@ def unavailable(reason):
     pytest.skip(reason)
 
 
+def require_tool(path):
+    """Skip (fail under CI) unless the FMI host ``path`` of ``FMI_TOOLS`` exists, saying
+    where the tests look for it."""
+    if not Path(path).exists():
+        unavailable(f"{path} is missing: set FEEDAXIS_FMI_TOOLS to the folder of the FMI hosts "
+                    "(docs/fmu-hosts.md, 'The hosts the tests use')")
+
+
 def require_system_library(soname):
     """Skip (fail under CI) unless the dynamic loader finds the system library ``soname``,
     naming how to install it (``SYSTEM_LIBRARIES``)."""

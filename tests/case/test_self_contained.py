@@ -52,6 +52,14 @@ def test_the_source_names_no_folder_outside_and_no_seed_number():
     assert not found
 
 
+def test_the_tests_name_papers_not_seed_numbers():
+    """The tests cite the papers by name too (their folder outside the checkout is CI's
+    default for the FMI hosts, conftest.FMI_TOOLS, and may be named)."""
+    found = [f"{path.relative_to(ROOT)}: {match}" for path in (ROOT / "tests").rglob("*.py")
+             for match in SEED_NUMBER.findall(path.read_text(encoding="utf-8"))]
+    assert not found
+
+
 def help_texts(parser, path=("feedaxis",)):
     """(command path, --help text, not wrapped) of the parser and every subcommand below it."""
     previous = os.environ.get("COLUMNS")

@@ -38,7 +38,7 @@ def apart_from_centring(angle_deg, values):
 
 def lag_s(kp_V_per_mm=0.8998):
     """The lag of an axis's loop at a steady feed: the plant b / s(s + a1) needs the command
-    u = a1 v / b, which the P action gives at the error a1 v / (b kp) (seed 002's plant)."""
+    u = a1 v / b, which the P action gives at the error a1 v / (b kp) (Anang et al. 2017's plant)."""
     return 163.0 / (78020.0 * kp_V_per_mm)
 
 

@@ -26,7 +26,7 @@ import pytest
 from fmpy.ssp.simulation import simulate_ssp
 
 from circular_cases import machine
-from conftest import unavailable
+from conftest import FMI_TOOLS, require_tool
 from feedaxis.cosim.circular import run_path
 from feedaxis.cosim.machine import (INTERPOLATOR_OUTPUTS, first_reference_mm,
                                     interpolator_parameters, machine_from_case_axes,
@@ -37,7 +37,7 @@ from feedaxis.physics.circle import CircleInterpolator
 from libcosim_driver import simulate_ssp_with_libcosim
 
 ROOT = Path(__file__).resolve().parents[2]
-OMS_DIR = ROOT.parent / "shared" / "tools" / "fmi" / "omsimulator"
+OMS_DIR = FMI_TOOLS / "omsimulator"
 H_S = 1e-3
 # its first reference (the circle at t_1) is (61.74, 39.45) mm, far from the machine's origin
 PATH = CircleInterpolator(2.0, 1000.0, (60.0, 40.0), lead_in_deg=30.0, lead_out_deg=10.0)
@@ -195,8 +195,7 @@ def test_omsimulator_program_runs_the_machine_ssp_like_simulate_circular(
     """The OMSimulator program (a host that is not a Python process) on the .ssp as written:
     its CSV result (12 significant digits: 5e-11 mm at 60 mm) after every macro step."""
     program = OMS_DIR / "bin" / "OMSimulator"
-    if not program.exists():
-        unavailable(f"{program} is missing (the FMI tools of ../shared/tools/fmi)")
+    require_tool(program)
     rows = circle_rows
     stop_s = (rows.size - 1) * H_S
     run = subprocess.run([str(program), f"--stopTime={stop_s!r}", "--resultFile=result.csv",
@@ -228,8 +227,7 @@ def test_fmpy_simulate_ssp_runs_the_machine_ssp_like_simulate_circular(system, d
 
 
 def test_omsimulator_runs_the_machine_ssp_like_the_master(system, ssp_path, master_rows, steps):
-    if not (OMS_DIR / "lib").exists():
-        unavailable(f"{OMS_DIR} is missing (the FMI tools of ../shared/tools/fmi)")
+    require_tool(OMS_DIR / "lib")
     sys.path.insert(0, str(OMS_DIR / "lib" / "x86_64-linux-gnu"))
     try:
         from OMSimulator import SSP, CRef

@@ -295,8 +295,7 @@ def test_the_master_runs_the_fmi3_fmus_as_the_fmi2_ones(fmu_paths, fmi3_paths):
 
 def omsimulator_run(ssp, folder):
     """The OMSimulator program's run of ``ssp`` to 0.2 s: {column name: values}."""
-    from conftest import FMI_TOOLS
-    from test_fmi_hosts import require_tool
+    from conftest import FMI_TOOLS, require_tool
 
     program = FMI_TOOLS / "omsimulator" / "bin" / "OMSimulator"
     require_tool(program)

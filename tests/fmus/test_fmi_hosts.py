@@ -21,7 +21,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 from fmpy.util import read_csv
 
-from conftest import FMI_TOOLS, require_system_library, unavailable
+from conftest import FMI_TOOLS, require_system_library, require_tool, unavailable
 from feedaxis.fmu_build import FMU_NAMES
 from feedaxis.physics import thermal
 
@@ -30,13 +30,6 @@ FMU_SOURCES = ROOT / "fmus"
 FMU_CHECK = FMI_TOOLS / "fmuCheck.linux64"
 ERROR = 3
 ECOS_LIBRARY = "libtbb.so.12"   # ecospy's binaries (ecos, libecosc.so) link it
-
-
-def require_tool(path):
-    """Skip outside CI when ``path`` is missing; fail in CI."""
-    if not Path(path).exists():
-        unavailable(f"{path} is missing: set FEEDAXIS_FMI_TOOLS to the folder of the FMI hosts "
-                    "(docs/fmu-hosts.md, 'The hosts the tests use')")
 
 
 def require_ecospy():

@@ -149,7 +149,7 @@ def test_segments_behave_as_a_sequence():
 
 def test_fit_progress_has_a_total_that_bounds_it(tmp_path):
     """The fit announces the most evaluations it can make before it starts, and stays
-    within it (seed 003's Table 2 duty, thermal_screw from Table 3 X)."""
+    within it (Rong et al. 2023's Table 2 duty, thermal_screw from Table 3 X)."""
     from feedaxis.case import read_case
     from feedaxis.effects import CATALOG, Model
     from feedaxis.examples import write_table2_case

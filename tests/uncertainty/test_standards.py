@@ -314,7 +314,7 @@ def test_iso230_3_uncertainty_matches_the_spread_over_repeated_thermal_tests(tmp
 
 def test_iso230_3_figures_of_a_seeded_thermal_case_match_the_generating_model(tmp_path,
                                                                               capsys):
-    """A thermal test generated from known screw parameters (seed 003 Table 1/3) with
+    """A thermal test generated from known screw parameters (Rong et al. 2023, Tables 1 and 3) with
     0.05 µm noise: the figures of the measured drifts equal those of the generating model's
     noiseless drifts; a fitted thermal_screw predicts them, and its compensation leaves
     the figures of the measured drift less the model's own predicted drift."""
