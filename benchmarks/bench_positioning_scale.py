@@ -88,6 +88,36 @@ residuals; a fit that evaluates its columns a block of rows at a time would take
 with it most of the mapped blocks. The refusal's cost of a row (``feedaxis.case``) is
 measured from these runs.
 
+Then (issue 35 item 2, the report's CPU), from report 77.5 s CPU (60.8 user, 16.8
+system) / 1,493 MB (one run under ``/usr/bin/time``, load 2-4; cProfile in CPU time at
+10^7 rows, memray's high-water mark, getrusage's user and system time; every command's
+``--json``, the model and the report byte-identical at 10^6 before and after):
+
+- the sampling notes' count of rows repeating a target, direction and run through an
+  in-place sort of their keys (NumPy 2.4's unique hashed the 10^7 distinct keys for 14 s
+  of the 77), the target groups searched among their 2,000 keys (two unique's sorts,
+  3.0 s): report 60.8 -> 48.8 s user;
+- a column of whole numbers from 0 to fewer than its size (a dense key: the rows' keys, a
+  run, a target index) ranked, and its distinct values counted, through the keys present
+  (the plausibility check's row groups: a sort of 10^7 keys, 1.7 s); whether the targets
+  vary or both directions occur from their extremes and signs (NumPy's unique hashed 10^7
+  targets, 2 s over 16 calls);
+- glibc's heap trimmed before each candidate fit of the diagnosis: diagnose's peak
+  1,463 -> 1,444 MB (one run each).
+
+Side by side with the old code (below, one run each at load 4.5-6): report 71.9 -> 57.8 s
+CPU (old / new 1.24), compare 1.61, fit 1.24, diagnose 1.07; peak RSS unchanged or lower,
+every command under 60 s and 1.5 GB; report's margins 2 s and 42 MB. Tried and left:
+pyarrow's CSV reader (a dependency already) read the same table bit for bit (the fuzz
+corpus and near-valid tables as the per-cell reader did) in 2.3 s CPU where NumPy's takes
+9.4 (report 46.7 s CPU), but its library and pool took the peak 38 MB higher (report
+1,523-1,528 MB, diagnose 1,482): over 1.5 GB. Every sample-sized block still mapped on its
+own (``feedaxis.__main__``; with none mapped, system time 3.5 s but 2.0 GB resident): the
+kernel's time (diagnose 10-14 s, report 17-22 s) is now the largest share left, the fit
+of 7 columns (560 MB) the largest block at the peak; the ISO figures' 16 sorts by target
+take 1.8 s and ``direction`` in 8 bits would save 70 MB (60 uses): neither worth the
+memory or the risk.
+
 Run: ``python benchmarks/bench_positioning_scale.py [--rows 10000000] [--repeats 1]
 [--baseline-src PATH]``.
 """

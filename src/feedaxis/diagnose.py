@@ -39,6 +39,7 @@ from .fit import (FD_STEP, FitResult, ParameterLayout, Problem, Statistics, fit,
                   fit_with_artefacts, too_few_samples)
 from .measurement import kinds_for, measurement_of
 from .measurement.base import NoStart
+from .memory import give_back_freed_memory
 from .physics.threads import one_blas_thread
 from .stats.judge import FAMILY_ALPHA, Test, accepts
 from .stats.linear import projection
@@ -304,6 +305,7 @@ def _select(measurement, left, pending, skipped, stages, notify):
         _screen_together(measurement, left, pending)
         for effect in list(pending.values()):
             notify(effect.name)
+            give_back_freed_memory()
             tested.append(_tried(measurement, left, effect, pending))
         # p-values alike (each underflows to 0 where effects explain thousands of noise
         # variances) keep the order of what the candidates leave, the least first

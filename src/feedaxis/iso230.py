@@ -81,8 +81,28 @@ def row_groups(*columns):
 
 
 def distinct_rows(*columns):
-    """The number of distinct rows of ``columns``: of :func:`row_groups`, without them."""
-    return np.unique(row_key(*columns)).size
+    """The number of distinct rows of ``columns``: of :func:`row_groups`, without them; the
+    keys present counted (:func:`present_keys`), else the keys sorted in place and their
+    changes counted (NumPy's unique of 10^7 distinct keys, by hashing, took 14 s)."""
+    key = row_key(*columns)
+    present = present_keys(key)
+    if present is not None:
+        return int(np.count_nonzero(present))
+    key.sort()
+    return int(np.count_nonzero(key[1:] != key[:-1])) + min(key.size, 1)
+
+
+def present_keys(column):
+    """Which of the whole numbers 0 .. max(``column``) occur in it, where ``column`` holds
+    integers from 0 to fewer than its size (a dense key: a mask no larger than the column
+    found in one pass); else None."""
+    if column.dtype.kind not in "iu" or column.size == 0:
+        return None
+    if column.min() < 0 or column.max() >= column.size:
+        return None
+    present = np.zeros(int(column.max()) + 1, dtype=bool)
+    present[column] = True
+    return present
 
 
 def row_key(*columns):
@@ -106,8 +126,13 @@ def ranks(column):
     """(distinct values, each sample's index among them): ``np.unique(column,
     return_inverse=True)``; a column of at most ``FEW_VALUES`` values (a direction, a run
     number, a target index: as its first ``FEW_VALUES`` samples suggest) sorted as it is
-    and searched, not sorted by index (twice as fast at 10^7 samples)."""
+    and searched, not sorted by index (twice as fast at 10^7 samples); a dense key
+    (:func:`present_keys`, as a row key of distinct rows) numbered through the running
+    count of the keys present (a sort of 10^7 keys took 1.7 s)."""
     column = np.asarray(column)
+    present = present_keys(column)
+    if present is not None:
+        return np.flatnonzero(present).astype(column.dtype), (np.cumsum(present) - 1)[column]
     if np.unique(column[:FEW_VALUES]).size <= FEW_VALUES // 4:
         values = np.unique(column)
         if values.size <= FEW_VALUES:
@@ -260,4 +285,4 @@ def target_groups(positioning, clusters=None):
     from :func:`target_clusters` (``clusters``, when already computed)."""
     _, cluster = clusters or target_clusters(positioning.target_mm)
     keys = cluster * 2 + (positioning.direction > 0)
-    return compact_index(np.unique(keys, return_inverse=True)[1].ravel())
+    return compact_index(ranks(keys)[1])

@@ -82,7 +82,7 @@ def positioning_details(measurement, model, effects, result):
     marks = marked_wavelengths(case.axis, effects)
     residual = residual_spectrum(target_mm, result.residual_um, marks)
     trend_um = (np.polyval(np.polyfit(target_mm, result.measured_um, 1), target_mm)
-                if np.unique(target_mm).size > 1 else np.mean(result.measured_um))
+                if varies(target_mm) else np.mean(result.measured_um))
     measured = residual_spectrum(target_mm, result.measured_um - trend_um, marks)
     targets = target_clusters(target_mm)[0].size
     unresolved = {name: measurement.unresolvable(effects[name]) for name in residual.marks}
@@ -102,6 +102,12 @@ def positioning_details(measurement, model, effects, result):
         spacing_mm)
 
 
+def varies(values):
+    """Whether ``values`` (finite) hold two distinct ones: ``np.unique(values).size > 1``
+    without sorting them (NumPy's unique hashes 10^7 targets for 0.7 s)."""
+    return values.size > 1 and values.min() < values.max()
+
+
 def dense_model(measurement, model, run_of_sample=None):
     """The model between the targets of ``measurement`` (positioning), as a
     :class:`DenseModel`: each line (an approach direction, or a run of ``run_of_sample``
@@ -112,7 +118,7 @@ def dense_model(measurement, model, run_of_sample=None):
     keys = _line_keys(samples, run_of_sample)
     lines = [(keys == key) & (samples.direction == sign)
              for key in np.unique(keys) for sign in (1.0, -1.0)]
-    lines = [chosen for chosen in lines if np.unique(samples.target_mm[chosen]).size > 1]
+    lines = [chosen for chosen in lines if varies(samples.target_mm[chosen])]
     wavelengths = marked_wavelengths(case.axis, {e.name: e for e in model.effects})
     span_mm = float(np.ptp(samples.target_mm))
     start_mm = float(samples.target_mm.min())
@@ -185,7 +191,7 @@ def straight_line(per_direction):
     of every direction of ``per_direction`` (as :func:`iso_deviation` gives)."""
     target_mm = np.concatenate([values[0] for values in per_direction.values()])
     mean_um = np.concatenate([values[1] for values in per_direction.values()])
-    if np.unique(target_mm).size < 2:
+    if not varies(target_mm):
         return float(np.mean(mean_um)), 0.0
     slope, offset = np.polyfit(target_mm, mean_um, 1)
     return float(offset), float(slope)

@@ -358,7 +358,7 @@ def test_autoregression_by_one_qr_is_lstsq_order_by_order(coefficients, size, mo
 def test_ranks_are_numpys_unique_inverse_and_distinct_rows_its_count(distinct):
     """A column of few values (searched) and of many (sorted by index), beyond the first
     samples' hint too: NumPy's unique values and inverse; the rows' count that of
-    row_groups."""
+    row_groups and of NumPy's unique rows (none and one row too)."""
     from feedaxis.iso230 import FEW_VALUES, distinct_rows, ranks, row_groups
 
     rng = np.random.default_rng(distinct)
@@ -369,4 +369,28 @@ def test_ranks_are_numpys_unique_inverse_and_distinct_rows_its_count(distinct):
     np.testing.assert_array_equal(values, expected[0])
     np.testing.assert_array_equal(index, expected[1].ravel())
     other = rng.choice([-1.0, 1.0], column.size)
-    assert distinct_rows(column, other) == row_groups(column, other).max() + 1
+    rows = np.unique(np.column_stack((column, other)), axis=0).shape[0]
+    assert distinct_rows(column, other) == row_groups(column, other).max() + 1 == rows
+    assert distinct_rows(column[:1], other[:1]) == 1
+    assert distinct_rows(column[:0], other[:0]) == 0
+
+
+@pytest.mark.parametrize("dtype", [np.int64, np.int32, np.uint8])
+def test_dense_keys_rank_as_numpys_unique(dtype):
+    """Whole numbers from 0 to fewer than their count (a dense key, ranked by the keys
+    present) and others (negative, too large: sorted): NumPy's unique values, their type,
+    and inverse; the distinct rows counted either way."""
+    from feedaxis.iso230 import distinct_rows, present_keys, ranks
+
+    rng = np.random.default_rng(7)
+    dense = rng.integers(0, 180, 200).astype(dtype)
+    sparse = dense.astype(np.int64) * 1000 - 7
+    assert present_keys(dense) is not None and present_keys(sparse) is None
+    for column in (dense, sparse, dense[:1], rng.permutation(5000).astype(dtype)
+                   if dtype != np.uint8 else dense[::-1]):
+        values, index = ranks(column)
+        expected = np.unique(column, return_inverse=True)
+        assert values.dtype == expected[0].dtype
+        np.testing.assert_array_equal(values, expected[0])
+        np.testing.assert_array_equal(index, expected[1].ravel())
+        assert distinct_rows(column) == expected[0].size

@@ -80,7 +80,8 @@ class PositioningSamples:
     @property
     def bidirectional(self):
         """True when both approach directions were measured."""
-        return self.has_direction and {-1.0, 1.0} <= set(np.unique(self.direction))
+        return self.has_direction and bool(np.any(self.direction == 1.0)
+                                           and np.any(self.direction == -1.0))
 
 
 def read_positioning(path, duty_end_s=None, length_mm=None):
