@@ -305,7 +305,7 @@ def _select(measurement, left, pending, skipped, stages, notify):
         _screen_together(measurement, left, pending)
         for effect in list(pending.values()):
             notify(effect.name)
-            give_back_freed_memory()
+            give_back_freed_memory(measurement.size)
             tested.append(_tried(measurement, left, effect, pending))
         # p-values alike (each underflows to 0 where effects explain thousands of noise
         # variances) keep the order of what the candidates leave, the least first
