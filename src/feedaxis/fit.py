@@ -364,12 +364,13 @@ class Problem:
 
         def jacobian(x):
             base_um, columns_um = self._split_at(layout, x)
-            here_um = base_um + columns_um @ x[layout.linear_index]
-            matrix = np.empty((here_um.size, layout.size))
-            matrix[:, layout.linear_index] = -columns_um
+            matrix = np.empty((base_um.size, layout.size))
+            matrix[:, layout.linear_index] = columns_um
             if exact and nonlinear.size:
-                matrix[:, nonlinear] = -self.core_derivatives(layout, x)
-                return matrix
+                matrix[:, nonlinear] = self.core_derivatives(layout, x)
+                return np.negative(matrix, out=matrix)  # no negated copy of either part
+            np.negative(matrix, out=matrix)
+            here_um = base_um + columns_um @ x[layout.linear_index]
             for index in nonlinear:
                 step = FD_STEP * max(1.0, abs(x[index]))
                 if x[index] + step > layout.upper[index]:
@@ -447,11 +448,11 @@ def variable_projection(problem, layout):
         linear parameters inside their bounds (those at a bound stay there)."""
         if not np.array_equal(x[nonlinear], x_nonlinear):
             project(x_nonlinear)
-        derivatives = problem.core_derivatives(layout, x)
+        derivatives = problem.core_derivatives(layout, x)  # an array of its own
         free = last["columns_um"][:, last["free"]]
         if free.shape[1]:
-            derivatives = derivatives - free @ np.linalg.lstsq(free, derivatives, rcond=None)[0]
-        return -derivatives
+            derivatives -= free @ np.linalg.lstsq(free, derivatives, rcond=None)[0]
+        return np.negative(derivatives, out=derivatives)
 
     if nonlinear.size:
         solution = least_squares(project, x[nonlinear], bounds=(lower[nonlinear],

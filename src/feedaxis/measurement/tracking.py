@@ -550,9 +550,10 @@ class Tracking(Measurement):
             position_mm = self.recent.put(("positions", params), position_mm)
         else:
             position_mm = self.positions_mm(params)
+        compared = d_position_mm[self.compared]
         with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
             return ((position_mm[self.compared] - self.record_reference_mm[self.compared])
-                    * 1e3, d_position_mm[self.compared] * 1e3)
+                    * 1e3, _scaled(compared, 1e3))
 
     def loop_response_um(self, model, disturbance_N):
         """Change of the predicted deviation (µm) at the samples when ``disturbance_N``
@@ -813,7 +814,9 @@ class Recent:
 
     def put(self, key, value):
         """Keep ``value`` (an array, made read-only) under ``key`` while the budget allows;
-        returns it."""
+        returns it (left writable and the others kept where it alone exceeds the budget)."""
+        if value.nbytes > self.budget_bytes:
+            return value
         value.setflags(write=False)
         self.items[key] = value
         self.items.move_to_end(key)
@@ -870,6 +873,15 @@ def _sine_fits_rms(time_s, values, frequencies_hz):
         left.append(_rms(values - a * cosine - b * sine - c))
         phasor *= turn
     return left
+
+
+def _scaled(values, factor):
+    """``values * factor``, in place where ``values`` is writable (no :class:`Recent` keeps
+    it: a pass too large to keep, a copy of the samples compared): a record's derivatives
+    are the largest array a fit makes."""
+    if values.flags.writeable:
+        return np.multiply(values, factor, out=values)
+    return values * factor
 
 
 def _selector(index):
