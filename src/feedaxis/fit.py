@@ -74,7 +74,8 @@ class FitResult:
     at the optimum (samples x parameters in the model's order), kept where the model has
     parameters that enter nonlinearly (for the diagnosis's linearised screening).
     ``plain`` is the fit of the same samples without the measurement's nuisances, where
-    :func:`fit_with_artefacts` fitted them beside the effects (for their test).
+    :func:`fit_with_artefacts` fitted them beside the effects (for their test; its
+    Jacobian let go).
     """
 
     model: Model
@@ -277,6 +278,7 @@ def fit_with_artefacts(model, data, progress=None, kind=None):
     if with_nuisances is not result.model and not too_few_samples(with_nuisances,
                                                                    [measurement]):
         plain = result
+        plain.jacobian = None  # only its residual is used again (the nuisances' test)
         result = fit(with_nuisances, measurement, progress)
         result.plain = plain
     result.artefacts = {**artefacts, **measurement.artefacts(result)}

@@ -67,6 +67,12 @@ TRACKING_FILE = "tracking.csv"
 # positions, 16 MB of a plant's sensitivities
 RECENT_BYTES = 2**27
 
+# Peak memory of the heaviest tracking command per row of tracking.csv (the case reader's
+# refusal, feedaxis.case.check_fits_in_memory; benchmarks/bench_tracking_scale.py): on 10^6
+# samples report peaked at 1,303 MB resident, 1,150 bytes a sample above the interpreter's
+# own 150 MB (fit 1,038 MB, diagnose 960 MB); the figure kept has a 30 % margin over it.
+ANALYSIS_BYTES_PER_ROW = 1500
+
 TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
                     "disturbance_N": False, "control_V": False}
 
@@ -89,7 +95,7 @@ def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
     for it (:func:`feedaxis.physics.servo.loop_budget_problem`) are refused at the row.
     """
     path = Path(path)
-    values, rows = _read_csv(path, TRACKING_COLUMNS)
+    values, rows = _read_csv(path, TRACKING_COLUMNS, ANALYSIS_BYTES_PER_ROW)
     time_s = values["time_s"]
     _first_bad(path, np.concatenate(([False], np.diff(time_s) <= 0)), rows, "time_s",
                "time_s must be strictly increasing")
