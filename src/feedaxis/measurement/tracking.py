@@ -736,8 +736,7 @@ class Tracking(Measurement):
         reversals = self.reversals_s()
         step_s = float(np.median(np.diff(self.time_s))) if self.time_s.size > 1 else 0.0
         if reversals.size:
-            gap = np.min(np.abs(slow[:, None] - reversals[None, :]), axis=1)
-            slow = slow[gap > 2.0 * step_s]
+            slow = slow[_nearest_gap(slow, reversals) > 2.0 * step_s]
         return np.sort(np.concatenate((reversals, slow)))
 
     def near_stop(self, time_s):
@@ -879,6 +878,16 @@ def _sine_fits_rms(time_s, values, frequencies_hz):
         left.append(_rms(values - a * cosine - b * sine - c))
         phasor *= turn
     return left
+
+
+def _nearest_gap(times_s, sorted_s):
+    """|time − the nearest of ``sorted_s``| (s) for each of ``times_s``: the nearest is a
+    neighbour in the sorted order (one of two candidates, not a times x sorted matrix: 10^4
+    near-stops x 10^4 reversals on a 10^4 s trace were 16 GB)."""
+    after = np.searchsorted(sorted_s, times_s)
+    gaps = [np.abs(times_s - sorted_s[np.clip(after + offset, 0, sorted_s.size - 1)])
+            for offset in (-1, 0)]
+    return np.minimum(*gaps)
 
 
 def _scaled(values, factor):
