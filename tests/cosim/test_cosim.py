@@ -164,9 +164,9 @@ def test_the_master_loop_unpacks_its_plan_by_the_plan_entry_fields():
     import inspect
     import re
 
-    from feedaxis.cosim.master import Master, PlanEntry
+    from feedaxis.cosim.master import PlanEntry, PythonSteps
 
-    unpacked = re.search(r"for \(([^)]*)\) in plan:", inspect.getsource(Master._loop)).group(1)
+    unpacked = re.search(r"for \(([^)]*)\) in plan:", inspect.getsource(PythonSteps.__call__)).group(1)
     assert tuple(n.strip() for n in unpacked.split(",")) == PlanEntry._fields
 
 

@@ -96,16 +96,23 @@ class LoadedFmu:
             setter = getattr(slave, f"set{names.get(variable.type, variable.type)}")
             setter([variable.valueReference], [value])
 
+    def native_stepping_functions(self, slave):
+        """(whether FMI 3.0, then fmpy's raw ctypes functions fmi2SetReal, fmi2DoStep,
+        fmi2GetReal of ``slave``; FMI 3.0: fmi3SetFloat64, fmi3DoStep, fmi3GetFloat64, whose
+        signatures differ)."""
+        names = (("fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64") if self.fmi3 else
+                 ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal"))
+        return (self.fmi3, *(slave._functions[name] for name in names))
+
     def stepping_functions(self, slave):
         """fmpy's raw ctypes functions (set_real, do_step, get_real) of ``slave``, each
         called as FMI 2.0's fmi2SetReal(c, vrs, n, values), fmi2DoStep(c, t, h,
         noSetFMUStatePriorToCurrentPoint) and fmi2GetReal(c, vrs, n, values) whichever the
         FMU's version; each returns the call's status."""
-        if not self.fmi3:
-            return tuple(slave._functions[f] for f in ("fmi2SetReal", "fmi2DoStep",
-                                                       "fmi2GetReal"))
-        set_float, do_step, get_float = (slave._functions[f] for f in (
-            "fmi3SetFloat64", "fmi3DoStep", "fmi3GetFloat64"))
+        fmi3, *functions = self.native_stepping_functions(slave)
+        if not fmi3:
+            return tuple(functions)
+        set_float, do_step, get_float = functions
         results = [ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double()]
         pointers = tuple(map(ctypes.byref, results))
         return (lambda c, vrs, n, values: set_float(c, vrs, n, values, n),

@@ -7,11 +7,15 @@ a structured NumPy array addressed by variable name (``result["NpidServo.positio
 ``result["positioning_error_um"]``).
 
 Speed: every value reference is resolved before the run; all signals live in one
-preallocated ctypes array that each FMU's ``fmi2GetReal`` writes straight into; the loop
-calls fmpy's raw ctypes functions ``fmi2SetReal``/``fmi2DoStep``/``fmi2GetReal`` and checks
-their status, with no per-step dict lookup or allocation (FMI 3.0 FMUs: ``fmi3SetFloat64``/
-``fmi3DoStep``/``fmi3GetFloat64`` behind the same signatures,
-:meth:`~feedaxis.cosim.fmu_runner.LoadedFmu.stepping_functions`).
+preallocated ctypes array that each FMU's ``fmi2GetReal`` writes straight into. The macro
+steps run compiled (:mod:`feedaxis.cosim.compiled_loop`), calling the FMUs' functions
+through the pointers fmpy loaded, a chunk of steps per call. Where that loop cannot be
+built (no C compiler), :class:`PythonSteps` makes the same calls through fmpy's raw ctypes
+functions ``fmi2SetReal``/``fmi2DoStep``/``fmi2GetReal`` and checks their status, with no
+per-step dict lookup or allocation (FMI 3.0 FMUs: ``fmi3SetFloat64``/``fmi3DoStep``/
+``fmi3GetFloat64`` behind the same signatures,
+:meth:`~feedaxis.cosim.fmu_runner.LoadedFmu.stepping_functions`); it gives the same numbers,
+its stepping loop about 13 times as long for the full axis (benchmarks/bench_cosim.py).
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ from fmpy.fmi1 import FMICallException
 
 from ..errors import ParameterError
 from ..stop import deferred
+from .compiled_loop import CompiledSteps, loop_library
 from .fmu_runner import LoadedFmu
 from .physics_check import check_physics
 from .system import check_parameter_values
@@ -52,6 +57,7 @@ class PlanEntry(NamedTuple):
     n_out: int
     out_ptr: object       # where the outputs land in the signal array
     name: str
+    native: tuple         # (FMI 3.0?, the raw set, step and get functions) for the C loop
 
 
 class SimulationInterrupted(KeyboardInterrupt):
@@ -77,6 +83,7 @@ class Timing:
     fmu_s: float | None = None
     macro_steps: int = 0
     timer_s: float = 0.0
+    loop: str = "compiled"  # or "python (why)"
 
     @property
     def overhead_fraction(self):
@@ -95,10 +102,14 @@ class Master:
     system : AxisSystem
     fmu_paths : dict
         FMU name -> path of the .fmu (:func:`feedaxis.cosim.fmu_cache.cached_fmus`).
+    compiled_loop : bool
+        Step in the compiled loop where it can be built (default); False: in Python.
     """
 
-    def __init__(self, system, fmu_paths):
+    def __init__(self, system, fmu_paths, compiled_loop=True):
         self.system = system
+        self.library, self.loop_missing = (loop_library() if compiled_loop else
+                                           (None, "the Python loop was asked for"))
         self.loaded = {}
         try:
             for component in system.components:
@@ -183,16 +194,23 @@ class Master:
                     plan.append(self._instantiate(system, component, signals, slaves,
                                                   fmu_time if profile else None))
                 fmu_time[:] = [0.0, 0]
+                recorded = bytearray(memoryview(signals).cast("B"))  # row 0
+                varying = [(j, source) for j, source in input_values if _varies(source)]
+                steps = self._steps(plan, signals, [j for j, _ in varying],
+                                    record_steps.tolist(), h, recorded, fmu_time, profile)
                 loop_started = time.perf_counter()
-                table = self._loop(plan, signals, input_values, record_steps, n_steps, h,
-                                   progress, stop)
+                _loop(steps, varying, n_steps, h, progress, stop)
                 loop_s = time.perf_counter() - loop_started
             finally:
                 for slave in slaves:
                     slave.freeInstance()
-        self.timing = Timing(time.perf_counter() - started, loop_s,
-                             fmu_time[0] if profile else None, n_steps,
-                             fmu_time[1] * _timer_cost_s() if profile else 0.0)
+        self.timing = Timing(time.perf_counter() - started, loop_s, macro_steps=n_steps,
+                             loop="compiled" if self.library else
+                             f"python ({self.loop_missing})")
+        if profile:
+            self.timing.fmu_s, calls, timer_cost_s = steps.fmu_time()
+            self.timing.timer_s = calls * timer_cost_s
+        table = np.frombuffer(recorded, dtype=np.float64).reshape(-1, len(signals))
         rows = len(table)
         result = self._result(table, record_steps[:rows] * h)
         if rows < record_steps.size or stop.requested:  # a stop while the slaves were freed
@@ -268,51 +286,16 @@ class Master:
                          set_real=set_real, slave=slave.component, in_vrs=in_vrs,
                          n_in=len(sources), do_step=do_step, step_s=component.step_s,
                          get_real=get_real, out_vrs=out_vrs, n_out=len(out_vrs),
-                         out_ptr=out_ptr, name=component.name)
+                         out_ptr=out_ptr, name=component.name,
+                         native=loaded.native_stepping_functions(slave))
 
-    def _loop(self, plan, signals, input_values, record_steps, n_steps, h, progress, stop):
-        """The macro steps; returns the recorded rows of the signals (fewer on Ctrl-C).
-
-        A row is recorded as the signal array's bytes appended to one buffer (a twentieth
-        of a microsecond, a fifth of a NumPy row assignment)."""
-        row_bytes = memoryview(signals).cast("B")
-        recorded = bytearray(row_bytes)
-        record = recorded.extend
-        records = record_steps.tolist()
-        n_records = len(records)
-        row, next_record = 1, (records[1] if n_records > 1 else -1)
-        varying = [(j, source) for j, source in input_values if _varies(source)]
-        warning = FMI_WARNING
-        for k_start in range(0, n_steps, CHUNK_STEPS):
-            if stop.requested:
-                break
-            k_end = min(n_steps, k_start + CHUNK_STEPS)
-            t_chunk = np.arange(k_start, k_end) * h
-            chunk = [(j, _values(source, t_chunk, k_start).tolist()) for j, source in varying]
-            for k in range(k_start, k_end):
-                kk = k - k_start
-                for j, values in chunk:
-                    signals[j] = values[kk]
-                k1 = k + 1
-                # unpacked in PlanEntry's field order: the fastest access in this loop
-                for (ratio, copies, in_buf, set_real, slave, in_vrs, n_in, do_step, step_s,
-                     get_real, out_vrs, n_out, out_ptr, name) in plan:
-                    if k1 % ratio:
-                        continue
-                    for i, j in copies:
-                        in_buf[i] = signals[j]
-                    if (set_real(slave, in_vrs, n_in, in_buf) > warning
-                            or do_step(slave, (k1 - ratio) * h, step_s, 1) > warning
-                            or get_real(slave, out_vrs, n_out, out_ptr) > warning):
-                        raise FmuStepError(f"{name} failed in the step ending at "
-                                           f"t = {k1 * h:.6g} s (its log above says why)")
-                if k1 == next_record:
-                    record(row_bytes)
-                    row += 1
-                    next_record = records[row] if row < n_records else -1
-            if progress is not None:
-                progress(k_end, n_steps)
-        return np.frombuffer(recorded, dtype=np.float64).reshape(row, len(signals))
+    def _steps(self, plan, signals, varying, records, h, recorded, fmu_time, profile):
+        """The run's macro steps: compiled where the loop's library loaded, else in Python
+        (:class:`PythonSteps`, its FMU calls timed into ``fmu_time`` when profiled)."""
+        if self.library is not None:
+            return CompiledSteps(self.library, plan, signals, varying, records, h, recorded,
+                                 CHUNK_STEPS, profile)
+        return PythonSteps(plan, signals, varying, records, h, recorded, fmu_time)
 
     def _result(self, table, time_s):
         """The structured result: recorded signals plus the system outputs."""
@@ -322,6 +305,84 @@ class Master:
             np.zeros((0, len(columns) + 1))
         dtype = np.dtype([(name, float) for name in self.names])
         return recfunctions.unstructured_to_structured(stacked, dtype)
+
+
+def _loop(steps, varying, n_steps, h, progress, stop):
+    """The macro steps in chunks: between chunks a stop is honoured (the rows recorded so
+    far stay) and ``progress`` told; ``steps`` makes a chunk's steps (compiled or
+    :class:`PythonSteps`)."""
+    for k_start in range(0, n_steps, CHUNK_STEPS):
+        if stop.requested:
+            break
+        k_end = min(n_steps, k_start + CHUNK_STEPS)
+        t_chunk = np.arange(k_start, k_end) * h
+        failed = steps(k_start, k_end, np.array(
+            [_values(source, t_chunk, k_start) for _, source in varying]).reshape(
+                len(varying), k_end - k_start))
+        if failed is not None:
+            name, k1 = failed
+            raise FmuStepError(f"{name} failed in the step ending at t = {k1 * h:.6g} s "
+                               "(its log above says why)")
+        if progress is not None:
+            progress(k_end, n_steps)
+
+
+class PythonSteps:
+    """The macro steps of a chunk in Python, as ``master_loop.c`` makes them compiled.
+
+    The fallback where that loop cannot be built (no C compiler, not Linux): the same
+    calls on the same plan, so the same numbers, its stepping loop about 13 times as long
+    for the full axis (each of fmpy's ctypes calls costs more than the FMU function it
+    calls). ``steps(k_start, k_end, values)`` (``values``: one row per
+    varying input, one column per step) appends the recorded rows to ``recorded`` and
+    returns None, or (name, k + 1) of the component that failed in macro step k.
+    A row is recorded as the signal array's bytes appended to one buffer (a twentieth of a
+    microsecond, a fifth of a NumPy row assignment).
+    """
+
+    def __init__(self, plan, signals, varying, records, h, recorded, fmu_time):
+        self.plan, self.signals, self.varying, self.h = plan, signals, varying, h
+        self.records, self.row = records, 1
+        self.record = recorded.extend
+        self.row_bytes = memoryview(signals).cast("B")
+        self.timed = fmu_time
+
+    def __call__(self, k_start, k_end, values):
+        plan, signals, h, record, row_bytes = (self.plan, self.signals, self.h, self.record,
+                                               self.row_bytes)
+        records, row, warning = self.records, self.row, FMI_WARNING
+        n_records = len(records)
+        next_record = records[row] if row < n_records else -1
+        chunk = list(zip(self.varying, values.tolist()))
+        try:
+            for k in range(k_start, k_end):
+                kk = k - k_start
+                for j, column in chunk:
+                    signals[j] = column[kk]
+                k1 = k + 1
+                # unpacked in PlanEntry's field order: the fastest access in this loop
+                for (ratio, copies, in_buf, set_real, slave, in_vrs, n_in, do_step, step_s,
+                     get_real, out_vrs, n_out, out_ptr, name, native) in plan:
+                    if k1 % ratio:
+                        continue
+                    for i, j in copies:
+                        in_buf[i] = signals[j]
+                    if (set_real(slave, in_vrs, n_in, in_buf) > warning
+                            or do_step(slave, (k1 - ratio) * h, step_s, 1) > warning
+                            or get_real(slave, out_vrs, n_out, out_ptr) > warning):
+                        return name, k1
+                if k1 == next_record:
+                    record(row_bytes)
+                    row += 1
+                    next_record = records[row] if row < n_records else -1
+        finally:
+            self.row = row
+        return None
+
+    def fmu_time(self):
+        """(seconds in the timed FMU calls, their count, what one timer costs outside the
+        call it times (s))."""
+        return self.timed[0], self.timed[1], _timer_cost_s()
 
 
 def _whole_steps(duration_s, h, what):
