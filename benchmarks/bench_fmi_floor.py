@@ -34,24 +34,31 @@ carrying its Python; in this Python host it runs on the host's interpreter) to t
 interleaved sets, in the PID mode, and prints its cost and per-repeat ratio to the feedaxis
 FMUs.
 
-**What the feedaxis FMUs pay per step.** NpidServo, StepperError and GeometricError step
-without entering Python: their host layer calls each FMU's step compiled ahead of time by
-numba (``feedaxis.physics.fmu_steps``, the same physics functions the slaves' Python steps
-call, in the FMU's compiled module ``physics/step_kernel``; fmus/README.md)
-on a block of numbers the slave packs after any call that may change it, and answers
-fmi2SetReal and fmi2GetReal of the inputs and outputs in C. What is left above the floor is
-the physics itself (the servo's 10 loop steps of 0.1 ms per 1 ms step, the geometric
-error's sines and table look-up) and the host layer's checks of each call. ThermalScrew,
-stepped every hundredth macro step, stays in Python: its 27 µs of NumPy per step (80 cells)
-are 0.3-0.4 µs of the axis's macro step, most of what is left between the axis and the
-floor (target: 1.2 times it). Before the compiled steps each of the three entered Python once per
-step (the slave's exchange function, 1-2 µs per FMU): the full axis cost 1.88, 1.91 and
-1.91 times the floor in PID, NPID and friction mode (the same command with ``--repeats 9``
-on main at e914964, 2026-11-26 21:33 UTC, load average 1.0-2.0). Counted with callgrind
-(``--instructions --steps 1000``, a figure the load does not move), the axis executes 1.14,
-1.11 and 1.06 times the native floor's instructions per macro step in PID, NPID and
-friction mode, against 1.48, 1.60 and 1.57 before; in CPU time 1.17, 1.19 and 1.20 on a
-quiet machine (below), 1.23-1.25 at load 6.8 (the shared caches).
+**What the feedaxis FMUs pay per step.** The four FMUs step without entering Python: their
+host layer calls each FMU's step compiled ahead of time by numba
+(``feedaxis.physics.fmu_steps``, the same physics functions the slaves' Python steps call, in
+the FMU's compiled module ``physics/step_kernel``; fmus/README.md) on a block of numbers the
+slave packs after any call that may change it, and answers fmi2SetReal and fmi2GetReal of
+the inputs and outputs in C. What is left above the floor is the physics itself (the servo's
+10 loop steps of 0.1 ms per 1 ms step, the geometric error's sines and table look-up, the
+thermal screw's 80 cells every hundredth macro step) and the host layer's checks of each
+call. Before the compiled steps each of the three that step every macro step entered Python
+once per step (the slave's exchange function, 1-2 µs per FMU): the full axis cost 1.88, 1.91
+and 1.91 times the floor in PID, NPID and friction mode (the same command with
+``--repeats 9`` on main at e914964, 2026-11-26 21:33 UTC, load average 1.0-2.0). With those
+three compiled and ThermalScrew still in Python (main at 397ea5b) it cost 1.17, 1.19 and 1.20
+times the floor on a quiet machine (load 0.6). ThermalScrew's Python step, 33 µs of CPU a
+doStep through fmpy, takes 4.1 µs compiled (the driver's calls included); counted with
+callgrind inside the host layer's doStep, 246,000 instructions became 17,200: per macro step
+of the axis 2,460 and 172, 3.3 and 0.23 % of the native floor's 72,000-82,000, so the axis
+gains about 3 % of the floor. The same command with ``--repeats 9``, once for the
+build before (397ea5b) and once for this one, one after the other at load average 4-5 on the
+shared machine: the full axis 1.27, 1.39 and 1.28 times the floor before, 1.15, 1.14 and 1.13
+after (quartiles up to 2.11 before and 1.58 after). ``--instructions`` (callgrind over the
+whole axis) cannot resolve that gain: its start-up differs from run to run by millions of
+instructions, so the native floor itself counted 72,300 to 82,400 per macro step in four runs
+(``--steps 1000`` and ``2000``, before and after); it gave 1.03-1.18 with the compiled thermal
+step and 1.04-1.34 before it.
 """
 import argparse
 import ast

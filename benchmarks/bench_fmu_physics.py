@@ -105,9 +105,11 @@ def geometric_paths():
 
 def dense_thermal_step(params, rise_K, duration_s, position_mm, feed_mm_min):
     """The reference update: the dense rate matrix and sources rebuilt, θ + dt (A θ + s)."""
-    nut = thermal.nut_cells(params, mounting.screw_coordinate_m(position_mm, params.fixed_end_mm))
+    nut = thermal.nut_cells(params.cells,
+                            mounting.screw_coordinate_m(position_mm, params.fixed_end_mm))
     rates = thermal.rate_matrix(params, feed_mm_min, nut)
-    return rise_K + duration_s * (rates @ rise_K + thermal.source_rate(params, feed_mm_min, nut))
+    sources = thermal.source_rate(params.cells, feed_mm_min, nut)
+    return rise_K + duration_s * (rates @ rise_K + sources)
 
 
 def thermal_paths():

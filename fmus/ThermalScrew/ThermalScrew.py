@@ -9,7 +9,7 @@ from dataclasses import fields
 import numpy as np
 from pythonfmu import DefaultExperiment
 
-from feedaxis_fmu_physics import thermal
+from feedaxis_fmu_physics import fmu_steps, thermal
 from feedaxis_slave import AxisSlave
 
 UNITS = {"length_m": "m", "diameter_m": "m", "density_kg_m3": "kg/m3",
@@ -72,6 +72,16 @@ class ThermalScrew(AxisSlave):
         self.elongation_um = float(thermal.screw_elongation_um(self.model, self.rise_K,
                                                                self.model.length_m))
         self.peak_rise_K = float(self.rise_K.max())
+
+    def native_step(self):
+        return fmu_steps.native_step("ThermalScrew")
+
+    def native_block(self):
+        return fmu_steps.thermal_screw_block(self.position_offset_mm, self.reference_ambient_C,
+                                             self.model.cells, self.rise_K)
+
+    def restore_native(self, block):
+        self.rise_K = np.array(fmu_steps.thermal_screw_rise_K(block))
 
     def model_state(self):
         return {"rise_K": self.rise_K.tolist()}

@@ -14,7 +14,7 @@ per doStep, to the function :func:`claim` returns (:meth:`AxisSlave.exchanger`),
 pythonfmu's three (set_real, do_step, get_real, each building Python lists).
 
 Where the FMU's compiled module is there (physics/step_kernel, feedaxis.kernel_build), the
-host layer steps NpidServo, StepperError and GeometricError without Python: it calls the C
+host layer steps the four FMUs of the axis without Python: it calls the C
 function :meth:`AxisSlave.native_step` names on a block of numbers the slave fills
 (:meth:`AxisSlave.native_block`, packed again after any call that may change the slave)
 and hands the outputs and state back (:meth:`AxisSlave.restore_native`) before any other

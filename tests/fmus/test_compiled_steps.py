@@ -1,6 +1,7 @@
 """The compiled steps (physics/fmu_steps.py, called by the host layer without Python) against
 the slaves' Python steps: the same FMU through fmpy, once as built and once with its slave
-offering no compiled step, on seeded inputs, in every controller mode of the servo."""
+offering no compiled step, on seeded inputs, in every controller mode of the servo, and the
+thermal screw's field over steps its compiled step takes and steps it leaves to Python."""
 import json
 import math
 import subprocess
@@ -15,8 +16,9 @@ from feedaxis.physics.kernel import shipped_kernel
 
 # One run of an FMU in a fresh process (an FMU's package is imported once per process, so
 # the two builds of one FMU cannot share one): parameters set before initialisation, the
-# inputs stepped, a tunable parameter changed halfway, a state saved, serialised and
-# restored, and a last step with a NaN input; prints the outputs, statuses and log.
+# inputs stepped (each step its size), a tunable parameter changed, a state saved halfway,
+# serialised and restored, and a last step with a NaN input; prints the outputs, statuses
+# and log.
 RUN = """
 import json, math, sys
 import numpy as np
@@ -45,16 +47,17 @@ slave.setupExperiment(startTime=0.0)
 slave.enterInitializationMode()
 slave.exitInitializationMode()
 outputs = [refs[name].valueReference for name in plan["outputs"]]
-h = plan["step_size_s"]
+n = len(next(iter(plan["inputs"].values())))
+sizes = plan.get("step_sizes_s") or [plan["step_size_s"]] * n
+times = [sum(sizes[:k]) for k in range(n + 1)]
 rows = []
 def advance(first, last):
     for k in range(first, last):
         if k == plan["tune_at"]:
             set_values(plan["tuned"])
         set_values({name: values[k] for name, values in plan["inputs"].items()})
-        slave.doStep(k * h, h)
+        slave.doStep(times[k], sizes[k])
         rows.append(slave.getReal(outputs))
-n = len(next(iter(plan["inputs"].values())))
 exchanges = []  # the slave's exchange function entered (Python stepping)
 sys.setprofile(lambda frame, event, arg: exchanges.append(1) if event == "call"
                and frame.f_code.co_filename.endswith(" exchange>") else None)
@@ -70,7 +73,7 @@ def refused(call, *args):
         return str(error)
     return "OK"
 sys.setprofile(None)
-statuses = [refused(slave.doStep, n * h, 0.0)]
+statuses = [refused(slave.doStep, times[n], 0.0)]
 slave.setFMUstate(saved)  # out of the error state
 statuses.append(refused(set_values, {name: math.nan for name in plan["inputs"]}))
 print(json.dumps({"rows": rows, "statuses": statuses, "exchanges": len(exchanges)}))
@@ -80,7 +83,8 @@ SERVO_MODES = {"PID": {}, "NPID": {"nonlinear": True}, "friction": {"friction_N"
                "Stribeck": {"coulomb_N": 10.0, "static_N": 25.0, "damping_N_s_per_mm": 0.02},
                "cascade": {"controller": "cascade"}}
 OUTPUTS = {"NpidServo": ["position_mm", "velocity_mm_s", "tracking_error_mm", "control_V"],
-           "StepperError": ["error_um"], "GeometricError": ["error_um"]}
+           "StepperError": ["error_um"], "GeometricError": ["error_um"],
+           "ThermalScrew": ["error_um", "elongation_um", "peak_rise_K"]}
 
 
 def seeded_inputs(name, n, seed=35):
@@ -92,6 +96,10 @@ def seeded_inputs(name, n, seed=35):
                 "disturbance_N": rng.normal(0.0, 30.0, n)}
     if name == "StepperError":
         return {"position_mm": 40.0 + walk}
+    if name == "ThermalScrew":  # a nut running back and forth at up to 150 mm/s
+        position_mm = 250.0 + 240.0 * np.sin(np.arange(n) * 0.05) + 20.0 * walk
+        return {"position_mm": position_mm, "velocity_mm_s": 150.0 * np.cos(np.arange(n) * 0.05),
+                "ambient_C": 20.0 + 2.0 * np.sin(np.arange(n) * 0.01) + walk}
     return {"position_mm": 60.0 + walk, "velocity_mm_s": np.gradient(walk) / 1e-3}
 
 
@@ -127,7 +135,17 @@ CASES = [("NpidServo", mode, parameters, {}) for mode, parameters in SERVO_MODES
      {"offset_um": 0.7}),
     ("GeometricError", "fixed end at +", {"backlash_um": 0.0, "fixed_end_mm": 300.0,
                                           "position_offset_mm": -20.0},
-     {"eccentricity_sin_um": -0.4})]
+     {"eccentricity_sin_um": -0.4}),
+    ("ThermalScrew", "Table 1", {}, {"reference_ambient_C": 21.5}),
+    ("ThermalScrew", "fixed end at +", {"fixed_end_mm": 650.0, "position_offset_mm": 30.0,
+                                        "ambient_reference_offset_mm": -12.0,
+                                        "k1_W_m2K_per_mm_min": 0.0},
+     {"reference_ambient_C": 18.0})]
+# the thermal screw's macro step, and a long step every 25 steps at λ = 4000 W/(m.K) (a
+# stability limit of 0.044 s): 69 sub-steps, beyond the compiled step's Euler loop, which
+# leaves it to the Python step (a matrix power)
+STEP_SIZE_S = {"ThermalScrew": 0.1}
+LONG_STEP_S, LONG_EVERY = 3.0, 25
 
 
 @pytest.mark.parametrize("name, mode, parameters, tuned", CASES,
@@ -135,7 +153,8 @@ CASES = [("NpidServo", mode, parameters, {}) for mode, parameters in SERVO_MODES
 def test_compiled_step_equals_the_python_step_through_fmpy(fmu_paths, tmp_path, name, mode,
                                                            parameters, tuned):
     n = 400
-    plan = {"parameters": parameters, "outputs": OUTPUTS[name], "step_size_s": 1e-3,
+    plan = {"parameters": parameters, "outputs": OUTPUTS[name],
+            "step_size_s": STEP_SIZE_S.get(name, 1e-3),
             "inputs": {k: v.tolist() for k, v in seeded_inputs(name, n).items()},
             "tune_at": n // 4, "tuned": tuned}
     compiled = run(fmu_paths[name], plan)
@@ -143,9 +162,7 @@ def test_compiled_step_equals_the_python_step_through_fmpy(fmu_paths, tmp_path, 
     rows, expected = np.array(compiled["rows"]), np.array(python["rows"])
     assert rows.shape == (n + n // 2, len(OUTPUTS[name]))
     assert compiled["exchanges"] == 0 and python["exchanges"] == len(rows)
-    scale = np.abs(expected).max(axis=0)
-    assert (scale > 0).all(), "an output never moves: the case tests nothing"
-    np.testing.assert_allclose(rows, expected, rtol=1e-12, atol=1e-12 * scale.max())
+    assert_same_rows(rows, expected)
     if tuned:  # the tuned parameter reached the compiled step
         half = n // 4
         assert not np.allclose(rows[half:n // 2], run_untuned(fmu_paths[name], plan)[half:n // 2])
@@ -158,7 +175,7 @@ def test_compiled_step_equals_the_python_step_through_fmpy(fmu_paths, tmp_path, 
     assert "must be finite" in compiled["log"][-1]
 
 
-@pytest.mark.parametrize("name", ["StepperError", "GeometricError"])
+@pytest.mark.parametrize("name", ["StepperError", "GeometricError", "ThermalScrew"])
 def test_a_module_that_does_not_load_is_a_warning_and_the_python_step(fmu_paths, tmp_path,
                                                                        name):
     """An FMU moved to a Python whose ABI its compiled module does not fit: the import
@@ -168,13 +185,39 @@ def test_a_module_that_does_not_load_is_a_warning_and_the_python_step(fmu_paths,
         for entry in source.infolist():
             data = source.read(entry)
             fmu.writestr(entry, b"not a library" if "step_kernel" in entry.filename else data)
-    plan = {"parameters": {}, "outputs": OUTPUTS[name], "step_size_s": 1e-3, "tune_at": -1,
+    plan = {"parameters": {}, "outputs": OUTPUTS[name],
+            "step_size_s": STEP_SIZE_S.get(name, 1e-3), "tune_at": -1,
             "tuned": {}, "inputs": {k: v.tolist() for k, v in seeded_inputs(name, 100).items()}}
     python, compiled = run(broken, plan), run(fmu_paths[name], plan)
     assert python["exchanges"] == len(python["rows"]) and compiled["exchanges"] == 0
     np.testing.assert_allclose(python["rows"], compiled["rows"], rtol=1e-12, atol=1e-15)
     warnings = [line for line in python["log"] if "the compiled step does not load" in line]
     assert len(warnings) == 1 and warnings[0].startswith("[WARNING]")
+
+
+def assert_same_rows(rows, expected):
+    """The outputs within 1e-12 of each other (relative, or of the output's largest value)."""
+    scale = np.abs(expected).max(axis=0)
+    assert (scale > 0).all(), "an output never moves: the case tests nothing"
+    np.testing.assert_allclose(rows, expected, rtol=1e-12, atol=1e-12 * scale.max())
+
+
+def test_thermal_steps_the_compiled_step_leaves_go_through_python(fmu_paths, tmp_path):
+    """Steps needing more sub-steps than the compiled Euler loop takes are declined and taken
+    by the Python step (from the same field); the compiled steps after them go on from its
+    field: the same outputs as Python alone."""
+    n = 400
+    sizes = [LONG_STEP_S if k % LONG_EVERY == LONG_EVERY - 1 else 0.1 for k in range(n)]
+    plan = {"parameters": {"conductivity_W_mK": 4000.0}, "outputs": OUTPUTS["ThermalScrew"],
+            "step_sizes_s": sizes, "tune_at": n // 4, "tuned": {"reference_ambient_C": 23.0},
+            "inputs": {k: v.tolist() for k, v in seeded_inputs("ThermalScrew", n).items()}}
+    compiled = run(fmu_paths["ThermalScrew"], plan)
+    python = run(python_stepping(fmu_paths["ThermalScrew"], "ThermalScrew", tmp_path), plan)
+    long_steps = [k for k in [*range(n), *range(n // 2, n)] if sizes[k] == LONG_STEP_S]
+    assert compiled["exchanges"] == len(long_steps) == 24
+    assert python["exchanges"] == len(python["rows"])
+    assert_same_rows(np.array(compiled["rows"]), np.array(python["rows"]))
+    assert compiled["log"] == python["log"] and compiled["statuses"] == python["statuses"]
 
 
 def run_untuned(fmu_path, plan):
@@ -189,7 +232,7 @@ def test_feedaxis_own_physics_has_no_compiled_module():
 
 
 def test_every_compiled_step_is_in_the_fmus_module(fmu_paths):
-    """The three FMUs that step every macro step carry the compiled module with their C
+    """The four FMUs of the axis carry the compiled module with their C
     step exported under its symbol."""
     for name, symbol in fmu_steps.STEPS.items():
         with zipfile.ZipFile(fmu_paths[name]) as archive:
@@ -271,3 +314,63 @@ def test_the_compiled_geometric_step_keeps_the_engagement_when_it_declines(kerne
     assert block_call(kernel_library, symbol, block, 1e-3, [10.0, math.nan], 1)[:2] == (0, block)
     done, after, _ = block_call(kernel_library, symbol, block, 1e-3, [10.0, -100.0], 1)
     assert done == 1 and after[0] == geometry.play_engagement(0.25, -0.1, 2.0)
+
+
+def thermal_block(**parameters):
+    """ThermalScrew's block at a seeded field, its parameters and the field (K)."""
+    from feedaxis.physics import thermal
+
+    params = thermal.ThermalScrewParams(**parameters)
+    rise_K = np.random.default_rng(3).uniform(0.0, 4.0, params.n_cells)
+    return fmu_steps.thermal_screw_block(2.5, 21.0, params.cells, rise_K), params, rise_K
+
+
+def test_the_thermal_block_holds_the_cell_terms_and_the_field():
+    """What the compiled step reads back from the block (the same function, run in Python
+    here) is the parameters' CellTerms and the field, number for number."""
+    block, params, rise_K = thermal_block(fixed_end_mm=300.0)
+    cells, field_K = fmu_steps.thermal_screw_cells(np.array(block), params.n_cells)
+    for name, value in params.cells._asdict().items():
+        assert np.array_equal(getattr(cells, name), value), name
+    assert field_K.tolist() == rise_K.tolist() == fmu_steps.thermal_screw_rise_K(block)
+
+
+@pytest.mark.parametrize("step_size_s, inputs", [(0.1, [math.nan, 50.0, 20.0]),
+                                                  (0.1, [0.0, math.inf, 20.0]),
+                                                  (0.1, [0.0, 50.0, -math.inf]),
+                                                  (0.1, [1e308, 50.0, 20.0]),
+                                                  (0.0, [1.0, 50.0, 20.0]),
+                                                  (-0.1, [1.0, 50.0, 20.0]),
+                                                  (math.inf, [1.0, 50.0, 20.0]),
+                                                  (6.5, [1.0, 50.0, 20.0])])
+def test_a_declined_thermal_step_leaves_its_block_as_it_was(kernel_library, step_size_s,
+                                                            inputs):
+    """Declined (an input or the nut position not finite, a step size not > 0 and finite,
+    more than 64 sub-steps of 0.1 s): 0 and the block unchanged."""
+    block, _, _ = thermal_block()
+    if inputs[0] == 1e308:  # a finite position and offset, an infinite nut position
+        block[1] = 1e308
+    done, after, _ = block_call(kernel_library, fmu_steps.STEPS["ThermalScrew"], block,
+                                step_size_s, inputs, 3)
+    assert done == 0 and after == block
+
+
+def test_the_compiled_thermal_step_advances_as_the_physics(kernel_library):
+    """Step by step, the compiled step's field equals thermal.advance's to the bit, and its
+    outputs the slave's (thermal_error_um, screw_elongation_um, the peak rise) within 1e-12
+    (the elongation's sum: NumPy's pairwise order against a running sum)."""
+    from feedaxis.physics import thermal
+
+    block, params, rise_K = thermal_block(conductivity_W_mK=4000.0, fixed_end_mm=641.0)
+    rng = np.random.default_rng(11)
+    for h in rng.choice([0.02, 0.1, 0.37, 1.0, 2.5], 200):  # 1 to 58 sub-steps of 0.044 s
+        position_mm, velocity_mm_s = rng.uniform(-200.0, 900.0), rng.normal(0.0, 80.0)
+        ambient_C = rng.normal(21.0, 1.0)
+        done, block, outputs = block_call(kernel_library, fmu_steps.STEPS["ThermalScrew"], block,
+                                          h, [position_mm, velocity_mm_s, ambient_C], 3)
+        rise_K = thermal.advance(params, rise_K, h, 2.5 + position_mm, velocity_mm_s * 60.0)
+        expected = [thermal.thermal_error_um(params, rise_K, 2.5 + position_mm, ambient_C - 21.0),
+                    thermal.screw_elongation_um(params, rise_K, params.length_m), rise_K.max()]
+        assert done == 1
+        assert fmu_steps.thermal_screw_rise_K(block) == rise_K.tolist()
+        np.testing.assert_allclose(outputs, expected, rtol=1e-12, atol=1e-12 * abs(expected[1]))

@@ -299,8 +299,8 @@ def test_thermal_screw_takes_a_tiny_and_a_huge_step(loaded_fmus):
 
 def test_euler_by_powers_equals_the_loop():
     params = thermal.ThermalScrewParams()
-    rates = thermal.rate_matrix(params, 6000.0, thermal.nut_cells(params, 0.3))
-    sources = thermal.source_rate(params, 6000.0, thermal.nut_cells(params, 0.3))
+    rates = thermal.rate_matrix(params, 6000.0, thermal.nut_cells(params.cells, 0.3))
+    sources = thermal.source_rate(params.cells, 6000.0, thermal.nut_cells(params.cells, 0.3))
     rise_K = np.linspace(0.0, 2.0, params.n_cells)
     looped = rise_K.copy()
     for _ in range(500):

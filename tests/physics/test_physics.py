@@ -124,7 +124,7 @@ def test_closed_form_duty_equals_eq10_stepped_with_the_nut_moving(conductivity_W
 def test_averaged_nut_heat_is_the_exact_path_mean():
     params = thermal.ThermalScrewParams()
     path_m = 0.141 + 0.5 * (np.arange(20000) + 0.5) / 20000
-    mean = np.mean([thermal.nut_cells(params, x) for x in path_m], axis=0)
+    mean = np.mean([thermal.nut_cells(params.cells, x) for x in path_m], axis=0)
     np.testing.assert_allclose(thermal.averaged_nut_cells(params, 0.141, 0.641), mean, atol=1e-6)
     assert thermal.averaged_nut_cells(params, 0.641, 0.141).sum() * params.cell_length_m \
         == pytest.approx(params.nut_length_m)
@@ -339,8 +339,8 @@ def test_servo_advance_refuses_a_bad_input_naming_it(bad, name):
 def dense_advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
     """The thermal update as it was written before the tridiagonal form: the dense rate
     matrix, the sources as k3·s_B + k4·s_N, dt from 1/max|A_nn|, θ + dt (A θ + s)."""
-    nut = thermal.nut_cells(params, mounting.screw_coordinate_m(nut_position_mm,
-                                                                params.fixed_end_mm))
+    nut = thermal.nut_cells(params.cells, mounting.screw_coordinate_m(nut_position_mm,
+                                                                      params.fixed_end_mm))
     rates = thermal.rate_matrix(params, feed_mm_min, nut)
     sources = np.tensordot([params.k3_W_per_mm_min, params.k4_W_per_mm_min],
                            thermal.unit_source_rates(params, feed_mm_min, nut), axes=1)

@@ -78,8 +78,8 @@ def euler_unit_fields(params, segments, times_s):
         path_m = thermal.screw_coordinate_m(np.array([segment.from_mm, segment.to_mm]),
                                             params.fixed_end_mm)
         nut = thermal.averaged_nut_cells(params, *path_m)
-        loss_W_K = thermal.convective_loss_W_K(params, feed, nut)
-        dt_s = thermal.stable_time_step_s(params, loss_W_K)
+        loss_W_K = thermal.convective_loss_W_K(params.cells, feed, nut)
+        dt_s = thermal.stable_time_step_s(params.cells, loss_W_K)
         sources_K_s = thermal.unit_source_rates(params, feed, nut)
         steps = int(round(segment.duration_s / dt_s))
         for step in range(steps + 1):
@@ -87,7 +87,7 @@ def euler_unit_fields(params, segments, times_s):
             unit_K[:, at] = state_K[:, None]
             if step < steps:
                 state_K = np.stack([thermal.euler_step(
-                    params, state_K[i], loss_W_K, dt_s / params.cell_heat_capacity_J_K,
+                    params.cells, state_K[i], loss_W_K, dt_s / params.cell_heat_capacity_J_K,
                     dt_s * sources_K_s[i]) for i in range(2)])
     return unit_K
 

@@ -1,7 +1,8 @@
 """Each FMU's step on flat numbers, which the FMU's host layer calls compiled, without Python.
 
 The NpidServo, StepperError and GeometricError FMUs step every macro step; entering Python
-for that costs more than their physics. feedaxis.kernel_build compiles the step functions
+for that costs more than their physics, and ThermalScrew's NumPy calls on its 80 cells cost
+as much again in Python as their arithmetic. feedaxis.kernel_build compiles the step functions
 here with numba's ahead-of-time compiler into the FMUs' compiled module (:mod:`.kernel`) as C
 functions ``int step(double *block, double step_size_s, const double *inputs, double
 *outputs)``: ``block`` holds the parameters and the state (the layout of the FMU's
@@ -12,22 +13,25 @@ slaves' Python steps (compiled by numba: the float branches of :mod:`.scalar` an
 
 A step returns 1 when done, 0 when it declines: a step size that is not finite and > 0, an
 input that is not finite, an output that would not be finite, more internal steps than
-allowed. A declined step leaves the block as it was, so the slave's Python step, which
-says what is wrong, takes it from the same state; an exception inside (none is expected)
-declines too.
+allowed (ThermalScrew: more sub-steps than its Euler loop takes; the Python step takes those
+as a matrix power through NumPy's BLAS, which the compiled module does not carry, faster
+than plain compiled loops would). A declined step leaves the block as it was, so the slave's
+Python step, which says what is wrong or takes the step, takes it from the same state; an
+exception inside (none is expected) declines too.
 """
 from __future__ import annotations
 
 import math
 import types
 
-from . import geometry, motor, mounting, scalar, servo
+from . import geometry, motor, mounting, scalar, servo, thermal
 from .kernel import shipped_kernel
 
 # the symbols of the C functions in the compiled module, by FMU
 STEPS = {"StepperError": "feedaxis_stepper_error_step",
          "GeometricError": "feedaxis_geometric_error_step",
-         "NpidServo": "feedaxis_npid_servo_step"}
+         "NpidServo": "feedaxis_npid_servo_step",
+         "ThermalScrew": "feedaxis_thermal_screw_step"}
 SIGNATURE = "i4(CPointer(f8), f8, CPointer(f8), CPointer(f8))"
 
 
@@ -165,6 +169,77 @@ def npid_servo_step(block, step_size_s, inputs, outputs):
     return 1
 
 
+THERMAL_HEADER = 3  # the block's numbers before the cell terms
+THERMAL_ARRAYS = 6  # thermal.CellTerms: its per-cell arrays first, then its floats
+THERMAL_FLOATS = len(thermal.CellTerms._fields) - THERMAL_ARRAYS
+
+
+def thermal_screw_block(position_offset_mm, reference_ambient_C, cells, rise_K):
+    """ThermalScrew's block: the number of cells, offset (mm), the ambient at which TE_a = 0
+    (°C), the floats of the cell terms (:class:`.thermal.CellTerms`), its per-cell arrays,
+    then the temperature rise per cell (K, its state)."""
+    return [float(rise_K.size), position_offset_mm, reference_ambient_C,
+            *cells[THERMAL_ARRAYS:], *(x for array in cells[:THERMAL_ARRAYS] for x in array),
+            *rise_K]
+
+
+def thermal_screw_cells(values, n):
+    """The :class:`.thermal.CellTerms` in ThermalScrew's block (``values``: its numbers as an
+    array, ``n`` cells), and the rise per cell (K), as views of the block."""
+    floats = values[THERMAL_HEADER:THERMAL_HEADER + THERMAL_FLOATS]
+    start = THERMAL_HEADER + THERMAL_FLOATS
+    cell = values[start:start + (THERMAL_ARRAYS + 1) * n]
+    return (thermal.CellTerms(cell[:n], cell[n:2 * n], cell[2 * n:3 * n], cell[3 * n:4 * n],
+                              cell[4 * n:5 * n], cell[5 * n:6 * n], floats[0], floats[1],
+                              floats[2], floats[3], floats[4], floats[5], floats[6], floats[7],
+                              floats[8], floats[9], floats[10], floats[11], floats[12],
+                              floats[13]),
+            cell[6 * n:])
+
+
+def thermal_screw_rise_K(block):
+    """The temperature rise per cell (K) in ThermalScrew's block."""
+    n = int(block[0])
+    return list(block[len(block) - n:])
+
+
+def thermal_screw_step(block, step_size_s, inputs, outputs):
+    """ThermalScrew: the field advanced as :func:`.thermal.advance` does in at most
+    :data:`.thermal.EULER_LOOP_LIMIT` sub-steps (:func:`.thermal.held_nut_terms`,
+    :func:`.thermal.sub_steps`, :func:`.thermal.euler_steps`), outputs as the slave's: the
+    error at the nut (:func:`.thermal.positioning_error_um` of
+    :func:`.thermal.elongation_at_um`), the free end's elongation, the peak rise."""
+    position_mm = block[1] + inputs[0]
+    feed_mm_min = inputs[1] * 60.0
+    ambient_delta_K = inputs[2] - block[2]
+    if not (0.0 < step_size_s < math.inf
+            and math.isfinite(position_mm + feed_mm_min + ambient_delta_K)):
+        return 0
+    n = int(block[0])
+    cells, rise_K = thermal_screw_cells(
+        numbers(block, THERMAL_HEADER + THERMAL_FLOATS + (THERMAL_ARRAYS + 1) * n), n)
+    _, loss_W_K, sources_K_s, sub_step_s = thermal.held_nut_terms(cells, position_mm,
+                                                                  feed_mm_min)
+    n_sub = thermal.sub_steps(step_size_s, sub_step_s)
+    if not 0 < n_sub <= thermal.EULER_LOOP_LIMIT:
+        return 0
+    advanced_K = thermal.euler_steps(cells, rise_K, loss_W_K, sources_K_s, step_size_s / n_sub,
+                                     n_sub)
+    screw_m = mounting.screw_coordinate_m(position_mm, cells.fixed_end_mm)
+    error_um = thermal.positioning_error_um(
+        cells, thermal.elongation_at_um(cells, advanced_K, screw_m), position_mm,
+        ambient_delta_K)
+    elongation_um = thermal.elongation_at_um(cells, advanced_K, cells.length_m)
+    peak_rise_K = advanced_K.max()
+    if not math.isfinite(error_um + elongation_um + peak_rise_K):
+        return 0
+    rise_K[:] = advanced_K
+    outputs[0] = error_um
+    outputs[1] = elongation_um
+    outputs[2] = peak_rise_K
+    return 1
+
+
 def numbers(block, size):
     """The first ``size`` numbers of ``block`` as an array (numba.carray where compiled;
     bound by :func:`compiled_steps`)."""
@@ -177,6 +252,7 @@ INT64 = None  # numpy.int64 where compiled (compiled_steps)
 def register_float_overloads(numba):
     """Let numba compile the physics for one float: the float branches of
     :func:`.scalar.values`, :func:`.scalar.values_and_module`, :func:`.scalar.clip`,
+    :func:`.scalar.trailing_axis`,
     :func:`.checks.require_positive`, and ``bisect.bisect_right`` over an array (what
     :func:`.scalar.interp_float` takes)."""
     import bisect
@@ -203,6 +279,11 @@ def register_float_overloads(numba):
     def _clip(value, lower, upper):
         if isinstance(value, float_types):
             return lambda value, lower, upper: clip_float(value, lower, upper)
+
+    @overload(scalar.trailing_axis)
+    def _trailing_axis(value):
+        if isinstance(value, float_types):
+            return lambda value: value
 
     @overload(checks.require_positive)
     def _require_positive(name, value):
@@ -240,7 +321,8 @@ def _overloaded():
     """The physics functions numba compiles through :func:`register_float_overloads`."""
     from . import checks
 
-    return {scalar.values, scalar.values_and_module, scalar.clip, checks.require_positive}
+    return {scalar.values, scalar.values_and_module, scalar.clip, scalar.trailing_axis,
+            checks.require_positive}
 
 
 def bound(numba, function, compiled):

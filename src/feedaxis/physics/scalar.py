@@ -44,6 +44,14 @@ def values_and_module(value):
     return np.asarray(value, dtype=float), np
 
 
+def trailing_axis(value):
+    """``value`` as it is when scalar, with a trailing axis when an array (one row per
+    element, against per-cell rows)."""
+    if isinstance(value, SCALAR_TYPES):
+        return value
+    return value[..., None]
+
+
 def clip(value, lower, upper):
     """``value`` limited to [lower, upper] (element-wise for arrays), as ``np.clip``: NaN
     stays NaN. A scalar is compared, not passed through min and max (half the cost: this

@@ -28,20 +28,37 @@ import numpy as np
 from .checks import (ParameterError, require_finite, require_non_negative, require_positive,
                      require_representable)
 from .mounting import axis_sign, screw_coordinate_m
-from .scalar import is_scalar, values
+from .scalar import is_scalar, trailing_axis, values
 from .threads import one_blas_thread
 
 
 class CellTerms(NamedTuple):
-    """What the cells of one screw keep whatever the feed and the nut (Eq. 5-10)."""
+    """What the cells of one screw keep whatever the feed and the nut (Eq. 5-10), and the
+    parameters a step reads (under their names in :class:`ThermalScrewParams`): the numbers
+    the functions of one explicit step take (:func:`advance`, :func:`thermal_error_um` at one
+    point). Arrays and floats only: ThermalScrew's compiled step (:mod:`.fmu_steps`)
+    rebuilds it from its block of numbers and calls the same functions."""
 
     lower_m: np.ndarray  # cell start from the fixed end
     upper_m: np.ndarray  # cell end
     bearing_fraction: np.ndarray  # under the fixed-end bearing
-    conductance_W_K: float  # λ·A_s/dx between neighbours
     neighbours_W_K: np.ndarray  # conduction to the neighbours per cell (one at either end)
     exposed_area_m2: np.ndarray  # lateral surface not under the bearing (Eq. 7)
     bearing_share: np.ndarray  # dx/L_B on the bearing's cells: the share of Q_B each takes (Eq. 10)
+    conductance_W_K: float  # λ·A_s/dx between neighbours
+    area_m2: float  # A_s (Eq. 5)
+    cell_heat_capacity_J_K: float  # C (Eq. 8)
+    length_m: float
+    cell_length_m: float
+    nut_length_m: float
+    time_step_s: float
+    k1_W_m2K_per_mm_min: float
+    k2_W_m2K: float
+    k3_W_per_mm_min: float
+    k4_W_per_mm_min: float
+    expansion_per_K: float
+    fixed_end_mm: float
+    ambient_reference_offset_mm: float
 
 
 # Cells of the finite-difference screw: a 100 m screw (the longest a case may describe) in
@@ -117,18 +134,6 @@ class ThermalScrewParams:
         """C = ρ·c·A_s·dx of one cell (Eq. 8)."""
         return self.density_kg_m3 * self.specific_heat_J_kgK * self.area_m2 * self.cell_length_m
 
-    def convection_W_m2K(self, feed_mm_min):
-        """h = k1·v + k2 (Eq. 17)."""
-        return self.k1_W_m2K_per_mm_min * abs(feed_mm_min) + self.k2_W_m2K
-
-    def bearing_heat_W(self, feed_mm_min):
-        """Q_B = k3·v (Eq. 18)."""
-        return self.k3_W_per_mm_min * abs(feed_mm_min)
-
-    def nut_heat_W(self, feed_mm_min):
-        """Q_N = k4·v (Eq. 19)."""
-        return self.k4_W_per_mm_min * abs(feed_mm_min)
-
     @cached_property
     def cells(self):
         """:class:`CellTerms`, computed once per parameter set (the instance is frozen)."""
@@ -139,9 +144,29 @@ class ThermalScrewParams:
         conductance_W_K = self.conductivity_W_mK * self.area_m2 / self.cell_length_m
         neighbours_W_K = np.full(n, 2.0 * conductance_W_K)
         neighbours_W_K[[0, -1]] = conductance_W_K
-        return CellTerms(lower_m, upper_m, bearing, conductance_W_K, neighbours_W_K,
+        return CellTerms(lower_m, upper_m, bearing, neighbours_W_K,
                          np.pi * self.diameter_m * self.cell_length_m * (1.0 - bearing),
-                         self.cell_length_m / self.bearing_length_m * bearing)
+                         self.cell_length_m / self.bearing_length_m * bearing, conductance_W_K,
+                         self.area_m2, self.cell_heat_capacity_J_K, self.length_m,
+                         self.cell_length_m, self.nut_length_m, self.time_step_s,
+                         self.k1_W_m2K_per_mm_min, self.k2_W_m2K, self.k3_W_per_mm_min,
+                         self.k4_W_per_mm_min, self.expansion_per_K, self.fixed_end_mm,
+                         self.ambient_reference_offset_mm)
+
+
+def convection_W_m2K(cells, feed_mm_min):
+    """h = k1·v + k2 (Eq. 17); ``cells``: :class:`CellTerms`."""
+    return cells.k1_W_m2K_per_mm_min * abs(feed_mm_min) + cells.k2_W_m2K
+
+
+def bearing_heat_W(cells, feed_mm_min):
+    """Q_B = k3·v (Eq. 18)."""
+    return cells.k3_W_per_mm_min * abs(feed_mm_min)
+
+
+def nut_heat_W(cells, feed_mm_min):
+    """Q_N = k4·v (Eq. 19)."""
+    return cells.k4_W_per_mm_min * abs(feed_mm_min)
 
 
 def bearing_cells(params):
@@ -149,11 +174,11 @@ def bearing_cells(params):
     return params.cells.bearing_fraction
 
 
-def nut_cells(params, nut_screw_m):
-    """Fraction of each cell under the nut centred at ``nut_screw_m`` from the fixed end."""
-    half_m = params.nut_length_m / 2.0
-    cells = params.cells
-    return _overlap(cells.lower_m, cells.upper_m, params.cell_length_m, nut_screw_m - half_m,
+def nut_cells(cells, nut_screw_m):
+    """Fraction of each cell under the nut centred at ``nut_screw_m`` from the fixed end;
+    ``cells``: :class:`CellTerms` (``params.cells``)."""
+    half_m = cells.nut_length_m / 2.0
+    return _overlap(cells.lower_m, cells.upper_m, cells.cell_length_m, nut_screw_m - half_m,
                     nut_screw_m + half_m)
 
 
@@ -167,7 +192,7 @@ def averaged_nut_cells(params, from_screw_m, to_screw_m):
     r = max(·, 0).
     """
     if np.isclose(from_screw_m, to_screw_m):
-        return nut_cells(params, from_screw_m)
+        return nut_cells(params.cells, from_screw_m)
     lower_m, upper_m = params.cells.lower_m, params.cells.upper_m
 
     def antiderivative(z_m):
@@ -192,34 +217,31 @@ def rate_matrix(params, feed_mm_min, nut_fraction):
     on the diagonal. A is symmetric.
     """
     coupling = np.full(params.n_cells - 1, params.cells.conductance_W_K)
-    diagonal = (-convective_loss_W_K(params, feed_mm_min, nut_fraction)
+    diagonal = (-convective_loss_W_K(params.cells, feed_mm_min, nut_fraction)
                 - np.concatenate((coupling, [0.0])) - np.concatenate(([0.0], coupling)))
     return ((np.diag(diagonal) + np.diag(coupling, 1) + np.diag(coupling, -1))
             / params.cell_heat_capacity_J_K)
 
 
-def convective_loss_W_K(params, feed_mm_min, nut_fraction):
+def convective_loss_W_K(cells, feed_mm_min, nut_fraction):
     """Conductance to ambient per cell (W/K): h on the lateral surface not under the bearing
-    or the nut (Eq. 7), plus the free-end face (Eq. 6, n = N).
+    or the nut (Eq. 7), plus the free-end face (Eq. 6, n = N); ``cells``: :class:`CellTerms`.
 
     ``feed_mm_min`` may be an array of steps, ``nut_fraction`` then one row per step.
     """
-    h_W_m2K = params.convection_W_m2K(values(feed_mm_min))
-    h_cells_W_m2K = h_W_m2K if is_scalar(h_W_m2K) else h_W_m2K[..., None]
-    loss_W_K = h_cells_W_m2K * params.cells.exposed_area_m2 * (1.0 - nut_fraction)
-    loss_W_K[..., -1] += h_W_m2K * params.area_m2
+    h_W_m2K = convection_W_m2K(cells, values(feed_mm_min))
+    loss_W_K = trailing_axis(h_W_m2K) * cells.exposed_area_m2 * (1.0 - nut_fraction)
+    loss_W_K[..., -1] += h_W_m2K * cells.area_m2
     return loss_W_K
 
 
-def source_rate(params, feed_mm_min, nut_fraction):
+def source_rate(cells, feed_mm_min, nut_fraction):
     """Source vector s (K/s): Q_B/L_B and Q_N/L_N per cell length (Eq. 7, 10, 18, 19);
-    one row per step for an array of feeds."""
+    one row per step for an array of feeds; ``cells``: :class:`CellTerms`."""
     feed_mm_min = values(feed_mm_min)
-    bearing_W, nut_W = params.bearing_heat_W(feed_mm_min), params.nut_heat_W(feed_mm_min)
-    if not is_scalar(feed_mm_min):
-        bearing_W, nut_W = bearing_W[..., None], nut_W[..., None]
-    return (bearing_W * params.cells.bearing_share + nut_W * params.cell_length_m
-            / params.nut_length_m * nut_fraction) / params.cell_heat_capacity_J_K
+    return (trailing_axis(bearing_heat_W(cells, feed_mm_min)) * cells.bearing_share
+            + trailing_axis(nut_heat_W(cells, feed_mm_min)) * cells.cell_length_m
+            / cells.nut_length_m * nut_fraction) / cells.cell_heat_capacity_J_K
 
 
 def unit_source_rates(params, feed_mm_min, nut_fraction):
@@ -231,22 +253,24 @@ def unit_source_rates(params, feed_mm_min, nut_fraction):
     return np.stack(per_unit) * (per_cell_W / params.cell_heat_capacity_J_K)
 
 
-def stable_time_step_s(params, loss_W_K):
+def stable_time_step_s(cells, loss_W_K):
     """Largest explicit step keeping every update a convex combination (no overshoot).
 
     dt ≤ 1 / max|A_nn| = C / max(loss + conduction to the neighbours) for the convective
-    loss ``loss_W_K`` (:func:`convective_loss_W_K`), capped by ``params.time_step_s``.
+    loss ``loss_W_K`` (:func:`convective_loss_W_K`), capped by ``cells.time_step_s``
+    (``cells``: :class:`CellTerms`).
     """
-    return min(params.time_step_s, params.cell_heat_capacity_J_K
-               / float((loss_W_K + params.cells.neighbours_W_K).max()))
+    return min(cells.time_step_s, cells.cell_heat_capacity_J_K
+               / float((loss_W_K + cells.neighbours_W_K).max()))
 
 
-def euler_step(params, rise_K, loss_W_K, rate_step_K_J, heat_step_K):
+def euler_step(cells, rise_K, loss_W_K, rate_step_K_J, heat_step_K):
     """One explicit Euler update θ + dt·(A θ + s) of Eq. 10 on the tridiagonal A.
 
     Parameters
     ----------
-    params : ThermalScrewParams
+    cells : CellTerms
+        ``params.cells``.
     rise_K : ndarray
         θ per cell (K).
     loss_W_K : ndarray
@@ -256,7 +280,7 @@ def euler_step(params, rise_K, loss_W_K, rate_step_K_J, heat_step_K):
     heat_step_K : ndarray
         dt·s, the source over the step (K).
     """
-    flow_W = params.cells.conductance_W_K * (rise_K[1:] - rise_K[:-1])
+    flow_W = cells.conductance_W_K * (rise_K[1:] - rise_K[:-1])
     net_W = -loss_W_K * rise_K
     net_W[:-1] += flow_W
     net_W[1:] -= flow_W
@@ -291,23 +315,48 @@ def advance(params, rise_K, duration_s, nut_position_mm, feed_mm_min):
     require_finite("feed_mm_min", feed_mm_min)
     if duration_s == 0.0:
         return rise_K
-    nut_fraction = nut_cells(params, screw_coordinate_m(nut_position_mm, params.fixed_end_mm))
-    loss_W_K = convective_loss_W_K(params, feed_mm_min, nut_fraction)
-    sources_K_s = source_rate(params, feed_mm_min, nut_fraction)
-    sub_step_s = stable_time_step_s(params, loss_W_K)
-    if not duration_s / sub_step_s <= MAX_SUB_STEPS:
+    cells = params.cells
+    nut_fraction, loss_W_K, sources_K_s, sub_step_s = held_nut_terms(cells, nut_position_mm,
+                                                                     feed_mm_min)
+    n_sub = sub_steps(duration_s, sub_step_s)
+    if n_sub == 0:
         raise ParameterError(f"a step of {duration_s} s needs {duration_s / sub_step_s:.3g} "
                              f"sub-steps of {sub_step_s:.3g} s (time_step_s or the stability "
                              f"limit C / (loss + conduction)), at most {MAX_SUB_STEPS:.0e}",
                              "time_step_s")
-    n_sub = max(1, math.ceil(duration_s / sub_step_s - 1e-9))
     dt_s = duration_s / n_sub
     if n_sub > EULER_LOOP_LIMIT:
         return _euler_steps_by_powers(rate_matrix(params, feed_mm_min, nut_fraction),
                                       sources_K_s, rise_K, dt_s, n_sub)
-    rate_step_K_J, heat_step_K = dt_s / params.cell_heat_capacity_J_K, dt_s * sources_K_s
-    for _ in range(n_sub):
-        rise_K = euler_step(params, rise_K, loss_W_K, rate_step_K_J, heat_step_K)
+    return euler_steps(cells, rise_K, loss_W_K, sources_K_s, dt_s, n_sub)
+
+
+def held_nut_terms(cells, nut_position_mm, feed_mm_min):
+    """What :func:`advance` steps with, the nut held at ``nut_position_mm`` (axis, mm) at
+    ``feed_mm_min``: (the nut's fraction of each cell, :func:`convective_loss_W_K` (W/K),
+    :func:`source_rate` (K/s), :func:`stable_time_step_s` (s)); ``cells``:
+    :class:`CellTerms`."""
+    nut_fraction = nut_cells(cells, screw_coordinate_m(nut_position_mm, cells.fixed_end_mm))
+    loss_W_K = convective_loss_W_K(cells, feed_mm_min, nut_fraction)
+    return (nut_fraction, loss_W_K, source_rate(cells, feed_mm_min, nut_fraction),
+            stable_time_step_s(cells, loss_W_K))
+
+
+def sub_steps(duration_s, sub_step_s):
+    """How many equal sub-steps of at most ``sub_step_s`` (s) :func:`advance` takes over
+    ``duration_s`` (s) > 0: at least one; 0 where more than :data:`MAX_SUB_STEPS` (or no
+    finite number) would be needed."""
+    if not duration_s / sub_step_s <= MAX_SUB_STEPS:
+        return 0
+    return max(1, math.ceil(duration_s / sub_step_s - 1e-9))
+
+
+def euler_steps(cells, rise_K, loss_W_K, sources_K_s, dt_s, n_steps):
+    """``n_steps`` explicit Euler updates of ``dt_s`` (s) (:func:`euler_step`) with the
+    loss (W/K) and the sources (K/s) held; ``cells``: :class:`CellTerms`."""
+    rate_step_K_J, heat_step_K = dt_s / cells.cell_heat_capacity_J_K, dt_s * sources_K_s
+    for _ in range(n_steps):
+        rise_K = euler_step(cells, rise_K, loss_W_K, rate_step_K_J, heat_step_K)
     return rise_K
 
 
@@ -336,7 +385,7 @@ def screw_elongation_um(params, rise_K, screw_coord_m):
     ``rise_K`` may be 2-D (time × cells); the result then has one row per time.
     """
     if is_scalar(screw_coord_m) and np.ndim(rise_K) == 1:
-        return _elongation_at_um(params, rise_K, screw_coord_m)
+        return elongation_at_um(params, rise_K, screw_coord_m)
     cumulative_um = _cumulative_elongation_um(params, rise_K)
     nodes_m = np.arange(params.n_cells + 1) * params.cell_length_m
     x = np.clip(np.asarray(screw_coord_m, dtype=float), 0.0, params.length_m)
@@ -344,11 +393,12 @@ def screw_elongation_um(params, rise_K, screw_coord_m):
     return result[0] if result.shape[0] == 1 else result
 
 
-def _elongation_at_um(params, rise_K, screw_m):
+def elongation_at_um(params, rise_K, screw_m):
     """:func:`screw_elongation_um` of one field at one point, without arrays: the cells
-    below the point in full, the one it is in by its fraction (Eq. 11-14), in µm."""
+    below the point in full, the one it is in by its fraction (Eq. 11-14), in µm;
+    ``params``: ThermalScrewParams or its :class:`CellTerms`."""
     cells = min(max(screw_m, 0.0), params.length_m) / params.cell_length_m
-    lower = min(int(cells), params.n_cells - 1)
+    lower = min(int(cells), rise_K.size - 1)
     within_K = float(rise_K[:lower].sum()) + min(cells - lower, 1.0) * float(rise_K[lower])
     return params.expansion_per_K * params.cell_length_m * 1e6 * within_K
 
@@ -372,7 +422,8 @@ def ambient_error_um(params, position_mm, ambient_delta_K):
     zero is the screw's fixed end. A screw held in its fixed bearing grows from there, so
     the nut moves by α·ΔT_a·(X - P_f) on either side of it (P_f of either sign, the same
     s = ±(X - P_f) of Eq. 15-16); ``ambient_reference_offset_mm`` moves the reference
-    (a scale or a mount that grows too).
+    (a scale or a mount that grows too). ``params``: ThermalScrewParams or its
+    :class:`CellTerms`.
     """
     reference_mm = params.fixed_end_mm + params.ambient_reference_offset_mm
     return (params.expansion_per_K * values(ambient_delta_K)
@@ -386,11 +437,18 @@ def thermal_error_um(params, rise_K, position_mm, ambient_delta_K=0.0):
     With a 1-D ``rise_K`` (one field) the error at every position; with a 2-D ``rise_K``
     holding one field per sample, the error of sample k at ``position_mm[k]``.
     """
-    sign = axis_sign(params.fixed_end_mm)
     screw_m = screw_coordinate_m(position_mm, params.fixed_end_mm)
     rise_K = np.asarray(rise_K, dtype=float)
     elongation = (screw_elongation_um if rise_K.ndim == 1 else sample_elongation_um)
-    return (sign * elongation(params, rise_K, screw_m)
+    return positioning_error_um(params, elongation(params, rise_K, screw_m), position_mm,
+                                ambient_delta_K)
+
+
+def positioning_error_um(params, elongation_um, position_mm, ambient_delta_K):
+    """TE(P_x) = ±TE_m + TE_a (Rong et al. 2023 Eq. 2, 15, 16), in µm, from the screw's
+    elongation TE_m at the nut (µm); ``params``: ThermalScrewParams or its
+    :class:`CellTerms`."""
+    return (axis_sign(params.fixed_end_mm) * elongation_um
             + ambient_error_um(params, position_mm, ambient_delta_K))
 
 
@@ -518,7 +576,8 @@ def _path_modes(params, feed_mm_min, from_mm, to_mm):
     rates, vectors = np.linalg.eigh(rate_matrix(params, feed_mm_min, nut_fraction))
     steady_K = -((unit_source_rates(params, feed_mm_min, nut_fraction) @ vectors) / rates) \
         @ vectors.T
-    dt_s = stable_time_step_s(params, convective_loss_W_K(params, feed_mm_min, nut_fraction))
+    dt_s = stable_time_step_s(params.cells,
+                              convective_loss_W_K(params.cells, feed_mm_min, nut_fraction))
     return PathModes(vectors, 1.0 + dt_s * rates, steady_K, dt_s)
 
 
@@ -704,8 +763,8 @@ def explicit_duty(params, segments, times_s, block=4096):
     """
     times_s = np.asarray(times_s, dtype=float)
     fastest = max(abs(s.feed_mm_min) for s in segments)
-    dt_s = stable_time_step_s(params,
-                              convective_loss_W_K(params, fastest, np.zeros(params.n_cells)))
+    cells = params.cells
+    dt_s = stable_time_step_s(cells, convective_loss_W_K(cells, fastest, np.zeros(params.n_cells)))
     step_times_s = np.arange(int(np.ceil(segments[-1].end_s / dt_s)) + 1) * dt_s
     owner = np.clip(np.searchsorted([s.end_s for s in segments], step_times_s, side="right"),
                     0, len(segments) - 1)
@@ -723,16 +782,15 @@ def explicit_duty(params, segments, times_s, block=4096):
     last_step = wanted.max(initial=0)
     for first in range(0, last_step + 1, block):
         steps = np.arange(first, min(first + block, last_step + 1))
-        loss_W_K, heat_K_s = _explicit_terms(params, feed[steps], nut_m[steps])
+        loss_W_K, heat_K_s = _explicit_terms(cells, feed[steps], nut_m[steps])
         for k, loss, heat in zip(steps, loss_W_K, heat_K_s):
             if k in samples_at:
                 fields_K[samples_at[k]] = rise_K
-            rise_K = euler_step(params, rise_K, loss, rate_step_K_J, dt_s * heat)
+            rise_K = euler_step(cells, rise_K, loss, rate_step_K_J, dt_s * heat)
     return fields_K
 
 
-def _explicit_terms(params, feed_mm_min, nut_m):
+def _explicit_terms(cells, feed_mm_min, nut_m):
     """Convective loss (W/K) and source rate (K/s) per cell for a block of steps (Eq. 5-10)."""
-    nut = nut_cells(params, nut_m[:, None])
-    return (convective_loss_W_K(params, feed_mm_min, nut),
-            source_rate(params, feed_mm_min, nut))
+    nut = nut_cells(cells, nut_m[:, None])
+    return convective_loss_W_K(cells, feed_mm_min, nut), source_rate(cells, feed_mm_min, nut)
