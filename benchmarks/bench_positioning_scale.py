@@ -167,11 +167,12 @@ def run(arguments_, source=None):
     return run_command([sys.executable, "-m", "feedaxis", *arguments_], env=environment)
 
 
-def measure(folder, repeats, baseline):
-    """{(name, "new" | "old"): [Command]}: every command, the old and new in turn."""
+def measure(commands_, repeats, baseline):
+    """{(name, "new" | "old"): [Command]}: every command of ``commands_`` ({name: its
+    arguments}, run in their order), the old and new in turn."""
     runs = {}
     for _ in range(repeats):
-        for name, arguments_ in commands(folder).items():
+        for name, arguments_ in commands_.items():
             for label, source in (("old", baseline), ("new", None)):
                 if label == "old" and not baseline:
                     continue
@@ -179,13 +180,28 @@ def measure(folder, repeats, baseline):
     return runs
 
 
-def line(name, label, done):
+def line(name, label, done, cpu_target_s=CPU_TARGET_S, memory_target_mb=MEMORY_TARGET_MB):
+    """(median CPU s, largest peak RSS MB, the line printing them against the targets)."""
     cpu = statistics.median(c.cpu_s for c in done)
+    system = statistics.median(c.system_s for c in done)
     peak = max(c.peak_mb for c in done)
     wall = statistics.median(c.wall_s for c in done)
-    return (cpu, peak, f"  {name:9s} {label:4s} CPU {cpu:7.1f} s ({cpu / CPU_TARGET_S:4.2f} of "
-                       f"{CPU_TARGET_S:.0f} s)  peak RSS {peak:6.0f} MB ({peak / MEMORY_TARGET_MB:4.2f}"
-                       f" of {MEMORY_TARGET_MB:.0f} MB)  wall {wall:7.1f} s")
+    return (cpu, peak, f"  {name:9s} {label:4s} CPU {cpu:7.1f} s ({cpu / cpu_target_s:4.2f} of "
+                       f"{cpu_target_s:.0f} s; system {system:5.1f} s)  peak RSS {peak:6.0f} MB "
+                       f"({peak / memory_target_mb:4.2f} of {memory_target_mb:.0f} MB)  wall "
+                       f"{wall:7.1f} s")
+
+
+def print_runs(names, runs, baseline, **targets):
+    """Each command's line (old beside new with ``baseline``, and their ratios)."""
+    for name in names:
+        new_cpu, new_peak, text = line(name, "new", runs[name, "new"], **targets)
+        print(text)
+        if baseline:
+            old_cpu, old_peak, text = line(name, "old", runs[name, "old"], **targets)
+            print(text)
+            print(f"  {name:9s} old / new: CPU {old_cpu / new_cpu:.2f}, peak RSS "
+                  f"{old_peak / new_peak:.2f}")
 
 
 def main(argv=None):
@@ -200,18 +216,11 @@ def main(argv=None):
         folder = Path(folder)
         write_case_folder(folder / "case", args.rows, args.targets)
         size_mb = (folder / "case" / "positioning.csv").stat().st_size / 1e6
-        runs = measure(folder, args.repeats, args.baseline_src)
+        runs = measure(commands(folder), args.repeats, args.baseline_src)
     print(f"{args.rows:,} positioning rows ({args.targets:,} targets x bidirectional runs, "
           f"positioning.csv {size_mb:.0f} MB); medians of {args.repeats} run(s), peak the "
           "largest")
-    for name in commands(Path(".")):
-        new_cpu, new_peak, text = line(name, "new", runs[name, "new"])
-        print(text)
-        if args.baseline_src:
-            old_cpu, old_peak, text = line(name, "old", runs[name, "old"])
-            print(text)
-            print(f"  {name:9s} old / new: CPU {old_cpu / new_cpu:.2f}, peak RSS "
-                  f"{old_peak / new_peak:.2f}")
+    print_runs(commands(Path(".")), runs, args.baseline_src)
 
 
 if __name__ == "__main__":

@@ -53,13 +53,15 @@ def rate(count, trials):
     return f"{count:3d}/{trials} ({100 * count / trials:5.2f} %, 95 % {100 * low:.2f}-{100 * high:.2f})"
 class Command(NamedTuple):
     """What one command cost and printed: wall and CPU seconds (its own and its reaped
-    children's, as wait4 gives them), peak resident memory (MB), its output."""
+    children's, as wait4 gives them: user + system, and the system's part), peak resident
+    memory (MB), its output."""
 
     wall_s: float
     cpu_s: float
     peak_mb: float
     stdout: str
     stderr: str
+    system_s: float
 
 
 def run_command(command, env=None):
@@ -76,7 +78,7 @@ def run_command(command, env=None):
     if os.waitstatus_to_exitcode(status):
         raise RuntimeError(f"{' '.join(command[2:5])} failed: {stderr.strip().splitlines()[-1:]}")
     return Command(wall_s, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, stdout,
-                   stderr)
+                   stderr, usage.ru_stime)
 
 
 def machine():

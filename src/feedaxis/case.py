@@ -366,15 +366,18 @@ def range_problem(key, value):
     return f"is beyond any physical axis: expected {low:g} to {high:g}"
 
 
-def _read_csv(path, spec):
+def _read_csv(path, spec, bytes_per_row=None):
     """Read a CSV of the format: header row, '#' comment lines, numeric fields only.
 
     The numbers are parsed by NumPy's C reader; a file it cannot take as one table is read
-    again line by line to name the first bad cell. Returns ({column: float array} for the
-    columns present, the data rows' :class:`RowLabels`).
+    again line by line to name the first bad cell; a file whose analysis would not fit at
+    ``bytes_per_row`` (the kind's figure, default ``ANALYSIS_BYTES_PER_ROW``) is refused
+    before (:func:`check_fits_in_memory`).
+    Returns ({column: float array} for the columns present, the data rows'
+    :class:`RowLabels`).
     """
     path = Path(path)
-    check_fits_in_memory(path)
+    check_fits_in_memory(path, bytes_per_row=bytes_per_row)
     plain = _plain_header(path)
     if plain is None:
         text = _lf_text(path)
@@ -401,13 +404,14 @@ def _read_csv(path, spec):
     return values, rows
 
 
-# Peak memory of the heaviest command per row of a case file: on 10^7 positioning rows
+# Peak memory of the heaviest command per row of a positioning.csv: on 10^7 positioning rows
 # (1,000 targets x 5,000 bidirectional runs, benchmarks/bench_positioning_scale.py)
 # diagnose peaked at up to 2,555 MB resident and report at up to 2,507 MB, at most 240
 # bytes a row above the interpreter's own 150 MB (report on 10^6 rows: 234); since issue
 # 35's bounded memory 1,429 and 1,458 MB (about 140 bytes a row), the figure kept for the
-# kinds whose analysis was not measured so; the text read is held up to three times more
-# (line ends normalised) while it is parsed.
+# kinds whose analysis was not measured so (a kind measured passes its own to _read_csv:
+# feedaxis.measurement.tracking); the text read is held up to three times more (line ends
+# normalised) while it is parsed.
 ANALYSIS_BYTES_PER_ROW = 250
 TEXT_COPIES = 3
 SAMPLE_BYTES = 1 << 16  # the file's start, from which its rows are counted
@@ -415,12 +419,13 @@ MEMORY_LIMIT_VARIABLE = "FEEDAXIS_MEMORY_LIMIT_MB"  # a lower limit than the mac
 READ_CHUNK_BYTES = 1 << 24  # a large CSV is checked in chunks of this many bytes
 
 
-def check_fits_in_memory(path, available_bytes=None):
+def check_fits_in_memory(path, available_bytes=None, bytes_per_row=None):
     """Refuse (:class:`CaseError`) a CSV whose reading and analysis would not fit in the
     memory the machine has available (or the limit ``FEEDAXIS_MEMORY_LIMIT_MB`` sets),
     before reading it: its rows estimated from its size and the lines of its first 64 kB,
-    each row costing ``ANALYSIS_BYTES_PER_ROW``, and its text ``TEXT_COPIES`` times where
-    that start shows it is read whole (comments, blank lines, CR line ends)."""
+    each row costing ``bytes_per_row`` (its kind's analysis at its peak; default
+    ``ANALYSIS_BYTES_PER_ROW``), and its text ``TEXT_COPIES`` times where that start shows
+    it is read whole (comments, blank lines, CR line ends)."""
     size = path.stat().st_size if path.is_file() else 0
     if size <= SAMPLE_BYTES:
         return
@@ -428,7 +433,8 @@ def check_fits_in_memory(path, available_bytes=None):
         start = stream.read(SAMPLE_BYTES)
     rows = size * max(start.count(b"\n"), 1) / len(start)
     whole = any(mark in start for mark in (b"#", b"\r", b"\n\n"))
-    needed = (TEXT_COPIES * size if whole else 0) + rows * ANALYSIS_BYTES_PER_ROW
+    per_row = ANALYSIS_BYTES_PER_ROW if bytes_per_row is None else bytes_per_row
+    needed = (TEXT_COPIES * size if whole else 0) + rows * per_row
     available, where = memory_limit()
     available = available if available_bytes is None else available_bytes
     if available is not None and needed > available:

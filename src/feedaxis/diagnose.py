@@ -436,7 +436,10 @@ def _screened_residual(measurement, left, effect, exact=False):
     jacobian = left.jacobian if left.jacobian is not None else Problem(
         left.model, [measurement]).jacobian(ParameterLayout(left.model, measurement.case.axis))(
         ParameterLayout(left.model, measurement.case.axis).start())
-    design = np.column_stack([-jacobian, *columns])
+    design = np.empty((jacobian.shape[0], jacobian.shape[1] + len(columns)))
+    np.negative(jacobian, out=design[:, :jacobian.shape[1]])  # no negated copy beside it
+    for at, column in enumerate(columns, start=jacobian.shape[1]):
+        design[:, at] = column
     residual = measurement.measured_um - base_um
     return residual - design @ np.linalg.lstsq(design, residual, rcond=None)[0]
 

@@ -74,7 +74,8 @@ class FitResult:
     at the optimum (samples x parameters in the model's order), kept where the model has
     parameters that enter nonlinearly (for the diagnosis's linearised screening).
     ``plain`` is the fit of the same samples without the measurement's nuisances, where
-    :func:`fit_with_artefacts` fitted them beside the effects (for their test).
+    :func:`fit_with_artefacts` fitted them beside the effects (for their test; its
+    Jacobian let go).
     """
 
     model: Model
@@ -277,6 +278,7 @@ def fit_with_artefacts(model, data, progress=None, kind=None):
     if with_nuisances is not result.model and not too_few_samples(with_nuisances,
                                                                    [measurement]):
         plain = result
+        plain.jacobian = None  # only its residual is used again (the nuisances' test)
         result = fit(with_nuisances, measurement, progress)
         result.plain = plain
     result.artefacts = {**artefacts, **measurement.artefacts(result)}
@@ -364,12 +366,13 @@ class Problem:
 
         def jacobian(x):
             base_um, columns_um = self._split_at(layout, x)
-            here_um = base_um + columns_um @ x[layout.linear_index]
-            matrix = np.empty((here_um.size, layout.size))
-            matrix[:, layout.linear_index] = -columns_um
+            matrix = np.empty((base_um.size, layout.size))
+            matrix[:, layout.linear_index] = columns_um
             if exact and nonlinear.size:
-                matrix[:, nonlinear] = -self.core_derivatives(layout, x)
-                return matrix
+                matrix[:, nonlinear] = self.core_derivatives(layout, x)
+                return np.negative(matrix, out=matrix)  # no negated copy of either part
+            np.negative(matrix, out=matrix)
+            here_um = base_um + columns_um @ x[layout.linear_index]
             for index in nonlinear:
                 step = FD_STEP * max(1.0, abs(x[index]))
                 if x[index] + step > layout.upper[index]:
@@ -447,11 +450,11 @@ def variable_projection(problem, layout):
         linear parameters inside their bounds (those at a bound stay there)."""
         if not np.array_equal(x[nonlinear], x_nonlinear):
             project(x_nonlinear)
-        derivatives = problem.core_derivatives(layout, x)
+        derivatives = problem.core_derivatives(layout, x)  # an array of its own
         free = last["columns_um"][:, last["free"]]
         if free.shape[1]:
-            derivatives = derivatives - free @ np.linalg.lstsq(free, derivatives, rcond=None)[0]
-        return -derivatives
+            derivatives -= free @ np.linalg.lstsq(free, derivatives, rcond=None)[0]
+        return np.negative(derivatives, out=derivatives)
 
     if nonlinear.size:
         solution = least_squares(project, x[nonlinear], bounds=(lower[nonlinear],

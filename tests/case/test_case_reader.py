@@ -250,6 +250,53 @@ def test_the_memory_limit_variable_refuses_a_case_by_its_size(tmp_path):
         assert wrong.returncode == 2 and "FEEDAXIS_MEMORY_LIMIT_MB" in wrong.stderr
 
 
+def _tracking_case(folder, rows):
+    """A tracking case of ``rows`` samples at 1 ms (a 1 Hz sine followed exactly)."""
+    folder.mkdir()
+    (folder / "axis.toml").write_text(
+        'name = "trace"\n\n[screw]\nlead_mm = 10.0\n\n[servo]\ncontroller = "pid"\n'
+        "kp_V_per_mm = 0.9\nki_V_per_mm_s = 0.0006\nkd_V_s_per_mm = 0.005\n"
+        "force_constant_N_per_V = 100.0\nloop_step_s = 0.0001\n")
+    time_s = np.arange(rows) * 1e-3
+    reference_mm = 10.0 * np.sin(2 * np.pi * time_s)
+    lines = [f"{t:.3f},{r:.6f},{r:.6f}" for t, r in zip(time_s, reference_mm)]
+    (folder / "tracking.csv").write_text("time_s,reference_mm,actual_mm\n" + "\n".join(lines)
+                                         + "\n")
+
+
+def test_a_tracking_case_is_refused_by_its_own_cost_of_a_row(tmp_path, monkeypatch):
+    """tracking.csv is estimated at the tracking analysis's own bytes a row, not the
+    positioning figure: a limit between the two refuses it (the size, the limit, the
+    file named; exit 2, nothing printed on stdout), one above its own accepts it."""
+    import feedaxis.case as case_module
+    import feedaxis.measurement.tracking as tracking_module
+
+    rows = 5_000
+    _tracking_case(tmp_path / "trace", rows)
+    per_row = tracking_module.ANALYSIS_BYTES_PER_ROW
+    assert per_row > 2 * case_module.ANALYSIS_BYTES_PER_ROW
+    between = rows * (per_row + case_module.ANALYSIS_BYTES_PER_ROW) / 2
+    monkeypatch.setattr(case_module, "available_memory_bytes", lambda: between)
+    with pytest.raises(case_module.CaseError) as refused:
+        case_module.read_case(tmp_path / "trace")
+    assert "tracking.csv" in str(refused.value) and f"{between / 1e9:.3g} GB available" in \
+        str(refused.value)
+    monkeypatch.setattr(case_module, "available_memory_bytes", lambda: 1.1 * rows * per_row)
+    assert case_module.read_case(tmp_path / "trace").tracking.time_s.size == rows
+    monkeypatch.undo()
+
+    def compare(limit_mb):
+        environment = {**os.environ, "FEEDAXIS_MEMORY_LIMIT_MB": f"{limit_mb:.6g}"}
+        return subprocess.run([sys.executable, "-m", "feedaxis", "compare",
+                               str(tmp_path / "trace")], capture_output=True, text=True,
+                              env=environment, timeout=300)
+
+    refused = compare(between / 1e6)
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert "tracking.csv" in refused.stderr and "FEEDAXIS_MEMORY_LIMIT_MB allows" in refused.stderr
+    assert compare(1.1 * rows * per_row / 1e6).returncode == 0
+
+
 def test_the_positioning_columns_are_copies_of_their_own_with_the_values_read(tmp_path):
     """read_positioning keeps each column as an array of its own (the table as read, all
     its columns in one array, is let go), with the values the per-cell reader reads."""

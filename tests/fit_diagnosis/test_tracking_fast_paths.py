@@ -201,6 +201,24 @@ def test_the_stops_are_found_once_and_are_those_found_anew(tmp_path):
     np.testing.assert_array_equal(stops, measurement._found_stops_s())
 
 
+def test_the_gap_to_the_nearest_reversal_is_the_matrix_minimum_to_the_bit():
+    """The near-stops' gap to the nearest reversal from its two neighbours in sorted order
+    is the minimum over every reversal (the times x reversals matrix it replaced), to the
+    bit: on rounded times (ties, a time on a reversal) and outside the reversals' span."""
+    from feedaxis.measurement.tracking import _nearest_gap
+
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        reversals = np.sort(rng.uniform(0.0, 100.0, rng.integers(1, 40)))
+        times = rng.uniform(-5.0, 105.0, rng.integers(0, 60))
+        if trial % 2:
+            reversals, times = np.round(reversals, 1), np.concatenate((np.round(times, 1),
+                                                                        reversals[:3]))
+        matrix = (np.min(np.abs(times[:, None] - reversals[None, :]), axis=1) if times.size
+                  else np.zeros(0))
+        assert _nearest_gap(times, reversals).tobytes() == matrix.tobytes()
+
+
 class _Anew:
     """A keep-by-content that keeps nothing: every result computed anew."""
 

@@ -67,6 +67,14 @@ TRACKING_FILE = "tracking.csv"
 # positions, 16 MB of a plant's sensitivities
 RECENT_BYTES = 2**27
 
+# Peak memory of the heaviest tracking command per row of tracking.csv (the case reader's
+# refusal, feedaxis.case.check_fits_in_memory; benchmarks/bench_tracking_scale.py): on 10^7
+# samples fit and report peaked at 5,857 MB resident, 571 bytes a sample above the
+# interpreter's own 150 MB (the fit's trust region: feedaxis.fit); on 10^6, where freed
+# blocks stay in the heap, report at 970 MB, 820 bytes. The figure kept covers both, with
+# 75 % over the 10^7 figure, where a case meets the machine's memory.
+ANALYSIS_BYTES_PER_ROW = 1000
+
 TRACKING_COLUMNS = {"time_s": True, "reference_mm": True, "actual_mm": True,
                     "disturbance_N": False, "control_V": False}
 
@@ -89,7 +97,7 @@ def read_tracking(path, loop_step_s=DEFAULT_LOOP_STEP_S):
     for it (:func:`feedaxis.physics.servo.loop_budget_problem`) are refused at the row.
     """
     path = Path(path)
-    values, rows = _read_csv(path, TRACKING_COLUMNS)
+    values, rows = _read_csv(path, TRACKING_COLUMNS, ANALYSIS_BYTES_PER_ROW)
     time_s = values["time_s"]
     _first_bad(path, np.concatenate(([False], np.diff(time_s) <= 0)), rows, "time_s",
                "time_s must be strictly increasing")
@@ -550,9 +558,10 @@ class Tracking(Measurement):
             position_mm = self.recent.put(("positions", params), position_mm)
         else:
             position_mm = self.positions_mm(params)
+        compared = d_position_mm[self.compared]
         with np.errstate(over="ignore", invalid="ignore"):  # a fit's trial loop may run away
             return ((position_mm[self.compared] - self.record_reference_mm[self.compared])
-                    * 1e3, d_position_mm[self.compared] * 1e3)
+                    * 1e3, _scaled(compared, 1e3))
 
     def loop_response_um(self, model, disturbance_N):
         """Change of the predicted deviation (µm) at the samples when ``disturbance_N``
@@ -729,8 +738,7 @@ class Tracking(Measurement):
         reversals = self.reversals_s()
         step_s = float(np.median(np.diff(self.time_s))) if self.time_s.size > 1 else 0.0
         if reversals.size:
-            gap = np.min(np.abs(slow[:, None] - reversals[None, :]), axis=1)
-            slow = slow[gap > 2.0 * step_s]
+            slow = slow[_nearest_gap(slow, reversals) > 2.0 * step_s]
         return np.sort(np.concatenate((reversals, slow)))
 
     def near_stop(self, time_s):
@@ -813,7 +821,9 @@ class Recent:
 
     def put(self, key, value):
         """Keep ``value`` (an array, made read-only) under ``key`` while the budget allows;
-        returns it."""
+        returns it (left writable and the others kept where it alone exceeds the budget)."""
+        if value.nbytes > self.budget_bytes:
+            return value
         value.setflags(write=False)
         self.items[key] = value
         self.items.move_to_end(key)
@@ -870,6 +880,25 @@ def _sine_fits_rms(time_s, values, frequencies_hz):
         left.append(_rms(values - a * cosine - b * sine - c))
         phasor *= turn
     return left
+
+
+def _nearest_gap(times_s, sorted_s):
+    """|time − the nearest of ``sorted_s``| (s) for each of ``times_s``: the nearest is a
+    neighbour in the sorted order (one of two candidates, not a times x sorted matrix: 10^4
+    near-stops x 10^4 reversals on a 10^4 s trace were 16 GB)."""
+    after = np.searchsorted(sorted_s, times_s)
+    gaps = [np.abs(times_s - sorted_s[np.clip(after + offset, 0, sorted_s.size - 1)])
+            for offset in (-1, 0)]
+    return np.minimum(*gaps)
+
+
+def _scaled(values, factor):
+    """``values * factor``, in place where ``values`` is writable (no :class:`Recent` keeps
+    it: a pass too large to keep, a copy of the samples compared): a record's derivatives
+    are the largest array a fit makes."""
+    if values.flags.writeable:
+        return np.multiply(values, factor, out=values)
+    return values * factor
 
 
 def _selector(index):
