@@ -11,32 +11,7 @@ import sys
 
 from . import stop
 from .console import fail
-
-
-M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
-KEPT_BLOCK_BYTES = 1 << 30  # freed memory up to this much stays in the heap for reuse (a C int)
-MAPPED_BLOCK_BYTES = 1 << 25  # a block this large (32 MB) is mapped on its own, unmapped when freed
-
-
-def keep_freed_memory():
-    """Let glibc's malloc keep freed blocks below ``MAPPED_BLOCK_BYTES`` in its heap for
-    reuse instead of unmapping them: the analysis allocates and frees sample-sized arrays
-    hundreds of times, and every fresh mapping is faulted in page by page (diagnose on
-    10^6 rows spent 1.5 of its 5 CPU seconds in the kernel so). Larger blocks (a
-    sample-sized array from 4·10^6 samples on) are still mapped on their own: reused in
-    the heap, the holes between them held up to 300 MB more than the live arrays at
-    10^7 rows (peak resident memory 2.3 GB where 1.8 GB was allocated), at 10 ms of the
-    kernel's for each (diagnose on 10^7 rows: 4 -> 13 s). Nothing changes off glibc."""
-    import ctypes
-
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
-        return
-    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
-    mallopt(M_MMAP_THRESHOLD, MAPPED_BLOCK_BYTES)
-    mallopt(M_TRIM_THRESHOLD, KEPT_BLOCK_BYTES)
+from .memory import keep_freed_memory
 
 
 def run():
