@@ -64,7 +64,7 @@ command's ``--json`` and the report byte-identical at 10^6 before and after):
   in place, the fit without nuisances let go once the selection moves on: 2,065 -> 1,608
   MB; yet peak RSS stayed at 2.2-2.3 GB: the heap reused sample-sized blocks and the holes
   between them held 0.3-0.5 GB more than the live arrays;
-- blocks of 32 MB and more mapped on their own again (``feedaxis.__main__``; below that,
+- blocks of 32 MB and more mapped on their own again (``feedaxis.memory``; below that,
   as at 10^6 rows, freed blocks stay for reuse): RSS within 0.1 GB of the allocations,
   at 10 ms of the kernel's per mapped block (diagnose's system time 4 -> 9-13 s);
 - the structure search's least squares through a QR taken 65,536 rows at a time
@@ -112,7 +112,7 @@ pyarrow's CSV reader (a dependency already) read the same table bit for bit (the
 corpus and near-valid tables as the per-cell reader did) in 2.3 s CPU where NumPy's takes
 9.4 (report 46.7 s CPU), but its library and pool took the peak 38 MB higher (report
 1,523-1,528 MB, diagnose 1,482): over 1.5 GB. Every sample-sized block still mapped on its
-own (``feedaxis.__main__``; with none mapped, system time 3.5 s but 2.0 GB resident): the
+own (``feedaxis.memory``; with none mapped, system time 3.5 s but 2.0 GB resident): the
 kernel's time (diagnose 10-14 s, report 17-22 s) is now the largest share left, the fit
 of 7 columns (560 MB) the largest block at the peak; the ISO figures' 16 sorts by target
 take 1.8 s and ``direction`` in 8 bits would save 70 MB (60 uses): neither worth the

@@ -51,7 +51,7 @@ fitted values, would not be the same to the bit. Nor 70 s: the loop takes ten st
 sample (10^8 a pass at 10^7) and a fit makes 10-30 passes, each about 1 s (the
 sensitivity pass) or 0.2 s (a simulation) a 10^6 samples, so the CPU time grows with the
 samples (fit 26 s at 10^6, 294 s at 10^7), and the system time with it: every array above
-32 MB is mapped fresh (``feedaxis.__main__``), the trust region's four per iteration too.
+32 MB is mapped fresh (``feedaxis.memory``), the trust region's four per iteration too.
 
 Run: ``python benchmarks/bench_tracking_scale.py [--samples 10000000] [--repeats 1]
 [--baseline-src PATH]``.
