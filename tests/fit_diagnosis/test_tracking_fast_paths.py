@@ -355,3 +355,31 @@ def test_the_screens_design_column_by_column_finds_what_row_by_row_finds(label, 
     for fast, slow in zip(columns_screened, screened):
         rms = np.sqrt(np.mean(slow ** 2))
         np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-13 * rms)
+
+
+@pytest.mark.parametrize("label", ("null", "friction"))
+def test_the_step_pursuit_s_nuisance_column_by_column_finds_what_row_by_row_finds(
+        label, tmp_path, monkeypatch):
+    """The force steps' nuisance (the Jacobian) whitened column by column against the same
+    row by row (the layout before): the filter gives the same values, so the pursuit's
+    orthonormal basis and the diagnosis are the same to the bit."""
+    from feedaxis.measurement import tracking
+
+    case = _record_case(label, tmp_path, 3)
+    nuisances = []
+    pursue = tracking._pursued_steps
+    monkeypatch.setattr(tracking, "_pursued_steps",
+                        lambda *args: nuisances.append(args[4]) or pursue(*args))
+    by_column = diagnose(case, SERVO_PLANT)
+    assert nuisances
+    bases = [np.linalg.qr(n)[0] for n in nuisances]
+    nuisances[:] = []
+    ar_filter = tracking._ar_filter
+    monkeypatch.setattr(tracking, "_ar_filter", lambda coefficients: lambda values: ar_filter(
+        coefficients)(np.ascontiguousarray(values)))
+    by_row = diagnose(case, SERVO_PLANT)
+    assert by_column.to_json() == by_row.to_json()
+    np.testing.assert_array_equal(by_column.final.residual_um, by_row.final.residual_um)
+    assert len(bases) == len(nuisances)
+    for basis, nuisance in zip(bases, nuisances):
+        np.testing.assert_array_equal(basis, np.linalg.qr(nuisance)[0])

@@ -1042,8 +1042,11 @@ class ForceSteps(Shape):
         residual = whiten(residual - np.mean(residual))
         grid = np.arange(first, last + 1)
         positions = grid[1:-1]
+        # the nuisance's columns stacked as rows and transposed, not column_stack'ed: the
+        # filter runs down contiguous columns (stacked and filtered 40 -> 21 ms at 500,000
+        # samples; the same values, so the same numbers)
         nuisance = (None if jacobian is None or jacobian.shape[1] == 0 else
-                    whiten(np.column_stack([measurement.gridded(c)[1] for c in jacobian.T])))
+                    whiten(np.array([measurement.gridded(c)[1] for c in jacobian.T]).T))
         chosen = _pursued_steps(residual, response, first, positions, nuisance)
         kept, full = _pruned_steps(measurement, residual, response, grid, nuisance, chosen,
                                    n_free, positions.size, self.extra)
