@@ -190,7 +190,8 @@ class Measurement(ABC):
         """``f(values, slots) -> (core_um, d core_um / d slots)``: the core's prediction
         (:meth:`core`) and its derivatives in the ``(effect, parameter)`` slots of effects
         that are not additive, from one pass (forward-mode sensitivities), or None when the
-        measurement has none (the fit then differences)."""
+        measurement has none (the fit then differences). The derivatives are an array of
+        their own: the fit negates them in place."""
         return None
 
     def separable(self, model):
