@@ -306,11 +306,12 @@ def test_the_texts_name_what_the_reference_is(tmp_path, reference, words):
 
 
 @pytest.mark.parametrize("harmonic_share", (0.0, 0.009, 0.011, 0.3))
-def test_the_sine_fits_are_the_least_squares_fits_at_each_frequency(harmonic_share):
-    """The single-sine check's fits (normal equations, the phasor turned from one frequency
-    to the next) leave the RMS a least-squares fit at each frequency anew leaves, within
-    1e-11 relative, on an uneven record (samples left out as outliers are)."""
-    from feedaxis.measurement.tracking import _sine_fits_rms
+def test_the_best_sine_fit_is_the_least_squares_fits_at_each_frequency(harmonic_share):
+    """The single-sine check's best fit (normal equations, the phasor turned from one
+    frequency to the next) is at the frequency where a least-squares fit at each frequency
+    anew leaves the least, and leaves its RMS within 1e-11 relative, on an uneven record
+    (samples left out as outliers are)."""
+    from feedaxis.measurement.tracking import _best_sine_fit
 
     time_s = np.delete(np.arange(20000) * 1e-3, [17, 5000, 12345])
     values = (10.0 * np.sin(2.0 * np.pi * 0.55 * time_s + 0.3) + 2.0
@@ -322,10 +323,10 @@ def test_the_sine_fits_are_the_least_squares_fits_at_each_frequency(harmonic_sha
             for basis in (np.column_stack((np.cos(phase), np.sin(phase), np.ones_like(phase)))
                           for phase in (2.0 * np.pi * f * (time_s - time_s[0])
                                         for f in frequencies_hz))]
-    left = _sine_fits_rms(time_s, values, frequencies_hz)
-    scale = np.sqrt(np.mean(values ** 2))
-    for fitted, expected in zip(left, anew):
-        assert fitted == pytest.approx(expected, rel=1e-11, abs=1e-12 * scale)
+    left, frequency_hz = _best_sine_fit(time_s, values, frequencies_hz)
+    expected, expected_hz = min(zip(anew, frequencies_hz))
+    assert frequency_hz == expected_hz
+    assert left == pytest.approx(expected, rel=1e-11, abs=1e-12 * np.sqrt(np.mean(values ** 2)))
 
 
 def test_the_report_shows_the_residual_apart_and_names_the_reference(tmp_path):

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import scipy
 
-from feedaxis.stats.coloured import (LAGGED_ROWS, autocorrelation_time, block_variance,
-                                     least_squares_autoregression, ljung_box_p_value)
+from feedaxis.stats.coloured import (LAGGED_ROWS, SOKAL_WINDOW, autocorrelation_time,
+                                     block_variance, least_squares_autoregression,
+                                     ljung_box_p_value)
 
 
 def ar1(rho, n, seed):
@@ -33,6 +34,41 @@ def test_least_squares_recovers_the_ar1_coefficient_and_innovation_variance(rho)
 def test_the_autocorrelation_time_of_ar1_is_one_plus_rho_over_one_minus_rho(rho):
     tau = np.mean([autocorrelation_time(ar1(rho, 20_000, seed)) for seed in range(4)])
     assert tau == pytest.approx((1.0 + rho) / (1.0 - rho), rel=0.1)
+
+
+def _tau_over_every_lag(residual):
+    """Sokal's τ from the autocovariance at every lag (zero-padded to 2n − 1, the path
+    before the window was first sought over the lags up to n / 8)."""
+    from feedaxis.stats.coloured import SOKAL_WINDOW, _autocovariance
+
+    autocovariance = _autocovariance(residual)
+    if autocovariance[0] <= 0.0:
+        return 1.0
+    tau = 1.0 + 2.0 * np.cumsum(autocovariance[1:] / autocovariance[0])
+    stop = np.flatnonzero(np.arange(1, autocovariance.size) >= SOKAL_WINDOW * tau)
+    return float(max(tau[stop[0]] if stop.size else tau[-1], 1.0))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_autocorrelation_time_from_the_first_lags_is_every_lag_s(seed):
+    """White, AR(1) and smoothed series whose window closes within n / 8 lags, a random
+    walk's and a slow sinusoid's that do not (τ from every lag then), and short series:
+    τ as from the autocovariance at every lag within 1e-12 (the transforms' lengths
+    differ, so their rounding does: about 1e-16 of each ρ)."""
+    from feedaxis.stats.coloured import SOKAL_FIRST_SHARE, _autocorrelation_time
+
+    rng = np.random.default_rng(seed)
+    n = 40_000
+    series = [rng.normal(size=n), ar1(0.5 + 0.2 * seed, n, seed),
+              np.convolve(rng.normal(size=n), np.ones(50), "same"),
+              rng.normal(size=n).cumsum(), np.sin(np.arange(n) * 3e-4) + rng.normal(size=n),
+              rng.normal(size=7), np.ones(5)]
+    closes = []
+    for values in series:
+        tau = _autocorrelation_time(values)
+        assert tau == pytest.approx(_tau_over_every_lag(values), rel=1e-12)
+        closes.append(SOKAL_WINDOW * tau <= values.size // SOKAL_FIRST_SHARE)
+    assert closes[:3] == [True] * 3 and closes[3:5] == [False] * 2
 
 
 def test_ljung_box_on_white_noise_alarms_at_its_level():
