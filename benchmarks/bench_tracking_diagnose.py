@@ -29,9 +29,23 @@ the Coulomb and Stribeck screens take their columns from one sensitivity pass (0
 (205 -> 148 ms, four passes), the Stribeck decay is not evaluated where it underflows to 0,
 a held constant force is measured against the loop the start's search ran (one simulation
 fewer), the robust AR noise model is kept by the residual's content (four fits -> one).
-Still not met: what is left is the four plant passes and the screens' pass (about 0.95 s),
-eleven simulations (0.45 s), 0.7-0.9 s of system time (page faults of fresh 4 MB
-temporaries) and about 1.8 s of analysis, no one part over a tenth (docs/tracking.md).
+A fourth round on the analysis around the simulations (docs/tracking.md; every finding the
+same, tests): Sokal's window sought over the first n/8 lags by transforms of 1.1 n points
+before all of them (the seven autocorrelation times 0.2 -> 0.08 s), the single-sine check
+forming one residual of its 41 fits (0.38 -> 0.27 s), the screens' design stored column by
+column as LAPACK takes it (0.24 -> 0.18 s), the step pursuit's nuisance whitened down
+contiguous columns, the kept results keyed by SHA-1, and the plant fit's Jacobian negated
+in place of a copy (0.08 -> 0.02 s): side by side against main before it (``--baseline
+fb6cd66``, five runs each, load 1.6) 3.40 -> 3.10 s CPU, 1.10x.
+Still not met: of about 2.7 s of user time the loop's own passes take half (the four plant
+sensitivity passes 0.55 s, the friction screens' pass 0.33 s, ten simulations 0.4 s: each
+at the cost of its 5·10^6 loop steps, the plant's pass bound by its 200 floating-point
+operations a step), SciPy's trust region about 0.3 s (a 500,000-row SVD an iteration), the
+periodogram's and the pursuit's transforms 0.16 s, and no other part over 0.15 s; the
+command line's heap setting (``feedaxis.memory``) takes the system time from 0.2-0.4 to
+0.12-0.16 s. What would reach 2 s changes the numbers: fused multiply-adds in the plant's
+pass (0.6-0.75x of its time in trials, positions and columns within 3e-13 of these) or
+fewer passes (a Jacobian updated, not recomputed, between the trust region's steps).
 
 Run: ``python benchmarks/bench_tracking_diagnose.py [--repeats 3] [--long-s 500]
 [--baseline 45c6d7f]`` (``--smoke``: 3 s, one repeat).
