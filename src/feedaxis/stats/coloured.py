@@ -113,8 +113,9 @@ def _autocovariance(residual, lags=None):
 def autocorrelation_time(residual):
     """Integrated autocorrelation time τ = 1 + 2 Σ ρ(k), summed up to the first lag
     k >= 5 τ(k) (Sokal's adaptive window); 1 for white noise. The last ``TAUS_KEPT`` are
-    kept by the residual's content (:class:`KeptByContent`; two FFTs saved each time): a fit's residual is asked for by its uncertainties, its check for a
-    measurement delay, the diagnosis's tests and its noise estimate."""
+    kept by the residual's content (:class:`KeptByContent`; two FFTs saved each time): a
+    fit's residual is asked for by its uncertainties, its check for a measurement delay,
+    the diagnosis's tests and its noise estimate."""
     return _KEPT_TAUS.get(residual, _autocorrelation_time)
 
 
