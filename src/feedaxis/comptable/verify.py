@@ -11,9 +11,9 @@ repeatability or drift, which no table removes.
 from __future__ import annotations
 
 import numpy as np
-import scipy
 
 from ..iso230 import FIGURE_NAMES, iso230_figures, target_groups
+from ..stats.distributions import f_sf
 from ..stats.wording import p_text
 from .table import position_error_um
 
@@ -42,7 +42,7 @@ def systematic_test(positioning):
         return {"p_value": None, "systematic_share": share}
     with np.errstate(divide="ignore", invalid="ignore"):
         statistic = (between_ss / between_dof) / (within_ss / within_dof)
-    p_value = float(scipy.stats.f.sf(statistic, between_dof, within_dof))
+    p_value = float(f_sf(statistic, between_dof, within_dof))
     return {"p_value": p_value if np.isfinite(p_value) else None, "systematic_share": share}
 
 

@@ -33,6 +33,7 @@ from ..plausibility import positioning_problems, warn_implausible
 from ..stats import judge
 from ..stats.aliasing import aliased
 from ..stats.coloured import peak_p_value
+from ..stats.distributions import f_sf
 from ..stats.judge import Layout, Test, drift_basis
 from ..stats.linear import Columns, normal_solve
 from ..stats.noise import PureError, ResidualMeanSquare, Serial, SerialPairs
@@ -480,7 +481,7 @@ def changing_reversal(constant, linear, measured_um):
     40 seeds instead of 2)."""
     before, after = constant.pure_ss(measured_um), linear.pure_ss(measured_um)
     statistic = (before - after) / max(after / linear.dof, 1e-300)
-    return float(scipy.stats.f.sf(statistic, 1, linear.dof)) < REVERSAL_ALPHA
+    return float(f_sf(statistic, 1, linear.dof)) < REVERSAL_ALPHA
 
 
 def marked_wavelengths(axis, effects):

@@ -38,6 +38,7 @@ from ..plausibility import tracking_problems, warn_implausible
 from ..stats.coloured import (MAX_AR_ORDER, autocorrelation_time, autoregression,
                               locate_sinusoid, noise_floor_um, peak_p_value, short_time_peak,
                               spikes)
+from ..stats.distributions import chi2_isf, f_sf
 from ..stats.judge import FAMILY_ALPHA, OUTLIER_ALPHA, Test, accepts, drift_basis
 from ..stats.noise import Coloured
 from .base import Measurement, NoStart, Shape, Trial
@@ -1032,8 +1033,6 @@ class ForceSteps(Shape):
         autoregressive filter of the residual's noise (robust spectrum, persistence raised
         by two standard errors: :meth:`feedaxis.stats.coloured.Autoregression.cautious`),
         so the tests are those of white noise."""
-        from scipy import stats
-
         first, last = int(measurement.index[0]), int(measurement.index[-1])
         _, residual = measurement.gridded(residual_um)
         noise = autoregression(residual, robust=True).cautious()
@@ -1056,7 +1055,7 @@ class ForceSteps(Shape):
         before = _leftover(residual, nuisance, None)
         dof = max(full.size - n_free - extra, 1)
         statistic = max(_rss(before) - _rss(full), 0.0) / extra / max(_rss(full) / dof, 1e-300)
-        p_value = float(stats.f.sf(statistic, extra, dof))
+        p_value = float(f_sf(statistic, extra, dof))
         test = Test(float(statistic), (extra, dof), min(1.0, p_value * positions.size),
                     f"F test of the steps together on the residual whitened by its noise's "
                     f"autoregressive filter (order {noise.order}); each step alone "
@@ -1137,14 +1136,11 @@ def _pursued_steps(residual, response, first, positions, nuisance):
     drop over ``positions`` (its variance times the χ²₁ quantile at 1 − FAMILY_ALPHA /
     positions) or at ``MAX_EVENTS``. The floor is a lower bound under coloured noise, so
     the pursuit is liberal; :func:`_pruned_steps` tests what it found."""
-    from scipy import stats
-
     grid = np.arange(first, first + residual.size)
     basis = (np.zeros((residual.size, 0)) if nuisance is None
              else np.linalg.qr(nuisance)[0])
     left = residual - basis @ (basis.T @ residual)
-    threshold = noise_floor_um(left) ** 2 * stats.chi2.isf(
-        FAMILY_ALPHA / positions.size, 1)
+    threshold = noise_floor_um(left) ** 2 * chi2_isf(FAMILY_ALPHA / positions.size, 1)
     chosen = []
     while len(chosen) < MAX_EVENTS:
         best = _best_step(left, response, first, positions, chosen)
@@ -1169,8 +1165,6 @@ def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_fre
     diagonal of (X'X)⁻¹, one fit per round) on the whitened residual, Bonferroni over the
     ``searched`` samples, at the family-wise level of a stage; each round drops the
     weakest half of the steps that fail (at least one)."""
-    from scipy import stats
-
     alpha = FAMILY_ALPHA / len(measurement.stages)
     chosen = list(chosen)
     offset = 0 if nuisance is None else nuisance.shape[1]
@@ -1183,7 +1177,7 @@ def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_fre
         drops = coefficients[offset:] ** 2 / np.maximum(inverse, 1e-300)
         dof = max(full.size - n_free - extra * len(chosen), 1.0)
         statistic = drops / extra / max(float(full @ full) / dof, 1e-300)
-        p_values = np.minimum(1.0, stats.f.sf(statistic, extra, dof) * searched)
+        p_values = np.minimum(1.0, f_sf(statistic, extra, dof) * searched)
         failing = np.flatnonzero(p_values >= alpha)
         if not failing.size:
             return chosen, full
@@ -1415,8 +1409,6 @@ class Reversal(Shape):
         return 1 if measurement.uniform_step_s() and measurement.stops_s().size else 0
 
     def trial(self, measurement, current):
-        from scipy import stats
-
         time_s, residual = measurement.gridded(current.residual_um)
         noise = autoregression(residual, robust=True).cautious()
         whitened = _ar_filter(noise.coefficients)(residual - np.mean(residual))[noise.order:]
@@ -1427,7 +1419,7 @@ class Reversal(Shape):
         statistic = float(np.mean(whitened[inside] ** 2) / max(np.mean(whitened[outside] ** 2),
                                                                1e-300))
         dof = (int(inside.sum()), int(outside.sum()))
-        test = Test(statistic, dof, float(stats.f.sf(statistic, *dof)),
+        test = Test(statistic, dof, float(f_sf(statistic, *dof)),
                     "F test of the residual's mean square near the reversals against elsewhere, "
                     f"whitened by its noise's autoregressive filter (order {noise.order})", "F")
         near = measurement.near_stop(measurement.time_s)

@@ -52,6 +52,8 @@ import numpy as np
 import scipy
 from numpy.lib.stride_tricks import sliding_window_view
 
+from .distributions import chi2_ppf, chi2_sf, norm_isf
+
 SOKAL_WINDOW = 5.0
 SOKAL_FIRST_SHARE = 8  # the window is first sought over lags up to n / 8
 MAX_AR_ORDER = 10
@@ -160,7 +162,7 @@ def _robust_noise_autocovariance(centred, max_order):
     if len(segments) >= MIN_ROBUST_SEGMENTS:
         level = np.quantile(power, NOISE_QUANTILE, axis=0)
         factor = np.full(level.size, -np.log1p(-NOISE_QUANTILE))
-        factor[[0, -1] if length % 2 == 0 else [0]] = scipy.stats.chi2.ppf(NOISE_QUANTILE, 1)
+        factor[[0, -1] if length % 2 == 0 else [0]] = chi2_ppf(NOISE_QUANTILE, 1)
         level = level / factor
     else:
         level = power.mean(axis=0)
@@ -358,7 +360,7 @@ def ljung_box_p_value(residual, lags, groups=None):
             continue
         rho = total / count / spread
         statistic += (n * (n + 2) / (n - lag) if groups is None else count) * rho ** 2
-    return float(scipy.stats.chi2.sf(statistic, lags))
+    return float(chi2_sf(statistic, lags))
 
 
 def block_variance(values):
@@ -414,7 +416,7 @@ def spikes(residual, alpha, floor=0.0):
     found = []
     if n < 8:
         return np.zeros(0, dtype=int)
-    limit = scipy.stats.norm.isf(alpha / (2 * n))
+    limit = norm_isf(alpha / (2 * n))
     judged = np.zeros(n, dtype=bool)
     for _ in range(n // 10):
         departure = _cubic_departure(values)

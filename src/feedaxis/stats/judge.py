@@ -24,9 +24,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy
 
 from ..iso230 import compact_index, target_groups
+from .distributions import norm_isf, norm_sf
 from .wording import p_text
 
 
@@ -142,7 +142,7 @@ def serial_correlation_test(residual_um):
     centred = residual - residual.mean()
     ratio = float(np.sum(np.diff(residual) ** 2) / max(centred @ centred, 1e-300))
     z = (2.0 - ratio) / (2.0 / np.sqrt(residual.size))
-    return Test(float(z), (1, residual.size), float(scipy.stats.norm.sf(z)),
+    return Test(float(z), (1, residual.size), float(norm_sf(z)),
                 "von Neumann ratio test in the order taken (no replicates)", "z")
 
 
@@ -158,7 +158,7 @@ def outlier_rows(layout, position_mm, residual_um, alpha=OUTLIER_ALPHA):
     flagged = np.zeros(n, dtype=bool)
     if n < 8:
         return np.flatnonzero(flagged)
-    limit = scipy.stats.norm.isf(alpha / (2 * n))
+    limit = norm_isf(alpha / (2 * n))
     if layout.has_repeats:  # the drift is fitted robustly once, to every sample
         residual_um = residual_um - _robust_drift(layout, residual_um)
     for _ in range(MAX_OUTLIER_PASSES):

@@ -37,11 +37,11 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import scipy
 
 from . import judge
 from .coloured import (Autoregression, KeptByContent, autocorrelation_time, block_variance,
                        least_squares_autoregression, ljung_box_p_value, noise_floor_um)
+from .distributions import f_sf
 from .judge import Test
 
 SERIAL_MAX_ORDER = 5
@@ -59,7 +59,7 @@ def _f_test(rss_before, rss_after, extra, denominator, dof, name):
     extra = max(int(extra), 1)
     dof = max(dof, 1)
     statistic = max(rss_before - rss_after, 0.0) / extra / max(denominator, 1e-300)
-    return Test(float(statistic), (extra, dof), float(scipy.stats.f.sf(statistic, extra, dof)), name)
+    return Test(float(statistic), (extra, dof), float(f_sf(statistic, extra, dof)), name)
 
 
 class PureError:
@@ -156,7 +156,7 @@ class PureError:
         statistic = (float(means @ means) / lof_dof) / max(self.pure_ss(residual_um) / pure_dof,
                                                            1e-300)
         return Test(statistic, (lof_dof, pure_dof),
-                    float(scipy.stats.f.sf(statistic, lof_dof, pure_dof)),
+                    float(f_sf(statistic, lof_dof, pure_dof)),
                     f"lack-of-fit F test against the {self.source}")
 
 
