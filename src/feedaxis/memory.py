@@ -18,10 +18,8 @@ def keep_freed_memory():
     kernel's for each (diagnose on 10^7 rows: 4 -> 13 s). Set by the command line
     (``feedaxis.__main__``) only: a library leaves its host's allocator alone. Nothing
     changes off glibc."""
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
+    mallopt = _glibc("mallopt")
+    if mallopt is None:
         return
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt(M_MMAP_THRESHOLD, MAPPED_BLOCK_BYTES)
@@ -43,7 +41,14 @@ def give_back_freed_memory(samples):
     0.2 s of page faults (minor faults 128,000 -> 142,000)."""
     if samples < LARGE_CASE_SAMPLES:
         return
+    malloc_trim = _glibc("malloc_trim")
+    if malloc_trim is not None:
+        malloc_trim(0)
+
+
+def _glibc(name):
+    """glibc's function ``name``, or None off glibc."""
     try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc
-        pass
+        return getattr(ctypes.CDLL("libc.so.6"), name)
+    except (OSError, AttributeError):
+        return None
