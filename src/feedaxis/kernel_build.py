@@ -10,8 +10,8 @@ inside the FMU's resources, loaded by ``physics.kernel``), and ``servo.Servo`` s
 when present.
 
 The same module carries each FMU's step (``physics.fmu_steps``: NpidServo, StepperError,
-GeometricError, ThermalScrew) as a C function the FMU's host layer calls without entering Python. pycc
-exports Python wrappers only; numba also compiles a C-ABI wrapper of every function
+GeometricError, ThermalScrew) as a C function the FMU's host layer calls without entering
+Python. pycc exports Python wrappers only; numba also compiles a C-ABI wrapper of every function
 (what ``numba.cfunc`` exposes), which pycc leaves hidden. :data:`COMPILE` renames those
 wrappers of the FMU steps to their symbols (``fmu_steps.STEPS``) and exports them, by
 wrapping ``numba.pycc.compiler.compile_extra``, the one place the compile result is seen.

@@ -166,7 +166,8 @@ def test_the_master_loop_unpacks_its_plan_by_the_plan_entry_fields():
 
     from feedaxis.cosim.master import PlanEntry, PythonSteps
 
-    unpacked = re.search(r"for \(([^)]*)\) in plan:", inspect.getsource(PythonSteps.__call__)).group(1)
+    unpacked = re.search(r"for \(([^)]*)\) in plan:",
+                         inspect.getsource(PythonSteps.__call__)).group(1)
     assert tuple(n.strip() for n in unpacked.split(",")) == PlanEntry._fields
 
 

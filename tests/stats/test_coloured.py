@@ -39,7 +39,7 @@ def test_the_autocorrelation_time_of_ar1_is_one_plus_rho_over_one_minus_rho(rho)
 def _tau_over_every_lag(residual):
     """Sokal's τ from the autocovariance at every lag (zero-padded to 2n − 1, the path
     before the window was first sought over the lags up to n / 8)."""
-    from feedaxis.stats.coloured import SOKAL_WINDOW, _autocovariance
+    from feedaxis.stats.coloured import _autocovariance
 
     autocovariance = _autocovariance(residual)
     if autocovariance[0] <= 0.0:
