@@ -202,6 +202,24 @@ def test_the_stops_are_found_once_and_are_those_found_anew(tmp_path):
     np.testing.assert_array_equal(stops, measurement._found_stops_s())
 
 
+def test_values_at_every_sample_are_gridded_as_interpolation_grids_them(tmp_path):
+    """With no outlier left out the gridded values are a copy of the values, with some
+    left out interpolated over them: np.interp's over the samples compared either way, to
+    the bit."""
+    from feedaxis.measurement import tracking
+
+    measurement = tracking.Tracking(_record_case("null", tmp_path, 3))
+    rng = np.random.default_rng(12)
+    for left_out in ([], [3, 4, 50, measurement.index.size - 2]):
+        measurement.index = np.delete(measurement.index, left_out)
+        values = rng.normal(size=measurement.index.size)
+        grid = np.arange(measurement.index[0], measurement.index[-1] + 1)
+        time_s, gridded = measurement.gridded(values)
+        np.testing.assert_array_equal(time_s, measurement.record_time_s[grid])
+        np.testing.assert_array_equal(gridded, np.interp(grid, measurement.index, values))
+        assert gridded is not values and (grid.size == values.size) == (not left_out)
+
+
 def test_the_gap_to_the_nearest_reversal_is_the_matrix_minimum_to_the_bit():
     """The near-stops' gap to the nearest reversal from its two neighbours in sorted order
     is the minimum over every reversal (the times x reversals matrix it replaced), to the
