@@ -51,7 +51,7 @@ ms): side by side against main before it (927cbe7, five runs each, load 1.1) 3.0
 CPU, 1.11x. Of the analysis what is left over 50 ms moves the numbers if changed: the
 reference's 41 sine fits (0.15 s), the periodogram of the whitened residual (0.07 s, its
 length n − order here 3 · 166,597), lstsq (gelsd) in the delay check and the projected
-Jacobian (another solver moves the fit's path and findings by up to 1e-6).
+Jacobian (the blocked projection there moved a periodic force's findings by 3e-6).
 Still not met: of about 2.7 s of user time the loop's own passes take half (the four plant
 sensitivity passes 0.55 s, the friction screens' pass 0.33 s, ten simulations 0.4 s: each
 at the cost of its 5·10^6 loop steps, the plant's pass bound by its 200 floating-point
