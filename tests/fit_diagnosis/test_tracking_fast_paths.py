@@ -406,3 +406,27 @@ def test_the_step_pursuit_s_nuisance_column_by_column_finds_what_row_by_row_find
     assert len(bases) == len(nuisances)
     for basis, nuisance in zip(bases, nuisances):
         np.testing.assert_array_equal(basis, np.linalg.qr(nuisance)[0])
+
+
+@pytest.mark.parametrize("label", ("null", "friction"))
+def test_the_step_pursuit_s_basis_is_numpys_qr_to_the_bit(label, tmp_path, monkeypatch):
+    """The pursuit's orthonormal basis of its nuisance from SciPy's QR of the columns as
+    they are (``_orthonormal``) against ``np.linalg.qr`` (the call before): the same values
+    in the same layout, so the same diagnosis to the bit."""
+    from feedaxis.measurement import tracking
+
+    case = _record_case(label, tmp_path, 3)
+    nuisances = []
+    orthonormal = tracking._orthonormal
+    monkeypatch.setattr(tracking, "_orthonormal",
+                        lambda columns: nuisances.append(columns) or orthonormal(columns))
+    by_scipy = diagnose(case, SERVO_PLANT)
+    assert nuisances
+    for nuisance in nuisances:
+        basis = orthonormal(nuisance)
+        np.testing.assert_array_equal(basis, np.linalg.qr(nuisance)[0])
+        assert basis.flags.c_contiguous
+    monkeypatch.setattr(tracking, "_orthonormal", lambda columns: np.linalg.qr(columns)[0])
+    by_numpy = diagnose(case, SERVO_PLANT)
+    assert by_scipy.to_json() == by_numpy.to_json()
+    np.testing.assert_array_equal(by_scipy.final.residual_um, by_numpy.final.residual_um)

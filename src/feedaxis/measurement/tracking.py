@@ -1143,8 +1143,7 @@ def _pursued_steps(residual, response, first, positions, nuisance):
     positions) or at ``MAX_EVENTS``. The floor is a lower bound under coloured noise, so
     the pursuit is liberal; :func:`_pruned_steps` tests what it found."""
     grid = np.arange(first, first + residual.size)
-    basis = (np.zeros((residual.size, 0)) if nuisance is None
-             else np.linalg.qr(nuisance)[0])
+    basis = np.zeros((residual.size, 0)) if nuisance is None else _orthonormal(nuisance)
     left = residual - basis @ (basis.T @ residual)
     threshold = noise_floor_um(left) ** 2 * chi2_isf(FAMILY_ALPHA / positions.size, 1)
     chosen = []
@@ -1162,6 +1161,15 @@ def _pursued_steps(residual, response, first, positions, nuisance):
         basis = np.column_stack((basis, column))
         left = left - column * (column @ left)
     return chosen
+
+
+def _orthonormal(columns):
+    """Q of ``columns``' QR decomposition: ``np.linalg.qr(columns)[0]``, the same values in
+    the same layout (C order), from the same LAPACK routines (geqrf, orgqr) called by SciPy
+    on the columns as they are, without NumPy's copies of them in and of Q out (the step
+    pursuit's nuisance on a 500 s servo trace, 500,000 x 6: 86 -> 40 ms)."""
+    return np.ascontiguousarray(scipy.linalg.qr(columns, mode="economic",
+                                                check_finite=False)[0])
 
 
 def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_free, searched,
