@@ -45,10 +45,11 @@ A fifth round on the analysis (every finding of five seeded diagnoses the same t
 score screens' least squares by the projection through a QR in blocks of rows, each block
 factored in place by LAPACK (not lstsq of the whole design; the screens 338 -> 212 ms),
 medians of large arrays from the values within a bracket of every 64th (the short-time
-periodogram's eleven levels and the robust scales, about 70 ms), and the residual gridded
-for the spectral tests by a copy where no outlier is left out, not by np.interp (45 -> 11
-ms): side by side against main before it (927cbe7, five runs each, load 1.1) 3.09 -> 2.79 s
-CPU, 1.11x. Of the analysis what is left over 50 ms moves the numbers if changed: the
+periodogram's eleven levels and the robust scales, about 70 ms), the residual gridded for
+the spectral tests by a copy where no outlier is left out, not by np.interp (45 -> 11 ms),
+and the step pursuit's orthonormal basis by SciPy's QR without NumPy's copies (the
+pursuit 162 -> 106 ms): side by side against main before it (927cbe7, five runs each,
+load 1.1, the first three) 3.09 -> 2.79 s CPU, 1.11x. Of the analysis what is left over 50 ms moves the numbers if changed: the
 reference's 41 sine fits (0.15 s), the periodogram of the whitened residual (0.07 s, its
 length n − order here 3 · 166,597), lstsq (gelsd) in the delay check and the projected
 Jacobian (the blocked projection there moved a periodic force's findings by 3e-6).
