@@ -49,8 +49,8 @@ periodogram's eleven levels and the robust scales, about 70 ms), the residual gr
 the spectral tests by a copy where no outlier is left out, not by np.interp (45 -> 11 ms),
 and the step pursuit's orthonormal basis by SciPy's QR without NumPy's copies (the
 pursuit 162 -> 106 ms): side by side against main before it (927cbe7, five runs each,
-load 1.1, the first three) 3.09 -> 2.79 s CPU, 1.11x. Of the analysis what is left over 50 ms moves the numbers if changed: the
-reference's 41 sine fits (0.15 s), the periodogram of the whitened residual (0.07 s, its
+load 1.1, the first three) 3.09 -> 2.79 s CPU, 1.11x. Of the analysis what is left over
+50 ms moves the numbers if changed: the reference's 41 sine fits (0.15 s), the periodogram of the whitened residual (0.07 s, its
 length n − order here 3 · 166,597), lstsq (gelsd) in the delay check and the projected
 Jacobian (the blocked projection there moved a periodic force's findings by 3e-6).
 Still not met: of about 2.7 s of user time the loop's own passes take half (the four plant
