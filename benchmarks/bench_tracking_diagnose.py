@@ -48,12 +48,12 @@ medians of large arrays from the values within a bracket of every 64th (the shor
 periodogram's eleven levels and the robust scales, about 70 ms), the residual gridded for
 the spectral tests by a copy where no outlier is left out, not by np.interp (45 -> 11 ms),
 and the step pursuit's orthonormal basis by SciPy's QR without NumPy's copies (the pursuit
-162 -> 106 ms): side by side against main before it (927cbe7, five runs each, load 1.1, the
-first three) 3.09 -> 2.79 s CPU, 1.11x. Of the analysis what is left over 50 ms moves the
-numbers if changed: the reference's 41 sine fits (0.15 s), the periodogram of the whitened
-residual (0.07 s, its length n − order here 3 · 166,597), lstsq (gelsd) in the delay check
-and the projected Jacobian (the blocked projection there moved a periodic force's findings
-by 3e-6).
+162 -> 106 ms): side by side against main before it (852abad, five runs each, load 1.0-1.3)
+3.13 -> 2.74 s CPU, 1.14x. Of the analysis what is left over 50 ms moves the numbers if
+changed: the reference's 41 sine fits (0.15 s), the periodogram of the whitened residual
+(0.07 s, its length n − order here 3 · 166,597), lstsq (gelsd) in the delay check and the
+projected Jacobian (the blocked projection there moved a periodic force's findings by
+3e-6).
 Still not met: of about 2.7 s of user time the loop's own passes take half (the four plant
 sensitivity passes 0.55 s, the friction screens' pass 0.33 s, ten simulations 0.4 s: each
 at the cost of its 5·10^6 loop steps, the plant's pass bound by its 200 floating-point
