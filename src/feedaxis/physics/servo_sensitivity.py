@@ -207,12 +207,13 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
     ``d_coefficients`` (27 x p: :func:`coefficient_jacobian` transposed, a parameter's
     derivatives along a row for the inner loops) and ``d_disturbance_V`` (p,) its force;
     ``d_state`` (4 x p: position, velocity, integral, previous) and ``d_buffer`` (delay line
-    x p) start at 0 for a loop started from given values; ``d_positions_mm`` (samples x p)
-    receives d position / dθ at each sample. Each block below is one line of run_loop
-    followed by its derivative. Where no friction force acts and no parameter moves one
-    (``frictional`` false: a plant's fit without friction), the friction's derivative is its
-    viscous term alone, its other terms products with zeros, and its tangent is not
-    evaluated (an exponential per step: 1.7x the pass of the four plant parameters).
+    x p) start at 0 for a loop started from given values; ``d_positions_mm`` (p x samples)
+    receives d position / dθ at each sample, a parameter's along a row. Each block below is
+    one line of run_loop followed by its derivative. Where no friction force acts and no
+    parameter moves one (``frictional`` false: a plant's fit without friction), the
+    friction's derivative is its viscous term alone, its other terms products with zeros,
+    and its tangent is not evaluated (an exponential per step: 1.7x the pass of the four
+    plant parameters).
     """
     a11, a12, a21, a22, late1, late2, early1, early2 = coefficients[0:8]
     plant = (a11, a12, a21, a22, late1, late2, early1, early2)
@@ -329,7 +330,7 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
             start_mm = end_mm
         positions_mm[i] = x1
         for j in range(p):
-            d_positions_mm[i, j] = dx1[j]
+            d_positions_mm[j, i] = dx1[j]
     state[0], state[1], state[2], state[3], state[4], state[5] = (
         x1, x2, integral, previous, start_mm, float(head))
 
@@ -397,7 +398,7 @@ def run_loop_tangent_pid(coefficients, d_coefficients, steps, references_mm, dis
             start_mm = end_mm
         positions_mm[i] = x1
         for j in range(p):
-            d_positions_mm[i, j] = dx1[j]
+            d_positions_mm[j, i] = dx1[j]
     d_state[0, :], d_state[1, :], d_state[2, :], d_state[3, :] = (dx1, dx2, d_integral,
                                                                   d_previous)
     state[0], state[1], state[2], state[3], state[4], state[5] = (
@@ -461,18 +462,21 @@ def _compiled(kernel):
 @one_blas_thread
 def simulate_sensitivity(params, names, time_s, reference_mm, disturbance_N=None, counts=None):
     """(position_mm (samples,), d position_mm / d``names`` (samples x len(names))) at each
-    sample of a tracking record, as :func:`.servo.simulate` steps it, from one pass."""
+    sample of a tracking record, as :func:`.servo.simulate` steps it, from one pass.
+
+    The derivatives are stored column by column (Fortran order), as the fit's trust region
+    takes them: its column sums and its scaled copies run down contiguous columns."""
     reference_mm = np.ascontiguousarray(reference_mm, dtype=float)
     counts = step_counts(time_s, params.time_step_s) if counts is None else counts
     d_coefficients, d_force = coefficient_jacobian(params, names)
     state = np.array([reference_mm[0], 0.0, 0.0, 0.0, reference_mm[0], 0.0])
     positions_mm = np.empty_like(reference_mm)
-    d_positions = np.zeros((reference_mm.size, len(names)))
+    d_positions = np.zeros((len(names), reference_mm.size))
     coefficients = loop_coefficients(params)
     kernel = compiled_pid_tangent() if plain_pid(coefficients, names) else compiled_tangent()
     kernel(coefficients, np.ascontiguousarray(d_coefficients.T), counts, reference_mm,
            forces_V(params, disturbance_N, reference_mm.size), d_force, state,
            np.zeros(params.buffer_size), np.zeros((4, len(names))),
            np.zeros((params.buffer_size, len(names))), positions_mm, d_positions)
-    return positions_mm, d_positions
+    return positions_mm, d_positions.T
 
