@@ -74,8 +74,8 @@ class FitResult:
     at the optimum (samples x parameters in the model's order), kept where the model has
     parameters that enter nonlinearly (for the diagnosis's linearised screening).
     ``plain`` is the fit of the same samples without the measurement's nuisances, where
-    :func:`fit_with_artefacts` fitted them beside the effects (for their test; its
-    Jacobian let go).
+    :func:`fit_with_artefacts` fitted them beside the effects (for their test: its residual
+    and statistics alone, :meth:`Solved.bare`).
     """
 
     model: Model
@@ -210,11 +210,17 @@ def fit(model, data, progress=None, kind=None):
     -------
     FitResult
     """
-    found = check_available(model, data, kind)
+    return _solved(model, check_available(model, data, kind), progress).analysed()
+
+
+def _solved(model, found, progress=None):
+    """The optimum of ``model`` on the measurements ``found`` (:func:`fit`'s search), not
+    yet analysed: :meth:`Solved.analysed` gives the fit, :meth:`Solved.bare` its residual
+    alone."""
     model = starting_values(model, found)
     layout = ParameterLayout(model, found[0].case.axis)
     if layout.size == 0:
-        return evaluate(model, found)
+        return Solved(model, found, None, layout, None)
     problem = Problem(model, found, progress)
     if progress:
         progress(total=evaluation_bound(layout))
@@ -226,20 +232,57 @@ def fit(model, data, progress=None, kind=None):
                                        jac=problem.jacobian(layout), x_scale="jac",
                                        method="trf",
                                        max_nfev=MAX_NFEV_PER_PARAMETER * layout.size))
-    sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
-                                                    solution.active_mask, layout, found)
-    fitted = model.with_values(layout.values(solution.x))
-    if found[0].loose_share is not None:
-        flag_loose(fitted, sigma, undetermined, found[0].loose_share, found[0].excitation)
-    if len(found) == 1:
-        for key, reason in {**unresolved_terms(fitted, found[0]), **found[0].confounded(
-                fitted, layout.slots, solution.jac, solution.fun, sigma)}.items():
-            undetermined.setdefault(key, reason)
-    result = FitResult(fitted, Statistics.of(problem.measured_um, solution.fun, layout.size),
-                       problem.measured_um, solution.fun, sigma, undetermined, covariance, found,
-                       jacobian=solution.jac if layout.nonlinear_index.size else None)
-    _check_finite(result, found)
-    return result
+    return Solved(model, found, problem, layout, solution)
+
+
+@dataclass
+class Solved:
+    """:func:`fit`'s optimum (``solution`` as SciPy's least_squares gives it; None where the
+    model has no parameter) before its uncertainties are worked out."""
+
+    model: Model
+    found: list
+    problem: Problem
+    layout: ParameterLayout
+    solution: object
+
+    def analysed(self):
+        """The :class:`FitResult` with the parameters' uncertainties, what the data leave
+        undetermined and the Jacobian."""
+        if self.solution is None:
+            return evaluate(self.model, self.found)
+        layout, solution, found = self.layout, self.solution, self.found
+        sigma, undetermined, covariance = uncertainties(solution.jac, solution.fun,
+                                                        solution.active_mask, layout, found)
+        fitted = self.fitted_model()
+        if found[0].loose_share is not None:
+            flag_loose(fitted, sigma, undetermined, found[0].loose_share, found[0].excitation)
+        if len(found) == 1:
+            for key, reason in {**unresolved_terms(fitted, found[0]), **found[0].confounded(
+                    fitted, layout.slots, solution.jac, solution.fun, sigma)}.items():
+                undetermined.setdefault(key, reason)
+        result = FitResult(fitted, self._statistics(), self.problem.measured_um,
+                           solution.fun, sigma, undetermined, covariance, found,
+                           jacobian=solution.jac if layout.nonlinear_index.size else None)
+        _check_finite(result, found)
+        return result
+
+    def bare(self):
+        """The :class:`FitResult` with its residual and statistics alone (a fit kept only to
+        be tested against, as the one before a measurement's nuisances: at 500,000 samples
+        the uncertainties' analysis costs tens of milliseconds)."""
+        if self.solution is None:
+            return evaluate(self.model, self.found)
+        result = FitResult(self.fitted_model(), self._statistics(), self.problem.measured_um,
+                           self.solution.fun, measurements=self.found)
+        _check_finite(result, self.found)
+        return result
+
+    def fitted_model(self):
+        return self.model.with_values(self.layout.values(self.solution.x))
+
+    def _statistics(self):
+        return Statistics.of(self.problem.measured_um, self.solution.fun, self.layout.size)
 
 
 def unresolved_terms(model, measurement):
@@ -252,6 +295,7 @@ def unresolved_terms(model, measurement):
             for parameter in effect.parameters}
 
 
+@one_blas_thread
 def fit_with_artefacts(model, data, progress=None, kind=None):
     """:func:`fit` with what the measurement says about its own samples fitted too, as the
     diagnosis does: its outliers kept out (refitted without them), its nuisances (a drift
@@ -262,8 +306,9 @@ def fit_with_artefacts(model, data, progress=None, kind=None):
     if len(found) > 1:
         return fit(model, found, progress)
     measurement = found[0]
-    result = fit(model, measurement, progress)
-    outliers = measurement.outliers(result.residual_um)
+    solved = _solved(model, found, progress)
+    plain = solved.bare()  # analysed only where it is the result
+    outliers = measurement.outliers(plain.residual_um)
     transients = measurement.transients(outliers)
     artefacts = {"outlier_rows": measurement.rows(np.setdiff1d(outliers, transients)),
                  "transient_rows": measurement.rows(transients)}
@@ -271,16 +316,17 @@ def fit_with_artefacts(model, data, progress=None, kind=None):
         keep = np.ones(measurement.size, dtype=bool)
         keep[outliers] = False
         measurement = measurement.subset(keep)
-        result = fit(result.model, measurement, progress)   # refits start where the last ended
-    with_nuisances = result.model
+        solved = _solved(plain.model, [measurement], progress)  # starts where the last ended
+        plain = solved.bare()
+    with_nuisances = plain.model
     for name, _, basis in measurement.nuisances():
         with_nuisances = with_nuisances + BasisEffect(name, basis)
-    if with_nuisances is not result.model and not too_few_samples(with_nuisances,
-                                                                   [measurement]):
-        plain = result
-        plain.jacobian = None  # only its residual is used again (the nuisances' test)
+    if with_nuisances is not plain.model and not too_few_samples(with_nuisances,
+                                                                  [measurement]):
         result = fit(with_nuisances, measurement, progress)
-        result.plain = plain
+        result.plain = plain  # only its residual is used again (the nuisances' test)
+    else:
+        result = solved.analysed()
     result.artefacts = {**artefacts, **measurement.artefacts(result)}
     return result
 

@@ -127,6 +127,28 @@ def test_a_drifting_measurements_offset_is_not_named_a_force(tmp_path, null_run,
     assert reason.startswith("undetermined") and "drifts" in reason and "control_V" in reason
 
 
+def test_the_fit_before_the_nuisances_is_the_plain_fit_without_its_analysis(tmp_path,
+                                                                           null_run):
+    """fit_with_artefacts keeps the fit before the drift for the drift's test only: its
+    residual and statistics those of a plain fit of the model to the same samples (to the
+    bit), its uncertainties not worked out; the fit with the drift is fit's own."""
+    from feedaxis.fit import fit_with_artefacts
+    from feedaxis.measurement import measurement_of
+
+    measurement = measurement_of(read_case(write_tracking_case(tmp_path / "d", null_run, 3,
+                                                               family="drifting")), "tracking")
+    model = Model((CATALOG["servo_plant"],), {"servo_plant": PLANT})
+    base = fit_with_artefacts(model, measurement)
+    assert base.artefacts["outlier_rows"] == [] and "drift" in base.model
+    plain = fit(model, measurement)
+    np.testing.assert_array_equal(base.plain.residual_um, plain.residual_um)
+    assert base.plain.statistics == plain.statistics and plain.uncertainties
+    assert base.plain.uncertainties == {} and base.plain.jacobian is None
+    with_drift = fit(base.model, base.measurements[0])
+    np.testing.assert_allclose(base.residual_um, with_drift.residual_um, rtol=0, atol=1e-9)
+    assert base.uncertainties.keys() == with_drift.uncertainties.keys()
+
+
 def test_the_drift_is_tested_against_the_fit_without_it(tmp_path, null_run):
     """The drift's test takes the model's fit before the drift was added (the diagnosis
     reuses it, a simulation per plant parameter each saved): the same test as a refit of
