@@ -40,29 +40,40 @@ column as LAPACK takes it (0.24 -> 0.18 s), the step pursuit's nuisance whitened
 contiguous columns, the kept results keyed by SHA-1, and the plant fit's Jacobian negated
 in place of a copy (0.08 -> 0.02 s): side by side against main before it (``--baseline
 fb6cd66``, five runs each, load 1.6) 3.40 -> 3.10 s CPU, 1.10x.
-A fifth round on the analysis (every finding of five seeded diagnoses the same to the bit:
-500 s and 60 s null traces, Coulomb friction, force steps, a periodic force): the four
-score screens' least squares by the projection through a QR in blocks of rows, each block
-factored in place by LAPACK (not lstsq of the whole design; the screens 338 -> 212 ms),
-medians of large arrays from the values within a bracket of every 64th (the short-time
-periodogram's eleven levels and the robust scales, about 70 ms), the residual gridded for
-the spectral tests by a copy where no outlier is left out, not by np.interp (45 -> 11 ms),
-and the step pursuit's orthonormal basis by SciPy's QR without NumPy's copies (the pursuit
-162 -> 106 ms): side by side against main before it (852abad, five runs each, load 1.0-1.3)
-3.13 -> 2.74 s CPU, 1.14x. Of the analysis what is left over 50 ms moves the numbers if
-changed: the reference's 41 sine fits (0.15 s), the periodogram of the whitened residual
-(0.07 s, its length n − order here 3 · 166,597), lstsq (gelsd) in the delay check and the
-projected Jacobian (the blocked projection there moved a periodic force's findings by
-3e-6).
-Still not met: of about 2.7 s of user time the loop's own passes take half (the four plant
-sensitivity passes 0.55 s, the friction screens' pass 0.33 s, ten simulations 0.4 s: each
-at the cost of its 5·10^6 loop steps, the plant's pass bound by its 200 floating-point
-operations a step), SciPy's trust region about 0.3 s (a 500,000-row SVD an iteration), the
-periodogram's and the pursuit's transforms 0.16 s, and no other part over 0.15 s; the
-command line's heap setting (``feedaxis.memory``) takes the system time from 0.2-0.4 to
-0.12-0.16 s. What would reach 2 s changes the numbers: fused multiply-adds in the plant's
-pass (0.6-0.75x of its time in trials, positions and columns within 3e-13 of these) or
-fewer passes (a Jacobian updated, not recomputed, between the trust region's steps).
+A fifth round on the loop's passes and the trust region's use of them (every finding the
+same; the fits move by rounding, as a one-ulp perturbation of the Jacobian moves them: on
+six seeded records the plant's and friction's values within 6e-13 relative, uncertainties
+within 4e-12, a drift coefficient near 0 by 7e-11 of its uncertainty): the tangent
+kernels' derivatives compiled with fused multiply-adds and the loop's own values without,
+so the positions stay run_loop's to the bit (the plant's pass 139 -> 117 ms, the friction
+screens' 330 -> 302 ms); the sensitivities and the fit's Jacobian stored column by column,
+as SciPy's trust region sums and scales them (its column sums, own time and SVD 0.3-0.4 ->
+0.15-0.17 s in cProfile). Side by side against main before it (eight runs each,
+load 1.8-2.5): 3.05 -> 2.94 s CPU with the first, 2.84 s with both (0.93x). The held
+force's second simulation is not the start's again (1 N more force): it stays.
+A sixth round, on the analysis, written beside the fifth and measured without it (every
+finding of five seeded diagnoses the same to the bit: 500 s and 60 s null traces, Coulomb
+friction, force steps, a periodic force): the four score screens' least squares by the
+projection through a QR in blocks of rows, each block factored in place by LAPACK (not
+lstsq of the whole design; the screens 338 -> 212 ms), medians of large arrays from the
+values within a bracket of every 64th (the short-time periodogram's eleven levels and the
+robust scales, about 70 ms), the residual gridded for the spectral tests by a copy where no
+outlier is left out, not by np.interp (45 -> 11 ms), and the step pursuit's orthonormal
+basis by SciPy's QR without NumPy's copies (the pursuit 162 -> 106 ms): side by side
+against main before both (852abad, five runs each, load 1.0-1.3) 3.13 -> 2.74 s CPU, 1.14x.
+Of the analysis what is left over 50 ms moves the numbers if changed: the reference's 41
+sine fits (0.15 s), the periodogram of the whitened residual (0.07 s, its length n − order
+here 3 · 166,597), lstsq (gelsd) in the delay check and the projected Jacobian (the blocked
+projection there moved a periodic force's findings by 3e-6).
+Still not met: of about 2.5 s of user time the loop's own passes take half (the four plant
+sensitivity passes 0.47 s, the friction screens' pass 0.3 s, ten simulations 0.37 s: each
+at the cost of its 5·10^6 loop steps), SciPy's trust region about 0.15 s (LAPACK's copy of
+a 500,000-row matrix an iteration), the periodogram's and the pursuit's transforms 0.16 s,
+and no other part over 0.15 s; the command line's heap setting (``feedaxis.memory``) takes
+the system time from 0.2-0.4 to 0.12-0.16 s. Fusing the positions' multiply-adds too would
+take the plant's pass to 0.8x of today's but moves the positions the fit's residual and the
+FMUs share; what would reach 2 s is fewer passes (a Jacobian updated, not recomputed,
+between the trust region's steps), which changes the numbers.
 
 Run: ``python benchmarks/bench_tracking_diagnose.py [--repeats 3] [--long-s 500]
 [--baseline 45c6d7f]`` (``--smoke``: 3 s, one repeat).

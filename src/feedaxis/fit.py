@@ -406,7 +406,8 @@ class Problem:
     def jacobian(self, layout):
         """``f(x) -> d residual / dx``: the linear parameters' columns exactly, the others
         from the sensitivities (:meth:`exact`), else by forward differences stepped into the
-        bounds."""
+        bounds; stored column by column (Fortran order) like the sensitivities, as SciPy's
+        trust region scales and sums it."""
         nonlinear = layout.nonlinear_index
         exact = self.exact(layout)
 
@@ -415,7 +416,7 @@ class Problem:
             if exact and nonlinear.size == layout.size:  # the derivatives are the matrix
                 derivatives = self.core_derivatives(layout, x)  # an array of its own
                 return np.negative(derivatives, out=derivatives)
-            matrix = np.empty((base_um.size, layout.size))
+            matrix = np.empty((base_um.size, layout.size), order="F")
             matrix[:, layout.linear_index] = columns_um
             if exact and nonlinear.size:
                 matrix[:, nonlinear] = self.core_derivatives(layout, x)

@@ -545,8 +545,9 @@ class Tracking(Measurement):
         """(:meth:`deviation_um` under ``params``, its derivatives in ``names``: samples x
         len(names), µm per unit), kept for the next calls as :meth:`positions_mm` (the
         positions too: the pass's are the loop's to the bit); columns kept from a pass in
-        more names at the same parameters are taken from it (a column is the same to the bit
-        beside other names: tests/physics/test_sensitivity.py)."""
+        more names at the same parameters are taken from it (a column is the same beside
+        other names: to the bit, within 1e-12 of its largest value where they change the
+        pass's kernel: tests/physics/test_sensitivity.py)."""
         key = ("sensitivity", params, tuple(names))
         d_position_mm = self.recent.get(key)
         if d_position_mm is None:

@@ -422,14 +422,15 @@ def numba_ready_loop(numba):
                                  with_compiled_callees(numba, friction_V, stribeck_V))
 
 
-def with_compiled_callees(numba, function, *callees):
+def with_compiled_callees(numba, function, *callees, **options):
     """``function``'s code with its calls of ``callees`` bound to numba-compiled copies of
-    them (numba compiles calls to compiled functions only; cached on disk also where
-    site-packages is read-only: :func:`.numba_cache.cached_njit`)."""
+    them, compiled with numba's ``options`` (numba compiles calls to compiled functions
+    only; cached on disk also where site-packages is read-only:
+    :func:`.numba_cache.cached_njit`)."""
     from .numba_cache import cached_njit
 
-    namespace = {**function.__globals__,
-                 **{callee.__name__: cached_njit(numba, callee) for callee in callees}}
+    namespace = {**function.__globals__, **{
+        callee.__name__: cached_njit(numba, callee, **options) for callee in callees}}
     return types.FunctionType(function.__code__, namespace, function.__name__)
 
 

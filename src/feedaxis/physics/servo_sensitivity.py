@@ -12,7 +12,8 @@ every parameter θ, where finite differences need one more simulation per parame
   "Computing integrals involving the matrix exponential", IEEE Trans. Automatic Control 23
   (1978), Theorem 1), and from d e^{Mτ}/dτ = M·e^{Mτ} for the delay's fraction.
 - :func:`run_loop_tangent`: :func:`.servo.run_loop`'s lines, each followed by its derivative
-  (its positions equal run_loop's bitwise: tests/physics/test_sensitivity.py).
+  (its positions equal run_loop's bitwise, its derivatives compiled with fused
+  multiply-adds: :func:`compiled_tangent`, tests/physics/test_sensitivity.py).
 
 The friction's sign is a clipped ramp and the NPID gain is held beyond e_max: both are
 differentiated piecewise (the side the value is on), as finite differences see them away
@@ -172,6 +173,32 @@ def npid_tangent(error_mm, ko_per_mm, e_max_mm):
     return rate * ko_per_mm * d_level, rate * level, rate * ko_per_mm if held else 0.0
 
 
+def pid_step(error, integral, previous, kp, ki, kd, dt):
+    """(integral, derivative, command) after a step of :func:`.servo.run_loop`'s PID (its
+    lines): the tangent kernels take the loop's own values from here, compiled without the
+    fused multiply-adds their derivatives are compiled with (:func:`compiled_tangent`)."""
+    integral += 0.5 * (error + previous) * dt
+    derivative = (error - previous) / dt
+    return integral, derivative, kp * error + ki * integral + kd * derivative
+
+
+def cascade_step(error, slope_mm_s, x2, integral, previous, kp_per_s, feedforward, kv, kv_tn,
+                 dt):
+    """(bracket, integral, command) after a step of :func:`.servo.run_loop`'s cascade (its
+    lines, as :func:`pid_step`)."""
+    bracket = kp_per_s * error + feedforward * slope_mm_s - x2
+    integral += 0.5 * (bracket + previous) * dt
+    return bracket, integral, kv * bracket + kv_tn * integral
+
+
+def plant_step(x1, x2, u_late, u_early, plant):
+    """(position, velocity) after a step of :func:`.servo.run_loop`'s plant (its lines, as
+    :func:`pid_step`); ``plant`` the coefficients' first eight (transition, late, early)."""
+    a11, a12, a21, a22, late1, late2, early1, early2 = plant
+    return (a11 * x1 + a12 * x2 + late1 * u_late + early1 * u_early,
+            a21 * x1 + a22 * x2 + late2 * u_late + early2 * u_early)
+
+
 def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturbances_V,
                      d_disturbance_V, state, buffer, d_state, d_buffer, positions_mm,
                      d_positions_mm):
@@ -180,14 +207,16 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
     ``d_coefficients`` (27 x p: :func:`coefficient_jacobian` transposed, a parameter's
     derivatives along a row for the inner loops) and ``d_disturbance_V`` (p,) its force;
     ``d_state`` (4 x p: position, velocity, integral, previous) and ``d_buffer`` (delay line
-    x p) start at 0 for a loop started from given values; ``d_positions_mm`` (samples x p)
-    receives d position / dθ at each sample. Each block below is one line of run_loop
-    followed by its derivative. Where no friction force acts and no parameter moves one
-    (``frictional`` false: a plant's fit without friction), the friction's derivative is its
-    viscous term alone, its other terms products with zeros, and its tangent is not
-    evaluated (an exponential per step: 1.7x the pass of the four plant parameters).
+    x p) start at 0 for a loop started from given values; ``d_positions_mm`` (p x samples)
+    receives d position / dθ at each sample, a parameter's along a row. Each block below is
+    one line of run_loop followed by its derivative. Where no friction force acts and no
+    parameter moves one (``frictional`` false: a plant's fit without friction), the
+    friction's derivative is its viscous term alone, its other terms products with zeros,
+    and its tangent is not evaluated (an exponential per step: 1.7x the pass of the four
+    plant parameters).
     """
     a11, a12, a21, a22, late1, late2, early1, early2 = coefficients[0:8]
+    plant = (a11, a12, a21, a22, late1, late2, early1, early2)
     kp, ki, kd, ko, e_max, nonlinear = coefficients[8:14]
     dt, delay = coefficients[16], coefficients[17]
     cascade, kp_per_s, kv, kv_tn, feedforward = coefficients[18:23]
@@ -221,15 +250,15 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
         for k in range(1, n_steps + 1):
             error = start_mm + (end_mm - start_mm) * (k - 1) / n_steps - x1
             if cascade != 0.0:
-                bracket = kp_per_s * error + feedforward * slope_mm_s - x2
+                bracket, integral, command = cascade_step(
+                    error, slope_mm_s, x2, integral, previous, kp_per_s, feedforward, kv, kv_tn,
+                    dt)
                 for j in range(p):
                     d_bracket = (dc[KP_PER_S, j] * error - kp_per_s * dx1[j]
                                  + dc[FEEDFORWARD, j] * slope_mm_s - dx2[j])
                     d_integral[j] += 0.5 * (d_bracket + d_previous[j]) * dt
                     d_previous[j] = d_bracket
-                integral += 0.5 * (bracket + previous) * dt
                 previous = bracket
-                command = kv * bracket + kv_tn * integral
                 for j in range(p):
                     d_command[j] = (dc[KV, j] * bracket + kv * d_previous[j]
                                     + dc[KV_TN, j] * integral + kv_tn * d_integral[j])
@@ -244,8 +273,8 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                     for j in range(p):
                         d_command[j] = (d_command[j] * (gain + raw * d_gain_e) + raw * (
                             d_gain_ko * dc[KO, j] + d_gain_max * dc[E_MAX, j]))
-                integral += 0.5 * (error + previous) * dt
-                derivative = (error - previous) / dt
+                integral, derivative, command = pid_step(error, integral, previous, kp, ki, kd,
+                                                         dt)
                 for j in range(p):
                     d_error = d_command[j]
                     d_integral[j] += 0.5 * (d_error + d_previous[j]) * dt
@@ -258,7 +287,6 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                     else:
                         d_command[j] = kp * d_error + ki * d_integral[j] + kd * d_derivative
                 previous = error
-                command = kp * error + ki * integral + kd * derivative
             buffer[head] = command
             late = head - shift
             if late < 0:
@@ -297,13 +325,12 @@ def run_loop_tangent(coefficients, d_coefficients, steps, references_mm, disturb
                       + early2 * du_early)
                 dx1[j], dx2[j] = d1, d2
             head = head + 1 if head + 1 < size else 0
-            x1, x2 = (a11 * x1 + a12 * x2 + late1 * u_late + early1 * u_early,
-                      a21 * x1 + a22 * x2 + late2 * u_late + early2 * u_early)
+            x1, x2 = plant_step(x1, x2, u_late, u_early, plant)
         if n_steps > 0:
             start_mm = end_mm
         positions_mm[i] = x1
         for j in range(p):
-            d_positions_mm[i, j] = dx1[j]
+            d_positions_mm[j, i] = dx1[j]
     state[0], state[1], state[2], state[3], state[4], state[5] = (
         x1, x2, integral, previous, start_mm, float(head))
 
@@ -316,8 +343,10 @@ def run_loop_tangent_pid(coefficients, d_coefficients, steps, references_mm, dis
     lines, with no branch in its inner loops, the controller's derivatives written straight
     into the delay line and each parameter's state in its own array (the plant's four
     parameters on 5·10⁶ loop steps: 205 -> 148 ms, medians of 7 side by side; the same
-    numbers to the bit: tests/physics/test_sensitivity.py)."""
+    positions to the bit, the same columns within 1e-12 where the two kernels fuse their
+    multiply-adds otherwise: tests/physics/test_sensitivity.py)."""
     a11, a12, a21, a22, late1, late2, early1, early2 = coefficients[0:8]
+    plant = (a11, a12, a21, a22, late1, late2, early1, early2)
     kp, ki, kd = coefficients[KP], coefficients[KI], coefficients[KD]
     dt, delay = coefficients[16], coefficients[17]
     c0, c1, c2, c3 = (d_coefficients[0].copy(), d_coefficients[1].copy(),
@@ -337,10 +366,8 @@ def run_loop_tangent_pid(coefficients, d_coefficients, steps, references_mm, dis
         force_V = disturbances_V[i]
         for k in range(1, n_steps + 1):
             error = start_mm + (end_mm - start_mm) * (k - 1) / n_steps - x1
-            integral += 0.5 * (error + previous) * dt
-            derivative = (error - previous) / dt
+            integral, _, command = pid_step(error, integral, previous, kp, ki, kd, dt)
             previous = error
-            command = kp * error + ki * integral + kd * derivative
             buffer[head] = command
             late = head - shift
             if late < 0:
@@ -366,13 +393,12 @@ def run_loop_tangent_pid(coefficients, d_coefficients, steps, references_mm, dis
                       + early2 * du_early)
                 dx1[j], dx2[j] = d1, d2
             head = head + 1 if head + 1 < size else 0
-            x1, x2 = (a11 * x1 + a12 * x2 + late1 * u_late + early1 * u_early,
-                      a21 * x1 + a22 * x2 + late2 * u_late + early2 * u_early)
+            x1, x2 = plant_step(x1, x2, u_late, u_early, plant)
         if n_steps > 0:
             start_mm = end_mm
         positions_mm[i] = x1
         for j in range(p):
-            d_positions_mm[i, j] = dx1[j]
+            d_positions_mm[j, i] = dx1[j]
     d_state[0, :], d_state[1, :], d_state[2, :], d_state[3, :] = (dx1, dx2, d_integral,
                                                                   d_previous)
     state[0], state[1], state[2], state[3], state[4], state[5] = (
@@ -391,42 +417,66 @@ def plain_pid(coefficients, names):
 
 @lru_cache(maxsize=1)
 def compiled_pid_tangent():
-    """:func:`run_loop_tangent_pid` compiled by numba's JIT (cached on disk)."""
-    import numba
-
-    from .numba_cache import cached_njit
-
-    return cached_njit(numba, run_loop_tangent_pid, nogil=True)
+    """:func:`run_loop_tangent_pid` compiled by numba's JIT (cached on disk), as
+    :func:`compiled_tangent`."""
+    return _compiled(numba_ready_tangent(run_loop_tangent_pid))
 
 
 @lru_cache(maxsize=1)
 def compiled_tangent():
     """:func:`run_loop_tangent` compiled by numba's JIT (cached on disk), its calls of the
-    loop's friction and NPID gain and their tangents bound to compiled copies."""
+    loop's friction and NPID gain and their tangents bound to compiled copies.
+
+    The derivatives' multiply-adds are fused (LLVM's contraction, numba's fastmath
+    "contract": 0.84x the time of the PID's pass of the plant on 5·10⁶ loop steps, 0.92x
+    the friction screens' pass; columns within 4e-15 of their largest value), the loop's
+    own values not: they come from :func:`pid_step`, :func:`cascade_step`,
+    :func:`plant_step` and :func:`.servo.friction_V`, compiled without (explicitly: a
+    callee otherwise takes its caller's fastmath), so the positions are
+    :func:`.servo.run_loop`'s to the bit, as the fit's residual and the FMUs take them."""
+    return _compiled(numba_ready_tangent(run_loop_tangent))
+
+
+def numba_ready_tangent(kernel):
+    """``kernel`` (:func:`run_loop_tangent` or :func:`run_loop_tangent_pid`) with its calls
+    bound to copies compiled by numba without fused multiply-adds
+    (:func:`.servo.with_compiled_callees`)."""
+    import numba
+
+    return with_compiled_callees(
+        numba, kernel, npid_gain, npid_tangent, resists,
+        with_compiled_callees(numba, friction_V, stribeck_V), friction_tangent, pid_step,
+        cascade_step, plant_step, fastmath=False)
+
+
+def _compiled(kernel):
+    """``kernel`` (:func:`numba_ready_tangent`'s) compiled with fused multiply-adds, cached on
+    disk (:func:`.numba_cache.cached_njit`)."""
     import numba
 
     from .numba_cache import cached_njit
 
-    return cached_njit(numba, with_compiled_callees(
-        numba, run_loop_tangent, npid_gain, npid_tangent, resists,
-        with_compiled_callees(numba, friction_V, stribeck_V), friction_tangent), nogil=True)
+    return cached_njit(numba, kernel, nogil=True, fastmath={"contract"})
 
 
 @one_blas_thread
 def simulate_sensitivity(params, names, time_s, reference_mm, disturbance_N=None, counts=None):
     """(position_mm (samples,), d position_mm / d``names`` (samples x len(names))) at each
-    sample of a tracking record, as :func:`.servo.simulate` steps it, from one pass."""
+    sample of a tracking record, as :func:`.servo.simulate` steps it, from one pass.
+
+    The derivatives are stored column by column (Fortran order), as the fit's trust region
+    takes them: its column sums and its scaled copies run down contiguous columns."""
     reference_mm = np.ascontiguousarray(reference_mm, dtype=float)
     counts = step_counts(time_s, params.time_step_s) if counts is None else counts
     d_coefficients, d_force = coefficient_jacobian(params, names)
     state = np.array([reference_mm[0], 0.0, 0.0, 0.0, reference_mm[0], 0.0])
     positions_mm = np.empty_like(reference_mm)
-    d_positions = np.zeros((reference_mm.size, len(names)))
+    d_positions = np.zeros((len(names), reference_mm.size))
     coefficients = loop_coefficients(params)
     kernel = compiled_pid_tangent() if plain_pid(coefficients, names) else compiled_tangent()
     kernel(coefficients, np.ascontiguousarray(d_coefficients.T), counts, reference_mm,
            forces_V(params, disturbance_N, reference_mm.size), d_force, state,
            np.zeros(params.buffer_size), np.zeros((4, len(names))),
            np.zeros((params.buffer_size, len(names))), positions_mm, d_positions)
-    return positions_mm, d_positions
+    return positions_mm, d_positions.T
 
