@@ -436,16 +436,14 @@ def _screened_residual(measurement, left, effect, exact=False):
     jacobian = left.jacobian if left.jacobian is not None else Problem(
         left.model, [measurement]).jacobian(ParameterLayout(left.model, measurement.case.axis))(
         ParameterLayout(left.model, measurement.case.axis).start())
-    design = _design(jacobian, columns)
     residual = measurement.measured_um - base_um
-    return residual - design @ np.linalg.lstsq(design, residual, rcond=None)[0]
+    return residual - projection(_design(jacobian, columns), residual)
 
 
 def _design(jacobian, columns):
     """[−``jacobian`` | ``columns``] stored column by column (Fortran order), as LAPACK
-    takes it: ``np.linalg.lstsq`` copies it so without a strided pass over the rows for
-    each column (the four screens of a 500 s servo trace: 200 -> 150 ms; the same
-    coefficients, the product with them in another order of its terms)."""
+    takes it: :func:`~feedaxis.stats.linear.projection` copies each block of its rows so
+    without a strided pass over them for each column."""
     design = np.empty((jacobian.shape[0], jacobian.shape[1] + len(columns)), order="F")
     np.negative(jacobian, out=design[:, :jacobian.shape[1]])  # no negated copy beside it
     for at, column in enumerate(columns, start=jacobian.shape[1]):

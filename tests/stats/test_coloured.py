@@ -1,14 +1,14 @@
 """stats/coloured.py on series of known structure: the coefficient and innovation variance
 of a seeded AR(1) process, its integrated autocorrelation time (1 + ρ)/(1 - ρ), and the
 Ljung-Box test's false-alarm rate on white noise and its blocked sums against whole-array
-ones."""
+ones; the median from a bracket against NumPy's."""
 import numpy as np
 import pytest
 import scipy
 
 from feedaxis.stats.coloured import (LAGGED_ROWS, SOKAL_WINDOW, autocorrelation_time,
                                      block_variance, least_squares_autoregression,
-                                     ljung_box_p_value)
+                                     ljung_box_p_value, median)
 
 
 def ar1(rho, n, seed):
@@ -108,3 +108,33 @@ def test_ljung_box_in_blocks_matches_the_whole_array_sums(grouped):
 def test_the_variance_in_blocks_is_numpys():
     x = ar1(0.3, 2 * LAGGED_ROWS + 99, 8) * 1e-3 + 7.0
     assert block_variance(x) == pytest.approx(float(np.var(x)), rel=1e-12)
+
+
+def _median_cases(rng):
+    """Arrays whose median the bracket finds (odd and even sizes, skewed, tied, a
+    constant, 2-D) and ones it misses (a pattern repeating every 64 values, whose sample is
+    one value, and a NaN): (values, whether the bracket holds the middle)."""
+    periodic = np.tile(np.arange(64.0), 4000)
+    with_nan = rng.normal(size=100_001)
+    with_nan[777] = np.nan
+    return [(rng.normal(size=100_001), True), (rng.exponential(size=250_000), True),
+            (np.round(rng.normal(size=480_000), 1), True), (np.full(70_000, 2.5), True),
+            (rng.normal(size=(3000, 31)) ** 2, True), (rng.normal(size=4095), True),
+            (rng.normal(size=300), False), (periodic, False), (with_nan, False)]
+
+
+def test_the_median_from_a_bracket_is_numpys_to_the_bit(monkeypatch):
+    """Each array's median equals np.median's to the bit; where the bracket holds the two
+    middle values only they reach np.median (the partition of all is saved), elsewhere
+    np.median takes all the values."""
+    rng = np.random.default_rng(11)
+    whole = np.median
+    sizes = []
+    monkeypatch.setattr(np, "median", lambda values: sizes.append(np.size(values))
+                        or whole(values))
+    for values, bracketed in _median_cases(rng):
+        expected = whole(values)
+        sizes[:] = []
+        found = median(values)
+        assert np.array_equal(found, expected, equal_nan=True) and type(found) is type(expected)
+        assert (max(sizes) <= 2) == bracketed

