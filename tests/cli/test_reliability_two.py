@@ -207,6 +207,25 @@ def wait_for(condition, timeout_s=300.0):
         time.sleep(0.05)
 
 
+def wait_for_cpu(process, seconds):
+    """Wait until ``process`` has used ``seconds`` of CPU (user + system, from
+    /proc/PID/stat) or has ended: a point in its own work however loaded the machine is;
+    where there is no /proc, half a second on the wall clock."""
+    stat = Path(f"/proc/{process.pid}/stat")
+    if not stat.exists():
+        time.sleep(0.5)
+        return
+
+    def used_s():
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # gone: it has ended
+            return float("inf")
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    wait_for(lambda: process.poll() is not None or used_s() >= seconds)
+
+
 def test_sigterm_during_demo_exits_143_and_leaves_no_staging_folder(tmp_path):
     out = tmp_path / "demo"
     demo = subprocess.Popen([*FEEDAXIS, "demo", "--out", str(out)], cwd=tmp_path,
@@ -264,7 +283,10 @@ def test_sigterm_and_sighup_stop_a_fit_as_ctrl_c_does(tmp_path, signum):
                             "assembly_eccentricity", "--out", str(tmp_path / "m.toml")],
                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True)
-    time.sleep(0.5)  # after the handler (0.05 s), within the imports or the fit (1.3 s idle)
+    # after the handler (0.05 s), within the imports or the fit (1 s of CPU on an idle
+    # machine): keyed to the child's own CPU time, so a loaded machine cannot delay the
+    # signal past the fit's end (a 0.5 s wall-clock sleep did, at load 3-4)
+    wait_for_cpu(fit, 0.2)
     fit.send_signal(signum)
     _, err = fit.communicate(timeout=300)
     name = signal.Signals(signum).name
