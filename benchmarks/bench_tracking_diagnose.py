@@ -61,6 +61,9 @@ robust scales, about 70 ms), the residual gridded for the spectral tests by a co
 outlier is left out, not by np.interp (45 -> 11 ms), and the step pursuit's orthonormal
 basis by SciPy's QR without NumPy's copies (the pursuit 162 -> 106 ms): side by side
 against main before both (852abad, five runs each, load 1.0-1.3) 3.13 -> 2.74 s CPU, 1.14x.
+Beside them, the fit a measurement's nuisances are tested against (the plant before the
+drift) is kept bare, its residual and statistics only: its uncertainties and the delay
+check were worked out and dropped (about 65 ms).
 Of the analysis what is left over 50 ms moves the numbers if changed: the reference's 41
 sine fits (0.15 s), the periodogram of the whitened residual (0.07 s, its length n − order
 here 3 · 166,597), lstsq (gelsd) in the delay check and the projected Jacobian (the blocked
