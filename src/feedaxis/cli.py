@@ -1145,6 +1145,7 @@ def main(argv=None):
         args = build_parser(argv[0] if argv else None).parse_args(argv)
         refuse_overwriting_inputs(_outputs(args), _inputs(args))
         FOLLOW_LINKS.set(getattr(args, "follow_links", False))
+        stop.raise_if_swallowed()  # by the start-up's imports
         with _one_line_warnings():
             args.handler(args)
     except KeyboardInterrupt as stopped:  # a scenario's says what it kept, once

@@ -16,11 +16,23 @@ from contextlib import contextmanager
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP")
                      if hasattr(signal, name))
 _received = [signal.SIGINT]  # the last stop signal received (Ctrl-C until another came)
+_came = [False]  # whether a stop signal has come (its interrupt may have been swallowed)
 
 
 def _raise_interrupt(signum, _frame):
     _received[0] = signum
+    _came[0] = True
     raise KeyboardInterrupt
+
+
+def raise_if_swallowed():
+    """Raise :class:`KeyboardInterrupt` again if a stop signal has come: called where no
+    interrupt can have been seen yet (before a command starts), it catches one that a
+    library's import swallowed. xml.etree.ElementTree falls back to Python when its C
+    accelerator's start fails, and an interrupt landing there fails it as an ImportError
+    it ignores: the command then ran to its end and exited 0 (seen under load)."""
+    if _came[0]:
+        raise KeyboardInterrupt
 
 
 def install():
