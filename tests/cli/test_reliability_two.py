@@ -283,9 +283,9 @@ def test_sigterm_and_sighup_stop_a_fit_as_ctrl_c_does(tmp_path, signum):
                             "assembly_eccentricity", "--out", str(tmp_path / "m.toml")],
                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True)
-    # after the handler (0.05 s), within the imports or the fit (1 s of CPU on an idle
-    # machine): keyed to the child's own CPU time, so a loaded machine cannot delay the
-    # signal past the fit's end (a 0.5 s wall-clock sleep did, at load 3-4)
+    # after the handler (0.05 s), within the imports or the fit (0.75 s of CPU in all):
+    # keyed to the child's own CPU time, so a loaded machine cannot delay the signal past
+    # the fit's end (a 0.5 s wall-clock sleep could)
     wait_for_cpu(fit, 0.2)
     fit.send_signal(signum)
     _, err = fit.communicate(timeout=300)
